@@ -1,0 +1,194 @@
+//! Core data types: planes, colour images, cost volumes, disparity maps.
+//!
+//! All are a flat `Vec` plus dimensions, row-major, with the layout documented on the type. Kernels index them
+//! directly; conversion from and to file formats happens only at the I/O edge (`crate::io`).
+
+/// A single-channel image, row-major: `data[y * width + x]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plane<T> {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// `width * height` samples, row-major.
+    pub data: Vec<T>,
+}
+
+impl<T: Clone> Plane<T> {
+    /// A plane filled with `value`.
+    pub fn new(width: usize, height: usize, value: T) -> Self {
+        Plane { width, height, data: vec![value; width * height] }
+    }
+}
+
+impl<T> Plane<T> {
+    /// Wraps existing data.
+    ///
+    /// # Panics
+    /// If `data.len() != width * height`.
+    pub fn from_vec(width: usize, height: usize, data: Vec<T>) -> Self {
+        assert_eq!(data.len(), width * height, "plane data length does not match {width}x{height}");
+        Plane { width, height, data }
+    }
+
+    /// Row `y` as a slice of length `width`.
+    #[inline]
+    pub fn row(&self, y: usize) -> &[T] {
+        &self.data[y * self.width..][..self.width]
+    }
+
+    /// Row `y` as a mutable slice of length `width`.
+    #[inline]
+    pub fn row_mut(&mut self, y: usize) -> &mut [T] {
+        &mut self.data[y * self.width..][..self.width]
+    }
+
+    /// (width, height).
+    pub fn dims(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+}
+
+impl<T: Copy> Plane<T> {
+    /// Sample at (x, y).
+    #[inline]
+    pub fn at(&self, x: usize, y: usize) -> T {
+        self.data[y * self.width + x]
+    }
+}
+
+/// A disparity map of the left (or right) view in pixels; `f32::INFINITY` marks an invalid/unknown pixel
+/// (the Middlebury convention).
+pub type DisparityMap = Plane<f32>;
+
+/// A planar RGB image with `f32` samples in 0..=255 (8-bit scale, whatever the file's bit depth).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RgbImage {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Red, green and blue planes, each `width * height`, row-major.
+    pub channels: [Vec<f32>; 3],
+}
+
+impl RgbImage {
+    /// A black image.
+    pub fn new(width: usize, height: usize) -> Self {
+        let n = width * height;
+        RgbImage { width, height, channels: [vec![0.0; n], vec![0.0; n], vec![0.0; n]] }
+    }
+
+    /// Number of pixels.
+    pub fn len(&self) -> usize {
+        self.width * self.height
+    }
+
+    /// True for a 0×0 image.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// (width, height).
+    pub fn dims(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// The colour of pixel index `i` (= `y * width + x`).
+    #[inline]
+    pub fn rgb(&self, i: usize) -> [f32; 3] {
+        [self.channels[0][i], self.channels[1][i], self.channels[2][i]]
+    }
+
+    /// Luma (ITU-R BT.601 weights), 0..=255.
+    pub fn to_grey(&self) -> Plane<f32> {
+        let [r, g, b] = &self.channels;
+        let data = r.iter().zip(g).zip(b).map(|((&r, &g), &b)| 0.299 * r + 0.587 * g + 0.114 * b).collect();
+        Plane::from_vec(self.width, self.height, data)
+    }
+
+    /// The image mirrored left-right. Matching the right view against the left is the left-view problem on
+    /// mirrored images, which lets one implementation serve both views.
+    pub fn mirrored(&self) -> RgbImage {
+        let mut out = RgbImage::new(self.width, self.height);
+        for (dst, src) in out.channels.iter_mut().zip(&self.channels) {
+            for (drow, srow) in dst.chunks_exact_mut(self.width).zip(src.chunks_exact(self.width)) {
+                for (d, s) in drow.iter_mut().zip(srow.iter().rev()) {
+                    *d = *s;
+                }
+            }
+        }
+        out
+    }
+}
+
+/// A matching cost volume, labels innermost: `data[(y * width + x) * ndisp + d]`.
+///
+/// Entry `d` at (x, y) is the cost of matching left pixel (x, y) with right pixel (x − d, y) (for a left-view
+/// volume). Labels innermost is what the lattice filter and the mean-field update want: all labels of one pixel
+/// are one contiguous slice.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CostVolume {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Number of disparity labels (0..ndisp).
+    pub ndisp: usize,
+    /// `width * height * ndisp` costs.
+    pub data: Vec<f32>,
+}
+
+impl CostVolume {
+    /// A volume filled with `value`.
+    pub fn new(width: usize, height: usize, ndisp: usize, value: f32) -> Self {
+        CostVolume { width, height, ndisp, data: vec![value; width * height * ndisp] }
+    }
+
+    /// The costs of pixel index `i` (= `y * width + x`), one per label.
+    #[inline]
+    pub fn pixel(&self, i: usize) -> &[f32] {
+        &self.data[i * self.ndisp..][..self.ndisp]
+    }
+
+    /// Mutable costs of pixel index `i`.
+    #[inline]
+    pub fn pixel_mut(&mut self, i: usize) -> &mut [f32] {
+        &mut self.data[i * self.ndisp..][..self.ndisp]
+    }
+}
+
+/// A rectified stereo pair and its disparity search range.
+#[derive(Clone, Debug)]
+pub struct StereoPair {
+    /// Left view (the reference view: disparities are computed for it).
+    pub left: RgbImage,
+    /// Right view.
+    pub right: RgbImage,
+    /// Number of disparity labels: disparities 0..ndisp−1 are searched.
+    pub ndisp: usize,
+}
+
+impl StereoPair {
+    /// Checks sizes and the search range.
+    ///
+    /// # Errors
+    /// [`crate::Error::SizeMismatch`] for unequal sizes, [`crate::Error::InvalidParam`] for an impossible `ndisp`
+    /// or an empty image.
+    pub fn new(left: RgbImage, right: RgbImage, ndisp: usize) -> crate::Result<Self> {
+        if left.dims() != right.dims() {
+            return Err(crate::Error::SizeMismatch { left: left.dims(), right: right.dims() });
+        }
+        if left.is_empty() {
+            return Err(crate::Error::Input("the images are empty (0 pixels)".into()));
+        }
+        if ndisp == 0 || ndisp >= left.width {
+            return Err(crate::Error::param(
+                "ndisp",
+                ndisp,
+                format!("at least 1 and less than the image width {}", left.width),
+            ));
+        }
+        Ok(StereoPair { left, right, ndisp })
+    }
+}

@@ -1,0 +1,191 @@
+//! Portable float map (PFM), Middlebury convention.
+//!
+//! Header `Pf\n<width> <height>\n<scale>\n` (`PF` = 3 channels), then float32 samples, **rows bottom-to-top**.
+//! A negative scale means little-endian, a positive one big-endian. `+inf` marks unknown/invalid disparities and
+//! is kept as is. We write greyscale, little-endian, scale −1. Readers accept both byte orders and both channel
+//! counts (taking the first channel of `PF`), and reject malformed headers and short data without allocating
+//! more than the file holds.
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+use crate::image::Plane;
+
+/// Encodes a plane as a greyscale little-endian PFM.
+pub fn encode_pfm(map: &Plane<f32>) -> Vec<u8> {
+    let header = format!("Pf\n{} {}\n-1\n", map.width, map.height);
+    let mut out = Vec::with_capacity(header.len() + map.data.len() * 4);
+    out.extend_from_slice(header.as_bytes());
+    for y in (0..map.height).rev() {
+        for v in map.row(y) {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    out
+}
+
+/// Decodes a PFM from memory.
+///
+/// # Errors
+/// [`Error::Pfm`] (with an empty path) describing the first problem found.
+pub fn decode_pfm(bytes: &[u8]) -> Result<Plane<f32>> {
+    decode(bytes).map_err(|msg| Error::Pfm { path: Default::default(), msg })
+}
+
+/// Writes a greyscale little-endian PFM atomically.
+///
+/// # Errors
+/// [`Error::Io`] naming the path.
+pub fn write_pfm(path: &Path, map: &Plane<f32>) -> Result<()> {
+    super::write_atomic(path, &encode_pfm(map))
+}
+
+/// Reads a PFM file.
+///
+/// # Errors
+/// [`Error::Io`] if it cannot be read, [`Error::Pfm`] naming the path if it is malformed.
+pub fn read_pfm(path: &Path) -> Result<Plane<f32>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    decode(&bytes).map_err(|msg| Error::Pfm { path: path.to_path_buf(), msg })
+}
+
+/// Splits off one whitespace-delimited header token; PFM headers separate fields by any whitespace.
+fn token<'a>(bytes: &'a [u8], pos: &mut usize, what: &str) -> std::result::Result<&'a str, String> {
+    while *pos < bytes.len() && bytes[*pos].is_ascii_whitespace() {
+        *pos += 1;
+    }
+    let start = *pos;
+    while *pos < bytes.len() && !bytes[*pos].is_ascii_whitespace() && *pos - start < 32 {
+        *pos += 1;
+    }
+    if start == *pos {
+        return Err(format!("header ends before the {what}"));
+    }
+    std::str::from_utf8(&bytes[start..*pos]).map_err(|_| format!("the {what} is not text"))
+}
+
+fn decode(bytes: &[u8]) -> std::result::Result<Plane<f32>, String> {
+    let mut pos = 0;
+    let channels = match token(bytes, &mut pos, "magic")? {
+        "Pf" => 1,
+        "PF" => 3,
+        other => return Err(format!("bad magic {other:?} (expected \"Pf\" or \"PF\")")),
+    };
+    let dim = |s: &str, what: &str| -> std::result::Result<usize, String> {
+        match s.parse::<usize>() {
+            Ok(v) if v > 0 => Ok(v),
+            _ => Err(format!("bad {what} {s:?} (expected a positive integer)")),
+        }
+    };
+    let width = dim(token(bytes, &mut pos, "width")?, "width")?;
+    let height = dim(token(bytes, &mut pos, "height")?, "height")?;
+    let scale_text = token(bytes, &mut pos, "scale")?;
+    let scale: f32 = scale_text.parse().map_err(|_| format!("bad scale {scale_text:?}"))?;
+    if scale == 0.0 || !scale.is_finite() {
+        return Err(format!("bad scale {scale_text:?} (expected a non-zero number)"));
+    }
+    // Exactly one whitespace byte separates the header from the data.
+    if pos >= bytes.len() || !bytes[pos].is_ascii_whitespace() {
+        return Err("header is not terminated by a newline".into());
+    }
+    pos += 1;
+    let samples = width
+        .checked_mul(height)
+        .and_then(|n| n.checked_mul(channels))
+        .ok_or_else(|| format!("size {width}x{height} overflows"))?;
+    let data = &bytes[pos..];
+    let needed = samples.checked_mul(4).ok_or_else(|| format!("size {width}x{height} overflows"))?;
+    if data.len() < needed {
+        return Err(format!(
+            "{width}x{height}x{channels} needs {needed} data bytes but the file has {}",
+            data.len()
+        ));
+    }
+    let little_endian = scale < 0.0;
+    let mut out = Plane::new(width, height, 0.0f32);
+    for (file_row, chunk) in data[..needed].chunks_exact(width * channels * 4).enumerate() {
+        let y = height - 1 - file_row;
+        for (dst, px) in out.row_mut(y).iter_mut().zip(chunk.chunks_exact(channels * 4)) {
+            let b = [px[0], px[1], px[2], px[3]];
+            *dst = if little_endian { f32::from_le_bytes(b) } else { f32::from_be_bytes(b) };
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Plane<f32> {
+        Plane::from_vec(3, 2, vec![0.0, 1.5, f32::INFINITY, -2.0, 1e-3, 1e6])
+    }
+
+    #[test]
+    fn round_trip_keeps_values_and_inf() {
+        let p = sample();
+        let back = decode_pfm(&encode_pfm(&p)).unwrap();
+        assert_eq!(back, p);
+    }
+
+    #[test]
+    fn rows_are_stored_bottom_to_top() {
+        let bytes = encode_pfm(&sample());
+        let header = b"Pf\n3 2\n-1\n";
+        assert_eq!(&bytes[..header.len()], header);
+        let first = f32::from_le_bytes(bytes[header.len()..][..4].try_into().unwrap());
+        assert_eq!(first, -2.0, "the first stored row is the image's bottom row");
+    }
+
+    #[test]
+    fn reads_big_endian_and_colour() {
+        let mut bytes = b"PF\n1 2\n1.0\n".to_vec();
+        for v in [7.0f32, 0.0, 0.0, 8.0, 0.0, 0.0] {
+            bytes.extend_from_slice(&v.to_be_bytes());
+        }
+        let p = decode_pfm(&bytes).unwrap();
+        assert_eq!(p.data, vec![8.0, 7.0]);
+    }
+
+    #[test]
+    fn rejects_malformed_headers() {
+        let body = [0u8; 64];
+        for header in [
+            &b"P5\n1 1\n-1\n"[..],
+            b"Pf\n0 1\n-1\n",
+            b"Pf\n-1 1\n-1\n",
+            b"Pf\nx 1\n-1\n",
+            b"Pf\n1 1\n0\n",
+            b"Pf\n1 1\nnan\n",
+            b"Pf\n1 1\n",
+            b"Pf\n1",
+            b"",
+            b"Pf\n99999999999999999999 1\n-1\n",
+            b"Pf\n4294967296 4294967296\n-1\n",
+        ] {
+            let mut bytes = header.to_vec();
+            bytes.extend_from_slice(&body);
+            assert!(decode_pfm(&bytes).is_err(), "accepted {:?}", String::from_utf8_lossy(header));
+        }
+    }
+
+    #[test]
+    fn rejects_truncated_data() {
+        let bytes = encode_pfm(&sample());
+        for cut in [bytes.len() - 1, bytes.len() - 4, 12] {
+            let e = decode_pfm(&bytes[..cut]).unwrap_err();
+            assert!(e.to_string().contains("needs 24 data bytes"), "{e}");
+        }
+    }
+
+    #[test]
+    fn file_round_trip_names_path_on_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("d.pfm");
+        write_pfm(&p, &sample()).unwrap();
+        assert_eq!(read_pfm(&p).unwrap(), sample());
+        std::fs::write(&p, b"garbage").unwrap();
+        let e = read_pfm(&p).unwrap_err().to_string();
+        assert!(e.contains("d.pfm") && e.contains("bad magic"), "{e}");
+    }
+}

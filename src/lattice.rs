@@ -1,0 +1,1 @@
+//! Permutohedral-lattice bilateral filter (Adams, Baek & Davis 2010). (Being implemented.)

@@ -1,0 +1,18 @@
+//! The `jem` command: parses arguments, calls the library, prints errors, picks the exit code.
+
+mod cli;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let args = cli::Cli::parse();
+    match cli::run(args) {
+        Ok(code) => code,
+        Err(err) => {
+            cli::print_error(&err);
+            ExitCode::from(2)
+        }
+    }
+}
