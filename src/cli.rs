@@ -17,12 +17,7 @@ use jem::{Error, Params, Result, StereoPair};
 /// `jem LEFT RIGHT -o OUT` reads a rectified pair and writes the left view's disparity map (PFM, EXR or 16-bit
 /// PNG by extension). ndisp comes from --ndisp, else from calib.txt beside LEFT.
 #[derive(Parser, Debug)]
-#[command(
-    name = "jem",
-    version,
-    args_conflicts_with_subcommands = true,
-    subcommand_negates_reqs = true
-)]
+#[command(name = "jem", version, args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
@@ -159,10 +154,7 @@ fn resolve_ndisp(flag: Option<usize>, left: &Path) -> Result<usize> {
 
 /// Loads a pair and checks sizes and ndisp.
 pub fn load_pair(left: &Path, right: &Path, ndisp: Option<usize>) -> Result<StereoPair> {
-    let (l, r) = rayon::join(
-        || jem::io::png::load_rgb(left),
-        || jem::io::png::load_rgb(right),
-    );
+    let (l, r) = rayon::join(|| jem::io::png::load_rgb(left), || jem::io::png::load_rgb(right));
     let (l, r) = (l?, r?);
     let ndisp = resolve_ndisp(ndisp, left)?;
     StereoPair::new(l, r, ndisp)
@@ -170,9 +162,7 @@ pub fn load_pair(left: &Path, right: &Path, ndisp: Option<usize>) -> Result<Ster
 
 fn run_match(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let (Some(left), Some(right), Some(output)) = (&args.left, &args.right, &args.output) else {
-        return Err(Error::Input(
-            "usage: jem LEFT RIGHT -o OUT (see --help)".into(),
-        ));
+        return Err(Error::Input("usage: jem LEFT RIGHT -o OUT (see --help)".into()));
     };
     // Check the output names before doing any work.
     jem::io::DisparityFormat::from_path(output)?;
@@ -202,11 +192,7 @@ fn run_match(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         for (name, d) in &out.timings.stages {
             eprintln!("{name:<14} {:>9.1} ms", d.as_secs_f64() * 1e3);
         }
-        eprintln!(
-            "{:<14} {:>9.1} ms",
-            "total",
-            start.elapsed().as_secs_f64() * 1e3
-        );
+        eprintln!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
     }
     Ok(ExitCode::SUCCESS)
 }

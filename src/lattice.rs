@@ -83,10 +83,7 @@ impl Lattice {
     /// If a σ is not positive, or the image is so large that a lattice coordinate overflows `i16` (more than
     /// ~45 000 pixels per side at σxy = 5).
     pub fn build(image: &RgbImage, sigma_xy: f32, sigma_rgb: f32) -> Lattice {
-        assert!(
-            sigma_xy > 0.0 && sigma_rgb > 0.0,
-            "lattice sigmas must be positive"
-        );
+        assert!(sigma_xy > 0.0 && sigma_rgb > 0.0, "lattice sigmas must be positive");
         let (w, npix) = (image.width, image.len());
         let (inv_xy, inv_rgb) = (1.0 / sigma_xy, 1.0 / sigma_rgb);
 
@@ -96,19 +93,13 @@ impl Lattice {
             .with_min_len(1024)
             .map(|i| {
                 let [r, g, b] = image.rgb(i);
-                let f = [
-                    (i % w) as f32 * inv_xy,
-                    (i / w) as f32 * inv_xy,
-                    r * inv_rgb,
-                    g * inv_rgb,
-                    b * inv_rgb,
-                ];
+                let f = [(i % w) as f32 * inv_xy, (i / w) as f32 * inv_xy, r * inv_rgb, g * inv_rgb, b * inv_rgb];
                 embed(&f)
             })
             .collect();
 
         // 2. Assign vertex ids in raster order of first appearance (sequential: deterministic).
-        let mut table = KeyTable::with_capacity(npix * 2 + 64);
+        let mut table = KeyTable::with_capacity(npix + 64);
         let mut pix_vertex = vec![0u32; npix * D1];
         let mut keys: Vec<[i16; D]> = Vec::with_capacity(npix);
         for (e, ids) in embeddings.iter().zip(pix_vertex.chunks_exact_mut(D1)) {
@@ -121,10 +112,7 @@ impl Lattice {
         }
         let nvert = keys.len();
         let pix_weight: Vec<f32> = embeddings.iter().flat_map(|e| e.weights).collect();
-        let self_weight = embeddings
-            .par_iter()
-            .map(|e| self_weight_of(&e.weights) * OUTPUT_SCALE)
-            .collect();
+        let self_weight = embeddings.par_iter().map(|e| self_weight_of(&e.weights) * OUTPUT_SCALE).collect();
         drop(embeddings);
 
         // 3. Splat gather lists (CSR), entries in pixel order.
@@ -146,34 +134,22 @@ impl Lattice {
         // 4. Blur neighbours along each lattice direction: key ± (1, …, 1) ∓ (d+1)·e_dir.
         let mut blur_nbr = vec![[NONE; 2]; D1 * nvert];
         for (dir, nbrs) in blur_nbr.chunks_exact_mut(nvert.max(1)).enumerate() {
-            nbrs.par_iter_mut()
-                .zip(keys.par_iter())
-                .with_min_len(1024)
-                .for_each(|(n, key)| {
-                    let mut down = *key;
-                    let mut up = *key;
-                    for c in 0..D {
-                        down[c] -= 1;
-                        up[c] += 1;
-                    }
-                    if dir < D {
-                        down[dir] += D1 as i16;
-                        up[dir] -= D1 as i16;
-                    }
-                    *n = [table.get(&down), table.get(&up)];
-                });
+            nbrs.par_iter_mut().zip(keys.par_iter()).with_min_len(1024).for_each(|(n, key)| {
+                let mut down = *key;
+                let mut up = *key;
+                for c in 0..D {
+                    down[c] -= 1;
+                    up[c] += 1;
+                }
+                if dir < D {
+                    down[dir] += D1 as i16;
+                    up[dir] -= D1 as i16;
+                }
+                *n = [table.get(&down), table.get(&up)];
+            });
         }
 
-        Lattice {
-            npix,
-            nvert,
-            pix_vertex,
-            pix_weight,
-            splat_start,
-            splat_entries,
-            blur_nbr,
-            self_weight,
-        }
+        Lattice { npix, nvert, pix_vertex, pix_weight, splat_start, splat_entries, blur_nbr, self_weight }
     }
 
     /// Number of pixels the lattice was built for.
@@ -204,24 +180,10 @@ impl Lattice {
     ///
     /// # Panics
     /// If the slices do not have `num_pixels × channels` elements.
-    pub fn filter(
-        &self,
-        input: &[f32],
-        output: &mut [f32],
-        channels: usize,
-        scratch: &mut LatticeScratch,
-    ) {
+    pub fn filter(&self, input: &[f32], output: &mut [f32], channels: usize, scratch: &mut LatticeScratch) {
         let nc = channels;
-        assert_eq!(
-            input.len(),
-            self.npix * nc,
-            "lattice filter input has the wrong size"
-        );
-        assert_eq!(
-            output.len(),
-            self.npix * nc,
-            "lattice filter output has the wrong size"
-        );
+        assert_eq!(input.len(), self.npix * nc, "lattice filter input has the wrong size");
+        assert_eq!(output.len(), self.npix * nc, "lattice filter output has the wrong size");
         if nc == 0 || self.npix == 0 {
             return;
         }
@@ -231,31 +193,24 @@ impl Lattice {
         let (mut cur, mut next) = (&mut scratch.a, &mut scratch.b);
 
         // Splat: gather each vertex's contributions in pixel order.
-        cur.par_chunks_mut(nc)
-            .enumerate()
-            .with_min_len(256)
-            .for_each(|(v, acc)| {
-                acc.fill(0.0);
-                let entries = &self.splat_entries
-                    [self.splat_start[v] as usize..self.splat_start[v + 1] as usize];
-                for &e in entries {
-                    let (p, w) = (e as usize / D1, self.pix_weight[e as usize]);
-                    let src = &input[p * nc..][..nc];
-                    for (a, s) in acc.iter_mut().zip(src) {
-                        *a += w * s;
-                    }
+        cur.par_chunks_mut(nc).enumerate().with_min_len(256).for_each(|(v, acc)| {
+            acc.fill(0.0);
+            let entries = &self.splat_entries[self.splat_start[v] as usize..self.splat_start[v + 1] as usize];
+            for &e in entries {
+                let (p, w) = (e as usize / D1, self.pix_weight[e as usize]);
+                let src = &input[p * nc..][..nc];
+                for (a, s) in acc.iter_mut().zip(src) {
+                    *a += w * s;
                 }
-            });
+            }
+        });
 
         // Blur along each of the d+1 directions: v ← v + ½(down + up).
         for dir in 0..D1 {
             let nbrs = &self.blur_nbr[dir * self.nvert..][..self.nvert];
             let src: &[f32] = cur;
-            next.par_chunks_mut(nc)
-                .zip(nbrs.par_iter())
-                .enumerate()
-                .with_min_len(256)
-                .for_each(|(v, (dst, &[down, up]))| {
+            next.par_chunks_mut(nc).zip(nbrs.par_iter()).enumerate().with_min_len(256).for_each(
+                |(v, (dst, &[down, up]))| {
                     let own = &src[v * nc..][..nc];
                     dst.copy_from_slice(own);
                     for n in [down, up] {
@@ -266,28 +221,25 @@ impl Lattice {
                             }
                         }
                     }
-                });
+                },
+            );
             std::mem::swap(&mut cur, &mut next);
         }
 
         // Slice: interpolate back with the splat weights.
         let vals: &[f32] = cur;
-        output
-            .par_chunks_mut(nc)
-            .enumerate()
-            .with_min_len(256)
-            .for_each(|(p, out)| {
-                out.fill(0.0);
-                let ids = &self.pix_vertex[p * D1..][..D1];
-                let ws = &self.pix_weight[p * D1..][..D1];
-                for (&v, &w) in ids.iter().zip(ws) {
-                    let w = w * OUTPUT_SCALE;
-                    let src = &vals[v as usize * nc..][..nc];
-                    for (o, s) in out.iter_mut().zip(src) {
-                        *o += w * s;
-                    }
+        output.par_chunks_mut(nc).enumerate().with_min_len(256).for_each(|(p, out)| {
+            out.fill(0.0);
+            let ids = &self.pix_vertex[p * D1..][..D1];
+            let ws = &self.pix_weight[p * D1..][..D1];
+            for (&v, &w) in ids.iter().zip(ws) {
+                let w = w * OUTPUT_SCALE;
+                let src = &vals[v as usize * nc..][..nc];
+                for (o, s) in out.iter_mut().zip(src) {
+                    *o += w * s;
                 }
-            });
+            }
+        });
     }
 }
 
@@ -332,11 +284,7 @@ fn embed(f: &[f32; D]) -> Embedding {
         let v = elevated[i] / d1;
         let up = v.ceil() * d1;
         let down = v.floor() * d1;
-        greedy[i] = if up - elevated[i] < elevated[i] - down {
-            up as i32
-        } else {
-            down as i32
-        };
+        greedy[i] = if up - elevated[i] < elevated[i] - down { up as i32 } else { down as i32 };
         total += greedy[i];
     }
     let total = total / D1 as i32;
@@ -386,11 +334,7 @@ fn embed(f: &[f32; D]) -> Embedding {
     for (rem, key) in keys.iter_mut().enumerate() {
         for i in 0..D {
             let r = rank[i] as usize;
-            let offset = if r <= D - rem {
-                rem as i32
-            } else {
-                rem as i32 - D1 as i32
-            };
+            let offset = if r <= D - rem { rem as i32 } else { rem as i32 - D1 as i32 };
             key[i] = i16::try_from(greedy[i] + offset).expect("lattice coordinate overflows i16");
         }
     }
@@ -404,15 +348,28 @@ struct KeyTable {
     keys: Vec<[i16; D]>,
     ids: Vec<u32>,
     mask: usize,
+    len: usize,
 }
 
 impl KeyTable {
     fn with_capacity(n: usize) -> Self {
         let cap = n.next_power_of_two().max(16);
-        KeyTable {
-            keys: vec![[0; D]; cap],
-            ids: vec![NONE; cap],
-            mask: cap - 1,
+        KeyTable { keys: vec![[0; D]; cap], ids: vec![NONE; cap], mask: cap - 1, len: 0 }
+    }
+
+    /// Rehashes into a table twice the size (ids are kept, so vertex numbering does not change).
+    fn grow(&mut self) {
+        let cap = self.ids.len() * 2;
+        let old_keys = std::mem::replace(&mut self.keys, vec![[0; D]; cap]);
+        let old_ids = std::mem::replace(&mut self.ids, vec![NONE; cap]);
+        self.mask = cap - 1;
+        for (key, id) in old_keys.iter().zip(old_ids).filter(|(_, id)| *id != NONE) {
+            let mut s = Self::slot(key) & self.mask;
+            while self.ids[s] != NONE {
+                s = (s + 1) & self.mask;
+            }
+            self.keys[s] = *key;
+            self.ids[s] = id;
         }
     }
 
@@ -425,14 +382,19 @@ impl KeyTable {
         (h ^ (h >> 29)) as usize
     }
 
-    /// The id of `key`, inserting it with `new_id` if absent.
+    /// The id of `key`, inserting it with `new_id` if absent. Doubles the table when it becomes half full, so
+    /// probing always ends (images with very noisy colours have up to d+1 distinct vertices per pixel).
     fn insert(&mut self, key: &[i16; D], new_id: u32) -> u32 {
+        if 2 * (self.len + 1) > self.ids.len() {
+            self.grow();
+        }
         let mut s = Self::slot(key) & self.mask;
         loop {
             let id = self.ids[s];
             if id == NONE {
                 self.keys[s] = *key;
                 self.ids[s] = new_id;
+                self.len += 1;
                 return new_id;
             }
             if self.keys[s] == *key {
@@ -477,18 +439,12 @@ mod tests {
     fn test_image(w: usize, h: usize, seed: u64) -> RgbImage {
         let noise = rand_vec(w * h * 3, seed);
         let mut img = RgbImage::new(w, h);
-        let palette = [
-            [200.0, 40.0, 40.0],
-            [30.0, 160.0, 60.0],
-            [90.0, 90.0, 220.0],
-            [240.0, 230.0, 120.0],
-        ];
+        let palette = [[200.0, 40.0, 40.0], [30.0, 160.0, 60.0], [90.0, 90.0, 220.0], [240.0, 230.0, 120.0]];
         for y in 0..h {
             for x in 0..w {
                 let region = usize::from(x * 3 > w) + 2 * usize::from(y * 2 > h + x / 3);
                 for c in 0..3 {
-                    img.channels[c][y * w + x] =
-                        palette[region][c] + 30.0 * (noise[(y * w + x) * 3 + c] - 0.5);
+                    img.channels[c][y * w + x] = palette[region][c] + 30.0 * (noise[(y * w + x) * 3 + c] - 0.5);
                 }
             }
         }
@@ -504,12 +460,7 @@ mod tests {
             for j in 0..n {
                 let (xj, yj, fj) = ((j % w) as f32, (j / w) as f32, img.rgb(j));
                 let dp = ((xi - xj).powi(2) + (yi - yj).powi(2)) / (2.0 * sxy * sxy);
-                let df = fi
-                    .iter()
-                    .zip(&fj)
-                    .map(|(a, b)| (a - b).powi(2))
-                    .sum::<f32>()
-                    / (2.0 * srgb * srgb);
+                let df = fi.iter().zip(&fj).map(|(a, b)| (a - b).powi(2)).sum::<f32>() / (2.0 * srgb * srgb);
                 let k = (-dp - df).exp();
                 for c in 0..nc {
                     out[i * nc + c] += k * input[j * nc + c];
@@ -554,23 +505,14 @@ mod tests {
     #[test]
     fn lattice_output_scale_matches_mass() {
         let (w, h) = (160, 160);
-        let uni = RgbImage {
-            width: w,
-            height: h,
-            channels: [vec![100.0; w * h], vec![50.0; w * h], vec![0.0; w * h]],
-        };
+        let uni = RgbImage { width: w, height: h, channels: [vec![100.0; w * h], vec![50.0; w * h], vec![0.0; w * h]] };
         let lat = Lattice::build(&uni, 5.0, 55.0);
         let out = filtered(&lat, &vec![1.0; w * h], 1);
-        let interior: Vec<f32> = (50..110)
-            .flat_map(|y| (50..110).map(move |x| (x, y)))
-            .map(|(x, y)| out[y * w + x])
-            .collect();
+        let interior: Vec<f32> =
+            (50..110).flat_map(|y| (50..110).map(move |x| (x, y))).map(|(x, y)| out[y * w + x]).collect();
         let mean = interior.iter().map(|&v| f64::from(v)).sum::<f64>() / interior.len() as f64;
         let mass = 2.0 * std::f64::consts::PI * 25.0;
-        assert!(
-            (mean / mass - 1.0).abs() < 0.01,
-            "interior mean {mean} vs Gaussian mass {mass}"
-        );
+        assert!((mean / mass - 1.0).abs() < 0.01, "interior mean {mean} vs Gaussian mass {mass}");
     }
 
     #[test]
@@ -596,31 +538,16 @@ mod tests {
         let img = test_image(50, 40, 11);
         let input = rand_vec(img.len() * 7, 2);
         let run = |threads| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| {
                 let lat = Lattice::build(&img, 5.0, 55.0);
-                (
-                    filtered(&lat, &input, 7),
-                    lat.self_weight().to_vec(),
-                    lat.num_vertices(),
-                )
+                (filtered(&lat, &input, 7), lat.self_weight().to_vec(), lat.num_vertices())
             })
         };
         let (a, b) = (run(1), run(2));
         assert_eq!(a.2, b.2);
-        assert!(
-            a.0.iter()
-                .zip(&b.0)
-                .all(|(x, y)| x.to_bits() == y.to_bits())
-        );
-        assert!(
-            a.1.iter()
-                .zip(&b.1)
-                .all(|(x, y)| x.to_bits() == y.to_bits())
-        );
+        assert!(a.0.iter().zip(&b.0).all(|(x, y)| x.to_bits() == y.to_bits()));
+        assert!(a.1.iter().zip(&b.1).all(|(x, y)| x.to_bits() == y.to_bits()));
     }
 
     /// The analytic self-weight against the filter's actual response to a unit impulse at that pixel. It is
@@ -636,27 +563,16 @@ mod tests {
             delta[i] = 1.0;
             let actual = filtered(&lat, &delta, 1)[i];
             let predicted = lat.self_weight()[i];
-            assert!(
-                actual <= predicted * 1.0001 && actual >= predicted * 0.85,
-                "pixel {i}: {actual} vs {predicted}"
-            );
+            assert!(actual <= predicted * 1.0001 && actual >= predicted * 0.85, "pixel {i}: {actual} vs {predicted}");
         }
     }
 
     #[test]
     fn lattice_embedding_weights_form_a_partition_of_unity() {
-        for f in [
-            [0.0; D],
-            [1.3, -2.2, 0.7, 4.1, 0.05],
-            [100.0, 37.5, 2.0, 2.0, 2.0],
-        ] {
+        for f in [[0.0; D], [1.3, -2.2, 0.7, 4.1, 0.05], [100.0, 37.5, 2.0, 2.0, 2.0]] {
             let e = embed(&f);
             let sum: f32 = e.weights.iter().sum();
-            assert!(
-                (sum - 1.0).abs() < 1e-5 && e.weights.iter().all(|&w| w >= -1e-6),
-                "{f:?}: {:?}",
-                e.weights
-            );
+            assert!((sum - 1.0).abs() < 1e-5 && e.weights.iter().all(|&w| w >= -1e-6), "{f:?}: {:?}", e.weights);
             // The d+1 vertices are distinct lattice points whose coordinates have remainders 0..=d.
             // Vertex `rem` is a remainder-`rem` lattice point: every coordinate ≡ rem (mod d+1), including the
             // implied last one (minus the sum of the others).
@@ -667,6 +583,23 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// White-noise colours put nearly every pixel in its own simplex (up to d+1 new vertices per pixel).
+    #[test]
+    fn lattice_handles_noise_images() {
+        let (w, h) = (40, 30);
+        let noise = rand_vec(w * h * 3, 4);
+        let mut img = RgbImage::new(w, h);
+        for c in 0..3 {
+            for i in 0..w * h {
+                img.channels[c][i] = 255.0 * noise[i * 3 + c];
+            }
+        }
+        let lat = Lattice::build(&img, 1.0, 5.0);
+        assert!(lat.num_vertices() > 2 * w * h, "{} vertices", lat.num_vertices());
+        let out = filtered(&lat, &vec![1.0; w * h], 1);
+        assert!(out.iter().all(|v| v.is_finite() && *v > 0.0));
     }
 
     #[test]

@@ -1,1 +1,567 @@
-//! Joint mean-field inference (paper §3, Algorithm 1). (Being implemented.)
+//! Joint mean-field inference on the FCM + LCM energy (paper §3, Algorithm 1; SPEC §3).
+//!
+//! Q_i(d) ∝ exp(−ψ_u(d) − Q̂_i(d) − P̂_i(d)), all pixels updated from the previous iterate (Jacobi), where
+//! - ψ_u = `unary_scale` × cost (the cost volume as a log-likelihood up to a temperature);
+//! - the fully connected Potts message Q̂_i(d) = ω·(Σ_l Q̃_i(l) − Q̃_i(d)), Q̃_i(l) = Σ_{j≠i} k(i, j) Q_j(l), with
+//!   Q̃ from the permutohedral lattice ([`crate::lattice`]) for all labels at once, optionally normalised
+//!   ([`Normalization`]) and without the pixel's own term (`exclude_self`, the paper's j ≠ i);
+//! - the local message P̂_i(d) = ω̃·Σ_l φ̃(d, l) P̃_i(l), P̃_i(l) = Σ_{j∈N4(i)} w̃(i, j) Q_j(l), in its O(M) form
+//!   P̂_i(d) = ω̃·(S_i − P̃_i(d) − (1 − β)(P̃_i(d−1) + P̃_i(d+1))), S_i = Σ_l P̃_i(l).
+//!
+//! The terms ω·Σ_l Q̃_i(l) and ω̃·S_i do not depend on d, so they cancel in the normalisation of Q_i and are not
+//! computed; the update uses E_i(d) = ψ_u(d) − ω·Q̃_i(d) − ω̃·(P̃_i(d) + (1 − β)(P̃_i(d−1) + P̃_i(d+1))), and
+//! Q_i = softmax(−E_i) with the maximum subtracted first (no overflow, never NaN for finite costs).
+//!
+//! Models: `lcm` sets ω = 0, `fcm` sets ω̃ = 0 (same code path). After T iterations the disparity is argmax Q (the
+//! paper's WTA) with an optional sub-pixel offset from a parabola through ln Q at d−1, d, d+1; the confidence is
+//! max Q.
+//!
+//! Default normalisation: the paper writes the message unnormalised (Σ_{j≠i} k(i,j) Q_j). Its magnitude then
+//! depends on how many similar pixels surround i (≈ 2πσx² = 157 in a uniform region, a few near thin
+//! structures), so one ω cannot suit both; we default to `symmetric` (D^{-1/2} K D^{-1/2}, as in Krähenbühl's
+//! dense-CRF code), chosen by measurement on trainingQ (docs/RESULTS.md); `none` and `pixel` remain available.
+//!
+//! Memory: Q, the next Q and the message, each `N × M` f32, plus the lattice's two `vertices × M` buffers; each
+//! iteration is O(N·M) and allocation-free (scratch is per row, made once per iteration chunk).
+
+use rayon::prelude::*;
+
+use crate::image::{CostVolume, DisparityMap, Plane, RgbImage};
+use crate::lattice::{Lattice, LatticeScratch};
+use crate::params::{MeanFieldParams, Normalization};
+
+/// Per-pixel label distributions, laid out like a [`CostVolume`]: `data[(y·w + x)·M + d]`.
+pub type Marginals = CostVolume;
+
+/// The weights of the two pairwise terms for one run (0 switches a term off).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PairwiseWeights {
+    /// ω, fully connected.
+    pub fcm: f32,
+    /// ω̃, locally connected.
+    pub lcm: f32,
+}
+
+/// Local edge weights w̃(i, j) towards the right and lower neighbours (the left/upper ones are their mirrors).
+#[derive(Clone, Debug)]
+pub struct LocalWeights {
+    /// w̃ between (x, y) and (x+1, y); 0 in the last column.
+    pub right: Plane<f32>,
+    /// w̃ between (x, y) and (x, y+1); 0 in the last row.
+    pub down: Plane<f32>,
+}
+
+/// w̃ = λ1 if Σ_rgb |I_i − I_j| < μ1, λ2 if < μ2, else λ3 (paper eq. 8).
+pub fn local_edge_weight(a: [f32; 3], b: [f32; 3], p: &MeanFieldParams) -> f32 {
+    let diff = (a[0] - b[0]).abs() + (a[1] - b[1]).abs() + (a[2] - b[2]).abs();
+    if diff < p.mu1 {
+        p.lambda1
+    } else if diff < p.mu2 {
+        p.lambda2
+    } else {
+        p.lambda3
+    }
+}
+
+/// Computes the 4-neighbour edge weights of an image.
+pub fn local_weights(image: &RgbImage, p: &MeanFieldParams) -> LocalWeights {
+    let (w, h) = image.dims();
+    let mut right = Plane::new(w, h, 0.0f32);
+    let mut down = Plane::new(w, h, 0.0f32);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if x + 1 < w {
+                right.data[i] = local_edge_weight(image.rgb(i), image.rgb(i + 1), p);
+            }
+            if y + 1 < h {
+                down.data[i] = local_edge_weight(image.rgb(i), image.rgb(i + w), p);
+            }
+        }
+    }
+    LocalWeights { right, down }
+}
+
+/// The local term's contribution to E_i(d) for all d, given P̃_i (the O(M) form without the constant S_i):
+/// `out[d] += −ω̃·(P̃(d) + (1 − β)(P̃(d−1) + P̃(d+1)))`.
+#[inline]
+pub fn add_local_energy(p_tilde: &[f32], omega: f32, beta: f32, out: &mut [f32]) {
+    let m = p_tilde.len();
+    let k = 1.0 - beta;
+    for d in 0..m {
+        let below = if d > 0 { p_tilde[d - 1] } else { 0.0 };
+        let above = if d + 1 < m { p_tilde[d + 1] } else { 0.0 };
+        out[d] -= omega * (p_tilde[d] + k * (below + above));
+    }
+}
+
+/// In place: `e ← softmax(−e)`, subtracting the minimum energy first.
+#[inline]
+fn softmax_neg_in_place(e: &mut [f32]) {
+    let min = e.iter().copied().fold(f32::INFINITY, f32::min);
+    let min = if min.is_finite() { min } else { 0.0 };
+    let mut sum = 0.0f32;
+    for v in e.iter_mut() {
+        *v = (min - *v).exp();
+        sum += *v;
+    }
+    if sum > 0.0 && sum.is_finite() {
+        let inv = 1.0 / sum;
+        e.iter_mut().for_each(|v| *v *= inv);
+    } else {
+        // Only reachable with non-finite energies: fall back to a uniform distribution rather than NaN.
+        let u = 1.0 / e.len() as f32;
+        e.iter_mut().for_each(|v| *v = u);
+    }
+}
+
+/// Mean-field state for one view: build once, then [`MeanField::step`] T times.
+pub struct MeanField<'a> {
+    cost: &'a CostVolume,
+    unary_scale: f32,
+    weights: PairwiseWeights,
+    beta: f32,
+    lattice: Option<Lattice>,
+    local: LocalWeights,
+    /// Per-pixel factor applied to Q before filtering (symmetric normalisation) — empty if 1.
+    in_scale: Vec<f32>,
+    /// Per-pixel factor applied to the filtered message — empty if 1.
+    out_scale: Vec<f32>,
+    /// Per-pixel self-weight to subtract (scaled like the input) — empty if the self term is kept.
+    self_weight: Vec<f32>,
+    q: Vec<f32>,
+    next: Vec<f32>,
+    msg: Vec<f32>,
+    scratch: LatticeScratch,
+}
+
+impl<'a> MeanField<'a> {
+    /// Prepares inference: the lattice (only if ω > 0), the local weights, and Q initialised to softmax(−ψ_u).
+    ///
+    /// # Panics
+    /// If the image and the cost volume differ in size.
+    pub fn new(cost: &'a CostVolume, image: &RgbImage, p: &MeanFieldParams, weights: PairwiseWeights) -> Self {
+        assert_eq!((cost.width, cost.height), image.dims(), "cost volume and image differ in size");
+        let n = image.len();
+        let m = cost.ndisp;
+        let lattice = (weights.fcm > 0.0).then(|| Lattice::build(image, p.sigma_xy, p.sigma_rgb));
+        let (mut in_scale, mut out_scale, mut self_weight) = (Vec::new(), Vec::new(), Vec::new());
+        if let Some(lat) = &lattice {
+            let mut norm = vec![0.0f32; n];
+            lat.filter(&vec![1.0f32; n], &mut norm, 1, &mut LatticeScratch::default());
+            let sw = lat.self_weight();
+            if p.exclude_self {
+                // Never let the normaliser reach 0: a pixel with no similar neighbours gets a tiny message.
+                norm.iter_mut().zip(sw).for_each(|(v, s)| *v = (*v - s).max(1e-3));
+            }
+            match p.normalization {
+                Normalization::None => {}
+                Normalization::Pixel => out_scale = norm.iter().map(|v| 1.0 / v).collect(),
+                Normalization::Symmetric => {
+                    in_scale = norm.iter().map(|v| 1.0 / v.sqrt()).collect();
+                    out_scale = in_scale.clone();
+                }
+            }
+            if p.exclude_self {
+                self_weight = sw.to_vec();
+            }
+        }
+        let mut q = cost.data.clone();
+        let scale = p.unary_scale;
+        q.par_chunks_mut(m).with_min_len(256).for_each(|e| {
+            e.iter_mut().for_each(|v| *v *= scale);
+            softmax_neg_in_place(e);
+        });
+        let msg = if lattice.is_some() { vec![0.0; n * m] } else { Vec::new() };
+        MeanField {
+            cost,
+            unary_scale: p.unary_scale,
+            weights,
+            beta: p.beta,
+            lattice,
+            local: local_weights(image, p),
+            in_scale,
+            out_scale,
+            self_weight,
+            q,
+            next: vec![0.0; n * m],
+            msg,
+            scratch: LatticeScratch::default(),
+        }
+    }
+
+    /// One Jacobi mean-field iteration over all pixels.
+    pub fn step(&mut self) {
+        let (w, m) = (self.cost.width, self.cost.ndisp);
+        if let Some(lat) = &self.lattice {
+            let input: &[f32] = if self.in_scale.is_empty() {
+                &self.q
+            } else {
+                let (q, s) = (&self.q, &self.in_scale);
+                self.next
+                    .par_chunks_mut(m)
+                    .zip(q.par_chunks(m))
+                    .zip(s.par_iter())
+                    .with_min_len(256)
+                    .for_each(|((dst, src), &s)| dst.iter_mut().zip(src).for_each(|(d, v)| *d = v * s));
+                &self.next
+            };
+            lat.filter(input, &mut self.msg, m, &mut self.scratch);
+        }
+
+        let mut next = std::mem::take(&mut self.next);
+        let this = &*self;
+        let q = &this.q;
+        let row_len = w * m;
+        next.par_chunks_mut(row_len)
+            .enumerate()
+            .for_each_init(|| vec![0.0f32; m], |p_tilde, (y, out_row)| this.update_row(y, q, out_row, p_tilde));
+        self.next = next;
+        std::mem::swap(&mut self.q, &mut self.next);
+    }
+
+    /// Computes the new Q for row `y` into `out_row` from the current `q`.
+    fn update_row(&self, y: usize, q: &[f32], out_row: &mut [f32], p_tilde: &mut [f32]) {
+        let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
+        let PairwiseWeights { fcm, lcm } = self.weights;
+        for (x, e) in out_row.chunks_exact_mut(m).enumerate() {
+            let i = y * w + x;
+            for (e, c) in e.iter_mut().zip(self.cost.pixel(i)) {
+                *e = self.unary_scale * c;
+            }
+            if fcm > 0.0 {
+                let (out_s, self_w) = self.message_factors(i);
+                let msg = &self.msg[i * m..][..m];
+                let qi = &q[i * m..][..m];
+                let k = fcm * out_s;
+                for ((e, g), qv) in e.iter_mut().zip(msg).zip(qi) {
+                    *e -= k * (g - self_w * qv).max(0.0);
+                }
+            }
+            if lcm > 0.0 {
+                p_tilde.fill(0.0);
+                let mut add = |j: usize, wt: f32| {
+                    for (p, v) in p_tilde.iter_mut().zip(&q[j * m..][..m]) {
+                        *p += wt * v;
+                    }
+                };
+                if x > 0 {
+                    add(i - 1, self.local.right.data[i - 1]);
+                }
+                if x + 1 < w {
+                    add(i + 1, self.local.right.data[i]);
+                }
+                if y > 0 {
+                    add(i - w, self.local.down.data[i - w]);
+                }
+                if y + 1 < h {
+                    add(i + w, self.local.down.data[i]);
+                }
+                add_local_energy(p_tilde, lcm, self.beta, e);
+            }
+            softmax_neg_in_place(e);
+        }
+    }
+
+    /// Pixel i's message factors: Q̃_i(l) = out_scale · (raw_i(l) − self_w · Q_i(l)), where raw is the lattice
+    /// output for the (possibly pre-scaled) marginals.
+    #[inline]
+    fn message_factors(&self, i: usize) -> (f32, f32) {
+        let out_s = self.out_scale.get(i).copied().unwrap_or(1.0);
+        let in_s = self.in_scale.get(i).copied().unwrap_or(1.0);
+        let self_w = self.self_weight.get(i).copied().unwrap_or(0.0) * in_s;
+        (out_s, self_w)
+    }
+
+    /// The fully connected message Q̃ (normalised, self term excluded as configured) for the current marginals,
+    /// `N × M`; empty when ω = 0. For tests and diagnostics: [`MeanField::step`] computes the same values inline.
+    pub fn fcm_message(&mut self) -> Vec<f32> {
+        let m = self.cost.ndisp;
+        let Some(lat) = &self.lattice else { return Vec::new() };
+        let scaled: Vec<f32> = if self.in_scale.is_empty() {
+            self.q.clone()
+        } else {
+            self.q.chunks_exact(m).zip(&self.in_scale).flat_map(|(q, s)| q.iter().map(move |v| v * s)).collect()
+        };
+        let mut raw = vec![0.0; scaled.len()];
+        lat.filter(&scaled, &mut raw, m, &mut self.scratch);
+        let mut out = raw;
+        for (i, msg) in out.chunks_exact_mut(m).enumerate() {
+            let (out_s, self_w) = self.message_factors(i);
+            for (g, qv) in msg.iter_mut().zip(&self.q[i * m..][..m]) {
+                *g = out_s * (*g - self_w * qv).max(0.0);
+            }
+        }
+        out
+    }
+
+    /// The current marginals.
+    pub fn marginals(&self) -> &[f32] {
+        &self.q
+    }
+
+    /// Consumes the state, returning the marginals as a volume.
+    pub fn into_marginals(self) -> Marginals {
+        CostVolume { width: self.cost.width, height: self.cost.height, ndisp: self.cost.ndisp, data: self.q }
+    }
+}
+
+/// Runs `p.iterations` mean-field iterations and returns the marginals.
+pub fn infer_mean_field(
+    cost: &CostVolume,
+    image: &RgbImage,
+    p: &MeanFieldParams,
+    weights: PairwiseWeights,
+) -> Marginals {
+    let mut mf = MeanField::new(cost, image, p, weights);
+    for _ in 0..p.iterations {
+        mf.step();
+    }
+    mf.into_marginals()
+}
+
+/// Disparity (argmax Q, ties to the smaller label, with an optional sub-pixel parabola through ln Q) and
+/// confidence (max Q) from marginals.
+pub fn decode_marginals(q: &Marginals, subpixel: bool) -> (DisparityMap, Plane<f32>) {
+    let (w, h, m) = (q.width, q.height, q.ndisp);
+    let mut disp = Plane::new(w, h, 0.0f32);
+    let mut conf = Plane::new(w, h, 0.0f32);
+    disp.data.par_iter_mut().zip(conf.data.par_iter_mut()).enumerate().with_min_len(1024).for_each(|(i, (d, c))| {
+        let qi = q.pixel(i);
+        let mut best = 0;
+        for (l, &v) in qi.iter().enumerate() {
+            if v > qi[best] {
+                best = l;
+            }
+        }
+        *c = qi[best];
+        *d = best as f32;
+        if subpixel && best > 0 && best + 1 < m {
+            *d += parabola_offset(qi[best - 1], qi[best], qi[best + 1]);
+        }
+    });
+    (disp, conf)
+}
+
+/// Vertex offset in [−0.5, 0.5] of the parabola through (−1, ln a), (0, ln b), (1, ln c), where b is the largest.
+#[inline]
+pub fn parabola_offset(a: f32, b: f32, c: f32) -> f32 {
+    const FLOOR: f32 = 1e-30;
+    let (la, lb, lc) = (a.max(FLOOR).ln(), b.max(FLOOR).ln(), c.max(FLOOR).ln());
+    let curvature = la - 2.0 * lb + lc;
+    if curvature < -1e-6 { (0.5 * (la - lc) / curvature).clamp(-0.5, 0.5) } else { 0.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::{CostParams, Params};
+
+    fn rand_vec(n: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed.max(1);
+        (0..n)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                (s >> 40) as f32 / (1u64 << 24) as f32
+            })
+            .collect()
+    }
+
+    #[test]
+    fn meanfield_local_message_o_m_form_equals_naive_sum() {
+        let m = 9;
+        let (omega, beta) = (1.7, 0.35);
+        let p_tilde: Vec<f32> = rand_vec(m, 3).iter().map(|v| v * 4.0).collect();
+        // Naive O(M²): P̂(d) = ω̃ Σ_l φ̃(d, l) P̃(l).
+        let phi = |d: usize, l: usize| match d.abs_diff(l) {
+            0 => 0.0,
+            1 => beta,
+            _ => 1.0,
+        };
+        let naive: Vec<f32> = (0..m).map(|d| omega * (0..m).map(|l| phi(d, l) * p_tilde[l]).sum::<f32>()).collect();
+        // O(M) form without the constant ω̃·S, which add_local_energy leaves out.
+        let mut fast = vec![0.0; m];
+        add_local_energy(&p_tilde, omega, beta, &mut fast);
+        let s: f32 = p_tilde.iter().sum();
+        for d in 0..m {
+            assert!(
+                (fast[d] + omega * s - naive[d]).abs() < 1e-4,
+                "label {d}: {} vs {}",
+                fast[d] + omega * s,
+                naive[d]
+            );
+        }
+    }
+
+    fn tiny_image(w: usize, h: usize) -> RgbImage {
+        let noise = rand_vec(w * h, 5);
+        let mut img = RgbImage::new(w, h);
+        for i in 0..w * h {
+            let x = i % w;
+            let base = if x < w / 2 { [180.0, 60.0, 50.0] } else { [40.0, 90.0, 200.0] };
+            for c in 0..3 {
+                img.channels[c][i] = base[c] + 25.0 * noise[i];
+            }
+        }
+        img
+    }
+
+    /// The lattice message against Σ_{j≠i} k(i, j) Q_j(l) computed densely, for each normalisation.
+    /// Tolerance as for the lattice itself (its kernel is an approximation of the Gaussian; see
+    /// `lattice_matches_brute_force_gaussian`): relative L2 error below 12%.
+    #[test]
+    fn meanfield_fcm_message_matches_brute_force() {
+        let (w, h, m) = (16, 12, 4);
+        let img = tiny_image(w, h);
+        let n = w * h;
+        let cost =
+            CostVolume { width: w, height: h, ndisp: m, data: rand_vec(n * m, 11).iter().map(|v| v * 10.0).collect() };
+        for norm in [Normalization::None, Normalization::Pixel, Normalization::Symmetric] {
+            let p = MeanFieldParams { normalization: norm, exclude_self: true, ..MeanFieldParams::default() };
+            let mut mf = MeanField::new(&cost, &img, &p, PairwiseWeights { fcm: 1.0, lcm: 0.0 });
+            let fast = mf.fcm_message();
+            let q = mf.marginals().to_vec();
+            let k = |i: usize, j: usize| {
+                let (xi, yi, xj, yj) = ((i % w) as f32, (i / w) as f32, (j % w) as f32, (j / w) as f32);
+                let (fi, fj) = (img.rgb(i), img.rgb(j));
+                let dp = ((xi - xj).powi(2) + (yi - yj).powi(2)) / (2.0 * p.sigma_xy.powi(2));
+                let df = fi.iter().zip(&fj).map(|(a, b)| (a - b).powi(2)).sum::<f32>() / (2.0 * p.sigma_rgb.powi(2));
+                (-dp - df).exp()
+            };
+            let deg: Vec<f32> = (0..n).map(|i| (0..n).filter(|&j| j != i).map(|j| k(i, j)).sum()).collect();
+            let (mut err2, mut ref2) = (0.0f64, 0.0f64);
+            for i in 0..n {
+                for l in 0..m {
+                    let reference: f32 = (0..n)
+                        .filter(|&j| j != i)
+                        .map(|j| {
+                            let kij = k(i, j);
+                            match norm {
+                                Normalization::None => kij * q[j * m + l],
+                                Normalization::Pixel => kij * q[j * m + l] / deg[i],
+                                Normalization::Symmetric => kij * q[j * m + l] / (deg[i] * deg[j]).sqrt(),
+                            }
+                        })
+                        .sum();
+                    err2 += f64::from(fast[i * m + l] - reference).powi(2);
+                    ref2 += f64::from(reference).powi(2);
+                }
+            }
+            let rel = (err2 / ref2).sqrt();
+            assert!(rel < 0.12, "{norm:?}: relative L2 error {rel}");
+        }
+    }
+
+    /// Random texture, right view shifted by a three-band disparity field.
+    fn banded_pair(w: usize, h: usize) -> (RgbImage, RgbImage, impl Fn(usize) -> usize) {
+        let field = move |x: usize| {
+            if x < w / 3 {
+                4
+            } else if x < 2 * w / 3 {
+                9
+            } else {
+                14
+            }
+        };
+        let tex_l = rand_vec(w * h * 3, 21);
+        let tex_r = rand_vec(w * h * 3, 77);
+        let mut left = RgbImage::new(w, h);
+        let mut right = RgbImage::new(w, h);
+        for c in 0..3 {
+            for i in 0..w * h {
+                left.channels[c][i] = 255.0 * tex_l[i * 3 + c];
+                right.channels[c][i] = 255.0 * tex_r[i * 3 + c];
+            }
+        }
+        for y in 0..h {
+            for x in 0..w {
+                let d = field(x);
+                if x >= d {
+                    for c in 0..3 {
+                        right.channels[c][y * w + x - d] = left.channels[c][y * w + x];
+                    }
+                }
+            }
+        }
+        (left, right, field)
+    }
+
+    /// Every model recovers a piecewise-constant disparity field on a textured pair: at least 97% of the pixels
+    /// away from the image border and from the band edges (where occlusions make the answer ambiguous) get the
+    /// exact label.
+    #[test]
+    fn meanfield_models_recover_synthetic_disparity() {
+        let (w, h, nd) = (90, 40, 18);
+        let (left, right, field) = banded_pair(w, h);
+        let cost = crate::cost::build_cost_volume(&left, &right, nd, &CostParams::default());
+        for (name, weights) in [
+            ("lcm", PairwiseWeights { fcm: 0.0, lcm: 1.0 }),
+            ("fcm", PairwiseWeights { fcm: 30.0, lcm: 0.0 }),
+            ("jem", PairwiseWeights { fcm: 30.0, lcm: 1.0 }),
+        ] {
+            let p = MeanFieldParams { iterations: 5, ..MeanFieldParams::default() };
+            let q = infer_mean_field(&cost, &left, &p, weights);
+            let (disp, conf) = decode_marginals(&q, false);
+            let (mut good, mut total) = (0, 0);
+            for y in 4..h - 4 {
+                for x in 20..w - 4 {
+                    if [w / 3, 2 * w / 3].iter().any(|&e| x + 16 > e && x < e + 4) {
+                        continue;
+                    }
+                    total += 1;
+                    good += usize::from(disp.at(x, y) == field(x) as f32);
+                }
+            }
+            let frac = good as f64 / total as f64;
+            assert!(frac >= 0.97, "{name}: {good}/{total} exact");
+            assert!(conf.data.iter().all(|c| (0.0..=1.0 + 1e-6).contains(c)));
+        }
+    }
+
+    #[test]
+    fn meanfield_marginals_are_distributions() {
+        let (w, h, nd) = (30, 10, 8);
+        let (left, right, _) = banded_pair(w, h);
+        let cost = crate::cost::build_cost_volume(&left, &right, nd, &CostParams::default());
+        let q = infer_mean_field(&cost, &left, &MeanFieldParams::default(), PairwiseWeights { fcm: 30.0, lcm: 1.0 });
+        for i in 0..w * h {
+            let s: f32 = q.pixel(i).iter().sum();
+            assert!((s - 1.0).abs() < 1e-4 && q.pixel(i).iter().all(|v| v.is_finite() && *v >= 0.0));
+        }
+    }
+
+    #[test]
+    fn meanfield_zero_iterations_is_softmax_of_the_unary() {
+        let (w, h, nd) = (20, 6, 5);
+        let (left, right, _) = banded_pair(w, h);
+        let cost = crate::cost::build_cost_volume(&left, &right, nd, &CostParams::default());
+        let p = MeanFieldParams { iterations: 0, ..MeanFieldParams::default() };
+        let q = infer_mean_field(&cost, &left, &p, PairwiseWeights { fcm: 30.0, lcm: 1.0 });
+        let (disp, _) = decode_marginals(&q, false);
+        assert_eq!(disp, crate::cost::winner_take_all(&cost));
+    }
+
+    #[test]
+    fn meanfield_run_is_identical_with_1_and_2_threads() {
+        let (w, h) = (64, 30);
+        let (left, right, _) = banded_pair(w, h);
+        let pair = crate::StereoPair::new(left, right, 16).unwrap();
+        let run = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| crate::run(&Params::default(), &pair).unwrap().disparity)
+        };
+        let (a, b) = (run(1), run(2));
+        assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()));
+    }
+
+    #[test]
+    fn parabola_offset_finds_the_vertex() {
+        // ln Q = −(x − 0.3)² sampled at −1, 0, 1.
+        let f = |x: f32| (-(x - 0.3f32).powi(2)).exp();
+        assert!((parabola_offset(f(-1.0), f(0.0), f(1.0)) - 0.3).abs() < 1e-4);
+        assert_eq!(parabola_offset(0.2, 0.2, 0.2), 0.0, "flat: no offset");
+        assert_eq!(parabola_offset(0.0, 1.0, 0.0), 0.0, "symmetric");
+    }
+}
