@@ -60,3 +60,15 @@ fn synth_defaults_and_bad_sizes() {
     assert!(err.contains("ndisp") && err.contains("400"), "{err}");
     assert!(!bad.exists(), "nothing is written for invalid parameters");
 }
+
+/// The committed example is what the current renderer produces (if this fails after a deliberate change to the
+/// renderer, regenerate it: `cargo run --release -- synth examples/synth --seed 1`).
+#[test]
+fn committed_example_is_up_to_date() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert!(synth(tmp.path(), &["--seed", "1", "--quiet"]).status.success());
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/synth");
+    for (f, (fresh, committed)) in FILES.iter().zip(read_all(tmp.path()).iter().zip(read_all(&example))) {
+        assert!(*fresh == committed, "examples/synth/{f} is stale");
+    }
+}
