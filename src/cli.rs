@@ -98,6 +98,15 @@ struct SynthArgs {
     /// Random seed: the same seed gives byte-identical files.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Image width in pixels (64..=8192).
+    #[arg(long, default_value_t = 320, value_name = "W")]
+    width: usize,
+    /// Image height in pixels (32..=8192).
+    #[arg(long, default_value_t = 240, value_name = "H")]
+    height: usize,
+    /// Disparity search range written to calib.txt (16..=W/2); the scene's disparities span about 6-92 % of it.
+    #[arg(long, default_value_t = 48, value_name = "N")]
+    ndisp: usize,
 }
 
 /// Runs the parsed command line.
@@ -118,10 +127,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             print!("{}", args.params()?.to_toml());
             Ok(ExitCode::SUCCESS)
         }
-        Some(Command::Synth(args)) => {
-            let _ = args;
-            Err(Error::Input("synth: not available yet".into()))
-        }
+        Some(Command::Synth(args)) => run_synth(&args, &cli.global),
     }
 }
 
@@ -193,6 +199,26 @@ fn run_match(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
             eprintln!("{name:<14} {:>9.1} ms", d.as_secs_f64() * 1e3);
         }
         eprintln!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn run_synth(args: &SynthArgs, global: &GlobalArgs) -> Result<ExitCode> {
+    let params = jem::synth::SynthParams { width: args.width, height: args.height, ndisp: args.ndisp, seed: args.seed };
+    let scene = jem::synth::render_scene(&params)?;
+    jem::synth::write_scene(&args.outdir, &scene)?;
+    if !global.quiet {
+        eprintln!(
+            "wrote {}/{{im0.png,im1.png,calib.txt,disp0GT.pfm,mask0nocc.png}}: {}x{}, ndisp {}, disparities {}..{}, \
+             seed {}",
+            args.outdir.display(),
+            params.width,
+            params.height,
+            scene.ndisp,
+            scene.vmin,
+            scene.vmax,
+            params.seed
+        );
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -31,6 +31,7 @@ pub mod lattice;
 pub mod meanfield;
 pub mod params;
 pub mod post;
+pub mod synth;
 
 use std::time::{Duration, Instant};
 
