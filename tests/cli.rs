@@ -1,0 +1,181 @@
+//! The `jem` binary end to end: outputs, formats, configs and clean failures on bad input (issues 2 and 8).
+
+mod common;
+
+use std::path::Path;
+
+use common::{files_in, repo, run_in, stderr};
+use jem::io::pfm;
+
+fn example(name: &str) -> String {
+    repo().join("examples").join("synth").join(name).to_string_lossy().into_owned()
+}
+
+/// Asserts a clean failure: exit code 2, one `error:` line mentioning every `needle`, and no file left in `dir`.
+fn assert_clean_failure(dir: &Path, args: &[&str], needles: &[&str]) {
+    let before = files_in(dir);
+    let out = run_in(dir, args);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "args {args:?}: {err}");
+    assert!(err.starts_with("error: ") && err.trim_end().lines().count() == 1, "not one error line: {err}");
+    for n in needles {
+        assert!(err.contains(n), "error for {args:?} does not mention {n:?}: {err}");
+    }
+    assert_eq!(files_in(dir), before, "args {args:?} left files behind");
+}
+
+#[test]
+fn readme_example_writes_a_valid_pfm() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(dir.path(), &[&example("im0.png"), &example("im1.png"), "-o", "disp.pfm"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let d = pfm::read_pfm(&dir.path().join("disp.pfm")).unwrap();
+    assert_eq!(d.dims(), (320, 240));
+    assert!(d.data.iter().all(|v| v.is_finite() && (0.0..48.0).contains(v)), "the default pipeline is dense");
+    assert_eq!(files_in(dir.path()), ["disp.pfm"], "no temporary files left");
+}
+
+#[test]
+fn output_formats_follow_the_extension() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    for name in ["d.pfm", "d.exr", "d.png"] {
+        let out = run_in(dir.path(), &[&l, &r, "-o", name, "--set", "model=wta"]);
+        assert!(out.status.success(), "{name}: {}", stderr(&out));
+    }
+    let a = jem::io::read_disparity(&dir.path().join("d.pfm")).unwrap();
+    let b = jem::io::read_disparity(&dir.path().join("d.exr")).unwrap();
+    let c = jem::io::read_disparity(&dir.path().join("d.png")).unwrap();
+    assert_eq!(a, b);
+    assert!(a.data.iter().zip(&c.data).all(|(x, y)| (x - y).abs() <= 1.0 / 512.0 || (*x == 0.0 && y.is_infinite())));
+}
+
+#[test]
+fn same_output_bytes_whatever_the_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    for (threads, name) in [("1", "t1.pfm"), ("2", "t2.pfm"), ("3", "t3.pfm"), ("2", "again.pfm")] {
+        let out = run_in(dir.path(), &["--threads", threads, &l, &r, "-o", name]);
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    let first = std::fs::read(dir.path().join("t1.pfm")).unwrap();
+    for name in ["t2.pfm", "t3.pfm", "again.pfm"] {
+        assert!(std::fs::read(dir.path().join(name)).unwrap() == first, "{name} differs from t1.pfm");
+    }
+}
+
+#[test]
+fn ndisp_comes_from_calib_or_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    // Images copied away from their calib.txt: ndisp must then be given.
+    for f in ["im0.png", "im1.png"] {
+        std::fs::copy(example(f), dir.path().join(f)).unwrap();
+    }
+    assert_clean_failure(dir.path(), &["im0.png", "im1.png", "-o", "d.pfm"], &["ndisp", "calib.txt"]);
+    let out = run_in(dir.path(), &["im0.png", "im1.png", "-o", "d.pfm", "--ndisp", "32", "--set", "model=wta"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    std::fs::write(dir.path().join("calib.txt"), "width=320\nndisp=zero\n").unwrap();
+    assert_clean_failure(dir.path(), &["im0.png", "im1.png", "-o", "e.pfm"], &["calib.txt", "ndisp"]);
+}
+
+#[test]
+fn bad_input_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    // Missing file.
+    assert_clean_failure(d, &[&l, "nope.png", "-o", "x.pfm", "--ndisp", "16"], &["nope.png"]);
+    // Unequal sizes.
+    image::RgbImage::new(100, 50).save(d.join("small.png")).unwrap();
+    assert_clean_failure(d, &[&l, "small.png", "-o", "x.pfm", "--ndisp", "16"], &["320x240", "100x50"]);
+    std::fs::remove_file(d.join("small.png")).unwrap();
+    // Corrupt and truncated images.
+    std::fs::write(d.join("bad.png"), b"\x89PNG\r\n\x1a\n garbage").unwrap();
+    assert_clean_failure(d, &[&l, "bad.png", "-o", "x.pfm", "--ndisp", "16"], &["bad.png"]);
+    let bytes = std::fs::read(&r).unwrap();
+    std::fs::write(d.join("bad.png"), &bytes[..bytes.len() / 2]).unwrap();
+    assert_clean_failure(d, &[&l, "bad.png", "-o", "x.pfm", "--ndisp", "16"], &["bad.png"]);
+    std::fs::write(d.join("bad.png"), b"just text").unwrap();
+    assert_clean_failure(d, &[&l, "bad.png", "-o", "x.pfm", "--ndisp", "16"], &["bad.png"]);
+    std::fs::remove_file(d.join("bad.png")).unwrap();
+    // Impossible ndisp.
+    assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "--ndisp", "0"], &["ndisp"]);
+    assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "--ndisp", "320"], &["ndisp", "320"]);
+    let out = run_in(d, &[&l, &r, "-o", "x.pfm", "--ndisp", "-3"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(!d.join("x.pfm").exists());
+    // Unknown output format.
+    assert_clean_failure(d, &[&l, &r, "-o", "x.jpg", "--ndisp", "16"], &["x.jpg"]);
+}
+
+#[test]
+fn bad_config_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    std::fs::write(d.join("typo.toml"), "[meanfield]\niteratons = 3\n").unwrap();
+    assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "-c", "typo.toml"], &["typo.toml", "iteratons"]);
+    std::fs::write(d.join("type.toml"), "[meanfield]\niterations = \"three\"\n").unwrap();
+    assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "-c", "type.toml"], &["type.toml", "iterations"]);
+    std::fs::write(d.join("range.toml"), "[meanfield]\nsigma_rgb = -1\n").unwrap();
+    assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "-c", "range.toml"], &["meanfield.sigma_rgb", "-1", "> 0"]);
+    std::fs::write(d.join("syntax.toml"), "[meanfield\n").unwrap();
+    assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "-c", "syntax.toml"], &["syntax.toml"]);
+    for f in ["typo.toml", "type.toml", "range.toml", "syntax.toml"] {
+        std::fs::remove_file(d.join(f)).unwrap();
+    }
+    assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "-c", "missing.toml"], &["missing.toml"]);
+    assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "--set", "model=deep"], &["model", "deep"]);
+    assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "--set", "cost.census_width=8"], &["cost.census_width", "8"]);
+}
+
+#[test]
+fn config_prints_the_effective_toml() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(dir.path(), &["config", "--set", "meanfield.iterations=9", "--set", "model=fcm"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8(out.stdout).unwrap();
+    let params = jem::Params::from_toml_str(&text, Path::new("printed")).unwrap();
+    assert_eq!(params.meanfield.iterations, 9);
+    assert_eq!(params.model, jem::Model::Fcm);
+    for cfg in std::fs::read_dir(repo().join("configs")).unwrap() {
+        let cfg = cfg.unwrap().path();
+        let out = run_in(dir.path(), &["config", "-c", cfg.to_str().unwrap()]);
+        assert!(out.status.success(), "{}: {}", cfg.display(), stderr(&out));
+    }
+}
+
+#[test]
+fn tiny_images_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (w, h) in [(1u32, 1u32), (2, 1), (3, 2), (5, 40), (40, 3)] {
+        image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 40) as u8, (y * 70) as u8, 9])).save(d.join("a.png")).unwrap();
+        image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(y * 30) as u8, (x * 20) as u8, 1])).save(d.join("b.png")).unwrap();
+        let out = run_in(d, &["a.png", "b.png", "-o", "o.pfm", "--ndisp", "1"]);
+        let err = stderr(&out);
+        if w == 1 {
+            assert_eq!(out.status.code(), Some(2), "{w}x{h}: {err}");
+            assert!(err.contains("ndisp"), "{err}");
+        } else {
+            assert!(out.status.success(), "{w}x{h}: {err}");
+            let map = pfm::read_pfm(&d.join("o.pfm")).unwrap();
+            assert_eq!(map.dims(), (w as usize, h as usize));
+            assert!(map.data.iter().all(|v| !v.is_nan()));
+        }
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}
+
+#[test]
+fn teddy_gives_a_450x375_pfm() {
+    let Some(data) = common::data_dir() else { return };
+    let teddy = data.join("MiddEval3/trainingQ/Teddy");
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (teddy.join("im0.png"), teddy.join("im1.png"));
+    let out = run_in(dir.path(), &[l.to_str().unwrap(), r.to_str().unwrap(), "-o", "t.pfm"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let bytes = std::fs::read(dir.path().join("t.pfm")).unwrap();
+    assert!(bytes.starts_with(b"Pf\n450 375\n-1\n"));
+    assert_eq!(bytes.len(), 14 + 450 * 375 * 4);
+}
