@@ -39,18 +39,8 @@ pub const SCENE_FILES: [&str; 3] = ["im0.png", "im1.png", "calib.txt"];
 pub fn validate_alg_name(name: &str) -> Result<()> {
     let ok = !name.is_empty()
         && name.len() <= 64
-        && name
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-');
-    if ok {
-        Ok(())
-    } else {
-        Err(Error::param(
-            "--alg",
-            format!("{name:?}"),
-            "1 to 64 letters, digits, _ or -",
-        ))
-    }
+        && name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-');
+    if ok { Ok(()) } else { Err(Error::param("--alg", format!("{name:?}"), "1 to 64 letters, digits, _ or -")) }
 }
 
 /// Folders under each root (recursively, the roots included) that contain every file in `files`, sorted by path
@@ -127,12 +117,7 @@ pub struct Shard {
 impl Shard {
     /// The items of this part, in order.
     pub fn select<T: Clone>(&self, items: &[T]) -> Vec<T> {
-        items
-            .iter()
-            .skip(self.index - 1)
-            .step_by(self.count)
-            .cloned()
-            .collect()
+        items.iter().skip(self.index - 1).step_by(self.count).cloned().collect()
     }
 }
 
@@ -142,10 +127,8 @@ impl FromStr for Shard {
     fn from_str(s: &str) -> std::result::Result<Self, String> {
         let bad = || format!("invalid shard {s:?} (expected I/N with 1 <= I <= N, e.g. 3/8)");
         let (i, n) = s.split_once('/').ok_or_else(bad)?;
-        let (index, count) = (
-            i.trim().parse::<usize>().map_err(|_| bad())?,
-            n.trim().parse::<usize>().map_err(|_| bad())?,
-        );
+        let (index, count) =
+            (i.trim().parse::<usize>().map_err(|_| bad())?, n.trim().parse::<usize>().map_err(|_| bad())?);
         if index == 0 || count == 0 || index > count {
             return Err(bad());
         }
@@ -227,10 +210,7 @@ pub struct BatchOptions {
 
 /// The display name of a scene folder.
 pub fn scene_name(dir: &Path) -> String {
-    dir.file_name().map_or_else(
-        || dir.display().to_string(),
-        |n| n.to_string_lossy().into_owned(),
-    )
+    dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
 
 /// Runs the pipeline on one scene folder and writes `disp0<alg>.pfm` and `time<alg>.txt` into it.
@@ -238,12 +218,7 @@ pub fn scene_name(dir: &Path) -> String {
 /// # Errors
 /// Unreadable images, a missing or malformed `calib.txt`, unequal sizes, invalid parameters, or a failed
 /// write. (A panic is not caught here; [`run_batch`] catches it.)
-pub fn run_scene(
-    dir: &Path,
-    params: &Params,
-    alg: &str,
-    on_stage: &dyn Fn(&str),
-) -> Result<SceneRun> {
+pub fn run_scene(dir: &Path, params: &Params, alg: &str, on_stage: &dyn Fn(&str)) -> Result<SceneRun> {
     on_stage("loading");
     let ndisp = calib::read_ndisp(&dir.join("calib.txt"))?;
     let (left, right) = rayon::join(
@@ -256,16 +231,8 @@ pub fn run_scene(
     let seconds = start.elapsed().as_secs_f64();
     on_stage("writing");
     crate::io::pfm::write_pfm(&dir.join(format!("disp0{alg}.pfm")), &out.disparity)?;
-    crate::io::write_atomic(
-        &dir.join(format!("time{alg}.txt")),
-        format!("{seconds:.6}\n").as_bytes(),
-    )?;
-    Ok(SceneRun {
-        size: pair.left.dims(),
-        ndisp,
-        seconds,
-        timings: out.timings,
-    })
+    crate::io::write_atomic(&dir.join(format!("time{alg}.txt")), format!("{seconds:.6}\n").as_bytes())?;
+    Ok(SceneRun { size: pair.left.dims(), ndisp, seconds, timings: out.timings })
 }
 
 /// The text of a panic payload.
@@ -280,24 +247,19 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
 }
 
 /// Runs (or skips) one scene, turning errors and panics into a [`SceneStatus`].
-fn process(
-    dir: &Path,
-    params: &Params,
-    opts: &BatchOptions,
-    on_stage: &dyn Fn(&str),
-) -> SceneStatus {
+fn process(dir: &Path, params: &Params, opts: &BatchOptions, on_stage: &dyn Fn(&str)) -> SceneStatus {
     if opts.skip_existing && dir.join(format!("disp0{}.pfm", opts.alg)).exists() {
         return SceneStatus::Skipped;
     }
-    match catch_unwind(AssertUnwindSafe(|| {
-        run_scene(dir, params, &opts.alg, on_stage)
-    })) {
+    guarded(|| run_scene(dir, params, &opts.alg, on_stage))
+}
+
+/// Runs `f`, turning an error or a panic into [`SceneStatus::Failed`].
+fn guarded(f: impl FnOnce() -> Result<SceneRun>) -> SceneStatus {
+    match catch_unwind(AssertUnwindSafe(f)) {
         Ok(Ok(run)) => SceneStatus::Done(run),
         Ok(Err(e)) => SceneStatus::Failed(error_chain(&e)),
-        Err(payload) => SceneStatus::Failed(format!(
-            "panic in the pipeline: {}",
-            panic_message(payload.as_ref())
-        )),
+        Err(payload) => SceneStatus::Failed(format!("panic in the pipeline: {}", panic_message(payload.as_ref()))),
     }
 }
 
@@ -332,18 +294,9 @@ pub fn run_batch(
             let Some(dir) = scenes.get(index) else { break };
             let name = scene_name(dir);
             on_event(Event::Started { index, name: &name });
-            let status = process(dir, params, opts, &|stage| {
-                on_event(Event::Stage { index, stage })
-            });
-            let report = SceneReport {
-                dir: dir.clone(),
-                name,
-                status,
-            };
-            on_event(Event::Finished {
-                index,
-                report: &report,
-            });
+            let status = process(dir, params, opts, &|stage| on_event(Event::Stage { index, stage }));
+            let report = SceneReport { dir: dir.clone(), name, status };
+            on_event(Event::Finished { index, report: &report });
             if let Ok(mut s) = slots.lock() {
                 s[index] = Some(report);
             }
@@ -359,9 +312,7 @@ pub fn run_batch(
             }
         });
     }
-    let slots = slots
-        .into_inner()
-        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    let slots = slots.into_inner().unwrap_or_else(|poisoned| poisoned.into_inner());
     slots
         .into_iter()
         .zip(scenes)
@@ -388,9 +339,7 @@ mod tests {
         let items: Vec<usize> = (0..10).collect();
         assert_eq!(Shard { index: 2, count: 3 }.select(&items), vec![1, 4, 7]);
         for n in 1..=12 {
-            let mut all: Vec<usize> = (1..=n)
-                .flat_map(|i| Shard { index: i, count: n }.select(&items))
-                .collect();
+            let mut all: Vec<usize> = (1..=n).flat_map(|i| Shard { index: i, count: n }.select(&items)).collect();
             all.sort();
             assert_eq!(all, items, "N = {n}");
         }
@@ -421,16 +370,22 @@ mod tests {
         }
         let found = find_scenes(&[root.to_path_buf(), root.join("b")]).unwrap();
         assert_eq!(found, vec![root.join("a/Zebra"), root.join("b/Teddy")]);
-        assert_eq!(
-            find_scenes(&[root.join("b/Teddy")]).unwrap(),
-            vec![root.join("b/Teddy")]
-        );
+        assert_eq!(find_scenes(&[root.join("b/Teddy")]).unwrap(), vec![root.join("b/Teddy")]);
         assert!(find_scenes(&[root.join("missing")]).is_err());
     }
 
     #[test]
-    fn panic_messages() {
+    fn errors_and_panics_become_failures() {
         let p = catch_unwind(|| panic!("boom {}", 3)).unwrap_err();
         assert_eq!(panic_message(p.as_ref()), "boom 3");
+        let failed = |s: SceneStatus| match s {
+            SceneStatus::Failed(msg) => msg,
+            other => panic!("expected a failure, got {other:?}"),
+        };
+        assert_eq!(failed(guarded(|| panic!("static"))), "panic in the pipeline: static");
+        assert_eq!(failed(guarded(|| todo!("mean field"))), "panic in the pipeline: not yet implemented: mean field");
+        assert_eq!(failed(guarded(|| Err(Error::Input("bad calib".into())))), "bad calib");
+        let run = SceneRun { size: (2, 1), ndisp: 1, seconds: 0.5, timings: Timings::default() };
+        assert!(matches!(guarded(|| Ok(run)), SceneStatus::Done(r) if r.seconds == 0.5));
     }
 }

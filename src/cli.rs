@@ -17,12 +17,7 @@ use jem::{Error, Params, Result, StereoPair};
 /// `jem LEFT RIGHT -o OUT` reads a rectified pair and writes the left view's disparity map (PFM, EXR or 16-bit
 /// PNG by extension). ndisp comes from --ndisp, else from calib.txt beside LEFT.
 #[derive(Parser, Debug)]
-#[command(
-    name = "jem",
-    version,
-    args_conflicts_with_subcommands = true,
-    subcommand_negates_reqs = true
-)]
+#[command(name = "jem", version, args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
@@ -202,10 +197,7 @@ fn resolve_ndisp(flag: Option<usize>, left: &Path) -> Result<usize> {
 
 /// Loads a pair and checks sizes and ndisp.
 pub fn load_pair(left: &Path, right: &Path, ndisp: Option<usize>) -> Result<StereoPair> {
-    let (l, r) = rayon::join(
-        || jem::io::png::load_rgb(left),
-        || jem::io::png::load_rgb(right),
-    );
+    let (l, r) = rayon::join(|| jem::io::png::load_rgb(left), || jem::io::png::load_rgb(right));
     let (l, r) = (l?, r?);
     let ndisp = resolve_ndisp(ndisp, left)?;
     StereoPair::new(l, r, ndisp)
@@ -213,9 +205,7 @@ pub fn load_pair(left: &Path, right: &Path, ndisp: Option<usize>) -> Result<Ster
 
 fn run_match(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let (Some(left), Some(right), Some(output)) = (&args.left, &args.right, &args.output) else {
-        return Err(Error::Input(
-            "usage: jem LEFT RIGHT -o OUT (see --help)".into(),
-        ));
+        return Err(Error::Input("usage: jem LEFT RIGHT -o OUT (see --help)".into()));
     };
     // Check the output names before doing any work.
     jem::io::DisparityFormat::from_path(output)?;
@@ -245,11 +235,7 @@ fn run_match(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         for (name, d) in &out.timings.stages {
             eprintln!("{name:<14} {:>9.1} ms", d.as_secs_f64() * 1e3);
         }
-        eprintln!(
-            "{:<14} {:>9.1} ms",
-            "total",
-            start.elapsed().as_secs_f64() * 1e3
-        );
+        eprintln!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -311,13 +297,7 @@ impl BatchDisplay {
             bar.enable_steady_tick(std::time::Duration::from_millis(200));
             bar
         });
-        BatchDisplay {
-            bar,
-            quiet,
-            total,
-            done: 0.into(),
-            active: Default::default(),
-        }
+        BatchDisplay { bar, quiet, total, done: 0.into(), active: Default::default() }
     }
 
     fn line(&self, msg: &str) {
@@ -331,10 +311,7 @@ impl BatchDisplay {
         let (Some(bar), Ok(active)) = (&self.bar, self.active.lock()) else {
             return;
         };
-        let msg: Vec<String> = active
-            .values()
-            .map(|(name, stage)| format!("{name} ({stage})"))
-            .collect();
+        let msg: Vec<String> = active.values().map(|(name, stage)| format!("{name} ({stage})")).collect();
         bar.set_message(msg.join(", "));
     }
 
@@ -365,10 +342,9 @@ impl BatchDisplay {
                     SceneStatus::Failed(e) => self.line(&format!("{head}: FAILED: {e}")),
                     _ if self.quiet || self.bar.is_some() => {}
                     SceneStatus::Skipped => self.line(&format!("{head}: skipped (result exists)")),
-                    SceneStatus::Done(r) => self.line(&format!(
-                        "{head}: {}x{}, ndisp {}, {:.3} s",
-                        r.size.0, r.size.1, r.ndisp, r.seconds
-                    )),
+                    SceneStatus::Done(r) => {
+                        self.line(&format!("{head}: {}x{}, ndisp {}, {:.3} s", r.size.0, r.size.1, r.ndisp, r.seconds))
+                    }
                 }
                 if let Some(bar) = &self.bar {
                     bar.inc(1);
@@ -399,22 +375,11 @@ fn run_batch(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         None => all.clone(),
     };
     if !global.quiet {
-        let shard = args
-            .shard
-            .map(|s| format!(" (shard {}/{} of {})", s.index, s.count, all.len()))
-            .unwrap_or_default();
-        eprintln!(
-            "{} scene(s){shard}, alg {}, {} job(s)",
-            scenes.len(),
-            args.alg,
-            args.jobs
-        );
+        let shard =
+            args.shard.map(|s| format!(" (shard {}/{} of {})", s.index, s.count, all.len())).unwrap_or_default();
+        eprintln!("{} scene(s){shard}, alg {}, {} job(s)", scenes.len(), args.alg, args.jobs);
     }
-    let opts = BatchOptions {
-        alg: args.alg.clone(),
-        jobs: args.jobs,
-        skip_existing: args.skip_existing,
-    };
+    let opts = BatchOptions { alg: args.alg.clone(), jobs: args.jobs, skip_existing: args.skip_existing };
     let display = BatchDisplay::new(scenes.len(), global.quiet);
 
     // Panics inside the pipeline are caught and reported per scene; keep the default hook's message and
@@ -432,18 +397,11 @@ fn run_batch(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         bar.finish_and_clear();
     }
 
-    let failed = reports
-        .iter()
-        .filter(|r| matches!(r.status, SceneStatus::Failed(_)))
-        .count();
+    let failed = reports.iter().filter(|r| matches!(r.status, SceneStatus::Failed(_))).count();
     if !global.quiet {
         print!("{}", batch_summary(&reports, global.verbose));
     }
-    Ok(if failed > 0 {
-        ExitCode::from(2)
-    } else {
-        ExitCode::SUCCESS
-    })
+    Ok(if failed > 0 { ExitCode::from(2) } else { ExitCode::SUCCESS })
 }
 
 /// The end-of-run table: scene, size, ndisp, seconds (and per-stage seconds with -v), status; then counts and
@@ -462,9 +420,7 @@ fn batch_summary(reports: &[jem::batch::SceneReport], verbose: bool) -> String {
             }
         }
     }
-    let mut header: Vec<String> = ["scene", "size", "ndisp", "seconds"]
-        .map(String::from)
-        .to_vec();
+    let mut header: Vec<String> = ["scene", "size", "ndisp", "seconds"].map(String::from).to_vec();
     header.extend(stages.iter().map(|s| s.to_string()));
     header.push("status".into());
     let mut rows = vec![header];
@@ -481,13 +437,8 @@ fn batch_summary(reports: &[jem::batch::SceneReport], verbose: bool) -> String {
                     format!("{:.3}", run.seconds),
                 ]);
                 for s in &stages {
-                    let t = run
-                        .timings
-                        .stages
-                        .iter()
-                        .filter(|(n, _)| n == s)
-                        .map(|(_, d)| d.as_secs_f64())
-                        .sum::<f64>();
+                    let t =
+                        run.timings.stages.iter().filter(|(n, _)| n == s).map(|(_, d)| d.as_secs_f64()).sum::<f64>();
                     row.push(format!("{t:.3}"));
                 }
                 row.push("ok".into());
@@ -506,11 +457,7 @@ fn batch_summary(reports: &[jem::batch::SceneReport], verbose: bool) -> String {
         rows.push(row);
     }
     let mut out = text_table(&rows, 1);
-    let mean = if done > 0 {
-        format!(", mean {:.3} s per pair", total_s / done as f64)
-    } else {
-        String::new()
-    };
+    let mean = if done > 0 { format!(", mean {:.3} s per pair", total_s / done as f64) } else { String::new() };
     out.push_str(&format!(
         "{} scene(s): {done} done, {skipped} skipped, {failed} failed; pipeline time {total_s:.3} s{mean}\n",
         reports.len()
@@ -529,15 +476,8 @@ fn batch_summary(reports: &[jem::batch::SceneReport], verbose: bool) -> String {
 /// Aligns rows of cells into columns (the first `text_cols` left-aligned, the rest right-aligned except the last).
 fn text_table(rows: &[Vec<String>], text_cols: usize) -> String {
     let ncol = rows.iter().map(Vec::len).max().unwrap_or(0);
-    let widths: Vec<usize> = (0..ncol)
-        .map(|c| {
-            rows.iter()
-                .filter_map(|r| r.get(c))
-                .map(|v| v.chars().count())
-                .max()
-                .unwrap_or(0)
-        })
-        .collect();
+    let widths: Vec<usize> =
+        (0..ncol).map(|c| rows.iter().filter_map(|r| r.get(c)).map(|v| v.chars().count()).max().unwrap_or(0)).collect();
     let mut out = String::new();
     for r in rows {
         let cells: Vec<String> = r
@@ -638,14 +578,8 @@ fn run_eval(args: &EvalArgs) -> Result<ExitCode> {
             )));
         }
         let table = PaperResults::load(&path)?;
-        let columns = args
-            .algs
-            .iter()
-            .enumerate()
-            .map(|(i, _)| &args.paper[if args.paper.len() == 1 { 0 } else { i }]);
-        columns
-            .map(|c| table.column(c).map(Some))
-            .collect::<Result<Vec<_>>>()?
+        let columns = args.algs.iter().enumerate().map(|(i, _)| &args.paper[if args.paper.len() == 1 { 0 } else { i }]);
+        columns.map(|c| table.column(c).map(Some)).collect::<Result<Vec<_>>>()?
     };
     let reports = args
         .algs
@@ -654,11 +588,7 @@ fn run_eval(args: &EvalArgs) -> Result<ExitCode> {
         .collect::<Result<Vec<_>>>()?;
     print!("{}", render(&reports, &papers, args.format));
     let excluded = reports.iter().any(|r| r.excluded().next().is_some());
-    Ok(if excluded {
-        ExitCode::from(2)
-    } else {
-        ExitCode::SUCCESS
-    })
+    Ok(if excluded { ExitCode::from(2) } else { ExitCode::SUCCESS })
 }
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -695,16 +625,9 @@ struct VizArgs {
 
 fn run_viz(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     use jem::viz;
-    let ext = args
-        .output
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
+    let ext = args.output.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     if ext.as_deref() != Some("png") {
-        return Err(Error::Input(format!(
-            "{}: viz writes PNG (use a .png name)",
-            args.output.display()
-        )));
+        return Err(Error::Input(format!("{}: viz writes PNG (use a .png name)", args.output.display())));
     }
     if let Some(s) = args.scale {
         if ![1, 2, 4].contains(&s) {
@@ -720,57 +643,28 @@ fn run_viz(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         };
         jem::batch::validate_alg_name(alg)?;
         if args.panel_width < 16 {
-            return Err(Error::param(
-                "--panel-width",
-                args.panel_width,
-                "at least 16",
-            ));
+            return Err(Error::param("--panel-width", args.panel_width, "at least 16"));
         }
         let (sheet, scenes) = viz::contact_sheet(&args.input, alg, args.scale, args.panel_width)?;
         sheet.write_png(&args.output)?;
         if !global.quiet {
             let names: Vec<String> = scenes.iter().map(|s| jem::batch::scene_name(s)).collect();
-            eprintln!(
-                "{}: {} rows ({})",
-                args.output.display(),
-                scenes.len(),
-                names.join(", ")
-            );
+            eprintln!("{}: {} rows ({})", args.output.display(), scenes.len(), names.join(", "));
         }
         return Ok(ExitCode::SUCCESS);
     }
     let disp = jem::io::read_disparity(&args.input)?;
-    let calib = viz::calib_range(
-        &args
-            .input
-            .parent()
-            .unwrap_or(Path::new("."))
-            .join("calib.txt"),
-    );
+    let calib = viz::calib_range(&args.input.parent().unwrap_or(Path::new(".")).join("calib.txt"));
     let data = viz::finite_range(&disp);
-    let vmin = args
-        .vmin
-        .or(calib.map(|c| c.0))
-        .or(data.map(|d| d.0))
-        .unwrap_or(0.0);
-    let vmax = args
-        .vmax
-        .or(calib.map(|c| c.1))
-        .or(data.map(|d| d.1))
-        .unwrap_or(1.0);
+    let vmin = args.vmin.or(calib.map(|c| c.0)).or(data.map(|d| d.0)).unwrap_or(0.0);
+    let vmax = args.vmax.or(calib.map(|c| c.1)).or(data.map(|d| d.1)).unwrap_or(1.0);
     let colour = viz::colorize(&disp, vmin, vmax);
     let picture = match &args.gt {
         None => colour,
         Some(gt_path) => {
             let (gt, mask) = viz::load_gt_for(&disp, gt_path)?;
-            let scale = args
-                .scale
-                .or_else(|| viz::resolved_scale(gt_path))
-                .unwrap_or(1);
-            viz::hstack(
-                &[colour, viz::error_map(&disp, &gt, mask.as_ref(), scale)],
-                4,
-            )
+            let scale = args.scale.or_else(|| viz::resolved_scale(gt_path)).unwrap_or(1);
+            viz::hstack(&[colour, viz::error_map(&disp, &gt, mask.as_ref(), scale)], 4)
         }
     };
     picture.write_png(&args.output)?;

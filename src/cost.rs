@@ -26,35 +26,29 @@ use crate::params::CostParams;
 /// # Panics
 /// If the window is even-sized or has more than 65 pixels (validated in [`crate::Params::validate`]).
 pub fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<u64> {
-    assert!(
-        win_w % 2 == 1 && win_h % 2 == 1 && win_w * win_h <= 65,
-        "invalid census window {win_w}x{win_h}"
-    );
+    assert!(win_w % 2 == 1 && win_h % 2 == 1 && win_w * win_h <= 65, "invalid census window {win_w}x{win_h}");
     let (w, h) = grey.dims();
     let (rx, ry) = ((win_w / 2) as isize, (win_h / 2) as isize);
     let mut out = Plane::new(w, h, 0u64);
-    out.data
-        .par_chunks_mut(w.max(1))
-        .enumerate()
-        .for_each(|(y, row)| {
-            let center_row = grey.row(y);
-            for (x, code) in row.iter_mut().enumerate() {
-                let c = center_row[x];
-                let mut bits = 0u64;
-                for dy in -ry..=ry {
-                    let yy = (y as isize + dy).clamp(0, h as isize - 1) as usize;
-                    let nrow = grey.row(yy);
-                    for dx in -rx..=rx {
-                        if dx == 0 && dy == 0 {
-                            continue;
-                        }
-                        let xx = (x as isize + dx).clamp(0, w as isize - 1) as usize;
-                        bits = (bits << 1) | u64::from(nrow[xx] < c);
+    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        let center_row = grey.row(y);
+        for (x, code) in row.iter_mut().enumerate() {
+            let c = center_row[x];
+            let mut bits = 0u64;
+            for dy in -ry..=ry {
+                let yy = (y as isize + dy).clamp(0, h as isize - 1) as usize;
+                let nrow = grey.row(yy);
+                for dx in -rx..=rx {
+                    if dx == 0 && dy == 0 {
+                        continue;
                     }
+                    let xx = (x as isize + dx).clamp(0, w as isize - 1) as usize;
+                    bits = (bits << 1) | u64::from(nrow[xx] < c);
                 }
-                *code = bits;
             }
-        });
+            *code = bits;
+        }
+    });
     out
 }
 
@@ -62,18 +56,15 @@ pub fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<
 pub fn sobel_x(grey: &Plane<f32>) -> Plane<f32> {
     let (w, h) = grey.dims();
     let mut out = Plane::new(w, h, 0.0f32);
-    out.data
-        .par_chunks_mut(w.max(1))
-        .enumerate()
-        .for_each(|(y, row)| {
-            let up = grey.row(y.saturating_sub(1));
-            let mid = grey.row(y);
-            let down = grey.row((y + 1).min(h - 1));
-            for (x, g) in row.iter_mut().enumerate() {
-                let (l, r) = (x.saturating_sub(1), (x + 1).min(w - 1));
-                *g = (up[r] - up[l]) + 2.0 * (mid[r] - mid[l]) + (down[r] - down[l]);
-            }
-        });
+    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        let up = grey.row(y.saturating_sub(1));
+        let mid = grey.row(y);
+        let down = grey.row((y + 1).min(h - 1));
+        for (x, g) in row.iter_mut().enumerate() {
+            let (l, r) = (x.saturating_sub(1), (x + 1).min(w - 1));
+            *g = (up[r] - up[l]) + 2.0 * (mid[r] - mid[l]) + (down[r] - down[l]);
+        }
+    });
     out
 }
 
@@ -86,17 +77,8 @@ pub fn truncation_cost(p: &CostParams) -> f32 {
 ///
 /// # Panics
 /// If the images differ in size (checked by [`crate::StereoPair::new`]) or the Census window is invalid.
-pub fn build_cost_volume(
-    left: &RgbImage,
-    right: &RgbImage,
-    ndisp: usize,
-    p: &CostParams,
-) -> CostVolume {
-    assert_eq!(
-        left.dims(),
-        right.dims(),
-        "left and right images differ in size"
-    );
+pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &CostParams) -> CostVolume {
+    assert_eq!(left.dims(), right.dims(), "left and right images differ in size");
     let (w, h) = left.dims();
     let (grey_l, grey_r) = (left.to_grey(), right.to_grey());
     let (cen_l, cen_r) = rayon::join(
@@ -107,24 +89,21 @@ pub fn build_cost_volume(
     let out_of_view = truncation_cost(p);
     let (a, tc, b, tg) = (p.census_weight, p.census_trunc, p.grad_weight, p.grad_trunc);
     let mut vol = CostVolume::new(w, h, ndisp, out_of_view);
-    vol.data
-        .par_chunks_mut(w * ndisp)
-        .enumerate()
-        .for_each(|(y, row)| {
-            let (cl_row, cr_row) = (cen_l.row(y), cen_r.row(y));
-            let (gl_row, gr_row) = (gx_l.row(y), gx_r.row(y));
-            for (x, costs) in row.chunks_exact_mut(ndisp).enumerate() {
-                let (cl, gl) = (cl_row[x], gl_row[x]);
-                let in_view = ndisp.min(x + 1);
-                // Labels d = 0..in_view match right pixels x, x−1, ..., x−in_view+1.
-                let cr = cr_row[x + 1 - in_view..=x].iter().rev();
-                let gr = gr_row[x + 1 - in_view..=x].iter().rev();
-                for ((c, &cr), &gr) in costs[..in_view].iter_mut().zip(cr).zip(gr) {
-                    let ham = (cl ^ cr).count_ones() as f32;
-                    *c = a * ham.min(tc) + b * (gl - gr).abs().min(tg);
-                }
+    vol.data.par_chunks_mut(w * ndisp).enumerate().for_each(|(y, row)| {
+        let (cl_row, cr_row) = (cen_l.row(y), cen_r.row(y));
+        let (gl_row, gr_row) = (gx_l.row(y), gx_r.row(y));
+        for (x, costs) in row.chunks_exact_mut(ndisp).enumerate() {
+            let (cl, gl) = (cl_row[x], gl_row[x]);
+            let in_view = ndisp.min(x + 1);
+            // Labels d = 0..in_view match right pixels x, x−1, ..., x−in_view+1.
+            let cr = cr_row[x + 1 - in_view..=x].iter().rev();
+            let gr = gr_row[x + 1 - in_view..=x].iter().rev();
+            for ((c, &cr), &gr) in costs[..in_view].iter_mut().zip(cr).zip(gr) {
+                let ham = (cl ^ cr).count_ones() as f32;
+                *c = a * ham.min(tc) + b * (gl - gr).abs().min(tg);
             }
-        });
+        }
+    });
     vol
 }
 
@@ -133,19 +112,15 @@ pub fn build_cost_volume(
 pub fn derive_right_volume(left: &CostVolume, out_of_view: f32) -> CostVolume {
     let (w, h, nd) = (left.width, left.height, left.ndisp);
     let mut right = CostVolume::new(w, h, nd, out_of_view);
-    right
-        .data
-        .par_chunks_mut(w * nd)
-        .enumerate()
-        .for_each(|(y, row)| {
-            let lrow = &left.data[y * w * nd..][..w * nd];
-            for (x, costs) in row.chunks_exact_mut(nd).enumerate() {
-                let in_view = nd.min(w - x);
-                for (d, c) in costs[..in_view].iter_mut().enumerate() {
-                    *c = lrow[(x + d) * nd + d];
-                }
+    right.data.par_chunks_mut(w * nd).enumerate().for_each(|(y, row)| {
+        let lrow = &left.data[y * w * nd..][..w * nd];
+        for (x, costs) in row.chunks_exact_mut(nd).enumerate() {
+            let in_view = nd.min(w - x);
+            for (d, c) in costs[..in_view].iter_mut().enumerate() {
+                *c = lrow[(x + d) * nd + d];
             }
-        });
+        }
+    });
     right
 }
 
@@ -190,20 +165,12 @@ mod tests {
     }
 
     fn grey_image(w: usize, h: usize, v: Vec<f32>) -> RgbImage {
-        RgbImage {
-            width: w,
-            height: h,
-            channels: [v.clone(), v.clone(), v],
-        }
+        RgbImage { width: w, height: h, channels: [v.clone(), v.clone(), v] }
     }
 
     /// A random texture and its right view shifted by a per-row disparity field `disp(x, y)`, sampled from the
     /// left so that right(x − d) = left(x).
-    fn shifted_pair(
-        w: usize,
-        h: usize,
-        disp: impl Fn(usize, usize) -> usize,
-    ) -> (RgbImage, RgbImage) {
+    fn shifted_pair(w: usize, h: usize, disp: impl Fn(usize, usize) -> usize) -> (RgbImage, RgbImage) {
         let left = noise(w, h, 7);
         let mut right = noise(w, h, 99);
         for y in 0..h {
@@ -232,11 +199,7 @@ mod tests {
         let grey = Plane::from_vec(4, 3, (0..12).map(|i| (i % 4) as f32 * 10.0).collect());
         let g = sobel_x(&grey);
         assert_eq!(g.at(1, 1), 80.0);
-        assert_eq!(
-            g.at(0, 1),
-            40.0,
-            "replicated border halves the central difference"
-        );
+        assert_eq!(g.at(0, 1), 40.0, "replicated border halves the central difference");
     }
 
     #[test]
@@ -256,15 +219,7 @@ mod tests {
     fn argmin_recovers_a_varying_field() {
         let (w, h, nd) = (96, 40, 20);
         // Three vertical bands with disparities 3, 11, 17; compare away from band edges and borders.
-        let field = |x: usize, _y: usize| {
-            if x < 32 {
-                3
-            } else if x < 64 {
-                11
-            } else {
-                17
-            }
-        };
+        let field = |x: usize, _y: usize| if x < 32 { 3 } else if x < 64 { 11 } else { 17 };
         let (left, right) = shifted_pair(w, h, field);
         let vol = build_cost_volume(&left, &right, nd, &CostParams::default());
         let wta = winner_take_all(&vol);
@@ -288,11 +243,7 @@ mod tests {
         let p = CostParams::default();
         let vol = build_cost_volume(&left, &right, 8, &p);
         assert_eq!(vol.pixel(3)[4..], [truncation_cost(&p); 4]);
-        assert!(
-            vol.pixel(3)[..4]
-                .iter()
-                .all(|&c| c < truncation_cost(&p) + 1e-3)
-        );
+        assert!(vol.pixel(3)[..4].iter().all(|&c| c < truncation_cost(&p) + 1e-3));
     }
 
     #[test]
@@ -304,11 +255,7 @@ mod tests {
         for y in 0..9 {
             for x in 0..40 {
                 for d in 0..12 {
-                    let expect = if x + d < 40 {
-                        vl.data[(y * 40 + x + d) * 12 + d]
-                    } else {
-                        truncation_cost(&p)
-                    };
+                    let expect = if x + d < 40 { vl.data[(y * 40 + x + d) * 12 + d] } else { truncation_cost(&p) };
                     assert_eq!(vr.data[(y * 40 + x) * 12 + d], expect);
                 }
             }

@@ -93,11 +93,7 @@ impl fmt::Display for Error {
             Error::Pfm { path, msg } => write!(f, "{}: invalid PFM: {msg}", path.display()),
             Error::Calib { path, msg } => write!(f, "{}: {msg}", path.display()),
             Error::Toml { path, msg } => write!(f, "{}: {}", path.display(), msg.trim_end()),
-            Error::InvalidParam {
-                name,
-                value,
-                expected,
-            } => {
+            Error::InvalidParam { name, value, expected } => {
                 write!(f, "invalid {name} = {value} (expected {expected})")
             }
             Error::SizeMismatch { left, right } => write!(
@@ -105,11 +101,7 @@ impl fmt::Display for Error {
                 "left image is {}x{} but right image is {}x{}; a rectified pair must have equal sizes",
                 left.0, left.1, right.0, right.1
             ),
-            Error::OutOfMemory {
-                needed,
-                limit,
-                hint,
-            } => write!(
+            Error::OutOfMemory { needed, limit, hint } => write!(
                 f,
                 "this run needs about {} but the memory limit is {}; {hint}",
                 human_bytes(*needed),
@@ -133,19 +125,12 @@ impl std::error::Error for Error {
 impl Error {
     /// Wraps an I/O error with the path it concerns.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Error::Io {
-            path: path.into(),
-            source,
-        }
+        Error::Io { path: path.into(), source }
     }
 
     /// An [`Error::InvalidParam`] from displayable parts.
     pub fn param(name: &str, value: impl fmt::Display, expected: impl Into<String>) -> Self {
-        Error::InvalidParam {
-            name: name.to_string(),
-            value: value.to_string(),
-            expected: expected.into(),
-        }
+        Error::InvalidParam { name: name.to_string(), value: value.to_string(), expected: expected.into() }
     }
 }
 
@@ -158,11 +143,7 @@ pub fn human_bytes(bytes: u64) -> String {
         value /= 1024.0;
         unit += 1;
     }
-    if unit == 0 {
-        format!("{bytes} B")
-    } else {
-        format!("{value:.1} {}", UNITS[unit])
-    }
+    if unit == 0 { format!("{bytes} B") } else { format!("{value:.1} {}", UNITS[unit]) }
 }
 
 /// The I/O error's message without the "(os error N)" suffix.

@@ -115,22 +115,11 @@ pub struct Metrics {
 
 impl Metrics {
     /// The metric names, in the order of [`Metrics::values`] (also the JSON and CSV keys).
-    pub const NAMES: [&'static str; 8] = [
-        "avgerr", "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2",
-    ];
+    pub const NAMES: [&'static str; 8] = ["avgerr", "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2"];
 
     /// The eight metrics in the order of [`Metrics::NAMES`].
     pub fn values(&self) -> [f64; 8] {
-        [
-            self.avgerr,
-            self.rms,
-            self.bad0_5,
-            self.bad1,
-            self.bad2,
-            self.bad4,
-            self.invalid,
-            self.totbad2,
-        ]
+        [self.avgerr, self.rms, self.bad0_5, self.bad1, self.bad2, self.bad4, self.invalid, self.totbad2]
     }
 
     /// Builds metrics from values in the order of [`Metrics::NAMES`].
@@ -173,11 +162,7 @@ pub fn evaluate(
     scale: u32,
     mask_mode: MaskMode,
 ) -> Metrics {
-    assert_eq!(
-        result.dims(),
-        gt.dims(),
-        "result and ground truth sizes differ"
-    );
+    assert_eq!(result.dims(), gt.dims(), "result and ground truth sizes differ");
     if let Some(m) = mask {
         assert_eq!(m.dims(), gt.dims(), "mask and ground truth sizes differ");
     }
@@ -210,18 +195,11 @@ pub fn evaluate(
         }
     }
     let pct = |k: u64| {
-        if n == 0 {
-            f64::NAN
-        } else {
-            100.0 * k as f64 / n as f64
-        }
+        if n == 0 { f64::NAN } else { 100.0 * k as f64 / n as f64 }
     };
     let valid = n - invalid;
-    let (avgerr, rms) = if valid == 0 {
-        (f64::NAN, f64::NAN)
-    } else {
-        (sum / valid as f64, (sum_sq / valid as f64).sqrt())
-    };
+    let (avgerr, rms) =
+        if valid == 0 { (f64::NAN, f64::NAN) } else { (sum / valid as f64, (sum_sq / valid as f64).sqrt()) };
     Metrics {
         avgerr,
         rms,
@@ -273,14 +251,7 @@ pub fn evaluate_files(
             )));
         }
     }
-    let metrics = evaluate(
-        &result_map,
-        &gt_map,
-        mask_plane.as_ref(),
-        ndisp,
-        scale,
-        mask_mode,
-    );
+    let metrics = evaluate(&result_map, &gt_map, mask_plane.as_ref(), ndisp, scale, mask_mode);
     if metrics.pixels == 0 {
         return Err(Error::Input(format!(
             "{}: no pixel with ground truth under the {} mask",
@@ -302,31 +273,16 @@ pub fn evaluate_scene(dir: &Path, alg: &str, scale: u32, mask_mode: MaskMode) ->
         return Err(Error::Input(format!("no result file {}", result.display())));
     }
     let calib_path = dir.join("calib.txt");
-    let ndisp = Calib::load(&calib_path)?
-        .ndisp()
-        .map_err(|msg| Error::Calib {
-            path: calib_path.clone(),
-            msg,
-        })?;
+    let ndisp = Calib::load(&calib_path)?.ndisp().map_err(|msg| Error::Calib { path: calib_path.clone(), msg })?;
     let mask = dir.join("mask0nocc.png");
     let mask = match (mask.is_file(), mask_mode) {
         (true, _) => Some(mask),
         (false, MaskMode::All) => None,
         (false, MaskMode::Nonocc) => {
-            return Err(Error::Input(format!(
-                "no {} (needed for the nonocc mask)",
-                mask.display()
-            )));
+            return Err(Error::Input(format!("no {} (needed for the nonocc mask)", mask.display())));
         }
     };
-    evaluate_files(
-        &result,
-        &dir.join("disp0GT.pfm"),
-        mask.as_deref(),
-        ndisp,
-        scale,
-        mask_mode,
-    )
+    evaluate_files(&result, &dir.join("disp0GT.pfm"), mask.as_deref(), ndisp, scale, mask_mode)
 }
 
 /// The MiddEval3 weight of a training scene: 0.5 for PianoL, Playroom, Playtable, Shelves and Vintage, 1 for
@@ -343,9 +299,7 @@ pub fn scene_weight(name: &str) -> f64 {
 pub fn scale_from_path(path: &Path) -> Option<u32> {
     path.components().rev().find_map(|c| {
         let name = c.as_os_str().to_str()?;
-        let rest = ["training", "test", "additional"]
-            .iter()
-            .find_map(|p| name.strip_prefix(p))?;
+        let rest = ["training", "test", "additional"].iter().find_map(|p| name.strip_prefix(p))?;
         match rest {
             "Q" => Some(4),
             "H" => Some(2),
@@ -396,31 +350,18 @@ impl AlgReport {
 
     /// The scenes left out of the averages, with the reason.
     pub fn excluded(&self) -> impl Iterator<Item = (&str, &str)> {
-        self.scenes.iter().filter_map(|s| {
-            s.metrics
-                .as_ref()
-                .err()
-                .map(|e| (s.name.as_str(), e.as_str()))
-        })
+        self.scenes.iter().filter_map(|s| s.metrics.as_ref().err().map(|e| (s.name.as_str(), e.as_str())))
     }
 
     /// Mean run time per pair over the evaluated scenes that have a time file, and how many had one.
     pub fn mean_seconds(&self) -> Option<(f64, usize)> {
-        let times: Vec<f64> = self
-            .scenes
-            .iter()
-            .filter(|s| s.metrics.is_ok())
-            .filter_map(|s| s.seconds)
-            .collect();
+        let times: Vec<f64> = self.scenes.iter().filter(|s| s.metrics.is_ok()).filter_map(|s| s.seconds).collect();
         (!times.is_empty()).then(|| (times.iter().sum::<f64>() / times.len() as f64, times.len()))
     }
 
     fn average(&self, weight: impl Fn(&SceneResult) -> f64) -> Option<Metrics> {
-        let ok: Vec<(f64, &Metrics)> = self
-            .scenes
-            .iter()
-            .filter_map(|s| s.metrics.as_ref().ok().map(|m| (weight(s), m)))
-            .collect();
+        let ok: Vec<(f64, &Metrics)> =
+            self.scenes.iter().filter_map(|s| s.metrics.as_ref().ok().map(|m| (weight(s), m))).collect();
         let total: f64 = ok.iter().map(|(w, _)| w).sum();
         if ok.is_empty() || total <= 0.0 {
             return None;
@@ -431,10 +372,7 @@ impl AlgReport {
                 *s += w * v;
             }
         }
-        Some(Metrics::from_values(
-            sums.map(|s| s / total),
-            ok.iter().map(|(_, m)| m.pixels).sum(),
-        ))
+        Some(Metrics::from_values(sums.map(|s| s / total), ok.iter().map(|(_, m)| m.pixels).sum()))
     }
 }
 
@@ -445,10 +383,7 @@ impl AlgReport {
 pub fn find_gt_scenes(dir: &Path) -> Result<Vec<PathBuf>> {
     let scenes = crate::batch::find_dirs_with(&[dir.to_path_buf()], &["disp0GT.pfm"])?;
     if scenes.is_empty() {
-        return Err(Error::Input(format!(
-            "no scene folder with a disp0GT.pfm under {}",
-            dir.display()
-        )));
+        return Err(Error::Input(format!("no scene folder with a disp0GT.pfm under {}", dir.display())));
     }
     Ok(scenes)
 }
@@ -460,12 +395,7 @@ pub fn find_gt_scenes(dir: &Path) -> Result<Vec<PathBuf>> {
 /// # Errors
 /// No scene with ground truth, an unreadable folder, or (with `scale = None`) a path that implies no resolution
 /// or scenes at different resolutions. Per-scene problems are not errors: they are recorded in the report.
-pub fn evaluate_dir(
-    dir: &Path,
-    alg: &str,
-    mask_mode: MaskMode,
-    scale: Option<u32>,
-) -> Result<AlgReport> {
+pub fn evaluate_dir(dir: &Path, alg: &str, mask_mode: MaskMode, scale: Option<u32>) -> Result<AlgReport> {
     let dirs = find_gt_scenes(dir)?;
     let scale = match scale {
         Some(s) => s,
@@ -483,12 +413,7 @@ pub fn evaluate_dir(
             dir: d.clone(),
         })
         .collect();
-    Ok(AlgReport {
-        alg: alg.to_string(),
-        mask: mask_mode,
-        scale,
-        scenes,
-    })
+    Ok(AlgReport { alg: alg.to_string(), mask: mask_mode, scale, scenes })
 }
 
 /// The one scale all `dirs` imply.
@@ -514,21 +439,13 @@ fn infer_common_scale(dirs: &[PathBuf]) -> Result<u32> {
             _ => found = Some((s, d)),
         }
     }
-    found
-        .map(|(s, _)| s)
-        .ok_or_else(|| Error::Input("no scenes".into()))
+    found.map(|(s, _)| s).ok_or_else(|| Error::Input("no scenes".into()))
 }
 
 /// Folder names, or paths relative to `root` where two folders share a name.
 fn scene_names(root: &Path, dirs: &[PathBuf]) -> Vec<String> {
-    let base: Vec<String> = dirs
-        .iter()
-        .map(|d| {
-            d.file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default()
-        })
-        .collect();
+    let base: Vec<String> =
+        dirs.iter().map(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()).collect();
     base.iter()
         .zip(dirs)
         .map(|(name, d)| {
@@ -544,10 +461,7 @@ fn scene_names(root: &Path, dirs: &[PathBuf]) -> Vec<String> {
 /// The number in a `time<alg>.txt`, if the file exists and holds one finite non-negative number.
 fn read_seconds(path: &Path) -> Option<f64> {
     let text = std::fs::read_to_string(path).ok()?;
-    text.trim()
-        .parse::<f64>()
-        .ok()
-        .filter(|t| t.is_finite() && *t >= 0.0)
+    text.trim().parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0)
 }
 
 /// The error and its sources on one line.
@@ -590,10 +504,7 @@ impl PaperResults {
     /// A message naming the line for a missing header, a bad weight, or a row with the wrong number of fields.
     /// Empty fields and `-` are missing values.
     pub fn parse(text: &str) -> std::result::Result<Self, String> {
-        let mut lines = text
-            .lines()
-            .enumerate()
-            .filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'));
+        let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'));
         let (_, header) = lines.next().ok_or("no header line")?;
         let head: Vec<&str> = header.split('\t').map(str::trim).collect();
         if head.len() < 3 || head[0] != "scene" || head[1] != "weight" {
@@ -604,20 +515,10 @@ impl PaperResults {
         for (n, line) in lines {
             let f: Vec<&str> = line.split('\t').map(str::trim).collect();
             if f.len() != head.len() {
-                return Err(format!(
-                    "line {}: {} fields, the header has {}",
-                    n + 1,
-                    f.len(),
-                    head.len()
-                ));
+                return Err(format!("line {}: {} fields, the header has {}", n + 1, f.len(), head.len()));
             }
-            let weight = f[1]
-                .parse::<f64>()
-                .map_err(|_| format!("line {}: bad weight {:?}", n + 1, f[1]))?;
-            let values = f[2..]
-                .iter()
-                .map(|v| v.parse::<f64>().ok().filter(|v| v.is_finite()))
-                .collect();
+            let weight = f[1].parse::<f64>().map_err(|_| format!("line {}: bad weight {:?}", n + 1, f[1]))?;
+            let values = f[2..].iter().map(|v| v.parse::<f64>().ok().filter(|v| v.is_finite())).collect();
             rows.push((f[0].to_string(), weight, values));
         }
         Ok(PaperResults { columns, rows })
@@ -643,10 +544,7 @@ impl PaperResults {
     /// [`Error::Input`] listing the available columns.
     pub fn column(&self, name: &str) -> Result<PaperColumn> {
         let Some(k) = self.columns.iter().position(|c| c == name) else {
-            return Err(Error::Input(format!(
-                "no paper column {name:?} (available: {})",
-                self.columns.join(", ")
-            )));
+            return Err(Error::Input(format!("no paper column {name:?} (available: {})", self.columns.join(", "))));
         };
         let mut scenes = BTreeMap::new();
         let (mut sum, mut total) = (0.0, 0.0);
@@ -657,11 +555,7 @@ impl PaperResults {
                 total += w;
             }
         }
-        Ok(PaperColumn {
-            name: name.to_string(),
-            scenes,
-            weighted: (total > 0.0).then(|| sum / total),
-        })
+        Ok(PaperColumn { name: name.to_string(), scenes, weighted: (total > 0.0).then(|| sum / total) })
     }
 }
 
@@ -689,9 +583,7 @@ impl FromStr for Format {
             "csv" => Ok(Format::Csv),
             "json" => Ok(Format::Json),
             "markdown" | "md" => Ok(Format::Markdown),
-            _ => Err(format!(
-                "unknown format {s:?} (expected table, csv, json or markdown)"
-            )),
+            _ => Err(format!("unknown format {s:?} (expected table, csv, json or markdown)")),
         }
     }
 }
@@ -705,13 +597,8 @@ impl FromStr for Format {
 /// # Panics
 /// If `papers` is non-empty and not as long as `reports`.
 pub fn render(reports: &[AlgReport], papers: &[Option<PaperColumn>], format: Format) -> String {
-    assert!(
-        papers.is_empty() || papers.len() == reports.len(),
-        "one paper column per report"
-    );
-    let paper: Vec<Option<&PaperColumn>> = (0..reports.len())
-        .map(|i| papers.get(i).and_then(Option::as_ref))
-        .collect();
+    assert!(papers.is_empty() || papers.len() == reports.len(), "one paper column per report");
+    let paper: Vec<Option<&PaperColumn>> = (0..reports.len()).map(|i| papers.get(i).and_then(Option::as_ref)).collect();
     let paper = paper.as_slice();
     match format {
         Format::Json => render_json(reports, paper),
@@ -742,11 +629,7 @@ fn json_str(s: &str) -> String {
 }
 
 fn json_num(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v}")
-    } else {
-        "null".into()
-    }
+    if v.is_finite() { format!("{v}") } else { "null".into() }
 }
 
 fn json_metrics(m: Option<&Metrics>) -> String {
@@ -771,7 +654,9 @@ fn render_json(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String 
             let scenes: Vec<String> = r
                 .scenes
                 .iter()
-                .filter_map(|s| s.metrics.as_ref().ok().map(|m| format!("    {}: {}", json_str(&s.name), json_metrics(Some(m)))))
+                .filter_map(|s| {
+                    s.metrics.as_ref().ok().map(|m| format!("    {}: {}", json_str(&s.name), json_metrics(Some(m))))
+                })
                 .collect();
             let mut o = format!(
                 "{{\n  \"alg\": {},\n  \"mask\": {},\n  \"scale\": {},\n  \"scenes\": {{{}}},\n  \"weighted\": {},\n  \
@@ -803,19 +688,11 @@ fn render_json(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String 
             o
         })
         .collect();
-    if objects.len() == 1 {
-        format!("{}\n", objects[0])
-    } else {
-        format!("[\n{}\n]\n", objects.join(",\n"))
-    }
+    if objects.len() == 1 { format!("{}\n", objects[0]) } else { format!("[\n{}\n]\n", objects.join(",\n")) }
 }
 
 fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
+    if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
 }
 
 fn csv_num(v: Option<f64>) -> String {
@@ -827,34 +704,27 @@ fn csv_num(v: Option<f64>) -> String {
 }
 
 fn render_csv(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String {
-    let mut out = format!(
-        "alg,mask,scale,scene,weight,{},time_s,paper,error\n",
-        Metrics::NAMES.join(",")
-    );
+    let mut out = format!("alg,mask,scale,scene,weight,{},time_s,paper,error\n", Metrics::NAMES.join(","));
     for (i, r) in reports.iter().enumerate() {
         let p = paper[i];
         let prefix = format!("{},{},{}", csv_field(&r.alg), r.mask.name(), r.scale);
-        let mut row = |scene: &str,
-                       weight: Option<f64>,
-                       m: Option<&Metrics>,
-                       t: Option<f64>,
-                       pv: Option<f64>,
-                       e: &str| {
-            let values: Vec<String> = match m {
-                Some(m) => m.values().iter().map(|v| csv_num(Some(*v))).collect(),
-                None => vec![String::new(); 8],
+        let mut row =
+            |scene: &str, weight: Option<f64>, m: Option<&Metrics>, t: Option<f64>, pv: Option<f64>, e: &str| {
+                let values: Vec<String> = match m {
+                    Some(m) => m.values().iter().map(|v| csv_num(Some(*v))).collect(),
+                    None => vec![String::new(); 8],
+                };
+                let _ = writeln!(
+                    out,
+                    "{prefix},{},{},{},{},{},{}",
+                    csv_field(scene),
+                    csv_num(weight),
+                    values.join(","),
+                    csv_num(t),
+                    csv_num(pv),
+                    csv_field(e)
+                );
             };
-            let _ = writeln!(
-                out,
-                "{prefix},{},{},{},{},{},{}",
-                csv_field(scene),
-                csv_num(weight),
-                values.join(","),
-                csv_num(t),
-                csv_num(pv),
-                csv_field(e)
-            );
-        };
         for s in &r.scenes {
             let pv = p.and_then(|p| p.scenes.get(&s.name).copied());
             match &s.metrics {
@@ -863,14 +733,7 @@ fn render_csv(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String {
             }
         }
         let mean_t = r.mean_seconds().map(|(t, _)| t);
-        row(
-            "weighted",
-            None,
-            r.weighted().as_ref(),
-            None,
-            p.and_then(|p| p.weighted),
-            "",
-        );
+        row("weighted", None, r.weighted().as_ref(), None, p.and_then(|p| p.weighted), "");
         row("mean", None, r.mean().as_ref(), mean_t, None, "");
     }
     out
@@ -894,26 +757,15 @@ struct Grid {
 impl Grid {
     fn text(&self) -> String {
         let ncol = self.rows[0].len();
-        let widths: Vec<usize> = (0..ncol)
-            .map(|c| {
-                self.rows
-                    .iter()
-                    .map(|r| r[c].chars().count())
-                    .max()
-                    .unwrap_or(0)
-            })
-            .collect();
+        let widths: Vec<usize> =
+            (0..ncol).map(|c| self.rows.iter().map(|r| r[c].chars().count()).max().unwrap_or(0)).collect();
         let mut out = String::new();
         for r in &self.rows {
             let cells: Vec<String> = r
                 .iter()
                 .enumerate()
                 .map(|(c, v)| {
-                    if self.numeric[c] {
-                        format!("{v:>w$}", w = widths[c])
-                    } else {
-                        format!("{v:<w$}", w = widths[c])
-                    }
+                    if self.numeric[c] { format!("{v:>w$}", w = widths[c]) } else { format!("{v:<w$}", w = widths[c]) }
                 })
                 .collect();
             out.push_str(cells.join("  ").trim_end());
@@ -924,21 +776,10 @@ impl Grid {
 
     fn markdown(&self) -> String {
         let mut out = String::new();
-        let line = |r: &[String]| {
-            format!(
-                "| {} |\n",
-                r.iter()
-                    .map(|c| c.replace('|', "\\|"))
-                    .collect::<Vec<_>>()
-                    .join(" | ")
-            )
-        };
+        let line =
+            |r: &[String]| format!("| {} |\n", r.iter().map(|c| c.replace('|', "\\|")).collect::<Vec<_>>().join(" | "));
         out.push_str(&line(&self.rows[0]));
-        let rule: Vec<String> = self
-            .numeric
-            .iter()
-            .map(|&n| if n { "---:".into() } else { "---".into() })
-            .collect();
+        let rule: Vec<String> = self.numeric.iter().map(|&n| if n { "---:".into() } else { "---".into() }).collect();
         out.push_str(&format!("|{}|\n", rule.join("|")));
         for r in &self.rows[1..] {
             out.push_str(&line(r));
@@ -947,11 +788,7 @@ impl Grid {
     }
 
     fn render(&self, markdown: bool) -> String {
-        if markdown {
-            self.markdown()
-        } else {
-            self.text()
-        }
+        if markdown { self.markdown() } else { self.text() }
     }
 }
 
@@ -968,8 +805,7 @@ fn render_text(reports: &[AlgReport], paper: &[Option<&PaperColumn>], md: bool) 
             r.alg,
             r.mask.name(),
             r.scale,
-            p.map(|p| format!(", paper column {}", p.name))
-                .unwrap_or_default()
+            p.map(|p| format!(", paper column {}", p.name)).unwrap_or_default()
         );
         if md {
             let _ = writeln!(out, "#### {title}\n");
@@ -980,69 +816,34 @@ fn render_text(reports: &[AlgReport], paper: &[Option<&PaperColumn>], md: bool) 
         if p.is_some() {
             header.push("paper".into());
         }
-        header.extend(
-            [
-                "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2", "time s",
-            ]
-            .map(String::from),
-        );
+        header.extend(["rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2", "time s"].map(String::from));
         let ncol = header.len();
         let mut rows = vec![header];
-        let mut push =
-            |name: String, weight: String, m: Option<&Metrics>, pv: Option<f64>, t: Option<f64>| {
-                let v = m.map(Metrics::values);
-                let mut r = vec![name, weight, fixed(v.map(|v| v[0]))];
-                if p.is_some() {
-                    r.push(fixed(pv));
-                }
-                r.extend((1..8).map(|k| fixed(v.map(|v| v[k]))));
-                r.push(t.map_or("-".into(), |t| format!("{t:.3}")));
-                rows.push(r);
-            };
+        let mut push = |name: String, weight: String, m: Option<&Metrics>, pv: Option<f64>, t: Option<f64>| {
+            let v = m.map(Metrics::values);
+            let mut r = vec![name, weight, fixed(v.map(|v| v[0]))];
+            if p.is_some() {
+                r.push(fixed(pv));
+            }
+            r.extend((1..8).map(|k| fixed(v.map(|v| v[k]))));
+            r.push(t.map_or("-".into(), |t| format!("{t:.3}")));
+            rows.push(r);
+        };
         for s in &r.scenes {
             let pv = p.and_then(|p| p.scenes.get(&s.name).copied());
-            let name = if s.metrics.is_ok() {
-                s.name.clone()
-            } else {
-                format!("{} (excluded)", s.name)
-            };
-            push(
-                name,
-                format!("{}", s.weight),
-                s.metrics.as_ref().ok(),
-                pv,
-                s.seconds,
-            );
+            let name = if s.metrics.is_ok() { s.name.clone() } else { format!("{} (excluded)", s.name) };
+            push(name, format!("{}", s.weight), s.metrics.as_ref().ok(), pv, s.seconds);
         }
         let strong = |s: &str| {
-            if md {
-                format!("**{s}**")
-            } else {
-                s.to_string()
-            }
+            if md { format!("**{s}**") } else { s.to_string() }
         };
-        push(
-            strong("weighted"),
-            String::new(),
-            r.weighted().as_ref(),
-            p.and_then(|p| p.weighted),
-            None,
-        );
-        push(
-            "mean".into(),
-            String::new(),
-            r.mean().as_ref(),
-            None,
-            r.mean_seconds().map(|(t, _)| t),
-        );
+        push(strong("weighted"), String::new(), r.weighted().as_ref(), p.and_then(|p| p.weighted), None);
+        push("mean".into(), String::new(), r.mean().as_ref(), None, r.mean_seconds().map(|(t, _)| t));
         let mut numeric = vec![true; ncol];
         numeric[0] = false;
         out.push_str(&Grid { rows, numeric }.render(md));
         let evaluated = r.scenes.iter().filter(|s| s.metrics.is_ok()).count();
-        let mut notes = vec![format!(
-            "{evaluated} of {} scenes evaluated",
-            r.scenes.len()
-        )];
+        let mut notes = vec![format!("{evaluated} of {} scenes evaluated", r.scenes.len())];
         if let Some((t, k)) = r.mean_seconds() {
             notes.push(format!("mean time per pair {t:.3} s (over {k})"));
         }
@@ -1069,16 +870,7 @@ fn summary_grid(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> Grid {
     if has_paper {
         header.extend(["paper".into(), "paper column".into()]);
     }
-    header.extend(
-        [
-            "mean avgErr",
-            "weighted bad2",
-            "weighted invalid",
-            "scenes",
-            "mean time s",
-        ]
-        .map(String::from),
-    );
+    header.extend(["mean avgErr", "weighted bad2", "weighted invalid", "scenes", "mean time s"].map(String::from));
     let mut rows = vec![header];
     for (i, r) in reports.iter().enumerate() {
         let w = r.weighted();
@@ -1091,21 +883,12 @@ fn summary_grid(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> Grid {
         row.push(fixed(r.mean().map(|m| m.avgerr)));
         row.push(fixed(w.map(|m| m.bad2)));
         row.push(fixed(w.map(|m| m.invalid)));
-        row.push(format!(
-            "{}/{}",
-            r.scenes.iter().filter(|s| s.metrics.is_ok()).count(),
-            r.scenes.len()
-        ));
-        row.push(
-            r.mean_seconds()
-                .map_or("-".into(), |(t, _)| format!("{t:.3}")),
-        );
+        row.push(format!("{}/{}", r.scenes.iter().filter(|s| s.metrics.is_ok()).count(), r.scenes.len()));
+        row.push(r.mean_seconds().map_or("-".into(), |(t, _)| format!("{t:.3}")));
         rows.push(row);
     }
     let ncol = rows[0].len();
-    let numeric = (0..ncol)
-        .map(|c| !(c == 0 || (has_paper && c == 3)))
-        .collect();
+    let numeric = (0..ncol).map(|c| !(c == 0 || (has_paper && c == 3))).collect();
     Grid { rows, numeric }
 }
 
@@ -1121,11 +904,7 @@ mod tests {
         let gt = vec![1.0, 2.0, 3.0, INF, 5.0, 6.0, 7.0, 8.0];
         let result = vec![1.0, 2.625, INF, 4.0, 11.0, -1.0, 7.25, 8.0];
         let mask = vec![255, 255, 255, 255, 255, 128, 0, 255];
-        (
-            Plane::from_vec(4, 2, result),
-            Plane::from_vec(4, 2, gt),
-            Plane::from_vec(4, 2, mask),
-        )
+        (Plane::from_vec(4, 2, result), Plane::from_vec(4, 2, gt), Plane::from_vec(4, 2, mask))
     }
 
     fn assert_close(m: &Metrics, want: [f64; 8], n: u64) {
@@ -1142,11 +921,7 @@ mod tests {
         let (r, g, m) = fixture();
         let got = evaluate(&r, &g, Some(&m), 10, 1, MaskMode::Nonocc);
         let rms = ((0.625f64.powi(2) + 25.0) / 4.0).sqrt();
-        assert_close(
-            &got,
-            [5.625 / 4.0, rms, 40.0, 20.0, 20.0, 20.0, 20.0, 40.0],
-            5,
-        );
+        assert_close(&got, [5.625 / 4.0, rms, 40.0, 20.0, 20.0, 20.0, 20.0, 40.0], 5);
     }
 
     #[test]
@@ -1156,20 +931,7 @@ mod tests {
         let got = evaluate(&r, &g, Some(&m), 10, 1, MaskMode::All);
         let rms = ((0.625f64.powi(2) + 25.0 + 36.0) / 5.0).sqrt();
         let p = |k: f64| 100.0 * k / 6.0;
-        assert_close(
-            &got,
-            [
-                11.625 / 5.0,
-                rms,
-                p(3.0),
-                p(2.0),
-                p(2.0),
-                p(2.0),
-                p(1.0),
-                p(3.0),
-            ],
-            6,
-        );
+        assert_close(&got, [11.625 / 5.0, rms, p(3.0), p(2.0), p(2.0), p(2.0), p(1.0), p(3.0)], 6);
     }
 
     #[test]
@@ -1178,11 +940,7 @@ mod tests {
         let (r, g, m) = fixture();
         let got = evaluate(&r, &g, Some(&m), 10, 4, MaskMode::Nonocc);
         let rms = ((2.5f64.powi(2) + 400.0) / 4.0).sqrt();
-        assert_close(
-            &got,
-            [22.5 / 4.0, rms, 40.0, 40.0, 40.0, 20.0, 20.0, 60.0],
-            5,
-        );
+        assert_close(&got, [22.5 / 4.0, rms, 40.0, 40.0, 40.0, 20.0, 20.0, 60.0], 5);
     }
 
     #[test]
@@ -1192,20 +950,7 @@ mod tests {
         let got = evaluate(&r, &g, None, 10, 1, MaskMode::Nonocc);
         let p = |k: f64| 100.0 * k / 7.0;
         let rms = ((0.625f64.powi(2) + 25.0 + 36.0 + 0.0625) / 6.0).sqrt();
-        assert_close(
-            &got,
-            [
-                11.875 / 6.0,
-                rms,
-                p(3.0),
-                p(2.0),
-                p(2.0),
-                p(2.0),
-                p(1.0),
-                p(3.0),
-            ],
-            7,
-        );
+        assert_close(&got, [11.875 / 6.0, rms, p(3.0), p(2.0), p(2.0), p(2.0), p(1.0), p(3.0)], 7);
     }
 
     #[test]
@@ -1214,20 +959,7 @@ mod tests {
         let gt = Plane::from_vec(5, 1, vec![0.0, 0.0, 0.0, 0.0, 8.0]);
         let r = Plane::from_vec(5, 1, vec![0.5, 1.0, 2.0, 4.0, 8.0]);
         let got = evaluate(&r, &gt, None, 8, 1, MaskMode::All);
-        assert_close(
-            &got,
-            [
-                7.5 / 5.0,
-                (21.25f64 / 5.0).sqrt(),
-                60.0,
-                40.0,
-                20.0,
-                0.0,
-                0.0,
-                20.0,
-            ],
-            5,
-        );
+        assert_close(&got, [7.5 / 5.0, (21.25f64 / 5.0).sqrt(), 60.0, 40.0, 20.0, 0.0, 0.0, 20.0], 5);
         let r = Plane::from_vec(5, 1, vec![0.0, 0.0, 0.0, 0.0, 9.0]);
         assert_eq!(evaluate(&r, &gt, None, 8, 1, MaskMode::All).avgerr, 0.0);
         // NaN and −inf are invalid too.
@@ -1247,19 +979,10 @@ mod tests {
 
     #[test]
     fn scale_from_middeval_paths() {
-        assert_eq!(
-            scale_from_path(Path::new("/d/MiddEval3/trainingQ/Teddy")),
-            Some(4)
-        );
-        assert_eq!(
-            scale_from_path(Path::new("MiddEval3/testH/Australia")),
-            Some(2)
-        );
+        assert_eq!(scale_from_path(Path::new("/d/MiddEval3/trainingQ/Teddy")), Some(4));
+        assert_eq!(scale_from_path(Path::new("MiddEval3/testH/Australia")), Some(2));
         assert_eq!(scale_from_path(Path::new("x/trainingF")), Some(1));
-        assert_eq!(
-            scale_from_path(Path::new("trainingQ/trainingH/Teddy")),
-            Some(2)
-        );
+        assert_eq!(scale_from_path(Path::new("trainingQ/trainingH/Teddy")), Some(2));
         assert_eq!(scale_from_path(Path::new("/home/PDF/Teddy")), None);
         assert_eq!(scale_from_path(Path::new("trainingX/Teddy")), None);
     }
@@ -1293,10 +1016,7 @@ mod tests {
         assert!((w.rms - 2.0 * 6.0 / 2.5).abs() < 1e-12);
         assert_eq!((w.bad2, w.pixels), (10.0, 300));
         assert!((r.mean().unwrap().avgerr - 7.0 / 3.0).abs() < 1e-12);
-        assert_eq!(
-            r.excluded().collect::<Vec<_>>(),
-            vec![("Vintage", "no result")]
-        );
+        assert_eq!(r.excluded().collect::<Vec<_>>(), vec![("Vintage", "no result")]);
         assert_eq!(r.mean_seconds(), Some((7.0 / 3.0, 3)));
     }
 
@@ -1326,13 +1046,8 @@ mod tests {
             m.rms = f64::NAN;
         }
         let json = render(&[r], &[], Format::Json);
-        assert!(
-            json.starts_with("{\n  \"alg\": \"A\\\"B\",\n  \"mask\": \"all\",\n  \"scale\": 2,\n"),
-            "{json}"
-        );
-        assert!(json.contains(
-            "\"Teddy\": {\"avgerr\": 1.5, \"rms\": null, \"bad0.5\": 0, \"bad1\": 0, \"bad2\": 10,"
-        ));
+        assert!(json.starts_with("{\n  \"alg\": \"A\\\"B\",\n  \"mask\": \"all\",\n  \"scale\": 2,\n"), "{json}");
+        assert!(json.contains("\"Teddy\": {\"avgerr\": 1.5, \"rms\": null, \"bad0.5\": 0, \"bad1\": 0, \"bad2\": 10,"));
         assert!(json.contains("\"excluded\": {\"Pipes\": \"no result\"}"));
         assert!(!json.contains("\"paper\""));
     }

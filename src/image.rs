@@ -17,11 +17,7 @@ pub struct Plane<T> {
 impl<T: Clone> Plane<T> {
     /// A plane filled with `value`.
     pub fn new(width: usize, height: usize, value: T) -> Self {
-        Plane {
-            width,
-            height,
-            data: vec![value; width * height],
-        }
+        Plane { width, height, data: vec![value; width * height] }
     }
 }
 
@@ -31,16 +27,8 @@ impl<T> Plane<T> {
     /// # Panics
     /// If `data.len() != width * height`.
     pub fn from_vec(width: usize, height: usize, data: Vec<T>) -> Self {
-        assert_eq!(
-            data.len(),
-            width * height,
-            "plane data length does not match {width}x{height}"
-        );
-        Plane {
-            width,
-            height,
-            data,
-        }
+        assert_eq!(data.len(), width * height, "plane data length does not match {width}x{height}");
+        Plane { width, height, data }
     }
 
     /// Row `y` as a slice of length `width`.
@@ -88,11 +76,7 @@ impl RgbImage {
     /// A black image.
     pub fn new(width: usize, height: usize) -> Self {
         let n = width * height;
-        RgbImage {
-            width,
-            height,
-            channels: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
-        }
+        RgbImage { width, height, channels: [vec![0.0; n], vec![0.0; n], vec![0.0; n]] }
     }
 
     /// Number of pixels.
@@ -113,22 +97,13 @@ impl RgbImage {
     /// The colour of pixel index `i` (= `y * width + x`).
     #[inline]
     pub fn rgb(&self, i: usize) -> [f32; 3] {
-        [
-            self.channels[0][i],
-            self.channels[1][i],
-            self.channels[2][i],
-        ]
+        [self.channels[0][i], self.channels[1][i], self.channels[2][i]]
     }
 
     /// Luma (ITU-R BT.601 weights), 0..=255.
     pub fn to_grey(&self) -> Plane<f32> {
         let [r, g, b] = &self.channels;
-        let data = r
-            .iter()
-            .zip(g)
-            .zip(b)
-            .map(|((&r, &g), &b)| 0.299 * r + 0.587 * g + 0.114 * b)
-            .collect();
+        let data = r.iter().zip(g).zip(b).map(|((&r, &g), &b)| 0.299 * r + 0.587 * g + 0.114 * b).collect();
         Plane::from_vec(self.width, self.height, data)
     }
 
@@ -137,10 +112,7 @@ impl RgbImage {
     pub fn mirrored(&self) -> RgbImage {
         let mut out = RgbImage::new(self.width, self.height);
         for (dst, src) in out.channels.iter_mut().zip(&self.channels) {
-            for (drow, srow) in dst
-                .chunks_exact_mut(self.width)
-                .zip(src.chunks_exact(self.width))
-            {
+            for (drow, srow) in dst.chunks_exact_mut(self.width).zip(src.chunks_exact(self.width)) {
                 for (d, s) in drow.iter_mut().zip(srow.iter().rev()) {
                     *d = *s;
                 }
@@ -170,12 +142,7 @@ pub struct CostVolume {
 impl CostVolume {
     /// A volume filled with `value`.
     pub fn new(width: usize, height: usize, ndisp: usize, value: f32) -> Self {
-        CostVolume {
-            width,
-            height,
-            ndisp,
-            data: vec![value; width * height * ndisp],
-        }
+        CostVolume { width, height, ndisp, data: vec![value; width * height * ndisp] }
     }
 
     /// The costs of pixel index `i` (= `y * width + x`), one per label.
@@ -210,15 +177,10 @@ impl StereoPair {
     /// or an empty image.
     pub fn new(left: RgbImage, right: RgbImage, ndisp: usize) -> crate::Result<Self> {
         if left.dims() != right.dims() {
-            return Err(crate::Error::SizeMismatch {
-                left: left.dims(),
-                right: right.dims(),
-            });
+            return Err(crate::Error::SizeMismatch { left: left.dims(), right: right.dims() });
         }
         if left.is_empty() {
-            return Err(crate::Error::Input(
-                "the images are empty (0 pixels)".into(),
-            ));
+            return Err(crate::Error::Input("the images are empty (0 pixels)".into()));
         }
         if ndisp == 0 || ndisp >= left.width {
             return Err(crate::Error::param(

@@ -100,13 +100,9 @@ pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str))
     let need_right = post.lrc.mode != LrcMode::Off;
 
     on_stage("cost volume");
-    let cost_left = t.time("cost", || {
-        cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &params.cost)
-    });
+    let cost_left = t.time("cost", || cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &params.cost));
     let cost_right = need_right.then(|| {
-        t.time("cost right", || {
-            cost::derive_right_volume(&cost_left, cost::truncation_cost(&params.cost))
-        })
+        t.time("cost right", || cost::derive_right_volume(&cost_left, cost::truncation_cost(&params.cost)))
     });
 
     on_stage("inference (left)");
@@ -122,58 +118,32 @@ pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str))
     let mut trusted = Plane::new(disparity.width, disparity.height, true);
     if let Some(right) = &right {
         let (checked, mask) = t.time("lrc", || {
-            post::lr_check::left_right_check(
-                &disparity,
-                &right.disparity,
-                post.lrc.mode,
-                post.lrc.thresh_px,
-            )
+            post::lr_check::left_right_check(&disparity, &right.disparity, post.lrc.mode, post.lrc.thresh_px)
         });
         disparity = checked;
         trusted = mask;
     }
     if post.fill {
-        t.time("fill", || {
-            post::fill::fill_occlusions_in_place(&mut disparity)
-        });
+        t.time("fill", || post::fill::fill_occlusions_in_place(&mut disparity));
     }
     if post.wmedian.enabled {
-        let targets = Plane::from_vec(
-            trusted.width,
-            trusted.height,
-            trusted.data.iter().map(|ok| !ok).collect(),
-        );
-        disparity = t.time("wmedian", || {
-            post::wmedian::weighted_median(&disparity, &pair.left, &targets, &post.wmedian)
-        });
+        let targets = Plane::from_vec(trusted.width, trusted.height, trusted.data.iter().map(|ok| !ok).collect());
+        disparity =
+            t.time("wmedian", || post::wmedian::weighted_median(&disparity, &pair.left, &targets, &post.wmedian));
     }
     if post.sps.enabled {
-        disparity = t.time("sps", || {
-            post::planes::fit_slanted_planes(&pair.left, &disparity, &trusted, &post.sps)
-        });
+        disparity = t.time("sps", || post::planes::fit_slanted_planes(&pair.left, &disparity, &trusted, &post.sps));
     }
-    Ok(Output {
-        disparity,
-        confidence: left.confidence,
-        timings: t,
-    })
+    Ok(Output { disparity, confidence: left.confidence, timings: t })
 }
 
 /// Inference for one view: WTA on the cost, or mean field with the view's own image.
-fn estimate_view(
-    params: &Params,
-    image: &RgbImage,
-    cost: &CostVolume,
-    t: &mut Timings,
-) -> ViewEstimate {
+fn estimate_view(params: &Params, image: &RgbImage, cost: &CostVolume, t: &mut Timings) -> ViewEstimate {
     match params.model {
         Model::Wta => {
             let disparity = t.time("wta", || cost::winner_take_all(cost));
             let confidence = Plane::new(cost.width, cost.height, 1.0);
-            ViewEstimate {
-                disparity,
-                confidence,
-            }
+            ViewEstimate { disparity, confidence }
         }
         Model::Lcm | Model::Fcm | Model::Jem => {
             let _ = image;

@@ -154,10 +154,7 @@ pub struct LrcParams {
 
 impl Default for LrcParams {
     fn default() -> Self {
-        LrcParams {
-            mode: LrcMode::Invalidate,
-            thresh_px: 1.0,
-        }
+        LrcParams { mode: LrcMode::Invalidate, thresh_px: 1.0 }
     }
 }
 
@@ -177,12 +174,7 @@ pub struct PostParams {
 
 impl Default for PostParams {
     fn default() -> Self {
-        PostParams {
-            lrc: LrcParams::default(),
-            fill: true,
-            wmedian: WmedianParams::default(),
-            sps: SpsParams::default(),
-        }
+        PostParams { lrc: LrcParams::default(), fill: true, wmedian: WmedianParams::default(), sps: SpsParams::default() }
     }
 }
 
@@ -238,10 +230,8 @@ impl Params {
 
     fn merged(config: Option<(&str, &Path)>, overrides: &[String]) -> Result<Params> {
         let mut table = match config {
-            Some((text, path)) => toml::from_str::<toml::Table>(text).map_err(|e| Error::Toml {
-                path: path.to_path_buf(),
-                msg: one_line(&e.to_string()),
-            })?,
+            Some((text, path)) => toml::from_str::<toml::Table>(text)
+                .map_err(|e| Error::Toml { path: path.to_path_buf(), msg: one_line(&e.to_string()) })?,
             None => toml::Table::new(),
         };
         for item in overrides {
@@ -252,10 +242,8 @@ impl Params {
             Some((_, path)) => format!("{} + --set", path.display()).into(),
             None => "--set".into(),
         };
-        let params = Params::deserialize(toml::Value::Table(table)).map_err(|e| Error::Toml {
-            path: origin,
-            msg: one_line(&e.to_string()),
-        })?;
+        let params = Params::deserialize(toml::Value::Table(table))
+            .map_err(|e| Error::Toml { path: origin, msg: one_line(&e.to_string()) })?;
         params.validate()?;
         Ok(params)
     }
@@ -271,10 +259,7 @@ impl Params {
     /// [`Error::InvalidParam`] naming the first offending key, its value and the valid range.
     pub fn validate(&self) -> Result<()> {
         let c = &self.cost;
-        for (name, v) in [
-            ("cost.census_width", c.census_width),
-            ("cost.census_height", c.census_height),
-        ] {
+        for (name, v) in [("cost.census_width", c.census_width), ("cost.census_height", c.census_height)] {
             if v == 0 || v % 2 == 0 || v > 15 {
                 return Err(Error::param(name, v, "an odd number from 1 to 15"));
             }
@@ -291,20 +276,12 @@ impl Params {
         check_nonneg("cost.grad_weight", c.grad_weight)?;
         check_nonneg("cost.grad_trunc", c.grad_trunc)?;
         if c.census_weight == 0.0 && c.grad_weight == 0.0 {
-            return Err(Error::param(
-                "cost.census_weight",
-                0,
-                "> 0 when cost.grad_weight is 0",
-            ));
+            return Err(Error::param("cost.census_weight", 0, "> 0 when cost.grad_weight is 0"));
         }
 
         let m = &self.meanfield;
         if m.iterations > 1000 {
-            return Err(Error::param(
-                "meanfield.iterations",
-                m.iterations,
-                "0 to 1000",
-            ));
+            return Err(Error::param("meanfield.iterations", m.iterations, "0 to 1000"));
         }
         check_positive("meanfield.unary_scale", m.unary_scale)?;
         check_nonneg("meanfield.fcm_weight", m.fcm_weight)?;
@@ -316,11 +293,7 @@ impl Params {
         check_positive("meanfield.sigma_rgb", m.sigma_rgb)?;
         check_nonneg("meanfield.mu1", m.mu1)?;
         if !(m.mu2 >= m.mu1 && m.mu2.is_finite()) {
-            return Err(Error::param(
-                "meanfield.mu2",
-                m.mu2,
-                format!(">= meanfield.mu1 = {}", m.mu1),
-            ));
+            return Err(Error::param("meanfield.mu2", m.mu2, format!(">= meanfield.mu1 = {}", m.mu1)));
         }
         check_nonneg("meanfield.lambda1", m.lambda1)?;
         check_nonneg("meanfield.lambda2", m.lambda2)?;
@@ -352,40 +325,23 @@ impl Params {
 
 /// Errors unless `v` is finite and ≥ 0.
 pub(crate) fn check_nonneg(name: &str, v: f32) -> Result<()> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(())
-    } else {
-        Err(Error::param(name, v, "a finite number >= 0"))
-    }
+    if v.is_finite() && v >= 0.0 { Ok(()) } else { Err(Error::param(name, v, "a finite number >= 0")) }
 }
 
 /// Errors unless `v` is finite and > 0.
 pub(crate) fn check_positive(name: &str, v: f32) -> Result<()> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(Error::param(name, v, "a finite number > 0"))
-    }
+    if v.is_finite() && v > 0.0 { Ok(()) } else { Err(Error::param(name, v, "a finite number > 0")) }
 }
 
 fn one_line(msg: &str) -> String {
-    msg.lines()
-        .map(str::trim)
-        .filter(|l| !l.is_empty() && !l.starts_with('|'))
-        .collect::<Vec<_>>()
-        .join("; ")
+    msg.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('|')).collect::<Vec<_>>().join("; ")
 }
 
 /// Applies one `section.key=value` override to a TOML table. The value is parsed as TOML (numbers, booleans,
 /// quoted strings); anything that does not parse is taken as a bare string, so `--set model=fcm` works.
 fn apply_override(table: &mut toml::Table, item: &str) -> Result<()> {
-    let bad = |msg: &str| Error::Toml {
-        path: "--set".into(),
-        msg: format!("{item:?}: {msg}"),
-    };
-    let (key, value) = item
-        .split_once('=')
-        .ok_or_else(|| bad("expected key=value"))?;
+    let bad = |msg: &str| Error::Toml { path: "--set".into(), msg: format!("{item:?}: {msg}") };
+    let (key, value) = item.split_once('=').ok_or_else(|| bad("expected key=value"))?;
     let key = key.trim();
     let parts: Vec<&str> = key.split('.').collect();
     if parts.iter().any(|p| p.is_empty()) {
@@ -399,9 +355,7 @@ fn apply_override(table: &mut toml::Table, item: &str) -> Result<()> {
     let (last, sections) = parts.split_last().ok_or_else(|| bad("empty key"))?;
     let mut current = table;
     for section in sections {
-        let entry = current
-            .entry(section.to_string())
-            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        let entry = current.entry(section.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
         current = match entry {
             toml::Value::Table(t) => t,
             _ => return Err(bad(&format!("`{section}` is not a section"))),
@@ -425,16 +379,14 @@ mod tests {
 
     #[test]
     fn unknown_key_is_named() {
-        let e =
-            Params::from_toml_str("[meanfield]\niteratons = 3\n", Path::new("c.toml")).unwrap_err();
+        let e = Params::from_toml_str("[meanfield]\niteratons = 3\n", Path::new("c.toml")).unwrap_err();
         let msg = e.to_string();
         assert!(msg.contains("c.toml") && msg.contains("iteratons"), "{msg}");
     }
 
     #[test]
     fn wrong_type_is_named() {
-        let e = Params::from_toml_str("[meanfield]\niterations = \"many\"\n", Path::new("c.toml"))
-            .unwrap_err();
+        let e = Params::from_toml_str("[meanfield]\niterations = \"many\"\n", Path::new("c.toml")).unwrap_err();
         let msg = e.to_string();
         assert!(msg.contains("iterations"), "{msg}");
     }
@@ -442,10 +394,7 @@ mod tests {
     #[test]
     fn out_of_range_names_key_value_and_range() {
         let e = Params::load(None, &["meanfield.sigma_xy=-2".into()]).unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "invalid meanfield.sigma_xy = -2 (expected a finite number > 0)"
-        );
+        assert_eq!(e.to_string(), "invalid meanfield.sigma_xy = -2 (expected a finite number > 0)");
         let e = Params::load(None, &["cost.census_width=4".into()]).unwrap_err();
         assert!(e.to_string().contains("cost.census_width = 4"), "{e}");
     }
@@ -454,11 +403,7 @@ mod tests {
     fn overrides_win_and_parse_types() {
         let p = Params::load(
             None,
-            &[
-                "model=fcm".into(),
-                "meanfield.iterations = 7".into(),
-                "post.lrc.mode=\"correct\"".into(),
-            ],
+            &["model=fcm".into(), "meanfield.iterations = 7".into(), "post.lrc.mode=\"correct\"".into()],
         )
         .unwrap();
         assert_eq!(p.model, Model::Fcm);

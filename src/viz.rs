@@ -54,11 +54,7 @@ impl Canvas {
         for _ in 0..width * height {
             data.extend_from_slice(&fill);
         }
-        Canvas {
-            width,
-            height,
-            data,
-        }
+        Canvas { width, height, data }
     }
 
     /// The colour at (x, y).
@@ -95,11 +91,7 @@ impl Canvas {
                 data.push(v.round().clamp(0.0, 255.0) as u8);
             }
         }
-        Canvas {
-            width: img.width,
-            height: img.height,
-            data,
-        }
+        Canvas { width: img.width, height: img.height, data }
     }
 }
 
@@ -121,11 +113,7 @@ const STOPS: [(f32, [f32; 3]); 9] = [
 /// The colour of `t` in [0, 1] (clamped; NaN maps to 0).
 pub fn colormap(t: f32) -> [u8; 3] {
     let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
-    let k = STOPS
-        .iter()
-        .position(|(p, _)| *p >= t)
-        .unwrap_or(STOPS.len() - 1)
-        .max(1);
+    let k = STOPS.iter().position(|(p, _)| *p >= t).unwrap_or(STOPS.len() - 1).max(1);
     let ((p0, c0), (p1, c1)) = (STOPS[k - 1], STOPS[k]);
     let f = ((t - p0) / (p1 - p0)).clamp(0.0, 1.0);
     [0, 1, 2].map(|c| (c0[c] + f * (c1[c] - c0[c])).round().clamp(0.0, 255.0) as u8)
@@ -133,13 +121,10 @@ pub fn colormap(t: f32) -> [u8; 3] {
 
 /// The smallest and largest finite values, or `None` if there is none.
 pub fn finite_range(map: &Plane<f32>) -> Option<(f32, f32)> {
-    map.data
-        .iter()
-        .filter(|v| v.is_finite())
-        .fold(None, |acc, &v| match acc {
-            None => Some((v, v)),
-            Some((lo, hi)) => Some((lo.min(v), hi.max(v))),
-        })
+    map.data.iter().filter(|v| v.is_finite()).fold(None, |acc, &v| match acc {
+        None => Some((v, v)),
+        Some((lo, hi)) => Some((lo.min(v), hi.max(v))),
+    })
 }
 
 /// Colour-maps a disparity map over `[vmin, vmax]` (an empty or reversed range maps everything to the low end);
@@ -157,28 +142,15 @@ pub fn colorize(disp: &DisparityMap, vmin: f32, vmax: f32) -> Canvas {
         };
         data.extend_from_slice(&c);
     }
-    Canvas {
-        width: disp.width,
-        height: disp.height,
-        data,
-    }
+    Canvas { width: disp.width, height: disp.height, data }
 }
 
 /// The benchmark-style error map (colours in the module doc); `scale` converts to full-resolution pixels.
 ///
 /// # Panics
 /// If the result, the GT and the mask differ in size.
-pub fn error_map(
-    result: &DisparityMap,
-    gt: &DisparityMap,
-    mask: Option<&Plane<u8>>,
-    scale: u32,
-) -> Canvas {
-    assert_eq!(
-        result.dims(),
-        gt.dims(),
-        "result and ground truth sizes differ"
-    );
+pub fn error_map(result: &DisparityMap, gt: &DisparityMap, mask: Option<&Plane<u8>>, scale: u32) -> Canvas {
+    assert_eq!(result.dims(), gt.dims(), "result and ground truth sizes differ");
     if let Some(m) = mask {
         assert_eq!(m.dims(), gt.dims(), "mask and ground truth sizes differ");
     }
@@ -208,11 +180,7 @@ pub fn error_map(
         };
         data.extend_from_slice(&c);
     }
-    Canvas {
-        width: gt.width,
-        height: gt.height,
-        data,
-    }
+    Canvas { width: gt.width, height: gt.height, data }
 }
 
 /// Downscales (or copies) to `width × height` by area averaging: each output pixel is the mean of the input
@@ -278,8 +246,7 @@ pub fn hstack(parts: &[Canvas], gap: usize) -> Canvas {
 
 /// Stacks canvases top to bottom, left-aligned, `gap` pixels apart, on the background colour.
 pub fn vstack(parts: &[Canvas], gap: usize) -> Canvas {
-    let height =
-        parts.iter().map(|p| p.height).sum::<usize>() + gap * parts.len().saturating_sub(1);
+    let height = parts.iter().map(|p| p.height).sum::<usize>() + gap * parts.len().saturating_sub(1);
     let width = parts.iter().map(|p| p.width).max().unwrap_or(0);
     let mut out = Canvas::new(width, height, BACKGROUND);
     let mut y = 0;
@@ -299,19 +266,13 @@ pub fn calib_range(calib: &Path) -> Option<(f32, f32)> {
 
 /// Loads `mask0nocc.png` beside a GT file, if present and of the GT's size.
 fn mask_beside(gt_path: &Path, gt: &DisparityMap) -> Result<Option<Plane<u8>>> {
-    let path = gt_path
-        .parent()
-        .unwrap_or(Path::new("."))
-        .join("mask0nocc.png");
+    let path = gt_path.parent().unwrap_or(Path::new(".")).join("mask0nocc.png");
     if !path.is_file() {
         return Ok(None);
     }
     let m = crate::io::png::load_grey8(&path)?;
     if m.dims() != gt.dims() {
-        return Err(Error::Input(format!(
-            "{}: mask size differs from the ground truth",
-            path.display()
-        )));
+        return Err(Error::Input(format!("{}: mask size differs from the ground truth", path.display())));
     }
     Ok(Some(m))
 }
@@ -320,10 +281,7 @@ fn mask_beside(gt_path: &Path, gt: &DisparityMap) -> Result<Option<Plane<u8>>> {
 ///
 /// # Errors
 /// Unreadable files or unequal sizes.
-pub fn load_gt_for(
-    result: &DisparityMap,
-    gt_path: &Path,
-) -> Result<(DisparityMap, Option<Plane<u8>>)> {
+pub fn load_gt_for(result: &DisparityMap, gt_path: &Path) -> Result<(DisparityMap, Option<Plane<u8>>)> {
     let gt = crate::io::read_disparity(gt_path)?;
     if gt.dims() != result.dims() {
         return Err(Error::Input(format!(
@@ -349,17 +307,10 @@ pub fn scene_row(dir: &Path, alg: &str, scale: Option<u32>, panel_width: usize) 
     let result = crate::io::read_disparity(&dir.join(format!("disp0{alg}.pfm")))?;
     let left = Canvas::from_rgb_image(&crate::io::png::load_rgb(&dir.join("im0.png"))?);
     if (left.width, left.height) != result.dims() {
-        return Err(Error::Input(format!(
-            "{}: result and im0.png differ in size",
-            dir.display()
-        )));
+        return Err(Error::Input(format!("{}: result and im0.png differ in size", dir.display())));
     }
     let gt_path = dir.join("disp0GT.pfm");
-    let gt = if gt_path.is_file() {
-        Some(load_gt_for(&result, &gt_path)?)
-    } else {
-        None
-    };
+    let gt = if gt_path.is_file() { Some(load_gt_for(&result, &gt_path)?) } else { None };
     let range = calib_range(&dir.join("calib.txt"))
         .or_else(|| gt.as_ref().and_then(|(g, _)| finite_range(g)))
         .or_else(|| finite_range(&result))
@@ -370,10 +321,7 @@ pub fn scene_row(dir: &Path, alg: &str, scale: Option<u32>, panel_width: usize) 
         Some((g, m)) => error_map(&result, g, m.as_ref(), scale),
         None => Canvas::new(result.width, result.height, NO_GT),
     };
-    let panels: Vec<Canvas> = [left, colour, error]
-        .iter()
-        .map(|c| fit_width(c, panel_width))
-        .collect();
+    let panels: Vec<Canvas> = [left, colour, error].iter().map(|c| fit_width(c, panel_width)).collect();
     Ok(hstack(&panels, 4))
 }
 
@@ -389,24 +337,13 @@ pub fn resolved_scale(path: &Path) -> Option<u32> {
 ///
 /// # Errors
 /// No such scene under `dir`, or any scene's files are unreadable (naming it).
-pub fn contact_sheet(
-    dir: &Path,
-    alg: &str,
-    scale: Option<u32>,
-    panel_width: usize,
-) -> Result<(Canvas, Vec<PathBuf>)> {
+pub fn contact_sheet(dir: &Path, alg: &str, scale: Option<u32>, panel_width: usize) -> Result<(Canvas, Vec<PathBuf>)> {
     let result_name = format!("disp0{alg}.pfm");
     let scenes = crate::batch::find_dirs_with(&[dir.to_path_buf()], &["im0.png", &result_name])?;
     if scenes.is_empty() {
-        return Err(Error::Input(format!(
-            "no scene folder with im0.png and {result_name} under {}",
-            dir.display()
-        )));
+        return Err(Error::Input(format!("no scene folder with im0.png and {result_name} under {}", dir.display())));
     }
-    let rows = scenes
-        .iter()
-        .map(|s| scene_row(s, alg, scale, panel_width))
-        .collect::<Result<Vec<_>>>()?;
+    let rows = scenes.iter().map(|s| scene_row(s, alg, scale, panel_width)).collect::<Result<Vec<_>>>()?;
     Ok((vstack(&rows, 8), scenes))
 }
 
@@ -476,15 +413,9 @@ mod tests {
         let b = Canvas::new(1, 2, [2; 3]);
         let h = hstack(&[a.clone(), b.clone()], 1);
         assert_eq!((h.width, h.height), (4, 2));
-        assert_eq!(
-            [h.get(0, 0), h.get(2, 0), h.get(3, 1), h.get(0, 1)],
-            [[1; 3], BACKGROUND, [2; 3], BACKGROUND]
-        );
+        assert_eq!([h.get(0, 0), h.get(2, 0), h.get(3, 1), h.get(0, 1)], [[1; 3], BACKGROUND, [2; 3], BACKGROUND]);
         let v = vstack(&[a, b], 0);
         assert_eq!((v.width, v.height), (2, 3));
-        assert_eq!(
-            [v.get(1, 0), v.get(0, 2), v.get(1, 2)],
-            [[1; 3], [2; 3], BACKGROUND]
-        );
+        assert_eq!([v.get(1, 0), v.get(0, 2), v.get(1, 2)], [[1; 3], [2; 3], BACKGROUND]);
     }
 }

@@ -24,11 +24,7 @@ impl Calib {
                 continue;
             }
             let Some((k, v)) = line.split_once('=') else {
-                return Err(format!(
-                    "line {}: expected key=value, found {:?}",
-                    n + 1,
-                    truncate(line)
-                ));
+                return Err(format!("line {}: expected key=value, found {:?}", n + 1, truncate(line)));
             };
             let k = k.trim();
             if k.is_empty() {
@@ -45,14 +41,9 @@ impl Calib {
     /// [`Error::Io`] or [`Error::Calib`] naming the path.
     pub fn load(path: &Path) -> Result<Calib> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let text = String::from_utf8(bytes).map_err(|_| Error::Calib {
-            path: path.to_path_buf(),
-            msg: "not a text file".into(),
-        })?;
-        Calib::parse(&text).map_err(|msg| Error::Calib {
-            path: path.to_path_buf(),
-            msg,
-        })
+        let text = String::from_utf8(bytes)
+            .map_err(|_| Error::Calib { path: path.to_path_buf(), msg: "not a text file".into() })?;
+        Calib::parse(&text).map_err(|msg| Error::Calib { path: path.to_path_buf(), msg })
     }
 
     /// The raw value of `key`.
@@ -68,18 +59,13 @@ impl Calib {
         let v = self.get("ndisp").ok_or("no ndisp key")?;
         match v.parse::<usize>() {
             Ok(n) if n > 0 => Ok(n),
-            _ => Err(format!(
-                "ndisp = {:?} is not a positive integer",
-                truncate(v)
-            )),
+            _ => Err(format!("ndisp = {:?} is not a positive integer", truncate(v))),
         }
     }
 
     /// A finite float value of `key`, if present and parseable.
     pub fn float(&self, key: &str) -> Option<f32> {
-        self.get(key)
-            .and_then(|v| v.parse::<f32>().ok())
-            .filter(|v| v.is_finite())
+        self.get(key).and_then(|v| v.parse::<f32>().ok()).filter(|v| v.is_finite())
     }
 }
 
@@ -88,10 +74,7 @@ impl Calib {
 /// # Errors
 /// [`Error::Io`] or [`Error::Calib`] naming the path.
 pub fn read_ndisp(path: &Path) -> Result<usize> {
-    Calib::load(path)?.ndisp().map_err(|msg| Error::Calib {
-        path: path.to_path_buf(),
-        msg,
-    })
+    Calib::load(path)?.ndisp().map_err(|msg| Error::Calib { path: path.to_path_buf(), msg })
 }
 
 fn truncate(s: &str) -> String {
@@ -112,10 +95,7 @@ mod tests {
         assert_eq!(c.ndisp(), Ok(64));
         assert_eq!(c.float("vmin"), Some(13.0));
         assert_eq!(c.float("baseline"), Some(178.089));
-        assert_eq!(
-            c.get("cam0"),
-            Some("[1746.24 0 14.88; 0 1746.24 65.5; 0 0 1]")
-        );
+        assert_eq!(c.get("cam0"), Some("[1746.24 0 14.88; 0 1746.24 65.5; 0 0 1]"));
     }
 
     #[test]

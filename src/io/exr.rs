@@ -24,10 +24,7 @@ pub fn encode_exr(path: &Path, map: &Plane<f32>) -> Result<Vec<u8>> {
     Image::from_layer(layer)
         .write()
         .to_buffered(&mut bytes)
-        .map_err(|source| JemError::Exr {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        .map_err(|source| JemError::Exr { path: path.to_path_buf(), source })?;
     Ok(bytes.into_inner())
 }
 
@@ -53,29 +50,17 @@ pub fn read_exr(path: &Path) -> Result<Plane<f32>> {
         .first_valid_layer()
         .all_attributes()
         .from_buffered(Cursor::new(bytes))
-        .map_err(|source| JemError::Exr {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        .map_err(|source| JemError::Exr { path: path.to_path_buf(), source })?;
     let layer = &image.layer_data;
     let (w, h) = (layer.size.width(), layer.size.height());
     let channels = &layer.channel_data.list;
-    let chosen = channels
-        .iter()
-        .find(|c| c.name.eq("Y"))
-        .or_else(|| channels.first());
+    let chosen = channels.iter().find(|c| c.name.eq("Y")).or_else(|| channels.first());
     let Some(channel) = chosen else {
-        return Err(JemError::Input(format!(
-            "{}: EXR has no channels",
-            path.display()
-        )));
+        return Err(JemError::Input(format!("{}: EXR has no channels", path.display())));
     };
     let data: Vec<f32> = channel.sample_data.values_as_f32().collect();
     if data.len() != w * h {
-        return Err(JemError::Input(format!(
-            "{}: EXR channel has the wrong number of samples",
-            path.display()
-        )));
+        return Err(JemError::Input(format!("{}: EXR channel has the wrong number of samples", path.display())));
     }
     Ok(Plane::from_vec(w, h, data))
 }

@@ -31,10 +31,7 @@ impl DisparityFormat {
     /// # Errors
     /// [`Error::Input`] for any other extension.
     pub fn from_path(path: &Path) -> Result<Self> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
+        let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
         match ext.as_deref() {
             Some("pfm") => Ok(DisparityFormat::Pfm),
             Some("exr") => Ok(DisparityFormat::Exr),
@@ -76,19 +73,14 @@ pub fn read_disparity(path: &Path) -> Result<DisparityMap> {
 /// # Errors
 /// [`Error::Io`] naming `path` (the temporary file is removed on failure).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomic_with(path, |file| {
-        file.write_all(bytes).map_err(|e| Error::io(path, e))
-    })
+    write_atomic_with(path, |file| file.write_all(bytes).map_err(|e| Error::io(path, e)))
 }
 
 /// Like [`write_atomic`], with a closure that writes into the temporary file.
 ///
 /// # Errors
 /// Whatever `write` returns, or [`Error::Io`] naming `path`.
-pub fn write_atomic_with(
-    path: &Path,
-    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
-) -> Result<()> {
+pub fn write_atomic_with(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<()> {
     let tmp = temp_path(path);
     let result = (|| {
         let mut file = std::fs::File::create(&tmp).map_err(|e| Error::io(path, e))?;
@@ -106,10 +98,7 @@ pub fn write_atomic_with(
 /// `dir/.name.jem-tmp-<pid>`: hidden, in the destination's folder (so the rename stays on one file system), and
 /// unique per process.
 fn temp_path(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
     path.with_file_name(format!(".{name}.jem-tmp-{}", std::process::id()))
 }
 
@@ -119,18 +108,9 @@ mod tests {
 
     #[test]
     fn format_from_extension() {
-        assert_eq!(
-            DisparityFormat::from_path(Path::new("a/b.PFM")).unwrap(),
-            DisparityFormat::Pfm
-        );
-        assert_eq!(
-            DisparityFormat::from_path(Path::new("b.exr")).unwrap(),
-            DisparityFormat::Exr
-        );
-        assert_eq!(
-            DisparityFormat::from_path(Path::new("b.png")).unwrap(),
-            DisparityFormat::Png16
-        );
+        assert_eq!(DisparityFormat::from_path(Path::new("a/b.PFM")).unwrap(), DisparityFormat::Pfm);
+        assert_eq!(DisparityFormat::from_path(Path::new("b.exr")).unwrap(), DisparityFormat::Exr);
+        assert_eq!(DisparityFormat::from_path(Path::new("b.png")).unwrap(), DisparityFormat::Png16);
         assert!(DisparityFormat::from_path(Path::new("b.jpg")).is_err());
         assert!(DisparityFormat::from_path(Path::new("b")).is_err());
     }

@@ -29,10 +29,7 @@ pub fn encode_pfm(map: &Plane<f32>) -> Vec<u8> {
 /// # Errors
 /// [`Error::Pfm`] (with an empty path) describing the first problem found.
 pub fn decode_pfm(bytes: &[u8]) -> Result<Plane<f32>> {
-    decode(bytes).map_err(|msg| Error::Pfm {
-        path: Default::default(),
-        msg,
-    })
+    decode(bytes).map_err(|msg| Error::Pfm { path: Default::default(), msg })
 }
 
 /// Writes a greyscale little-endian PFM atomically.
@@ -49,10 +46,7 @@ pub fn write_pfm(path: &Path, map: &Plane<f32>) -> Result<()> {
 /// [`Error::Io`] if it cannot be read, [`Error::Pfm`] naming the path if it is malformed.
 pub fn read_pfm(path: &Path) -> Result<Plane<f32>> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    decode(&bytes).map_err(|msg| Error::Pfm {
-        path: path.to_path_buf(),
-        msg,
-    })
+    decode(&bytes).map_err(|msg| Error::Pfm { path: path.to_path_buf(), msg })
 }
 
 /// Splits off one whitespace-delimited header token; PFM headers separate fields by any whitespace.
@@ -86,13 +80,9 @@ fn decode(bytes: &[u8]) -> std::result::Result<Plane<f32>, String> {
     let width = dim(token(bytes, &mut pos, "width")?, "width")?;
     let height = dim(token(bytes, &mut pos, "height")?, "height")?;
     let scale_text = token(bytes, &mut pos, "scale")?;
-    let scale: f32 = scale_text
-        .parse()
-        .map_err(|_| format!("bad scale {scale_text:?}"))?;
+    let scale: f32 = scale_text.parse().map_err(|_| format!("bad scale {scale_text:?}"))?;
     if scale == 0.0 || !scale.is_finite() {
-        return Err(format!(
-            "bad scale {scale_text:?} (expected a non-zero number)"
-        ));
+        return Err(format!("bad scale {scale_text:?} (expected a non-zero number)"));
     }
     // Exactly one whitespace byte separates the header from the data.
     if pos >= bytes.len() || !bytes[pos].is_ascii_whitespace() {
@@ -104,9 +94,7 @@ fn decode(bytes: &[u8]) -> std::result::Result<Plane<f32>, String> {
         .and_then(|n| n.checked_mul(channels))
         .ok_or_else(|| format!("size {width}x{height} overflows"))?;
     let data = &bytes[pos..];
-    let needed = samples
-        .checked_mul(4)
-        .ok_or_else(|| format!("size {width}x{height} overflows"))?;
+    let needed = samples.checked_mul(4).ok_or_else(|| format!("size {width}x{height} overflows"))?;
     if data.len() < needed {
         return Err(format!(
             "{width}x{height}x{channels} needs {needed} data bytes but the file has {}",
@@ -115,22 +103,11 @@ fn decode(bytes: &[u8]) -> std::result::Result<Plane<f32>, String> {
     }
     let little_endian = scale < 0.0;
     let mut out = Plane::new(width, height, 0.0f32);
-    for (file_row, chunk) in data[..needed]
-        .chunks_exact(width * channels * 4)
-        .enumerate()
-    {
+    for (file_row, chunk) in data[..needed].chunks_exact(width * channels * 4).enumerate() {
         let y = height - 1 - file_row;
-        for (dst, px) in out
-            .row_mut(y)
-            .iter_mut()
-            .zip(chunk.chunks_exact(channels * 4))
-        {
+        for (dst, px) in out.row_mut(y).iter_mut().zip(chunk.chunks_exact(channels * 4)) {
             let b = [px[0], px[1], px[2], px[3]];
-            *dst = if little_endian {
-                f32::from_le_bytes(b)
-            } else {
-                f32::from_be_bytes(b)
-            };
+            *dst = if little_endian { f32::from_le_bytes(b) } else { f32::from_be_bytes(b) };
         }
     }
     Ok(out)
@@ -157,10 +134,7 @@ mod tests {
         let header = b"Pf\n3 2\n-1\n";
         assert_eq!(&bytes[..header.len()], header);
         let first = f32::from_le_bytes(bytes[header.len()..][..4].try_into().unwrap());
-        assert_eq!(
-            first, -2.0,
-            "the first stored row is the image's bottom row"
-        );
+        assert_eq!(first, -2.0, "the first stored row is the image's bottom row");
     }
 
     #[test]
@@ -191,11 +165,7 @@ mod tests {
         ] {
             let mut bytes = header.to_vec();
             bytes.extend_from_slice(&body);
-            assert!(
-                decode_pfm(&bytes).is_err(),
-                "accepted {:?}",
-                String::from_utf8_lossy(header)
-            );
+            assert!(decode_pfm(&bytes).is_err(), "accepted {:?}", String::from_utf8_lossy(header));
         }
     }
 

@@ -22,15 +22,9 @@ pub fn load_rgb(path: &Path) -> Result<RgbImage> {
         .with_guessed_format()
         .map_err(|e| Error::io(path, e))?;
     if reader.format().is_none() {
-        return Err(Error::Input(format!(
-            "{}: not a PNG or PNM image",
-            path.display()
-        )));
+        return Err(Error::Input(format!("{}: not a PNG or PNM image", path.display())));
     }
-    let img = reader.decode().map_err(|source| Error::Image {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let img = reader.decode().map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     Ok(to_rgb(&img))
 }
 
@@ -45,31 +39,21 @@ pub fn to_rgb(img: &DynamicImage) -> RgbImage {
     };
     match img {
         DynamicImage::ImageRgb8(b) => {
-            b.pixels()
-                .enumerate()
-                .for_each(|(i, p)| put(i, p.0.map(f32::from)));
+            b.pixels().enumerate().for_each(|(i, p)| put(i, p.0.map(f32::from)));
         }
         DynamicImage::ImageLuma8(b) => {
-            b.pixels()
-                .enumerate()
-                .for_each(|(i, p)| put(i, [f32::from(p.0[0]); 3]));
+            b.pixels().enumerate().for_each(|(i, p)| put(i, [f32::from(p.0[0]); 3]));
         }
         DynamicImage::ImageRgba8(b) => {
-            b.pixels()
-                .enumerate()
-                .for_each(|(i, p)| put(i, [p.0[0], p.0[1], p.0[2]].map(f32::from)));
+            b.pixels().enumerate().for_each(|(i, p)| put(i, [p.0[0], p.0[1], p.0[2]].map(f32::from)));
         }
         DynamicImage::ImageLumaA8(b) => {
-            b.pixels()
-                .enumerate()
-                .for_each(|(i, p)| put(i, [f32::from(p.0[0]); 3]));
+            b.pixels().enumerate().for_each(|(i, p)| put(i, [f32::from(p.0[0]); 3]));
         }
         other => {
             // 16-bit and float variants: go through 16-bit RGB and rescale to the 8-bit range.
             let b = other.to_rgb16();
-            b.pixels()
-                .enumerate()
-                .for_each(|(i, p)| put(i, p.0.map(|v| f32::from(v) / 257.0)));
+            b.pixels().enumerate().for_each(|(i, p)| put(i, p.0.map(|v| f32::from(v) / 257.0)));
         }
     }
     out
@@ -86,16 +70,8 @@ pub fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> R
     assert_eq!(rgb.len(), width * height * 3);
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new(&mut bytes)
-        .write_image(
-            rgb,
-            width as u32,
-            height as u32,
-            image::ExtendedColorType::Rgb8,
-        )
-        .map_err(|source| Error::Image {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        .write_image(rgb, width as u32, height as u32, image::ExtendedColorType::Rgb8)
+        .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     super::write_atomic(path, &bytes)
 }
 
@@ -107,25 +83,13 @@ pub fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> R
 pub fn write_disparity_png16(path: &Path, map: &DisparityMap) -> Result<()> {
     let mut be = Vec::with_capacity(map.data.len() * 2);
     for &d in &map.data {
-        let v: u16 = if d.is_finite() && d >= 0.0 {
-            (d * 256.0).round().clamp(1.0, 65535.0) as u16
-        } else {
-            0
-        };
+        let v: u16 = if d.is_finite() && d >= 0.0 { (d * 256.0).round().clamp(1.0, 65535.0) as u16 } else { 0 };
         be.extend_from_slice(&v.to_be_bytes());
     }
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new(&mut bytes)
-        .write_image(
-            &be,
-            map.width as u32,
-            map.height as u32,
-            image::ExtendedColorType::L16,
-        )
-        .map_err(|source| Error::Image {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        .write_image(&be, map.width as u32, map.height as u32, image::ExtendedColorType::L16)
+        .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     super::write_atomic(path, &bytes)
 }
 
@@ -135,29 +99,11 @@ pub fn write_disparity_png16(path: &Path, map: &DisparityMap) -> Result<()> {
 /// [`Error::Io`] or [`Error::Image`] naming the path.
 pub fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let img =
-        image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).map_err(|source| {
-            Error::Image {
-                path: path.to_path_buf(),
-                source,
-            }
-        })?;
+    let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
+        .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     let grey = img.to_luma16();
-    let data = grey
-        .pixels()
-        .map(|p| {
-            if p.0[0] == 0 {
-                f32::INFINITY
-            } else {
-                f32::from(p.0[0]) / 256.0
-            }
-        })
-        .collect();
-    Ok(Plane::from_vec(
-        grey.width() as usize,
-        grey.height() as usize,
-        data,
-    ))
+    let data = grey.pixels().map(|p| if p.0[0] == 0 { f32::INFINITY } else { f32::from(p.0[0]) / 256.0 }).collect();
+    Ok(Plane::from_vec(grey.width() as usize, grey.height() as usize, data))
 }
 
 /// Loads an 8-bit grey image (e.g. `mask0nocc.png`) as a plane of `u8`.
@@ -166,16 +112,9 @@ pub fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
 /// [`Error::Io`] or [`Error::Image`] naming the path.
 pub fn load_grey8(path: &Path) -> Result<Plane<u8>> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let img = image::load_from_memory(&bytes).map_err(|source| Error::Image {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let img = image::load_from_memory(&bytes).map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     let grey = img.to_luma8();
-    Ok(Plane::from_vec(
-        grey.width() as usize,
-        grey.height() as usize,
-        grey.into_raw(),
-    ))
+    Ok(Plane::from_vec(grey.width() as usize, grey.height() as usize, grey.into_raw()))
 }
 
 #[cfg(test)]
@@ -185,21 +124,13 @@ mod tests {
     #[test]
     fn loads_all_pixel_layouts_to_the_same_rgb() {
         let dir = tempfile::tempdir().unwrap();
-        let rgb8 = image::RgbImage::from_fn(3, 2, |x, y| {
-            image::Rgb([(x * 80) as u8, (y * 100) as u8, 7])
-        });
+        let rgb8 = image::RgbImage::from_fn(3, 2, |x, y| image::Rgb([(x * 80) as u8, (y * 100) as u8, 7]));
         let p8 = dir.path().join("a.png");
         rgb8.save(&p8).unwrap();
         let p16 = dir.path().join("b.png");
-        DynamicImage::ImageRgb8(rgb8.clone())
-            .to_rgb16()
-            .save(&p16)
-            .unwrap();
+        DynamicImage::ImageRgb8(rgb8.clone()).to_rgb16().save(&p16).unwrap();
         let pa = dir.path().join("c.png");
-        DynamicImage::ImageRgb8(rgb8.clone())
-            .to_rgba8()
-            .save(&pa)
-            .unwrap();
+        DynamicImage::ImageRgb8(rgb8.clone()).to_rgba8().save(&pa).unwrap();
         let ppm = dir.path().join("d.ppm");
         rgb8.save(&ppm).unwrap();
         let a = load_rgb(&p8).unwrap();
@@ -209,9 +140,7 @@ mod tests {
             assert_eq!(load_rgb(p).unwrap(), a, "{}", p.display());
         }
         let grey = dir.path().join("g.pgm");
-        image::GrayImage::from_pixel(2, 2, image::Luma([9]))
-            .save(&grey)
-            .unwrap();
+        image::GrayImage::from_pixel(2, 2, image::Luma([9])).save(&grey).unwrap();
         assert_eq!(load_rgb(&grey).unwrap().rgb(3), [9.0; 3]);
     }
 
@@ -219,12 +148,7 @@ mod tests {
     fn corrupt_and_missing_files_name_the_path() {
         let dir = tempfile::tempdir().unwrap();
         let missing = dir.path().join("nope.png");
-        assert!(
-            load_rgb(&missing)
-                .unwrap_err()
-                .to_string()
-                .contains("nope.png")
-        );
+        assert!(load_rgb(&missing).unwrap_err().to_string().contains("nope.png"));
         let bad = dir.path().join("bad.png");
         std::fs::write(&bad, b"\x89PNG\r\n\x1a\nnot really").unwrap();
         assert!(load_rgb(&bad).unwrap_err().to_string().contains("bad.png"));

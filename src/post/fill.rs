@@ -9,9 +9,7 @@ use crate::image::DisparityMap;
 /// Fills invalid pixels in place (see the module doc).
 pub fn fill_occlusions_in_place(disp: &mut DisparityMap) {
     let w = disp.width;
-    disp.data
-        .par_chunks_mut(w.max(1))
-        .for_each(|row| fill_row(row));
+    disp.data.par_chunks_mut(w.max(1)).for_each(|row| fill_row(row));
 }
 
 /// Fills one row: a left-to-right pass records the nearest valid value on the left, a right-to-left pass takes
@@ -44,20 +42,13 @@ mod tests {
 
     #[test]
     fn fills_with_the_smaller_neighbour() {
-        let mut d = Plane::from_vec(
-            8,
-            2,
-            vec![
-                INF, 5.0, INF, INF, 2.0, 7.0, INF, INF, //
-                INF, INF, INF, INF, INF, INF, INF, INF,
-            ],
-        );
+        let mut d = Plane::from_vec(8, 2, vec![
+            INF, 5.0, INF, INF, 2.0, 7.0, INF, INF, //
+            INF, INF, INF, INF, INF, INF, INF, INF,
+        ]);
         fill_occlusions_in_place(&mut d);
         assert_eq!(d.row(0), &[5.0, 5.0, 2.0, 2.0, 2.0, 7.0, 7.0, 7.0]);
-        assert!(
-            d.row(1).iter().all(|v| v.is_infinite()),
-            "an empty row stays invalid"
-        );
+        assert!(d.row(1).iter().all(|v| v.is_infinite()), "an empty row stays invalid");
     }
 
     #[test]

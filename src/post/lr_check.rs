@@ -17,26 +17,19 @@ use crate::params::LrcMode;
 /// # Panics
 /// If the maps differ in size.
 pub fn consistency_mask(left: &DisparityMap, right: &DisparityMap, thresh_px: f32) -> Plane<bool> {
-    assert_eq!(
-        left.dims(),
-        right.dims(),
-        "left and right disparity maps differ in size"
-    );
+    assert_eq!(left.dims(), right.dims(), "left and right disparity maps differ in size");
     let w = left.width;
     let mut mask = Plane::new(left.width, left.height, false);
-    mask.data
-        .par_chunks_mut(w)
-        .enumerate()
-        .for_each(|(y, row)| {
-            let (lrow, rrow) = (left.row(y), right.row(y));
-            for (x, ok) in row.iter_mut().enumerate() {
-                let d = lrow[x];
-                *ok = match matching_x(x, d, w) {
-                    Some(xr) => (d - rrow[xr]).abs() <= thresh_px,
-                    None => false,
-                };
-            }
-        });
+    mask.data.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let (lrow, rrow) = (left.row(y), right.row(y));
+        for (x, ok) in row.iter_mut().enumerate() {
+            let d = lrow[x];
+            *ok = match matching_x(x, d, w) {
+                Some(xr) => (d - rrow[xr]).abs() <= thresh_px,
+                None => false,
+            };
+        }
+    });
     mask
 }
 
@@ -66,11 +59,7 @@ pub fn left_right_check(
     match mode {
         LrcMode::Off => {}
         LrcMode::Invalidate => {
-            out.data
-                .iter_mut()
-                .zip(&mask.data)
-                .filter(|(_, ok)| !**ok)
-                .for_each(|(d, _)| *d = f32::INFINITY);
+            out.data.iter_mut().zip(&mask.data).filter(|(_, ok)| !**ok).for_each(|(d, _)| *d = f32::INFINITY);
         }
         LrcMode::Correct => {
             out.data.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
@@ -118,12 +107,7 @@ mod tests {
         let (cor, _) = left_right_check(&l, &r, LrcMode::Correct, 1.0);
         assert_eq!(cor.data, vec![0.0, 1.0, 3.0, 1.0, 1.4]);
         let r2 = map(5, &[0.0, 1.0, 0.0, 0.2, 1.0]);
-        let (cor, _) = left_right_check(
-            &map(5, &[0.0, 0.0, 0.0, 0.0, 1.6]),
-            &r2,
-            LrcMode::Correct,
-            0.5,
-        );
+        let (cor, _) = left_right_check(&map(5, &[0.0, 0.0, 0.0, 0.0, 1.6]), &r2, LrcMode::Correct, 0.5);
         // x=4: d 1.6 → xr 2 (round 2), |1.6−0| > 0.5 → min(1.6, 0) = 0.
         assert_eq!(cor.data[4], 0.0);
     }

@@ -21,12 +21,7 @@ pub struct WmedianParams {
 
 impl Default for WmedianParams {
     fn default() -> Self {
-        WmedianParams {
-            enabled: false,
-            radius: 9,
-            sigma_xy: 9.0,
-            sigma_rgb: 20.0,
-        }
+        WmedianParams { enabled: false, radius: 9, sigma_xy: 9.0, sigma_rgb: 20.0 }
     }
 }
 
@@ -37,11 +32,7 @@ impl WmedianParams {
     /// [`crate::Error::InvalidParam`] naming the key.
     pub fn validate(&self) -> Result<()> {
         if self.radius == 0 || self.radius > 64 {
-            return Err(crate::Error::param(
-                "post.wmedian.radius",
-                self.radius,
-                "1 to 64",
-            ));
+            return Err(crate::Error::param("post.wmedian.radius", self.radius, "1 to 64"));
         }
         crate::params::check_positive("post.wmedian.sigma_xy", self.sigma_xy)?;
         crate::params::check_positive("post.wmedian.sigma_rgb", self.sigma_rgb)
