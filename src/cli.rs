@@ -645,11 +645,14 @@ fn run_viz(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         if args.panel_width < 16 {
             return Err(Error::param("--panel-width", args.panel_width, "at least 16"));
         }
-        let (sheet, scenes) = viz::contact_sheet(&args.input, alg, args.scale, args.panel_width)?;
-        sheet.write_png(&args.output)?;
+        let sheet = viz::contact_sheet(&args.input, alg, args.scale, args.panel_width)?;
+        sheet.canvas.write_png(&args.output)?;
+        for (dir, e) in &sheet.skipped {
+            eprintln!("warning: {} left out: {e}", dir.display());
+        }
         if !global.quiet {
-            let names: Vec<String> = scenes.iter().map(|s| jem::batch::scene_name(s)).collect();
-            eprintln!("{}: {} rows ({})", args.output.display(), scenes.len(), names.join(", "));
+            let names: Vec<String> = sheet.rows.iter().map(|s| jem::batch::scene_name(s)).collect();
+            eprintln!("{}: {} rows ({})", args.output.display(), names.len(), names.join(", "));
         }
         return Ok(ExitCode::SUCCESS);
     }

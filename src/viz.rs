@@ -206,16 +206,15 @@ pub fn resize_area(src: &Canvas, width: usize, height: usize) -> Canvas {
             let mut sum = [0u32; 3];
             for y in y0..y1 {
                 for x in x0..x1 {
-                    let p = src.get(x, y);
-                    for c in 0..3 {
-                        sum[c] += u32::from(p[c]);
+                    for (s, v) in sum.iter_mut().zip(src.get(x, y)) {
+                        *s += u32::from(v);
                     }
                 }
             }
             let n = ((y1 - y0) * (x1 - x0)) as u32;
             let i = (oy * width + ox) * 3;
-            for c in 0..3 {
-                out.data[i + c] = ((sum[c] + n / 2) / n) as u8;
+            for (dst, s) in out.data[i..i + 3].iter_mut().zip(sum) {
+                *dst = ((s + n / 2) / n) as u8;
             }
         }
     }
@@ -331,20 +330,44 @@ pub fn resolved_scale(path: &Path) -> Option<u32> {
     crate::eval::scale_from_path(&p)
 }
 
+/// What [`contact_sheet`] drew.
+#[derive(Clone, Debug)]
+pub struct Sheet {
+    /// The picture.
+    pub canvas: Canvas,
+    /// The scene folders drawn, in row order.
+    pub rows: Vec<PathBuf>,
+    /// Scenes left out because their files could not be drawn, with the reason.
+    pub skipped: Vec<(PathBuf, String)>,
+}
+
 /// A contact sheet of every scene folder under `dir` that has `im0.png` and `disp0<alg>.pfm`, sorted by path,
-/// one [`scene_row`] per scene, 8 pixels apart. Returns the sheet and the scene folders in row order; a scene
-/// that cannot be drawn becomes an error.
+/// one [`scene_row`] per scene, 8 pixels apart. A scene whose files cannot be drawn is left out and listed in
+/// [`Sheet::skipped`].
 ///
 /// # Errors
-/// No such scene under `dir`, or any scene's files are unreadable (naming it).
-pub fn contact_sheet(dir: &Path, alg: &str, scale: Option<u32>, panel_width: usize) -> Result<(Canvas, Vec<PathBuf>)> {
+/// No such scene under `dir`, or none of them could be drawn.
+pub fn contact_sheet(dir: &Path, alg: &str, scale: Option<u32>, panel_width: usize) -> Result<Sheet> {
     let result_name = format!("disp0{alg}.pfm");
     let scenes = crate::batch::find_dirs_with(&[dir.to_path_buf()], &["im0.png", &result_name])?;
     if scenes.is_empty() {
         return Err(Error::Input(format!("no scene folder with im0.png and {result_name} under {}", dir.display())));
     }
-    let rows = scenes.iter().map(|s| scene_row(s, alg, scale, panel_width)).collect::<Result<Vec<_>>>()?;
-    Ok((vstack(&rows, 8), scenes))
+    let (mut canvases, mut rows, mut skipped) = (Vec::new(), Vec::new(), Vec::new());
+    for s in scenes {
+        match scene_row(&s, alg, scale, panel_width) {
+            Ok(c) => {
+                canvases.push(c);
+                rows.push(s);
+            }
+            Err(e) => skipped.push((s, e.to_string())),
+        }
+    }
+    if canvases.is_empty() {
+        let why: Vec<String> = skipped.iter().map(|(_, e)| e.clone()).collect();
+        return Err(Error::Input(format!("no scene could be drawn: {}", why.join("; "))));
+    }
+    Ok(Sheet { canvas: vstack(&canvases, 8), rows, skipped })
 }
 
 #[cfg(test)]
