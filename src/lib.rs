@@ -23,8 +23,10 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod batch;
 pub mod cost;
 pub mod error;
+pub mod eval;
 pub mod image;
 pub mod io;
 pub mod lattice;
@@ -32,6 +34,7 @@ pub mod meanfield;
 pub mod params;
 pub mod post;
 pub mod synth;
+pub mod viz;
 
 use std::time::{Duration, Instant};
 

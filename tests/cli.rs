@@ -150,8 +150,12 @@ fn tiny_images_never_panic() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     for (w, h) in [(1u32, 1u32), (2, 1), (3, 2), (5, 40), (40, 3)] {
-        image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 40) as u8, (y * 70) as u8, 9])).save(d.join("a.png")).unwrap();
-        image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(y * 30) as u8, (x * 20) as u8, 1])).save(d.join("b.png")).unwrap();
+        image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 40) as u8, (y * 70) as u8, 9]))
+            .save(d.join("a.png"))
+            .unwrap();
+        image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(y * 30) as u8, (x * 20) as u8, 1]))
+            .save(d.join("b.png"))
+            .unwrap();
         let out = run_in(d, &["a.png", "b.png", "-o", "o.pfm", "--ndisp", "1"]);
         let err = stderr(&out);
         if w == 1 {
