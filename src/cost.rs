@@ -148,6 +148,7 @@ pub fn argmin(values: &[f32]) -> usize {
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)] // index loops read best in reference implementations
 mod tests {
     use super::*;
 

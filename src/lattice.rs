@@ -418,6 +418,7 @@ impl KeyTable {
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)] // index loops read best in reference implementations
 mod tests {
     use super::*;
 

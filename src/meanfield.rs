@@ -353,6 +353,7 @@ pub fn parabola_offset(a: f32, b: f32, c: f32) -> f32 {
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)] // index loops read best in reference implementations
 mod tests {
     use super::*;
     use crate::params::{CostParams, Params};

@@ -421,8 +421,7 @@ mod tests {
 
     #[test]
     fn model_selects_weights() {
-        let mut p = Params::default();
-        p.model = Model::Lcm;
+        let mut p = Params { model: Model::Lcm, ..Params::default() };
         assert_eq!(p.effective_fcm_weight(), 0.0);
         assert_eq!(p.effective_lcm_weight(), p.meanfield.lcm_weight);
         p.model = Model::Fcm;

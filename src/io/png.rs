@@ -79,14 +79,15 @@ pub fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> R
 /// # Errors
 /// [`Error::Image`] or [`Error::Io`] naming the path.
 pub fn write_disparity_png16(path: &Path, map: &DisparityMap) -> Result<()> {
-    let mut be = Vec::with_capacity(map.data.len() * 2);
+    // The encoder takes 16-bit samples in native byte order (it writes them big-endian itself).
+    let mut samples = Vec::with_capacity(map.data.len() * 2);
     for &d in &map.data {
         let v: u16 = if d.is_finite() && d >= 0.0 { (d * 256.0).round().clamp(1.0, 65535.0) as u16 } else { 0 };
-        be.extend_from_slice(&v.to_be_bytes());
+        samples.extend_from_slice(&v.to_ne_bytes());
     }
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new(&mut bytes)
-        .write_image(&be, map.width as u32, map.height as u32, image::ExtendedColorType::L16)
+        .write_image(&samples, map.width as u32, map.height as u32, image::ExtendedColorType::L16)
         .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     super::write_atomic(path, &bytes)
 }

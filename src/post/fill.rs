@@ -9,7 +9,7 @@ use crate::image::DisparityMap;
 /// Fills invalid pixels in place (see the module doc).
 pub fn fill_occlusions_in_place(disp: &mut DisparityMap) {
     let w = disp.width;
-    disp.data.par_chunks_mut(w.max(1)).for_each(|row| fill_row(row));
+    disp.data.par_chunks_mut(w.max(1)).for_each(fill_row);
 }
 
 /// Fills one row: a left-to-right pass records the nearest valid value on the left, a right-to-left pass takes

@@ -7,17 +7,11 @@ use crate::error::Result;
 use crate::image::{DisparityMap, Plane, RgbImage};
 
 /// Slanted-plane smoothing parameters.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SpsParams {
     /// Run the stage.
     pub enabled: bool,
-}
-
-impl Default for SpsParams {
-    fn default() -> Self {
-        SpsParams { enabled: false }
-    }
 }
 
 impl SpsParams {
