@@ -1,1 +1,99 @@
-fn main() {}
+//! Per-stage benchmarks on a real quarter-resolution scene (Motorcycle, 741×497, ndisp 70) when the Middlebury
+//! data is present (`$JEM_DATA`, default `../shared/middlebury`), else on the shipped synthetic example.
+//!
+//! `cargo bench --bench stages` runs them all; `cargo bench --bench stages -- lattice` one group.
+
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use jem::lattice::{Lattice, LatticeScratch};
+use jem::meanfield::{MeanField, PairwiseWeights};
+use jem::{Params, StereoPair, cost, post};
+
+/// The benchmark scene: (name, pair).
+fn scene() -> (String, StereoPair) {
+    let data = std::env::var_os("JEM_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/middlebury"));
+    let moto = data.join("MiddEval3/trainingQ/Motorcycle");
+    let (dir, name) = if moto.is_dir() {
+        (moto, "Motorcycle Q")
+    } else {
+        eprintln!("note: Middlebury data not found; benchmarking the synthetic example instead");
+        (Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/synth"), "synth")
+    };
+    let left = jem::io::png::load_rgb(&dir.join("im0.png")).expect("left image");
+    let right = jem::io::png::load_rgb(&dir.join("im1.png")).expect("right image");
+    let ndisp = jem::io::calib::read_ndisp(&dir.join("calib.txt")).expect("calib.txt");
+    let pair = StereoPair::new(left, right, ndisp).expect("valid pair");
+    (format!("{name} {}x{} nd{}", pair.left.width, pair.left.height, ndisp), pair)
+}
+
+fn stages(c: &mut Criterion) {
+    let (name, pair) = scene();
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/default.toml");
+    let params = Params::load(Some(&config), &[]).expect("configs/default.toml");
+    let mf = &params.meanfield;
+
+    let mut g = c.benchmark_group("cost");
+    g.bench_function(BenchmarkId::new("both views", &name), |b| {
+        b.iter(|| {
+            let left = cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &params.cost);
+            let right = cost::derive_right_volume(&left, cost::truncation_cost(&params.cost));
+            black_box((left, right))
+        })
+    });
+    g.finish();
+
+    let mut g = c.benchmark_group("lattice");
+    g.bench_function(BenchmarkId::new("build", &name), |b| {
+        b.iter(|| black_box(Lattice::build(&pair.left, mf.sigma_xy, mf.sigma_rgb)))
+    });
+    let lattice = Lattice::build(&pair.left, mf.sigma_xy, mf.sigma_rgb);
+    let n = pair.left.len();
+    for channels in [1, pair.ndisp] {
+        let input: Vec<f32> = (0..n * channels).map(|i| (i % 97) as f32 / 97.0).collect();
+        let mut output = vec![0.0; input.len()];
+        let mut scratch = LatticeScratch::default();
+        g.bench_function(BenchmarkId::new(format!("filter {channels} channels"), &name), |b| {
+            b.iter(|| lattice.filter(black_box(&input), &mut output, channels, &mut scratch))
+        });
+    }
+    g.finish();
+
+    let cost_left = cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &params.cost);
+    let mut g = c.benchmark_group("meanfield");
+    g.sample_size(10).measurement_time(Duration::from_secs(8));
+    let weights = PairwiseWeights { fcm: params.effective_fcm_weight(), lcm: params.effective_lcm_weight() };
+    g.bench_function(BenchmarkId::new("setup (lattice + init)", &name), |b| {
+        b.iter(|| black_box(MeanField::new(&cost_left, &pair.left, mf, weights)))
+    });
+    let mut state = MeanField::new(&cost_left, &pair.left, mf, weights);
+    g.bench_function(BenchmarkId::new("one JEM iteration", &name), |b| b.iter(|| state.step()));
+    g.finish();
+
+    let mut g = c.benchmark_group("post");
+    let (dl, _) =
+        jem::meanfield::decode_marginals(&jem::meanfield::infer_mean_field(&cost_left, &pair.left, mf, weights), true);
+    let dr = dl.clone();
+    g.bench_function(BenchmarkId::new("lrc + fill", &name), |b| {
+        b.iter(|| {
+            let (mut d, mask) = post::lr_check::left_right_check(&dl, &dr, jem::LrcMode::Invalidate, 1.0);
+            post::fill::fill_occlusions_in_place(&mut d);
+            black_box((d, mask))
+        })
+    });
+    g.finish();
+
+    let mut g = c.benchmark_group("end-to-end");
+    g.sample_size(10).measurement_time(Duration::from_secs(20));
+    g.bench_function(BenchmarkId::new("default.toml", &name), |b| {
+        b.iter(|| black_box(jem::run(&params, &pair).expect("pipeline")))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, stages);
+criterion_main!(benches);

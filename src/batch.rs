@@ -206,6 +206,8 @@ pub struct BatchOptions {
     pub jobs: usize,
     /// Skip scenes whose `disp0<alg>.pfm` exists.
     pub skip_existing: bool,
+    /// Memory limit per scene (see [`crate::check_memory`]); with `jobs` > 1 each job may use this much.
+    pub max_memory_bytes: u64,
 }
 
 /// The display name of a scene folder.
@@ -218,7 +220,13 @@ pub fn scene_name(dir: &Path) -> String {
 /// # Errors
 /// Unreadable images, a missing or malformed `calib.txt`, unequal sizes, invalid parameters, or a failed
 /// write. (A panic is not caught here; [`run_batch`] catches it.)
-pub fn run_scene(dir: &Path, params: &Params, alg: &str, on_stage: &dyn Fn(&str)) -> Result<SceneRun> {
+pub fn run_scene(
+    dir: &Path,
+    params: &Params,
+    alg: &str,
+    max_memory_bytes: u64,
+    on_stage: &dyn Fn(&str),
+) -> Result<SceneRun> {
     on_stage("loading");
     let ndisp = calib::read_ndisp(&dir.join("calib.txt"))?;
     let (left, right) = rayon::join(
@@ -226,6 +234,7 @@ pub fn run_scene(dir: &Path, params: &Params, alg: &str, on_stage: &dyn Fn(&str)
         || crate::io::png::load_rgb(&dir.join("im1.png")),
     );
     let pair = StereoPair::new(left?, right?, ndisp)?;
+    crate::check_memory(pair.left.width, pair.left.height, ndisp, params, max_memory_bytes)?;
     let start = Instant::now();
     let out = crate::run_observed(params, &pair, on_stage)?;
     let seconds = start.elapsed().as_secs_f64();
@@ -251,7 +260,7 @@ fn process(dir: &Path, params: &Params, opts: &BatchOptions, on_stage: &dyn Fn(&
     if opts.skip_existing && dir.join(format!("disp0{}.pfm", opts.alg)).exists() {
         return SceneStatus::Skipped;
     }
-    guarded(|| run_scene(dir, params, &opts.alg, on_stage))
+    guarded(|| run_scene(dir, params, &opts.alg, opts.max_memory_bytes, on_stage))
 }
 
 /// Runs `f`, turning an error or a panic into [`SceneStatus::Failed`].

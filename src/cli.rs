@@ -41,6 +41,39 @@ pub struct GlobalArgs {
     /// Print per-stage timings to stderr.
     #[arg(long, short, global = true, help_heading = "Global")]
     verbose: bool,
+    /// Refuse runs estimated to need more memory than this, before allocating (e.g. 1500M, 8G; default: 80% of
+    /// physical memory).
+    #[arg(long, global = true, value_name = "SIZE", value_parser = parse_size, help_heading = "Global")]
+    max_memory: Option<u64>,
+}
+
+impl GlobalArgs {
+    /// The memory limit in bytes.
+    fn memory_limit(&self) -> u64 {
+        self.max_memory.unwrap_or_else(jem::default_memory_limit)
+    }
+}
+
+/// Parses `123`, `800K`, `1500M`, `8G` (binary units; a trailing `B`/`iB` is allowed) into bytes.
+fn parse_size(text: &str) -> std::result::Result<u64, String> {
+    let t = text.trim().trim_end_matches(['B', 'b']).trim_end_matches('i');
+    let (digits, unit) = match t.char_indices().find(|(_, c)| c.is_ascii_alphabetic()) {
+        Some((i, _)) => (&t[..i], &t[i..]),
+        None => (t, ""),
+    };
+    let shift = match unit.to_ascii_uppercase().as_str() {
+        "" => 0,
+        "K" => 10,
+        "M" => 20,
+        "G" => 30,
+        "T" => 40,
+        _ => return Err(format!("unknown unit in {text:?} (use K, M, G or T)")),
+    };
+    let value: f64 = digits.trim().parse().map_err(|_| format!("{text:?} is not a size like 1500M or 8G"))?;
+    if !(value.is_finite() && value > 0.0) {
+        return Err(format!("{text:?} must be positive"));
+    }
+    Ok((value * (1u64 << shift) as f64) as u64)
 }
 
 #[derive(Subcommand, Debug)]
@@ -221,6 +254,7 @@ fn run_match(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let params = args.config.params()?;
     let start = Instant::now();
     let pair = load_pair(left, right, args.ndisp)?;
+    jem::check_memory(pair.left.width, pair.left.height, pair.ndisp, &params, global.memory_limit())?;
     let load_time = start.elapsed();
 
     let spinner = stage_spinner(global.quiet);
@@ -405,7 +439,12 @@ fn run_batch(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
             args.shard.map(|s| format!(" (shard {}/{} of {})", s.index, s.count, all.len())).unwrap_or_default();
         eprintln!("{} scene(s){shard}, alg {}, {} job(s)", scenes.len(), args.alg, args.jobs);
     }
-    let opts = BatchOptions { alg: args.alg.clone(), jobs: args.jobs, skip_existing: args.skip_existing };
+    let opts = BatchOptions {
+        alg: args.alg.clone(),
+        jobs: args.jobs,
+        skip_existing: args.skip_existing,
+        max_memory_bytes: global.memory_limit(),
+    };
     let display = BatchDisplay::new(scenes.len(), global.quiet);
 
     // Panics inside the pipeline are caught and reported per scene; keep the default hook's message and

@@ -76,6 +76,51 @@ pub struct Output {
     pub timings: Timings,
 }
 
+/// Estimated peak memory of [`run`] in bytes for a `width × height` pair with `ndisp` labels.
+///
+/// N = pixels, M = labels. Alive at the peak: one cost volume (4NM), one view's marginals, next marginals and
+/// fully connected message (12NM), the lattice's two vertex buffers (2·V·M·4 with V ≤ N vertices, ~0.4N on
+/// natural images), the images and per-pixel lattice tables (~300 bytes per pixel).
+pub fn estimate_memory_bytes(width: usize, height: usize, ndisp: usize, params: &Params) -> u64 {
+    let (n, m) = (width as u64 * height as u64, ndisp as u64);
+    let volume = 4 * n * m;
+    let inference = match params.model {
+        Model::Wta => 0,
+        Model::Lcm => 2 * volume,
+        Model::Fcm | Model::Jem => 3 * volume + 2 * volume,
+    };
+    let two_volumes = if params.post.lrc.mode == LrcMode::Off { volume } else { 2 * volume };
+    (volume + inference).max(two_volumes) + 300 * n
+}
+
+/// Fails fast, before anything large is allocated, when a run would need more than `limit_bytes`.
+///
+/// # Errors
+/// [`Error::OutOfMemory`] with the estimate, the limit and what to do about it.
+pub fn check_memory(width: usize, height: usize, ndisp: usize, params: &Params, limit_bytes: u64) -> Result<()> {
+    let needed = estimate_memory_bytes(width, height, ndisp, params);
+    if needed <= limit_bytes {
+        return Ok(());
+    }
+    Err(Error::OutOfMemory {
+        needed,
+        limit: limit_bytes,
+        hint: format!(
+            "{width}x{height} with ndisp {ndisp} is too large; use smaller images (e.g. half resolution) or a \
+             smaller ndisp, or raise --max-memory if the machine has the memory"
+        ),
+    })
+}
+
+/// A default memory limit: 80% of the machine's physical memory (from `/proc/meminfo`), or 8 GiB where that
+/// cannot be read.
+pub fn default_memory_limit() -> u64 {
+    let total_kib = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
+        s.lines().find(|l| l.starts_with("MemTotal:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+    });
+    total_kib.map(|k| k * 1024 / 5 * 4).unwrap_or(8 << 30)
+}
+
 /// Disparity and confidence of one view.
 struct ViewEstimate {
     disparity: DisparityMap,
@@ -102,16 +147,20 @@ pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str))
 
     on_stage("cost volume");
     let cost_left = t.time("cost", || cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &params.cost));
-    let cost_right = need_right
-        .then(|| t.time("cost right", || cost::derive_right_volume(&cost_left, cost::truncation_cost(&params.cost))));
 
+    // Left inference first, then the right volume from the left one, which is dropped before the right
+    // inference: at most one volume plus one view's inference buffers are alive at a time.
     on_stage("inference (left)");
     let left = estimate_view(params, &pair.left, &cost_left, &mut t);
-    drop(cost_left);
-    let right = cost_right.map(|c| {
+    let right = if need_right {
+        let cost_right =
+            t.time("cost right", || cost::derive_right_volume(&cost_left, cost::truncation_cost(&params.cost)));
+        drop(cost_left);
         on_stage("inference (right)");
-        estimate_view(params, &pair.right, &c, &mut t)
-    });
+        Some(estimate_view(params, &pair.right, &cost_right, &mut t))
+    } else {
+        None
+    };
 
     on_stage("post-processing");
     let mut disparity = left.disparity;
@@ -155,5 +204,31 @@ fn estimate_view(params: &Params, image: &RgbImage, cost: &CostVolume, t: &mut T
                 t.time("decode", || meanfield::decode_marginals(&q, params.meanfield.subpixel));
             ViewEstimate { disparity, confidence }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn memory_estimate_scales_with_pixels_and_labels() {
+        let p = Params::default();
+        // Vintage at quarter resolution: 720x480 (about), ndisp 190: well under 2 GB, over 1 GB.
+        let vintage = estimate_memory_bytes(720, 480, 190, &p);
+        assert!(vintage > 1 << 30 && vintage < 2 << 30, "{vintage}");
+        assert_eq!(estimate_memory_bytes(200, 100, 10, &p) * 4, estimate_memory_bytes(400, 200, 10, &p));
+        let wta = Params { model: Model::Wta, ..Params::default() };
+        assert!(estimate_memory_bytes(720, 480, 190, &wta) < vintage / 2);
+    }
+
+    #[test]
+    fn memory_guard_refuses_before_allocating() {
+        let p = Params::default();
+        // Full resolution 2880x1988 at ndisp 760 would need ~100 GB: refused at once with the numbers.
+        let e = check_memory(2880, 1988, 760, &p, 24 << 30).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.contains("needs about") && msg.contains("GiB") && msg.contains("2880x1988"), "{msg}");
+        check_memory(450, 375, 64, &p, 24 << 30).unwrap();
     }
 }
