@@ -102,13 +102,26 @@ impl Lattice {
         let mut table = KeyTable::with_capacity(npix + 64);
         let mut pix_vertex = vec![0u32; npix * D1];
         let mut keys: Vec<[i16; D]> = Vec::with_capacity(npix);
+        // Horizontally adjacent pixels share most simplex vertices: look in the previous pixel's first (a few
+        // comparisons) and only probe the table on a miss. Same ids as probing every key.
+        let mut prev: Option<(&[[i16; D]; D1], [u32; D1])> = None;
         for (e, ids) in embeddings.iter().zip(pix_vertex.chunks_exact_mut(D1)) {
-            for (key, id) in e.keys.iter().zip(ids) {
-                *id = table.insert(key, keys.len() as u32);
-                if *id as usize == keys.len() {
-                    keys.push(*key);
-                }
+            for (key, id) in e.keys.iter().zip(ids.iter_mut()) {
+                let cached = prev.and_then(|(pk, pid)| pk.iter().position(|k| k == key).map(|j| pid[j]));
+                *id = match cached {
+                    Some(found) => found,
+                    None => {
+                        let found = table.insert(key, keys.len() as u32);
+                        if found as usize == keys.len() {
+                            keys.push(*key);
+                        }
+                        found
+                    }
+                };
             }
+            let mut own = [0u32; D1];
+            own.copy_from_slice(ids);
+            prev = Some((&e.keys, own));
         }
         let nvert = keys.len();
         let pix_weight: Vec<f32> = embeddings.iter().flat_map(|e| e.weights).collect();
