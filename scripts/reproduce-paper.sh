@@ -12,10 +12,12 @@
 #
 # Environment:
 #   JEM_DATA     folder holding MiddEval3/trainingQ and paper-results.tsv (default: ../shared/middlebury, relative
-#                to the repository root). Results are written into the scene folders as disp0<ALG>.pfm and
-#                time<ALG>.txt, the MiddEval3 layout (ALG = JemLCM, JemFCM, JemLRC, JemSPS, JemALL).
+#                to the repository root). Results are written as disp0<ALG>.pfm and time<ALG>.txt into the scene
+#                folders of the WORK mirror, the MiddEval3 layout (ALG = JemLCM, JemFCM, JemLRC, JemSPS, JemALL).
 #   JEM          the jem binary (default: target/release/jem, built unless --no-build)
 #   JEM_CONFIGS  folder with the configs (default: configs/)
+#   WORK         where the results go (default: target/reproduce): a mirror of trainingQ made of symbolic links to
+#                the inputs, so the data folder itself may be read-only
 #   RESULTS      the Markdown file to update (default: docs/RESULTS.md)
 set -euo pipefail
 
@@ -58,6 +60,18 @@ for run in "${runs[@]}"; do
     read -r _ cfg _ _ <<<"$run"
     [[ -f $configs/$cfg ]] || { echo "error: missing config $configs/$cfg" >&2; exit 2; }
 done
+
+# Results go into a mirror of trainingQ made of symbolic links to the inputs (the data may be read-only).
+work=${WORK:-$root/target/reproduce}/MiddEval3/trainingQ
+for scene in "$train"/*/; do
+    name=$(basename "$scene")
+    [[ -f $scene/im0.png ]] || continue
+    mkdir -p "$work/$name"
+    for f in im0.png im1.png calib.txt disp0GT.pfm mask0nocc.png; do
+        if [[ -e $scene/$f ]]; then ln -sfn "$(cd "$scene" && pwd)/$f" "$work/$name/$f"; fi
+    done
+done
+train=$work
 
 if [[ -z ${JEM:-} ]]; then
     if [[ $build == 1 ]]; then
