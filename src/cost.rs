@@ -23,32 +23,47 @@ use crate::params::CostParams;
 /// Census codes of a grey image: bit k is set when the k-th window neighbour (row-major, centre skipped) is
 /// darker than the centre. Borders replicate the edge pixels.
 ///
+/// The image is padded once with replicated borders, so the inner loop has no clamping and runs over a whole
+/// row per window offset (vectorised across x).
+///
 /// # Panics
 /// If the window is even-sized or has more than 65 pixels (validated in [`crate::Params::validate`]).
 pub fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<u64> {
     assert!(win_w % 2 == 1 && win_h % 2 == 1 && win_w * win_h <= 65, "invalid census window {win_w}x{win_h}");
     let (w, h) = grey.dims();
-    let (rx, ry) = ((win_w / 2) as isize, (win_h / 2) as isize);
+    let (rx, ry) = (win_w / 2, win_h / 2);
+    let padded = pad_replicate(grey, rx, ry);
+    let pw = w + 2 * rx;
     let mut out = Plane::new(w, h, 0u64);
-    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
-        let center_row = grey.row(y);
-        for (x, code) in row.iter_mut().enumerate() {
-            let c = center_row[x];
-            let mut bits = 0u64;
-            for dy in -ry..=ry {
-                let yy = (y as isize + dy).clamp(0, h as isize - 1) as usize;
-                let nrow = grey.row(yy);
-                for dx in -rx..=rx {
-                    if dx == 0 && dy == 0 {
-                        continue;
-                    }
-                    let xx = (x as isize + dx).clamp(0, w as isize - 1) as usize;
-                    bits = (bits << 1) | u64::from(nrow[xx] < c);
+    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, codes)| {
+        let center = &padded[(y + ry) * pw + rx..][..w];
+        for dy in 0..win_h {
+            let nrow = &padded[(y + dy) * pw..][..pw];
+            for dx in 0..win_w {
+                if dx == rx && dy == ry {
+                    continue;
+                }
+                let nbr = &nrow[dx..][..w];
+                for ((code, &n), &c) in codes.iter_mut().zip(nbr).zip(center) {
+                    *code = (*code << 1) | u64::from(n < c);
                 }
             }
-            *code = bits;
         }
     });
+    out
+}
+
+/// The plane with `px` columns and `py` rows of replicated border on each side, row-major, width `w + 2·px`.
+fn pad_replicate(p: &Plane<f32>, px: usize, py: usize) -> Vec<f32> {
+    let (w, h) = p.dims();
+    let pw = w + 2 * px;
+    let mut out = vec![0.0f32; pw * (h + 2 * py)];
+    for (py_i, row) in out.chunks_exact_mut(pw).enumerate() {
+        let src = p.row(py_i.saturating_sub(py).min(h - 1));
+        row[..px].fill(src[0]);
+        row[px..px + w].copy_from_slice(src);
+        row[px + w..].fill(src[w - 1]);
+    }
     out
 }
 
@@ -89,21 +104,29 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
     let out_of_view = truncation_cost(p);
     let (a, tc, b, tg) = (p.census_weight, p.census_trunc, p.grad_weight, p.grad_trunc);
     let mut vol = CostVolume::new(w, h, ndisp, out_of_view);
-    vol.data.par_chunks_mut(w * ndisp).enumerate().for_each(|(y, row)| {
-        let (cl_row, cr_row) = (cen_l.row(y), cen_r.row(y));
-        let (gl_row, gr_row) = (gx_l.row(y), gx_r.row(y));
-        for (x, costs) in row.chunks_exact_mut(ndisp).enumerate() {
-            let (cl, gl) = (cl_row[x], gl_row[x]);
-            let in_view = ndisp.min(x + 1);
-            // Labels d = 0..in_view match right pixels x, x−1, ..., x−in_view+1.
-            let cr = cr_row[x + 1 - in_view..=x].iter().rev();
-            let gr = gr_row[x + 1 - in_view..=x].iter().rev();
-            for ((c, &cr), &gr) in costs[..in_view].iter_mut().zip(cr).zip(gr) {
-                let ham = (cl ^ cr).count_ones() as f32;
-                *c = a * ham.min(tc) + b * (gl - gr).abs().min(tg);
+    vol.data.par_chunks_mut(w * ndisp).enumerate().for_each_init(
+        || (vec![0u64; w], vec![0.0f32; w]),
+        |(cr_rev, gr_rev), (y, row)| {
+            // The right row reversed: label d of left pixel x reads right pixel x − d = w−1−k with
+            // k = w−1−x+d, so consecutive labels are consecutive k and the label loop runs forwards.
+            for (k, (c, g)) in cr_rev.iter_mut().zip(gr_rev.iter_mut()).enumerate() {
+                *c = cen_r.data[y * w + w - 1 - k];
+                *g = gx_r.data[y * w + w - 1 - k];
             }
-        }
-    });
+            let (cl_row, gl_row) = (cen_l.row(y), gx_l.row(y));
+            for (x, costs) in row.chunks_exact_mut(ndisp).enumerate() {
+                let (cl, gl) = (cl_row[x], gl_row[x]);
+                let in_view = ndisp.min(x + 1);
+                let k0 = w - 1 - x;
+                let cr = &cr_rev[k0..][..in_view];
+                let gr = &gr_rev[k0..][..in_view];
+                for ((c, &cr), &gr) in costs[..in_view].iter_mut().zip(cr).zip(gr) {
+                    let ham = (cl ^ cr).count_ones() as f32;
+                    *c = a * ham.min(tc) + b * (gl - gr).abs().min(tg);
+                }
+            }
+        },
+    );
     vol
 }
 
