@@ -68,6 +68,7 @@ pub struct Lattice {
 pub struct LatticeScratch {
     a: Vec<f32>,
     b: Vec<f32>,
+    zero: Vec<f32>,
 }
 
 /// Per-pixel result of embedding a feature vector: simplex vertex keys and barycentric weights.
@@ -195,22 +196,49 @@ impl Lattice {
     /// If the slices do not have `num_pixels × channels` elements.
     pub fn filter(&self, input: &[f32], output: &mut [f32], channels: usize, scratch: &mut LatticeScratch) {
         let nc = channels;
-        assert_eq!(input.len(), self.npix * nc, "lattice filter input has the wrong size");
         assert_eq!(output.len(), self.npix * nc, "lattice filter output has the wrong size");
-        if nc == 0 || self.npix == 0 {
-            return;
+        let vals = self.splat_blur(input, None, nc, scratch);
+        output.par_chunks_mut(nc.max(1)).enumerate().with_min_len(256).for_each(|(p, out)| {
+            self.slice(vals, p, out);
+        });
+    }
+
+    /// The first two steps of [`Lattice::filter`]: splats `input` (each pixel's values multiplied by
+    /// `pixel_scale[p]` if given) and blurs; returns the vertex values (`num_vertices × channels`), to be read
+    /// per pixel with [`Lattice::slice`]. Lets a caller fuse slicing into its own per-pixel loop.
+    ///
+    /// # Panics
+    /// If `input` does not have `num_pixels × channels` elements or `pixel_scale` not `num_pixels`.
+    pub fn splat_blur<'s>(
+        &self,
+        input: &[f32],
+        pixel_scale: Option<&[f32]>,
+        channels: usize,
+        scratch: &'s mut LatticeScratch,
+    ) -> &'s [f32] {
+        let nc = channels;
+        assert_eq!(input.len(), self.npix * nc, "lattice filter input has the wrong size");
+        if let Some(s) = pixel_scale {
+            assert_eq!(s.len(), self.npix, "lattice pixel scale has the wrong size");
         }
         let len = self.nvert * nc;
         scratch.a.resize(len, 0.0);
         scratch.b.resize(len, 0.0);
-        let (mut cur, mut next) = (&mut scratch.a, &mut scratch.b);
+        scratch.zero.resize(nc, 0.0);
+        if nc == 0 || self.npix == 0 {
+            return &scratch.a;
+        }
+        let LatticeScratch { a, b, zero } = scratch;
+        let zero: &[f32] = zero;
+        let (mut cur, mut next) = (a, b);
 
         // Splat: gather each vertex's contributions in pixel order.
         cur.par_chunks_mut(nc).enumerate().with_min_len(256).for_each(|(v, acc)| {
             acc.fill(0.0);
             let entries = &self.splat_entries[self.splat_start[v] as usize..self.splat_start[v + 1] as usize];
             for &e in entries {
-                let (p, w) = (e as usize / D1, self.pix_weight[e as usize]);
+                let p = e as usize / D1;
+                let w = self.pix_weight[e as usize] * pixel_scale.map_or(1.0, |s| s[p]);
                 let src = &input[p * nc..][..nc];
                 for (a, s) in acc.iter_mut().zip(src) {
                     *a += w * s;
@@ -218,41 +246,40 @@ impl Lattice {
             }
         });
 
-        // Blur along each of the d+1 directions: v ← v + ½(down + up).
+        // Blur along each of the d+1 directions: v ← v + ½(down + up), a missing neighbour counting as 0.
         for dir in 0..D1 {
             let nbrs = &self.blur_nbr[dir * self.nvert..][..self.nvert];
             let src: &[f32] = cur;
             next.par_chunks_mut(nc).zip(nbrs.par_iter()).enumerate().with_min_len(256).for_each(
                 |(v, (dst, &[down, up]))| {
                     let own = &src[v * nc..][..nc];
-                    dst.copy_from_slice(own);
-                    for n in [down, up] {
-                        if n != NONE {
-                            let nv = &src[n as usize * nc..][..nc];
-                            for (d, s) in dst.iter_mut().zip(nv) {
-                                *d += 0.5 * s;
-                            }
-                        }
+                    let lo = if down == NONE { zero } else { &src[down as usize * nc..][..nc] };
+                    let hi = if up == NONE { zero } else { &src[up as usize * nc..][..nc] };
+                    for (((d, &o), &l), &h) in dst.iter_mut().zip(own).zip(lo).zip(hi) {
+                        *d = o + 0.5 * (l + h);
                     }
                 },
             );
             std::mem::swap(&mut cur, &mut next);
         }
+        cur
+    }
 
-        // Slice: interpolate back with the splat weights.
-        let vals: &[f32] = cur;
-        output.par_chunks_mut(nc).enumerate().with_min_len(256).for_each(|(p, out)| {
-            out.fill(0.0);
-            let ids = &self.pix_vertex[p * D1..][..D1];
-            let ws = &self.pix_weight[p * D1..][..D1];
-            for (&v, &w) in ids.iter().zip(ws) {
-                let w = w * OUTPUT_SCALE;
-                let src = &vals[v as usize * nc..][..nc];
-                for (o, s) in out.iter_mut().zip(src) {
-                    *o += w * s;
-                }
+    /// The last step of [`Lattice::filter`] for one pixel: `out = Σ_k w_k · vals[v_k]` (scaled by
+    /// [`OUTPUT_SCALE`]), with `vals` from [`Lattice::splat_blur`] and `out.len()` channels.
+    #[inline]
+    pub fn slice(&self, vals: &[f32], pixel: usize, out: &mut [f32]) {
+        let nc = out.len();
+        out.fill(0.0);
+        let ids = &self.pix_vertex[pixel * D1..][..D1];
+        let ws = &self.pix_weight[pixel * D1..][..D1];
+        for (&v, &w) in ids.iter().zip(ws) {
+            let w = w * OUTPUT_SCALE;
+            let src = &vals[v as usize * nc..][..nc];
+            for (o, s) in out.iter_mut().zip(src) {
+                *o += w * s;
             }
-        });
+        }
     }
 }
 

@@ -186,7 +186,6 @@ pub struct MeanField<'a> {
     self_weight: Vec<f32>,
     q: Vec<f32>,
     next: Vec<f32>,
-    msg: Vec<f32>,
     scratch: LatticeScratch,
 }
 
@@ -227,7 +226,6 @@ impl<'a> MeanField<'a> {
             e.iter_mut().for_each(|v| *v *= scale);
             softmax_neg_in_place(e);
         });
-        let msg = if lattice.is_some() { vec![0.0; n * m] } else { Vec::new() };
         MeanField {
             cost,
             unary_scale: p.unary_scale,
@@ -240,7 +238,6 @@ impl<'a> MeanField<'a> {
             self_weight,
             q,
             next: vec![0.0; n * m],
-            msg,
             scratch: LatticeScratch::default(),
         }
     }
@@ -248,35 +245,28 @@ impl<'a> MeanField<'a> {
     /// One Jacobi mean-field iteration over all pixels.
     pub fn step(&mut self) {
         let (w, m) = (self.cost.width, self.cost.ndisp);
-        if let Some(lat) = &self.lattice {
-            let input: &[f32] = if self.in_scale.is_empty() {
-                &self.q
-            } else {
-                let (q, s) = (&self.q, &self.in_scale);
-                self.next
-                    .par_chunks_mut(m)
-                    .zip(q.par_chunks(m))
-                    .zip(s.par_iter())
-                    .with_min_len(256)
-                    .for_each(|((dst, src), &s)| dst.iter_mut().zip(src).for_each(|(d, v)| *d = v * s));
-                &self.next
-            };
-            lat.filter(input, &mut self.msg, m, &mut self.scratch);
-        }
-
         let mut next = std::mem::take(&mut self.next);
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let vals: &[f32] = match &self.lattice {
+            Some(lat) => {
+                let scale = (!self.in_scale.is_empty()).then_some(self.in_scale.as_slice());
+                lat.splat_blur(&self.q, scale, m, &mut scratch)
+            }
+            None => &[],
+        };
         let this = &*self;
         let q = &this.q;
-        let row_len = w * m;
-        next.par_chunks_mut(row_len)
-            .enumerate()
-            .for_each_init(|| vec![0.0f32; m], |p_tilde, (y, out_row)| this.update_row(y, q, out_row, p_tilde));
+        next.par_chunks_mut(w * m).enumerate().for_each_init(
+            || (vec![0.0f32; m], vec![0.0f32; m]),
+            |(p_tilde, msg), (y, out_row)| this.update_row(y, q, vals, out_row, p_tilde, msg),
+        );
+        self.scratch = scratch;
         self.next = next;
         std::mem::swap(&mut self.q, &mut self.next);
     }
 
-    /// Computes the new Q for row `y` into `out_row` from the current `q`.
-    fn update_row(&self, y: usize, q: &[f32], out_row: &mut [f32], p_tilde: &mut [f32]) {
+    /// Computes the new Q for row `y` into `out_row` from the current `q` and the blurred lattice values.
+    fn update_row(&self, y: usize, q: &[f32], vals: &[f32], out_row: &mut [f32], p_tilde: &mut [f32], msg: &mut [f32]) {
         let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
         let PairwiseWeights { fcm, lcm } = self.weights;
         for (x, e) in out_row.chunks_exact_mut(m).enumerate() {
@@ -284,12 +274,12 @@ impl<'a> MeanField<'a> {
             for (e, c) in e.iter_mut().zip(self.cost.pixel(i)) {
                 *e = self.unary_scale * c;
             }
-            if fcm > 0.0 {
+            if let (true, Some(lat)) = (fcm > 0.0, &self.lattice) {
+                lat.slice(vals, i, msg);
                 let (out_s, self_w) = self.message_factors(i);
-                let msg = &self.msg[i * m..][..m];
                 let qi = &q[i * m..][..m];
                 let k = fcm * out_s;
-                for ((e, g), qv) in e.iter_mut().zip(msg).zip(qi) {
+                for ((e, g), qv) in e.iter_mut().zip(msg.iter()).zip(qi) {
                     *e -= k * (g - self_w * qv).max(0.0);
                 }
             }
