@@ -212,22 +212,29 @@ pub fn fit_slanted_planes(image: &RgbImage, disp: &DisparityMap, trusted: &Plane
         return disp.clone();
     }
     let scene = Scene::new(image, disp, trusted, p);
+    let (labels, planes) = segment_and_fit(&scene, p);
+    render(&labels, &planes, w, scene.max_disp + p.inlier_thresh_px)
+}
+
+/// The alternation of the module doc: returns the final segment labels (row-major) and one plane per segment.
+fn segment_and_fit(scene: &Scene, p: &SpsParams) -> (Vec<u32>, Vec<[f64; 3]>) {
+    let (w, h) = (scene.width, scene.height);
     let step = ((w * h) as f64 / p.segments as f64).sqrt().max(1.0);
     let (mut labels, nseg) = grid_labels(w, h, step);
     let mut adj = Adjacency::new(nseg);
 
     // Initialisation: RANSAC planes on the grid cells.
-    let acc = accumulate(&scene, &labels, nseg, None);
+    let acc = accumulate(scene, &labels, nseg, None);
     let bounds = adj.rebuild(&labels, w, h, None);
-    let mut planes = ransac_planes(&scene, &labels, nseg, p, |_| true);
+    let mut planes = ransac_planes(scene, &labels, nseg, p, |_| true);
     let mut planes_full = borrow_missing(&mut planes, &adj, &bounds, &acc, &scene);
-    let mut acc = accumulate(&scene, &labels, nseg, Some(&planes_full));
+    let mut acc = accumulate(scene, &labels, nseg, Some(&planes_full));
 
     let pos_scale = f64::from(p.position_weight) / (step * step);
     for _ in 0..p.iterations {
         let models: Vec<SegModel> = acc.iter().zip(&planes_full).map(|(a, pl)| SegModel::new(a, *pl)).collect();
-        sweep(&scene, &mut labels, &models, pos_scale as f32, p);
-        acc = accumulate(&scene, &labels, nseg, Some(&planes_full));
+        sweep(scene, &mut labels, &models, pos_scale as f32, p);
+        acc = accumulate(scene, &labels, nseg, Some(&planes_full));
         let mut bounds = adj.rebuild(&labels, w, h, Some(&planes_full));
         for b in &mut bounds {
             b.label = choose_label(b, &acc, &planes_full, p);
@@ -236,7 +243,7 @@ pub fn fit_slanted_planes(image: &RgbImage, disp: &DisparityMap, trusted: &Plane
         // Segments whose plane no longer explains their data start again from RANSAC.
         let min_support = f64::from(p.min_support);
         if acc.iter().any(|a| a.is_stale(min_support)) {
-            let fresh = ransac_planes(&scene, &labels, nseg, p, |k| acc[k].is_stale(min_support));
+            let fresh = ransac_planes(scene, &labels, nseg, p, |k| acc[k].is_stale(min_support));
             for ((pl, f), a) in planes.iter_mut().zip(fresh).zip(&acc) {
                 if a.is_stale(min_support) {
                     *pl = f;
@@ -245,7 +252,7 @@ pub fn fit_slanted_planes(image: &RgbImage, disp: &DisparityMap, trusted: &Plane
         }
         planes_full = borrow_missing(&mut planes, &adj, &bounds, &acc, &scene);
     }
-    render(&labels, &planes_full, w, scene.max_disp + p.inlier_thresh_px)
+    (labels, planes_full)
 }
 
 /// Per-pixel inputs: Lab colour, disparity and data weight.
@@ -1168,6 +1175,121 @@ mod tests {
         assert_eq!(&labels[30..], &[5, 5, 6, 6, 7, 7, 8, 8, 9, 9]);
         let (labels, n) = grid_labels(1, 1, 50.0);
         assert_eq!((labels, n), (vec![0], 1));
+    }
+
+    /// Every label's pixels form one 4-connected component (flood fill from each label's first pixel).
+    fn assert_connected(labels: &[u32], w: usize, h: usize) {
+        let nseg = labels.iter().max().map_or(0, |m| *m as usize + 1);
+        let mut seen = vec![false; labels.len()];
+        let mut started = vec![false; nseg];
+        for start in 0..labels.len() {
+            if seen[start] {
+                continue;
+            }
+            let l = labels[start];
+            assert!(!started[l as usize], "segment {l} has a second component at pixel {start}");
+            started[l as usize] = true;
+            let mut stack = vec![start];
+            seen[start] = true;
+            while let Some(i) = stack.pop() {
+                let (x, y) = (i % w, i / w);
+                let nbrs = [
+                    (x > 0).then(|| i - 1),
+                    (x + 1 < w).then(|| i + 1),
+                    (y > 0).then(|| i - w),
+                    (y + 1 < h).then(|| i + w),
+                ];
+                for j in nbrs.into_iter().flatten() {
+                    if !seen[j] && labels[j] == l {
+                        seen[j] = true;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+    }
+
+    fn scene_of<'a>(img: &RgbImage, disp: &'a DisparityMap, trusted: &Plane<bool>, p: &SpsParams) -> Scene<'a> {
+        Scene::new(img, disp, trusted, p)
+    }
+
+    #[test]
+    fn segments_snap_to_a_colour_edge_and_stay_connected() {
+        // 40×24, red left of x = 13, blue from x = 13 (not a grid line: cells are 8 px wide), constant disparity,
+        // so only colour can move the boundaries.
+        let (w, h) = (40, 24);
+        let mut img = RgbImage::new(w, h);
+        for i in 0..w * h {
+            let c = if i % w < 13 { 0 } else { 2 };
+            img.channels[c][i] = 200.0;
+        }
+        let disp = Plane::new(w, h, 4.0);
+        let trusted = Plane::new(w, h, true);
+        let p = SpsParams { segments: 15, ..SpsParams::default() };
+        let (labels, planes) = segment_and_fit(&scene_of(&img, &disp, &trusted, &p), &p);
+        assert_connected(&labels, w, h);
+        // Every segment is one colour.
+        for l in 0..planes.len() as u32 {
+            let xs: Vec<usize> = (0..w * h).filter(|&i| labels[i] == l).map(|i| i % w).collect();
+            assert!(xs.iter().all(|&x| x < 13) || xs.iter().all(|&x| x >= 13), "segment {l} straddles: {xs:?}");
+        }
+        assert!(planes.iter().all(|pl| (eval(pl, 20.0, 10.0) - 4.0).abs() < 1e-9));
+    }
+
+    #[test]
+    fn segments_stay_connected_on_noise() {
+        // Random colours and disparities: the moves are erratic, connectivity must hold anyway.
+        let (w, h) = (37, 29);
+        let mut img = RgbImage::new(w, h);
+        let mut disp = Plane::new(w, h, 0.0);
+        let mut rng = SplitMix(3);
+        for i in 0..w * h {
+            for c in 0..3 {
+                img.channels[c][i] = (rng.next() % 256) as f32;
+            }
+            disp.data[i] = (rng.next() % 1000) as f32 / 50.0;
+        }
+        let trusted = Plane::new(w, h, true);
+        for segments in [4, 20, 80] {
+            let p = SpsParams { segments, boundary_weight: 0.0, position_weight: 1.0, ..SpsParams::default() };
+            let (labels, _) = segment_and_fit(&scene_of(&img, &disp, &trusted, &p), &p);
+            assert_connected(&labels, w, h);
+        }
+    }
+
+    /// Two 6×4 segments side by side (a: x < 3, b: x ≥ 3), 4-adjacent along x = 2.5; boundary midpoints at
+    /// (2.5, y) for y = 0..4.
+    fn two_segment_boundary(pa: [f64; 3], pb: [f64; 3]) -> BoundaryLabel {
+        let (w, h) = (6, 4);
+        let labels: Vec<u32> = (0..w * h).map(|i| u32::from(i % w >= 3)).collect();
+        let planes = [pa, pb];
+        let mut adj = Adjacency::new(2);
+        let bounds = adj.rebuild(&labels, w, h, Some(&planes));
+        assert_eq!(bounds.len(), 1);
+        assert_eq!(bounds[0].geom.s1, 4.0);
+        let mut acc = vec![SegAcc::default(); 2];
+        for (i, &l) in labels.iter().enumerate() {
+            acc[l as usize].geom.add(1.0, (i % w) as f64, (i / w) as f64, 0.0);
+        }
+        choose_label(&bounds[0], &acc, &planes, &SpsParams::default())
+    }
+
+    #[test]
+    fn boundary_labels() {
+        // Same plane: coplanar (cost 0).
+        assert_eq!(two_segment_boundary([0.1, 0.0, 5.0], [0.1, 0.0, 5.0]), BoundaryLabel::Coplanar);
+        // A crease meeting at x = 2.5: hinge (mean squared difference 0 on the boundary, not over the segments).
+        assert_eq!(two_segment_boundary([0.5, 0.0, 0.0], [-0.5, 0.0, 2.5]), BoundaryLabel::Hinge);
+        // A 5 px step, a in front: occlusion with a in front; b in front: occlusion with b in front.
+        assert_eq!(two_segment_boundary([0.0, 0.0, 10.0], [0.0, 0.0, 5.0]), BoundaryLabel::OcclusionA);
+        assert_eq!(two_segment_boundary([0.0, 0.0, 5.0], [0.0, 0.0, 10.0]), BoundaryLabel::OcclusionB);
+        // Violation counts: planes crossing on the boundary at y = 1.5 → half the midpoints each way.
+        let (w, h) = (6, 4);
+        let labels: Vec<u32> = (0..w * h).map(|i| u32::from(i % w >= 3)).collect();
+        let mut adj = Adjacency::new(2);
+        let b = adj.rebuild(&labels, w, h, Some(&[[0.0, 1.0, 0.0], [0.0, 0.0, 1.5]]));
+        assert_eq!((b[0].a_behind, b[0].b_behind), (2.0, 2.0));
+        assert_eq!(adj.lists, vec![vec![(1, 0)], vec![(0, 0)]]);
     }
 
     #[test]
