@@ -227,7 +227,7 @@ fn segment_and_fit(scene: &Scene, p: &SpsParams) -> (Vec<u32>, Vec<[f64; 3]>) {
     let acc = accumulate(scene, &labels, nseg, None);
     let bounds = adj.rebuild(&labels, w, h, None);
     let mut planes = ransac_planes(scene, &labels, nseg, p, |_| true);
-    let mut planes_full = borrow_missing(&mut planes, &adj, &bounds, &acc, &scene);
+    let mut planes_full = borrow_missing(&mut planes, &adj, &bounds, &acc, scene);
     let mut acc = accumulate(scene, &labels, nseg, Some(&planes_full));
 
     let pos_scale = f64::from(p.position_weight) / (step * step);
@@ -250,7 +250,7 @@ fn segment_and_fit(scene: &Scene, p: &SpsParams) -> (Vec<u32>, Vec<[f64; 3]>) {
                 }
             }
         }
-        planes_full = borrow_missing(&mut planes, &adj, &bounds, &acc, &scene);
+        planes_full = borrow_missing(&mut planes, &adj, &bounds, &acc, scene);
     }
     (labels, planes_full)
 }
