@@ -74,16 +74,37 @@ fn stages(c: &mut Criterion) {
     g.bench_function(BenchmarkId::new("one JEM iteration", &name), |b| b.iter(|| state.step()));
     g.finish();
 
+    // Post-processing on real inference output for both views.
     let mut g = c.benchmark_group("post");
-    let (dl, _) =
-        jem::meanfield::decode_marginals(&jem::meanfield::infer_mean_field(&cost_left, &pair.left, mf, weights), true);
-    let dr = dl.clone();
+    let infer = |image: &jem::RgbImage, cost: &jem::CostVolume| {
+        jem::meanfield::decode_marginals(&jem::meanfield::infer_mean_field(cost, image, mf, weights), true).0
+    };
+    let dl = infer(&pair.left, &cost_left);
+    let cost_right = cost::derive_right_volume(&cost_left, cost::truncation_cost(&params.cost));
+    let dr = infer(&pair.right, &cost_right);
+    drop((cost_left, cost_right));
     g.bench_function(BenchmarkId::new("lrc + fill", &name), |b| {
         b.iter(|| {
             let (mut d, mask) = post::lr_check::left_right_check(&dl, &dr, jem::LrcMode::Invalidate, 1.0);
             post::fill::fill_occlusions_in_place(&mut d);
             black_box((d, mask))
         })
+    });
+    let (mut filled, trusted) = post::lr_check::left_right_check(&dl, &dr, jem::LrcMode::Invalidate, 1.0);
+    post::fill::fill_occlusions_in_place(&mut filled);
+    let targets = jem::Plane::from_vec(trusted.width, trusted.height, trusted.data.iter().map(|ok| !ok).collect());
+    let share = 100.0 * targets.data.iter().filter(|t| **t).count() as f64 / targets.data.len() as f64;
+    let mut wm = params.post.wmedian.clone();
+    wm.enabled = true;
+    g.bench_function(BenchmarkId::new(format!("weighted median ({share:.1}% targets)"), &name), |b| {
+        b.iter(|| black_box(post::wmedian::weighted_median(&filled, &pair.left, &targets, &wm)))
+    });
+    let median = post::wmedian::weighted_median(&filled, &pair.left, &targets, &wm);
+    let mut sps = params.post.sps.clone();
+    sps.enabled = true;
+    g.sample_size(10);
+    g.bench_function(BenchmarkId::new("slanted planes", &name), |b| {
+        b.iter(|| black_box(post::planes::fit_slanted_planes(&pair.left, &median, &trusted, &sps)))
     });
     g.finish();
 
