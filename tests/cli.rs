@@ -197,3 +197,25 @@ fn memory_guard_fails_fast_with_the_estimate() {
     let out = run_in(dir.path(), &["--max-memory", "4G", &l, &r, "-o", "x.pfm"]);
     assert!(out.status.success(), "{}", stderr(&out));
 }
+
+/// Killing a run (SIGINT or SIGKILL) leaves neither the output nor a temporary file: the output is only ever
+/// created by renaming a finished temporary file. The run is made long (many iterations) so the signal lands
+/// while it computes.
+#[test]
+fn interrupted_run_leaves_no_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    for signal in ["-INT", "-KILL"] {
+        let mut child = common::jem()
+            .current_dir(dir.path())
+            .args([&l, &r, "-o", "out.pfm", "--set", "meanfield.iterations=1000", "-q"])
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(400));
+        let status = std::process::Command::new("kill").args([signal, &child.id().to_string()]).status().unwrap();
+        assert!(status.success());
+        let exit = child.wait().unwrap();
+        assert!(!exit.success(), "the run finished before the signal; make it longer");
+        assert!(files_in(dir.path()).is_empty(), "{signal}: left {:?}", files_in(dir.path()));
+    }
+}
