@@ -44,6 +44,15 @@ const NONE: u32 = u32::MAX;
 /// this factor; the peak k̃(i, i) is then ~0.9–1.0 instead of 1. Checked by `lattice_output_scale_matches_mass`.
 pub const OUTPUT_SCALE: f32 = 1.0 / 0.5536;
 
+/// The largest feature value (position/σxy or colour/σrgb) the lattice accepts: its i16 keys hold the elevated
+/// coordinates, which are at most ~34.6 × the largest feature (2d · (d+1)·√(2/3)/√2 for d = 5), plus d+1.
+pub const MAX_FEATURE: f32 = 900.0;
+
+/// Whether an image of this size with these σ can be embedded (see [`MAX_FEATURE`]).
+pub fn features_fit(width: usize, height: usize, sigma_xy: f32, sigma_rgb: f32) -> bool {
+    (width.max(height) as f32 / sigma_xy) <= MAX_FEATURE && 255.0 / sigma_rgb <= MAX_FEATURE
+}
+
 /// A permutohedral lattice built for one image's features.
 #[derive(Clone, Debug)]
 pub struct Lattice {
@@ -81,10 +90,14 @@ impl Lattice {
     /// Builds the lattice for an image's (x/σxy, y/σxy, r/σrgb, g/σrgb, b/σrgb) features.
     ///
     /// # Panics
-    /// If a σ is not positive, or the image is so large that a lattice coordinate overflows `i16` (more than
-    /// ~45 000 pixels per side at σxy = 5).
+    /// If a σ is not positive, or the features exceed [`MAX_FEATURE`] (check with [`features_fit`]; e.g. more
+    /// than 4 500 pixels per side at σxy = 5) so that a lattice coordinate could overflow `i16`.
     pub fn build(image: &RgbImage, sigma_xy: f32, sigma_rgb: f32) -> Lattice {
         assert!(sigma_xy > 0.0 && sigma_rgb > 0.0, "lattice sigmas must be positive");
+        assert!(
+            features_fit(image.width, image.height, sigma_xy, sigma_rgb),
+            "lattice features too large for i16 keys"
+        );
         let (w, npix) = (image.width, image.len());
         let (inv_xy, inv_rgb) = (1.0 / sigma_xy, 1.0 / sigma_rgb);
 

@@ -141,6 +141,21 @@ pub fn run(params: &Params, pair: &StereoPair) -> Result<Output> {
 /// [`Error::InvalidParam`] if `params` does not validate.
 pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str)) -> Result<Output> {
     params.validate()?;
+    let mf = &params.meanfield;
+    if params.effective_fcm_weight() > 0.0
+        && !lattice::features_fit(pair.left.width, pair.left.height, mf.sigma_xy, mf.sigma_rgb)
+    {
+        return Err(Error::param(
+            "meanfield.sigma_xy / meanfield.sigma_rgb",
+            format!("{} / {}", mf.sigma_xy, mf.sigma_rgb),
+            format!(
+                "image size / sigma_xy and 255 / sigma_rgb at most {} (the image is {}x{})",
+                lattice::MAX_FEATURE,
+                pair.left.width,
+                pair.left.height
+            ),
+        ));
+    }
     let mut t = Timings::default();
     let post = &params.post;
     let need_right = post.lrc.mode != LrcMode::Off;
@@ -220,6 +235,21 @@ mod tests {
         assert_eq!(estimate_memory_bytes(200, 100, 10, &p) * 4, estimate_memory_bytes(400, 200, 10, &p));
         let wta = Params { model: Model::Wta, ..Params::default() };
         assert!(estimate_memory_bytes(720, 480, 190, &wta) < vintage / 2);
+    }
+
+    #[test]
+    fn tiny_sigmas_are_an_error_not_a_panic() {
+        let img = RgbImage::new(64, 8);
+        let pair = StereoPair::new(img.clone(), img, 4).unwrap();
+        let mut p = Params::default();
+        p.meanfield.sigma_xy = 0.01;
+        let e = run(&p, &pair).unwrap_err().to_string();
+        assert!(e.contains("sigma_xy") && e.contains("64x8"), "{e}");
+        p.meanfield.sigma_xy = 5.0;
+        p.meanfield.sigma_rgb = 0.1;
+        assert!(run(&p, &pair).is_err());
+        p.meanfield.sigma_rgb = 55.0;
+        assert!(run(&p, &pair).is_ok());
     }
 
     #[test]
