@@ -166,13 +166,14 @@ pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str))
     // Left inference first, then the right volume from the left one, which is dropped before the right
     // inference: at most one volume plus one view's inference buffers are alive at a time.
     on_stage("inference (left)");
-    let left = estimate_view(params, &pair.left, &cost_left, &mut t);
+    let mut buffers = meanfield::Buffers::default();
+    let left = estimate_view(params, &pair.left, &cost_left, &mut t, &mut buffers);
     let right = if need_right {
         let cost_right =
             t.time("cost right", || cost::derive_right_volume(&cost_left, cost::truncation_cost(&params.cost)));
         drop(cost_left);
         on_stage("inference (right)");
-        Some(estimate_view(params, &pair.right, &cost_right, &mut t))
+        Some(estimate_view(params, &pair.right, &cost_right, &mut t, &mut buffers))
     } else {
         None
     };
@@ -202,7 +203,14 @@ pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str))
 }
 
 /// Inference for one view: WTA on the cost, or mean field with the view's own image.
-fn estimate_view(params: &Params, image: &RgbImage, cost: &CostVolume, t: &mut Timings) -> ViewEstimate {
+/// `buffers` carries the large allocations from one view to the next.
+fn estimate_view(
+    params: &Params,
+    image: &RgbImage,
+    cost: &CostVolume,
+    t: &mut Timings,
+    buffers: &mut meanfield::Buffers,
+) -> ViewEstimate {
     match params.model {
         Model::Wta => {
             let disparity = t.time("wta", || cost::winner_take_all(cost));
@@ -212,11 +220,16 @@ fn estimate_view(params: &Params, image: &RgbImage, cost: &CostVolume, t: &mut T
         Model::Lcm | Model::Fcm | Model::Jem => {
             let weights =
                 meanfield::PairwiseWeights { fcm: params.effective_fcm_weight(), lcm: params.effective_lcm_weight() };
-            let mut mf = t.time("mf setup", || meanfield::MeanField::new(cost, image, &params.meanfield, weights));
+            let reuse = std::mem::take(buffers);
+            let mut mf = t.time("mf setup", || {
+                meanfield::MeanField::with_buffers(cost, image, &params.meanfield, weights, reuse)
+            });
             t.time("mf iterations", || (0..params.meanfield.iterations).for_each(|_| mf.step()));
-            let q = mf.into_marginals();
+            let (q, rest) = mf.into_marginals_and_buffers();
             let (disparity, confidence) =
                 t.time("decode", || meanfield::decode_marginals(&q, params.meanfield.subpixel));
+            *buffers = rest;
+            buffers.recycle(q);
             ViewEstimate { disparity, confidence }
         }
     }

@@ -170,6 +170,22 @@ fn softmax_neg_in_place(e: &mut [f32]) {
     }
 }
 
+/// Large buffers a [`MeanField`] can take over from a previous one (the other view), so that they are not
+/// allocated and page-faulted again.
+#[derive(Debug, Default)]
+pub struct Buffers {
+    q: Vec<f32>,
+    next: Vec<f32>,
+    scratch: LatticeScratch,
+}
+
+impl Buffers {
+    /// Gives back the storage of marginals that are no longer needed.
+    pub fn recycle(&mut self, marginals: Marginals) {
+        self.q = marginals.data;
+    }
+}
+
 /// Mean-field state for one view: build once, then [`MeanField::step`] T times.
 pub struct MeanField<'a> {
     cost: &'a CostVolume,
@@ -195,6 +211,20 @@ impl<'a> MeanField<'a> {
     /// # Panics
     /// If the image and the cost volume differ in size.
     pub fn new(cost: &'a CostVolume, image: &RgbImage, p: &MeanFieldParams, weights: PairwiseWeights) -> Self {
+        Self::with_buffers(cost, image, p, weights, Buffers::default())
+    }
+
+    /// Like [`MeanField::new`], reusing `buffers` (from [`MeanField::into_marginals_and_buffers`]).
+    ///
+    /// # Panics
+    /// If the image and the cost volume differ in size.
+    pub fn with_buffers(
+        cost: &'a CostVolume,
+        image: &RgbImage,
+        p: &MeanFieldParams,
+        weights: PairwiseWeights,
+        buffers: Buffers,
+    ) -> Self {
         assert_eq!((cost.width, cost.height), image.dims(), "cost volume and image differ in size");
         let n = image.len();
         let m = cost.ndisp;
@@ -220,7 +250,11 @@ impl<'a> MeanField<'a> {
                 self_weight = sw.to_vec();
             }
         }
-        let mut q = cost.data.clone();
+        let Buffers { mut q, mut next, scratch } = buffers;
+        q.clear();
+        q.extend_from_slice(&cost.data);
+        next.clear();
+        next.resize(n * m, 0.0);
         let scale = p.unary_scale;
         q.par_chunks_mut(m).with_min_len(256).for_each(|e| {
             e.iter_mut().for_each(|v| *v *= scale);
@@ -237,8 +271,8 @@ impl<'a> MeanField<'a> {
             out_scale,
             self_weight,
             q,
-            next: vec![0.0; n * m],
-            scratch: LatticeScratch::default(),
+            next,
+            scratch,
         }
     }
 
@@ -347,7 +381,14 @@ impl<'a> MeanField<'a> {
 
     /// Consumes the state, returning the marginals as a volume.
     pub fn into_marginals(self) -> Marginals {
-        CostVolume { width: self.cost.width, height: self.cost.height, ndisp: self.cost.ndisp, data: self.q }
+        self.into_marginals_and_buffers().0
+    }
+
+    /// Consumes the state, returning the marginals and the buffers for reuse by another [`MeanField`].
+    pub fn into_marginals_and_buffers(self) -> (Marginals, Buffers) {
+        let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
+        let buffers = Buffers { q: Vec::new(), next: self.next, scratch: self.scratch };
+        (CostVolume { width: w, height: h, ndisp: m, data: self.q }, buffers)
     }
 }
 
