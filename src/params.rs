@@ -78,7 +78,7 @@ impl Default for CostParams {
             census_height: 7,
             census_weight: 1.0,
             census_trunc: 48.0,
-            grad_weight: 0.1,
+            grad_weight: 0.3,
             grad_trunc: 60.0,
         }
     }
@@ -125,7 +125,7 @@ impl Default for MeanFieldParams {
         MeanFieldParams {
             iterations: 5,
             unary_scale: 0.5,
-            fcm_weight: 30.0,
+            fcm_weight: 10.0,
             lcm_weight: 1.0,
             beta: 0.3,
             sigma_xy: 5.0,

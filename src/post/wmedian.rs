@@ -56,7 +56,7 @@ pub struct WmedianParams {
 
 impl Default for WmedianParams {
     fn default() -> Self {
-        WmedianParams { enabled: false, radius: 9, sigma_xy: 9.0, sigma_rgb: 20.0 }
+        WmedianParams { enabled: true, radius: 9, sigma_xy: 9.0, sigma_rgb: 20.0 }
     }
 }
 
