@@ -50,7 +50,13 @@ fn write_shift_scene(dir: &Path, width: u32, height: u32, d: u32, ndisp: usize, 
 /// A TOML config that needs no mean-field inference.
 fn wta_config(dir: &Path) -> PathBuf {
     let p = dir.join("wta.toml");
-    std::fs::write(&p, "model = \"wta\"\n").unwrap();
+    // Plain winner-take-all: no left-right check and no post-processing (the defaults run the full pipeline).
+    std::fs::write(
+        &p,
+        "model = \"wta\"\n[post]\nfill = false\n[post.lrc]\nmode = \"off\"\n[post.wmedian]\nenabled = false\n\
+         [post.sps]\nenabled = false\n",
+    )
+    .unwrap();
     p
 }
 
