@@ -219,3 +219,21 @@ fn interrupted_run_leaves_no_file() {
         assert!(files_in(dir.path()).is_empty(), "{signal}: left {:?}", files_in(dir.path()));
     }
 }
+
+/// NaN in a config is rejected; overflowing arithmetic (costs that reach inf) never puts NaN into the output.
+#[test]
+fn nan_and_inf_never_reach_the_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    for key in ["meanfield.unary_scale", "meanfield.fcm_weight", "cost.grad_weight", "post.sps.disparity_weight"] {
+        assert_clean_failure(dir.path(), &[&l, &r, "-o", "x.pfm", "--set", &format!("{key}=nan")], &[key]);
+        assert_clean_failure(dir.path(), &[&l, &r, "-o", "x.pfm", "--set", &format!("{key}=inf")], &[key]);
+    }
+    let out = run_in(
+        dir.path(),
+        &[&l, &r, "-o", "big.pfm", "--set", "cost.census_weight=3e38", "--set", "cost.grad_weight=3e38"],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let d = pfm::read_pfm(&dir.path().join("big.pfm")).unwrap();
+    assert!(d.data.iter().all(|v| !v.is_nan()), "NaN in the output");
+}
