@@ -474,19 +474,7 @@ impl KeyTable {
 #[allow(clippy::needless_range_loop)] // index loops read best in reference implementations
 mod tests {
     use super::*;
-
-    /// xorshift noise in 0..1.
-    fn rand_vec(n: usize, seed: u64) -> Vec<f32> {
-        let mut s = seed.max(1);
-        (0..n)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                (s >> 40) as f32 / (1u64 << 24) as f32
-            })
-            .collect()
-    }
+    use crate::test_util::rand_vec;
 
     /// A piecewise-constant colour image with a few regions plus mild noise: the kind of structure the
     /// bilateral kernel is meant for.

@@ -443,18 +443,7 @@ pub fn parabola_offset(a: f32, b: f32, c: f32) -> f32 {
 mod tests {
     use super::*;
     use crate::params::{CostParams, Params};
-
-    fn rand_vec(n: usize, seed: u64) -> Vec<f32> {
-        let mut s = seed.max(1);
-        (0..n)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                (s >> 40) as f32 / (1u64 << 24) as f32
-            })
-            .collect()
-    }
+    use crate::test_util::rand_vec;
 
     #[test]
     fn meanfield_local_message_o_m_form_equals_naive_sum() {
