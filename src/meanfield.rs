@@ -28,7 +28,7 @@ use rayon::prelude::*;
 
 use crate::image::{CostVolume, DisparityMap, Plane, RgbImage};
 use crate::lattice::{Lattice, LatticeScratch};
-use crate::params::{MeanFieldParams, Normalization};
+use crate::params::{MeanFieldParams, Normalization, Schedule};
 
 /// Per-pixel label distributions, laid out like a [`CostVolume`]: `data[(y·w + x)·M + d]`.
 pub type Marginals = CostVolume;
@@ -186,12 +186,21 @@ impl Buffers {
     }
 }
 
+/// Which pixels one update pass computes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Pass {
+    All,
+    Even,
+    Odd,
+}
+
 /// Mean-field state for one view: build once, then [`MeanField::step`] T times.
 pub struct MeanField<'a> {
     cost: &'a CostVolume,
     unary_scale: f32,
     weights: PairwiseWeights,
     beta: f32,
+    schedule: Schedule,
     lattice: Option<Lattice>,
     local: LocalWeights,
     /// Per-pixel factor applied to Q before filtering (symmetric normalisation) — empty if 1.
@@ -265,6 +274,7 @@ impl<'a> MeanField<'a> {
             unary_scale: p.unary_scale,
             weights,
             beta: p.beta,
+            schedule: p.schedule,
             lattice,
             local: local_weights(image, p),
             in_scale,
@@ -280,47 +290,95 @@ impl<'a> MeanField<'a> {
     pub fn step(&mut self) {
         let (w, m) = (self.cost.width, self.cost.ndisp);
         let mut next = std::mem::take(&mut self.next);
+        let mut q = std::mem::take(&mut self.q);
         let mut scratch = std::mem::take(&mut self.scratch);
         let vals: &[f32] = match &self.lattice {
             Some(lat) => {
                 let scale = (!self.in_scale.is_empty()).then_some(self.in_scale.as_slice());
-                lat.splat_blur(&self.q, scale, m, &mut scratch)
+                lat.splat_blur(&q, scale, m, &mut scratch)
             }
             None => &[],
         };
         let this = &*self;
-        let q = &this.q;
-        next.par_chunks_mut(w * m).enumerate().for_each_init(
-            || (vec![0.0f32; m], vec![0.0f32; m]),
-            |(p_tilde, msg), (y, out_row)| this.update_row(y, q, vals, out_row, p_tilde, msg),
-        );
+        let init = || (vec![0.0f32; m], vec![0.0f32; m], vec![0.0f32; m]);
+        match self.schedule {
+            Schedule::Jacobi => {
+                let src = &q;
+                next.par_chunks_mut(w * m).enumerate().for_each_init(init, |(p, g, own), (y, out)| {
+                    this.update_row(y, Pass::All, src, src, vals, out, p, g, own)
+                });
+                std::mem::swap(&mut q, &mut next);
+            }
+            Schedule::Checkerboard => {
+                // Pass 1: pixels with x + y even, from the previous Q, into `next`.
+                let src = &q;
+                next.par_chunks_mut(w * m).enumerate().for_each_init(init, |(p, g, own), (y, out)| {
+                    this.update_row(y, Pass::Even, src, src, vals, out, p, g, own)
+                });
+                // Pass 2: odd pixels, whose 4 neighbours are all even, from the pass-1 values; written over
+                // the previous Q (each pixel reads its own old value first), with the even ones copied in.
+                let even = &next;
+                q.par_chunks_mut(w * m).enumerate().for_each_init(init, |(p, g, own), (y, out)| {
+                    this.update_row(y, Pass::Odd, even, &[], vals, out, p, g, own)
+                });
+            }
+        }
+        self.q = q;
         self.scratch = scratch;
         self.next = next;
-        std::mem::swap(&mut self.q, &mut self.next);
     }
 
-    /// Computes the new Q for row `y` into `out_row` from the current `q` and the blurred lattice values.
-    fn update_row(&self, y: usize, q: &[f32], vals: &[f32], out_row: &mut [f32], p_tilde: &mut [f32], msg: &mut [f32]) {
+    /// Computes the new Q for row `y` into `out_row`: neighbours' marginals come from `nbr_src`, the pixel's
+    /// own previous marginal (for the self term) from `self_src`, or from `out_row` itself when that is empty.
+    /// `pass` picks the pixels to compute; with [`Pass::Odd`] the even pixels are copied from `nbr_src`.
+    #[allow(clippy::too_many_arguments)]
+    fn update_row(
+        &self,
+        y: usize,
+        pass: Pass,
+        nbr_src: &[f32],
+        self_src: &[f32],
+        vals: &[f32],
+        out_row: &mut [f32],
+        p_tilde: &mut [f32],
+        msg: &mut [f32],
+        own: &mut [f32],
+    ) {
         let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
         let PairwiseWeights { fcm, lcm } = self.weights;
         for (x, e) in out_row.chunks_exact_mut(m).enumerate() {
             let i = y * w + x;
+            let odd = (x + y) % 2 == 1;
+            match pass {
+                Pass::All => {}
+                Pass::Even if odd => continue,
+                Pass::Even => {}
+                Pass::Odd if !odd => {
+                    e.copy_from_slice(&nbr_src[i * m..][..m]);
+                    continue;
+                }
+                Pass::Odd => {}
+            }
+            if self_src.is_empty() {
+                own.copy_from_slice(e);
+            } else {
+                own.copy_from_slice(&self_src[i * m..][..m]);
+            }
             for (e, c) in e.iter_mut().zip(self.cost.pixel(i)) {
                 *e = self.unary_scale * c;
             }
             if let (true, Some(lat)) = (fcm > 0.0, &self.lattice) {
                 lat.slice(vals, i, msg);
                 let (out_s, self_w) = self.message_factors(i);
-                let qi = &q[i * m..][..m];
                 let k = fcm * out_s;
-                for ((e, g), qv) in e.iter_mut().zip(msg.iter()).zip(qi) {
+                for ((e, g), qv) in e.iter_mut().zip(msg.iter()).zip(own.iter()) {
                     *e -= k * (g - self_w * qv).max(0.0);
                 }
             }
             if lcm > 0.0 {
                 p_tilde.fill(0.0);
                 let mut add = |j: usize, wt: f32| {
-                    for (p, v) in p_tilde.iter_mut().zip(&q[j * m..][..m]) {
+                    for (p, v) in p_tilde.iter_mut().zip(&nbr_src[j * m..][..m]) {
                         *p += wt * v;
                     }
                 };
@@ -442,7 +500,7 @@ pub fn parabola_offset(a: f32, b: f32, c: f32) -> f32 {
 #[allow(clippy::needless_range_loop)] // index loops read best in reference implementations
 mod tests {
     use super::*;
-    use crate::params::{CostParams, Params};
+    use crate::params::{CostParams, Params, Schedule};
     use crate::test_util::rand_vec;
 
     #[test]
@@ -572,12 +630,14 @@ mod tests {
         let (w, h, nd) = (90, 40, 18);
         let (left, right, field) = banded_pair(w, h);
         let cost = crate::cost::build_cost_volume(&left, &right, nd, &CostParams::default());
-        for (name, weights) in [
-            ("lcm", PairwiseWeights { fcm: 0.0, lcm: 1.0 }),
-            ("fcm", PairwiseWeights { fcm: 30.0, lcm: 0.0 }),
-            ("jem", PairwiseWeights { fcm: 30.0, lcm: 1.0 }),
+        for (name, weights, schedule) in [
+            ("lcm", PairwiseWeights { fcm: 0.0, lcm: 1.0 }, Schedule::Jacobi),
+            ("fcm", PairwiseWeights { fcm: 30.0, lcm: 0.0 }, Schedule::Jacobi),
+            ("jem", PairwiseWeights { fcm: 30.0, lcm: 1.0 }, Schedule::Jacobi),
+            ("lcm checkerboard", PairwiseWeights { fcm: 0.0, lcm: 1.0 }, Schedule::Checkerboard),
+            ("jem checkerboard", PairwiseWeights { fcm: 30.0, lcm: 1.0 }, Schedule::Checkerboard),
         ] {
-            let p = MeanFieldParams { iterations: 5, ..MeanFieldParams::default() };
+            let p = MeanFieldParams { iterations: 5, schedule, ..MeanFieldParams::default() };
             let q = infer_mean_field(&cost, &left, &p, weights);
             let (disp, conf) = decode_marginals(&q, false);
             let (mut good, mut total) = (0, 0);
@@ -593,6 +653,64 @@ mod tests {
             let frac = good as f64 / total as f64;
             assert!(frac >= 0.97, "{name}: {good}/{total} exact");
             assert!(conf.data.iter().all(|c| (0.0..=1.0 + 1e-6).contains(c)));
+        }
+    }
+
+    /// The red-black schedule against a slow reference: update every even pixel from the old marginals, then
+    /// every odd pixel from the new even ones, one pixel at a time, with the local term only.
+    #[test]
+    fn meanfield_checkerboard_matches_sequential_reference() {
+        let (w, h, nd) = (13, 7, 6);
+        let (left, right, _) = banded_pair(w, h);
+        let cost = crate::cost::build_cost_volume(&left, &right, nd, &CostParams::default());
+        let p = MeanFieldParams { iterations: 2, schedule: Schedule::Checkerboard, ..MeanFieldParams::default() };
+        let weights = PairwiseWeights { fcm: 0.0, lcm: 1.5 };
+        let fast = infer_mean_field(&cost, &left, &p, weights);
+        let local = local_weights(&left, &p);
+        let mut q: Vec<f32> = cost.data.iter().map(|c| c * p.unary_scale).collect();
+        q.chunks_exact_mut(nd).for_each(softmax_neg_in_place);
+        for _ in 0..p.iterations {
+            for parity in [0, 1] {
+                let old = q.clone();
+                for y in 0..h {
+                    for x in (0..w).filter(|x| (x + y) % 2 == parity) {
+                        let i = y * w + x;
+                        let mut nbrs = Vec::new();
+                        if x > 0 {
+                            nbrs.push((i - 1, local.right.data[i - 1]));
+                        }
+                        if x + 1 < w {
+                            nbrs.push((i + 1, local.right.data[i]));
+                        }
+                        if y > 0 {
+                            nbrs.push((i - w, local.down.data[i - w]));
+                        }
+                        if y + 1 < h {
+                            nbrs.push((i + w, local.down.data[i]));
+                        }
+                        let mut e: Vec<f32> = (0..nd).map(|d| p.unary_scale * cost.data[i * nd + d]).collect();
+                        for d in 0..nd {
+                            // Naive O(M²) local energy, without the label-independent constant.
+                            let mut s = 0.0;
+                            for l in 0..nd {
+                                let phi = match d.abs_diff(l) {
+                                    0 => 0.0,
+                                    1 => p.beta,
+                                    _ => 1.0,
+                                };
+                                let pt: f32 = nbrs.iter().map(|&(j, wt)| wt * old[j * nd + l]).sum();
+                                s += (phi - 1.0) * pt;
+                            }
+                            e[d] += weights.lcm * s;
+                        }
+                        softmax_neg_in_place(&mut e);
+                        q[i * nd..][..nd].copy_from_slice(&e);
+                    }
+                }
+            }
+        }
+        for (a, b) in fast.data.iter().zip(&q) {
+            assert!((a - b).abs() < 1e-5, "{a} vs {b}");
         }
     }
 

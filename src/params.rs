@@ -41,6 +41,18 @@ pub enum Normalization {
     Symmetric,
 }
 
+/// Order of the mean-field updates within one iteration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Schedule {
+    /// All pixels from the previous iterate at once (the paper's parallel update).
+    Jacobi,
+    /// Red-black: pixels with x + y even first, then the odd ones from the new even values (the local term
+    /// then propagates two pixels per iteration and cannot oscillate between two checkerboard states). The
+    /// fully connected message is computed once per iteration from the previous iterate in both schedules.
+    Checkerboard,
+}
+
 /// What the left-right check does with an inconsistent pixel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -118,6 +130,8 @@ pub struct MeanFieldParams {
     pub normalization: Normalization,
     /// Sub-pixel refinement: a parabola through the log-marginals around the argmax.
     pub subpixel: bool,
+    /// Update order within an iteration.
+    pub schedule: Schedule,
 }
 
 impl Default for MeanFieldParams {
@@ -126,7 +140,7 @@ impl Default for MeanFieldParams {
             iterations: 5,
             unary_scale: 0.5,
             fcm_weight: 10.0,
-            lcm_weight: 1.0,
+            lcm_weight: 2.0,
             beta: 0.3,
             sigma_xy: 5.0,
             sigma_rgb: 55.0,
@@ -138,6 +152,7 @@ impl Default for MeanFieldParams {
             exclude_self: true,
             normalization: Normalization::Symmetric,
             subpixel: true,
+            schedule: Schedule::Checkerboard,
         }
     }
 }
