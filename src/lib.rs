@@ -27,6 +27,7 @@ pub mod batch;
 pub mod cost;
 pub mod error;
 pub mod eval;
+pub mod fastmath;
 pub mod image;
 pub mod io;
 pub mod lattice;

@@ -19,7 +19,7 @@
 //!    value), find the bin holding the median, and run a weighted quickselect (three-way partition,
 //!    median-of-three pivot) on that bin's values only.
 //!
-//! The weights use a polynomial `exp` (relative error < 1e-5 against `f32::exp`, tested) so that the loop
+//! The weights use [`crate::fastmath::exp_nonpositive`] (relative error < 5e-7 against `f32::exp`, tested) so the loop
 //! vectorises; the reductions (min, max, sums) run in independent lanes combined in a fixed order, so that they
 //! are not one serial dependency chain. The weights are thus defined up to that rounding; the median of the
 //! weights as computed is exact.
@@ -38,6 +38,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
+use crate::fastmath::{exp_nonpositive, lane_max, lane_min};
 use crate::image::{DisparityMap, Plane, RgbImage};
 
 /// Weighted-median parameters.
@@ -158,7 +159,7 @@ pub fn weighted_median(
                 if scratch.vals.is_empty() {
                     continue; // no valid neighbour: keep the input value
                 }
-                let (v_min, v_max) = (lane_min(&scratch.vals), -lane_min_neg(&scratch.vals));
+                let (v_min, v_max) = (lane_min(&scratch.vals), lane_max(&scratch.vals));
                 let e_min = lane_min(&scratch.wts);
                 let guess = last.or(Some(*d_out).filter(|d| d.is_finite()));
                 *d_out = scratch.median(e_min, v_min, v_max, guess);
@@ -167,39 +168,6 @@ pub fn weighted_median(
         },
     );
     out
-}
-
-/// The minimum of `v` (+∞ if empty; no NaN may occur). Eight independent lanes (a vectorisable pattern) instead
-/// of one serial chain of `minss`, whose latency would dominate the filter.
-#[inline]
-fn lane_min(v: &[f32]) -> f32 {
-    let mut m = [f32::INFINITY; 8];
-    let chunks = v.chunks_exact(8);
-    for &x in chunks.remainder() {
-        m[0] = if x < m[0] { x } else { m[0] };
-    }
-    for c in chunks {
-        for l in 0..8 {
-            m[l] = if c[l] < m[l] { c[l] } else { m[l] };
-        }
-    }
-    m.iter().fold(f32::INFINITY, |a, &b| if b < a { b } else { a })
-}
-
-/// The minimum of −v, i.e. minus the maximum of `v` (see [`lane_min`]).
-#[inline]
-fn lane_min_neg(v: &[f32]) -> f32 {
-    let mut m = [f32::INFINITY; 8];
-    let chunks = v.chunks_exact(8);
-    for &x in chunks.remainder() {
-        m[0] = if -x < m[0] { -x } else { m[0] };
-    }
-    for c in chunks {
-        for l in 0..8 {
-            m[l] = if -c[l] < m[l] { -c[l] } else { m[l] };
-        }
-    }
-    m.iter().fold(f32::INFINITY, |a, &b| if b < a { b } else { a })
 }
 
 /// Number of value bins [`Scratch::median`] uses to narrow the search.
@@ -301,23 +269,6 @@ impl Scratch {
         }
         weighted_lower_median(&mut self.in_bin, (half - below).max(f64::MIN_POSITIVE))
     }
-}
-
-/// e^x for x ≤ 0 (x = −∞ and NaN give 2⁻¹²⁶ and garbage respectively; neither occurs here), relative error
-/// below 1e-6 (tested against `f32::exp`), flushing to 2⁻¹²⁶ below x ≈ −87.3. Plain arithmetic, so the weight loop
-/// vectorises, unlike a call to libm's `expf`.
-///
-/// e^x = 2^t with t = x·log₂e, split as t = n + f with n an integer (rounded towards zero after a −½ shift) and
-/// f ∈ (−½, ½]; 2^f is its Taylor series to degree 6 (remainder (½ ln 2)⁷/7! ≈ 1.2e-7), and 2^n is built in the
-/// exponent bits.
-#[inline]
-fn exp_nonpositive(x: f32) -> f32 {
-    let t = (x * std::f32::consts::LOG2_E).max(-126.0);
-    let n = (t - 0.5) as i32; // t ≤ 0: truncation of t − ½ rounds t to the nearest integer
-    let f = (t - n as f32) * std::f32::consts::LN_2;
-    // Taylor series of e^f, Horner form.
-    let p = 1.0 + f * (1.0 + f * (0.5 + f * (1.0 / 6.0 + f * (1.0 / 24.0 + f * (1.0 / 120.0 + f * (1.0 / 720.0))))));
-    f32::from_bits(((n + 127) as u32) << 23) * p
 }
 
 /// The smallest value `v` in `items` (value, weight) with Σ_{value ≤ v} weight ≥ `half`, by weighted quickselect.
@@ -504,30 +455,6 @@ mod tests {
         assert_eq!(binned_median(&[(4.0, 1.0), (1.0, 1.0), (4.0, 1.0), (1.0, 1.0)]).0, 1.0);
         assert_eq!(binned_median(&[(4.0, 1.0), (1.0, 1.0), (4.0, 1.0), (1.0, 0.5)]).0, 4.0);
         assert_eq!(binned_median(&[(2.0, 1.0)]).0, 2.0);
-    }
-
-    #[test]
-    fn lane_reductions() {
-        for n in [1usize, 7, 8, 9, 30] {
-            let v: Vec<f32> = (0..n).map(|k| ((k * 37) % 11) as f32 - 3.0).collect();
-            let (lo, hi) = v.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
-            assert_eq!((lane_min(&v), -lane_min_neg(&v)), (lo, hi), "n {n}");
-        }
-        assert_eq!(lane_min(&[]), f32::INFINITY);
-    }
-
-    #[test]
-    fn fast_exp_matches_std() {
-        let mut worst = 0.0f64;
-        for k in 0..=870_000 {
-            let x = -(k as f32) * 1e-4;
-            let (fast, exact) = (f64::from(exp_nonpositive(x)), f64::from(x).exp());
-            worst = worst.max((fast - exact).abs() / exact);
-        }
-        assert!(worst < 1e-5, "worst relative error {worst}");
-        assert_eq!(exp_nonpositive(0.0), 1.0);
-        assert_eq!(exp_nonpositive(-1e4), f32::from_bits(1 << 23));
-        assert_eq!(exp_nonpositive(f32::NEG_INFINITY), f32::from_bits(1 << 23));
     }
 
     #[test]
