@@ -133,18 +133,26 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
 /// Derives the right view's volume from the left one: `C_R(x, d) = C_L(x + d, d)`, and `out_of_view` where
 /// `x + d ≥ width`.
 pub fn derive_right_volume(left: &CostVolume, out_of_view: f32) -> CostVolume {
+    derive_right_volume_in(left, out_of_view, Vec::new())
+}
+
+/// [`derive_right_volume`] written into `storage` (any contents; resized as needed), so that a caller can reuse
+/// an allocation that is already paged in.
+pub fn derive_right_volume_in(left: &CostVolume, out_of_view: f32, mut storage: Vec<f32>) -> CostVolume {
     let (w, h, nd) = (left.width, left.height, left.ndisp);
-    let mut right = CostVolume::new(w, h, nd, out_of_view);
-    right.data.par_chunks_mut(w * nd).enumerate().for_each(|(y, row)| {
+    storage.resize(w * h * nd, 0.0);
+    storage.par_chunks_mut(w * nd).enumerate().for_each(|(y, row)| {
         let lrow = &left.data[y * w * nd..][..w * nd];
         for (x, costs) in row.chunks_exact_mut(nd).enumerate() {
             let in_view = nd.min(w - x);
-            for (d, c) in costs[..in_view].iter_mut().enumerate() {
+            let (inside, outside) = costs.split_at_mut(in_view);
+            for (d, c) in inside.iter_mut().enumerate() {
                 *c = lrow[(x + d) * nd + d];
             }
+            outside.fill(out_of_view);
         }
     });
-    right
+    CostVolume { width: w, height: h, ndisp: nd, data: storage }
 }
 
 /// Winner-take-all: the label of least cost at every pixel (ties go to the smaller label), as `f32`.

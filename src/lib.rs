@@ -164,15 +164,20 @@ pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str))
     on_stage("cost volume");
     let cost_left = t.time("cost", || cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &params.cost));
 
-    // Left inference first, then the right volume from the left one, which is dropped before the right
-    // inference: at most one volume plus one view's inference buffers are alive at a time.
+    // Left inference first, then the right volume from the left one; the left volume is spent before the right
+    // inference: at most one volume plus one view's inference buffers are alive at a time (three N × M buffers
+    // in all, plus the lattice's).
     on_stage("inference (left)");
     let mut buffers = meanfield::Buffers::default();
     let left = estimate_view(params, &pair.left, &cost_left, &mut t, &mut buffers);
     let right = if need_right {
-        let cost_right =
-            t.time("cost right", || cost::derive_right_volume(&cost_left, cost::truncation_cost(&params.cost)));
-        drop(cost_left);
+        // The right volume goes into the left view's spent marginals, and the left volume's storage becomes the
+        // right view's marginals: no new allocation (nor page faults) for the right view.
+        let spare = buffers.take_spare();
+        let cost_right = t.time("cost right", || {
+            cost::derive_right_volume_in(&cost_left, cost::truncation_cost(&params.cost), spare)
+        });
+        buffers.recycle(cost_left.data);
         on_stage("inference (right)");
         Some(estimate_view(params, &pair.right, &cost_right, &mut t, &mut buffers))
     } else {
@@ -230,7 +235,7 @@ fn estimate_view(
             let (disparity, confidence) =
                 t.time("decode", || meanfield::decode_marginals(&q, params.meanfield.subpixel));
             *buffers = rest;
-            buffers.recycle(q);
+            buffers.recycle(q.data);
             ViewEstimate { disparity, confidence }
         }
     }

@@ -125,9 +125,15 @@ pub struct Buffers {
 }
 
 impl Buffers {
-    /// Gives back the storage of marginals that are no longer needed.
-    pub fn recycle(&mut self, marginals: Marginals) {
-        self.q = marginals.data;
+    /// Gives back an `N × M` allocation that is no longer needed (old marginals, a dropped cost volume): the next
+    /// [`MeanField`] keeps its marginals in it.
+    pub fn recycle(&mut self, storage: Vec<f32>) {
+        self.q = storage;
+    }
+
+    /// Takes the spare `N × M` allocation out (empty if there is none), e.g. to build a cost volume in it.
+    pub fn take_spare(&mut self) -> Vec<f32> {
+        std::mem::take(&mut self.q)
     }
 }
 
