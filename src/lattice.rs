@@ -112,31 +112,8 @@ impl Lattice {
             })
             .collect();
 
-        // 2. Assign vertex ids in raster order of first appearance (sequential: deterministic).
-        let mut table = KeyTable::with_capacity(npix + 64);
-        let mut pix_vertex = vec![0u32; npix * D1];
-        let mut keys: Vec<[i16; D]> = Vec::with_capacity(npix);
-        // Horizontally adjacent pixels share most simplex vertices: look in the previous pixel's first (a few
-        // comparisons) and only probe the table on a miss. Same ids as probing every key.
-        let mut prev: Option<(&[[i16; D]; D1], [u32; D1])> = None;
-        for (e, ids) in embeddings.iter().zip(pix_vertex.chunks_exact_mut(D1)) {
-            for (key, id) in e.keys.iter().zip(ids.iter_mut()) {
-                let cached = prev.and_then(|(pk, pid)| pk.iter().position(|k| k == key).map(|j| pid[j]));
-                *id = match cached {
-                    Some(found) => found,
-                    None => {
-                        let found = table.insert(key, keys.len() as u32);
-                        if found as usize == keys.len() {
-                            keys.push(*key);
-                        }
-                        found
-                    }
-                };
-            }
-            let mut own = [0u32; D1];
-            own.copy_from_slice(ids);
-            prev = Some((&e.keys, own));
-        }
+        // 2. Vertex ids in raster order of first appearance, found block by block in parallel.
+        let (pix_vertex, keys, table) = assign_vertex_ids(&embeddings);
         let nvert = keys.len();
         let pix_weight: Vec<f32> = embeddings.iter().flat_map(|e| e.weights).collect();
         let self_weight = embeddings.par_iter().map(|e| self_weight_of(&e.weights) * OUTPUT_SCALE).collect();
@@ -396,33 +373,113 @@ fn embed(f: &[f32; D]) -> Embedding {
     Embedding { keys, weights }
 }
 
-/// Open-addressing hash table from lattice keys to vertex ids (linear probing, power-of-two capacity).
+/// Numbers the simplex vertices of all pixels by first appearance in raster order: per-entry ids
+/// (`[pixel·D1 + k]`), the keys in id order, and the table from key to id.
+///
+/// Blocks of pixels are numbered in parallel, each with its own table, and the blocks' keys are then merged in
+/// block order into one table; a key's global id is thus its first appearance in the whole raster, exactly as in
+/// one sequential pass, whatever the number of blocks or threads.
+fn assign_vertex_ids(embeddings: &[Embedding]) -> (Vec<u32>, Vec<[i16; D]>, KeyTable) {
+    let block = embeddings.len().div_ceil(rayon::current_num_threads().max(1)).max(16_384);
+    assign_vertex_ids_in_blocks(embeddings, block)
+}
+
+/// [`assign_vertex_ids`] with a given block size in pixels.
+fn assign_vertex_ids_in_blocks(embeddings: &[Embedding], block: usize) -> (Vec<u32>, Vec<[i16; D]>, KeyTable) {
+    let npix = embeddings.len();
+    let block = block.max(1);
+    let mut pix_vertex = vec![0u32; npix * D1];
+    // Per block: local ids into pix_vertex, and the block's keys in local id order.
+    let local_keys: Vec<Vec<[i16; D]>> = pix_vertex
+        .par_chunks_mut(block * D1)
+        .zip(embeddings.par_chunks(block))
+        .map(|(ids, embs)| number_block(embs, ids))
+        .collect();
+    let mut table = KeyTable::with_capacity(npix + 64);
+    let mut keys: Vec<[i16; D]> = Vec::with_capacity(npix);
+    let maps: Vec<Vec<u32>> = local_keys
+        .iter()
+        .map(|block_keys| {
+            block_keys
+                .iter()
+                .map(|key| {
+                    let id = table.insert(key, keys.len() as u32);
+                    if id as usize == keys.len() {
+                        keys.push(*key);
+                    }
+                    id
+                })
+                .collect()
+        })
+        .collect();
+    pix_vertex.par_chunks_mut(block * D1).zip(maps.par_iter()).for_each(|(ids, map)| {
+        ids.iter_mut().for_each(|id| *id = map[*id as usize]);
+    });
+    (pix_vertex, keys, table)
+}
+
+/// Numbers the vertices of one block of pixels by first appearance (ids into `ids`), returning its keys in id
+/// order.
+fn number_block(embeddings: &[Embedding], ids: &mut [u32]) -> Vec<[i16; D]> {
+    let mut table = KeyTable::with_capacity(embeddings.len() + 64);
+    let mut keys: Vec<[i16; D]> = Vec::with_capacity(embeddings.len());
+    // Horizontally adjacent pixels share most simplex vertices: look in the previous pixel's first (a few
+    // comparisons) and only probe the table on a miss. Same ids as probing every key.
+    let mut prev: Option<(&[[i16; D]; D1], [u32; D1])> = None;
+    for (e, ids) in embeddings.iter().zip(ids.chunks_exact_mut(D1)) {
+        for (key, id) in e.keys.iter().zip(ids.iter_mut()) {
+            let cached = prev.and_then(|(pk, pid)| pk.iter().position(|k| k == key).map(|j| pid[j]));
+            *id = match cached {
+                Some(found) => found,
+                None => {
+                    let found = table.insert(key, keys.len() as u32);
+                    if found as usize == keys.len() {
+                        keys.push(*key);
+                    }
+                    found
+                }
+            };
+        }
+        let mut own = [0u32; D1];
+        own.copy_from_slice(ids);
+        prev = Some((&e.keys, own));
+    }
+    keys
+}
+
+/// Open-addressing hash table from lattice keys to vertex ids (linear probing, power-of-two capacity). Key and id
+/// share a 16-byte slot, so a probe touches one cache line.
 struct KeyTable {
-    keys: Vec<[i16; D]>,
-    ids: Vec<u32>,
+    slots: Vec<Slot>,
     mask: usize,
     len: usize,
 }
 
+#[derive(Clone, Copy)]
+struct Slot {
+    key: [i16; D],
+    id: u32,
+}
+
+const EMPTY: Slot = Slot { key: [0; D], id: NONE };
+
 impl KeyTable {
     fn with_capacity(n: usize) -> Self {
         let cap = n.next_power_of_two().max(16);
-        KeyTable { keys: vec![[0; D]; cap], ids: vec![NONE; cap], mask: cap - 1, len: 0 }
+        KeyTable { slots: vec![EMPTY; cap], mask: cap - 1, len: 0 }
     }
 
     /// Rehashes into a table twice the size (ids are kept, so vertex numbering does not change).
     fn grow(&mut self) {
-        let cap = self.ids.len() * 2;
-        let old_keys = std::mem::replace(&mut self.keys, vec![[0; D]; cap]);
-        let old_ids = std::mem::replace(&mut self.ids, vec![NONE; cap]);
+        let cap = self.slots.len() * 2;
+        let old = std::mem::replace(&mut self.slots, vec![EMPTY; cap]);
         self.mask = cap - 1;
-        for (key, id) in old_keys.iter().zip(old_ids).filter(|(_, id)| *id != NONE) {
-            let mut s = Self::slot(key) & self.mask;
-            while self.ids[s] != NONE {
+        for slot in old.into_iter().filter(|s| s.id != NONE) {
+            let mut s = Self::slot(&slot.key) & self.mask;
+            while self.slots[s].id != NONE {
                 s = (s + 1) & self.mask;
             }
-            self.keys[s] = *key;
-            self.ids[s] = id;
+            self.slots[s] = slot;
         }
     }
 
@@ -438,20 +495,19 @@ impl KeyTable {
     /// The id of `key`, inserting it with `new_id` if absent. Doubles the table when it becomes half full, so
     /// probing always ends (images with very noisy colours have up to d+1 distinct vertices per pixel).
     fn insert(&mut self, key: &[i16; D], new_id: u32) -> u32 {
-        if 2 * (self.len + 1) > self.ids.len() {
+        if 2 * (self.len + 1) > self.slots.len() {
             self.grow();
         }
         let mut s = Self::slot(key) & self.mask;
         loop {
-            let id = self.ids[s];
-            if id == NONE {
-                self.keys[s] = *key;
-                self.ids[s] = new_id;
+            let slot = &mut self.slots[s];
+            if slot.id == NONE {
+                *slot = Slot { key: *key, id: new_id };
                 self.len += 1;
                 return new_id;
             }
-            if self.keys[s] == *key {
-                return id;
+            if slot.key == *key {
+                return slot.id;
             }
             s = (s + 1) & self.mask;
         }
@@ -461,9 +517,9 @@ impl KeyTable {
     fn get(&self, key: &[i16; D]) -> u32 {
         let mut s = Self::slot(key) & self.mask;
         loop {
-            let id = self.ids[s];
-            if id == NONE || self.keys[s] == *key {
-                return id;
+            let slot = &self.slots[s];
+            if slot.id == NONE || slot.key == *key {
+                return slot.id;
             }
             s = (s + 1) & self.mask;
         }
@@ -642,6 +698,41 @@ mod tests {
         assert!(lat.num_vertices() > 2 * w * h, "{} vertices", lat.num_vertices());
         let out = filtered(&lat, &vec![1.0; w * h], 1);
         assert!(out.iter().all(|v| v.is_finite() && *v > 0.0));
+    }
+
+    /// Block-parallel vertex numbering against one plain sequential pass over every key (a `HashMap` from key to
+    /// id, first appearance in raster order), for block sizes from 1 pixel to the whole image.
+    #[test]
+    fn lattice_vertex_ids_match_sequential_numbering() {
+        let (w, h) = (37, 23);
+        let img = test_image(w, h, 6);
+        let embeddings: Vec<Embedding> = (0..w * h)
+            .map(|i| {
+                let [r, g, b] = img.rgb(i);
+                embed(&[(i % w) as f32 / 2.0, (i / w) as f32 / 2.0, r / 20.0, g / 20.0, b / 20.0])
+            })
+            .collect();
+        let mut ids_ref = Vec::new();
+        let mut keys_ref: Vec<[i16; D]> = Vec::new();
+        let mut seen = std::collections::HashMap::new();
+        for e in &embeddings {
+            for key in &e.keys {
+                let id = *seen.entry(*key).or_insert_with(|| {
+                    keys_ref.push(*key);
+                    keys_ref.len() as u32 - 1
+                });
+                ids_ref.push(id);
+            }
+        }
+        assert!(keys_ref.len() > 100, "too few vertices for a meaningful test: {}", keys_ref.len());
+        for block in [1, 5, 37, 100, 851, w * h] {
+            let (ids, keys, table) = assign_vertex_ids_in_blocks(&embeddings, block);
+            assert_eq!(ids, ids_ref, "block {block}");
+            assert_eq!(keys, keys_ref, "block {block}");
+            for (id, key) in keys.iter().enumerate() {
+                assert_eq!(table.get(key), id as u32);
+            }
+        }
     }
 
     #[test]
