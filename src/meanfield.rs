@@ -84,15 +84,91 @@ pub fn local_weights(image: &RgbImage, p: &MeanFieldParams) -> LocalWeights {
 }
 
 /// The local term's contribution to E_i(d) for all d, given P̃_i (the O(M) form without the constant S_i):
-/// `out[d] += −ω̃·(P̃(d) + (1 − β)(P̃(d−1) + P̃(d+1)))`.
-#[inline]
+/// `out[d] += −ω̃·(P̃(d) + (1 − β)(P̃(d−1) + P̃(d+1)))`. (The update computes the same through
+/// [`pixel_energies`]; this form is for tests and callers with an unpadded P̃.)
 pub fn add_local_energy(p_tilde: &[f32], omega: f32, beta: f32, out: &mut [f32]) {
     let m = p_tilde.len();
-    let k = 1.0 - beta;
-    for d in 0..m {
-        let below = if d > 0 { p_tilde[d - 1] } else { 0.0 };
-        let above = if d + 1 < m { p_tilde[d + 1] } else { 0.0 };
-        out[d] -= omega * (p_tilde[d] + k * (below + above));
+    let mut padded = vec![0.0f32; m + 2];
+    padded[1..=m].copy_from_slice(p_tilde);
+    let mut term = vec![0.0f32; m];
+    pixel_energies(&vec![0.0; m], 0.0, None, Some(LocalTerm { p_padded: &padded, omega, beta }), &mut term);
+    out.iter_mut().zip(&term).for_each(|(o, t)| *o += t);
+}
+
+/// The fully connected term of one pixel: Q̃(l) = `out_scale`·(`msg`(l) − `self_weight`·`own`(l)), clamped at 0.
+#[derive(Clone, Copy)]
+struct FullTerm<'s> {
+    msg: &'s [f32],
+    own: &'s [f32],
+    omega: f32,
+    out_scale: f32,
+    self_weight: f32,
+}
+
+/// The local term of one pixel: P̃ with a zero at each end (`p_padded[d + 1]` = P̃(d)), ω̃ and β.
+#[derive(Clone, Copy)]
+struct LocalTerm<'s> {
+    p_padded: &'s [f32],
+    omega: f32,
+    beta: f32,
+}
+
+/// E(d) = `unary_scale`·cost(d) − ω·Q̃(d) − ω̃·(P̃(d) + (1 − β)(P̃(d−1) + P̃(d+1))) into `en`, in one pass, with
+/// either pairwise term optional (SPEC §3; the label-independent constants are left out).
+#[inline(always)]
+fn pixel_energies(
+    cost: &[f32],
+    unary_scale: f32,
+    full: Option<FullTerm<'_>>,
+    local: Option<LocalTerm<'_>>,
+    en: &mut [f32],
+) {
+    let m = en.len();
+    let cost = &cost[..m];
+    match (full, local) {
+        (None, None) => en.iter_mut().zip(cost).for_each(|(e, c)| *e = unary_scale * c),
+        (Some(f), None) => {
+            let (msg, own, k) = (&f.msg[..m], &f.own[..m], f.omega * f.out_scale);
+            for d in 0..m {
+                en[d] = unary_scale * cost[d] - k * (msg[d] - f.self_weight * own[d]).max(0.0);
+            }
+        }
+        (None, Some(l)) => {
+            let (p, kb) = (&l.p_padded[..m + 2], 1.0 - l.beta);
+            for d in 0..m {
+                en[d] = unary_scale * cost[d] - l.omega * (p[d + 1] + kb * (p[d] + p[d + 2]));
+            }
+        }
+        (Some(f), Some(l)) => {
+            let (msg, own, k) = (&f.msg[..m], &f.own[..m], f.omega * f.out_scale);
+            let (p, kb) = (&l.p_padded[..m + 2], 1.0 - l.beta);
+            for d in 0..m {
+                en[d] = unary_scale * cost[d]
+                    - k * (msg[d] - f.self_weight * own[d]).max(0.0)
+                    - l.omega * (p[d + 1] + kb * (p[d] + p[d + 2]));
+            }
+        }
+    }
+}
+
+/// `out ← softmax(−en)`, bit-identical to [`softmax_neg_in_place`] on a copy of `en`.
+#[inline(always)]
+fn softmax_neg_into(en: &[f32], out: &mut [f32]) {
+    let m = out.len();
+    let en = &en[..m];
+    let min = lane_min(en);
+    let min = if min.is_finite() { min } else { 0.0 };
+    // Separate passes (each stays in L1): a loop that also accumulated the sum would not vectorise the exp.
+    for (o, e) in out.iter_mut().zip(en) {
+        *o = exp_nonpositive(min - e);
+    }
+    let sum = lane_sum(out);
+    if sum > 0.0 && sum.is_finite() {
+        let inv = 1.0 / sum;
+        out.iter_mut().for_each(|v| *v *= inv);
+    } else {
+        let u = 1.0 / m as f32;
+        out.iter_mut().for_each(|v| *v = u);
     }
 }
 
@@ -134,6 +210,24 @@ impl Buffers {
     /// Takes the spare `N × M` allocation out (empty if there is none), e.g. to build a cost volume in it.
     pub fn take_spare(&mut self) -> Vec<f32> {
         std::mem::take(&mut self.q)
+    }
+}
+
+/// Per-thread scratch of the row update, `M` labels.
+struct RowScratch {
+    /// The sliced fully connected message.
+    msg: Vec<f32>,
+    /// P̃ with a zero at each end.
+    p_padded: Vec<f32>,
+    /// The energies E(d).
+    energy: Vec<f32>,
+    /// A row of zeros standing in for missing neighbours.
+    zeros: Vec<f32>,
+}
+
+impl RowScratch {
+    fn new(m: usize) -> Self {
+        RowScratch { msg: vec![0.0; m], p_padded: vec![0.0; m + 2], energy: vec![0.0; m], zeros: vec![0.0; m] }
     }
 }
 
@@ -251,27 +345,27 @@ impl<'a> MeanField<'a> {
             None => &[],
         };
         let this = &*self;
-        let init = || (vec![0.0f32; m], vec![0.0f32; m], vec![0.0f32; m]);
+        let init = || RowScratch::new(m);
         match self.schedule {
             Schedule::Jacobi => {
                 let src = &q;
-                next.par_chunks_mut(w * m).enumerate().for_each_init(init, |(p, g, own), (y, out)| {
-                    this.update_row(y, Pass::All, src, src, vals, out, p, g, own)
-                });
+                next.par_chunks_mut(w * m)
+                    .enumerate()
+                    .for_each_init(init, |s, (y, out)| this.update_row(y, Pass::All, src, src, vals, out, s));
                 std::mem::swap(&mut q, &mut next);
             }
             Schedule::Checkerboard => {
                 // Pass 1: pixels with x + y even, from the previous Q, into `next`.
                 let src = &q;
-                next.par_chunks_mut(w * m).enumerate().for_each_init(init, |(p, g, own), (y, out)| {
-                    this.update_row(y, Pass::Even, src, src, vals, out, p, g, own)
-                });
+                next.par_chunks_mut(w * m)
+                    .enumerate()
+                    .for_each_init(init, |s, (y, out)| this.update_row(y, Pass::Even, src, src, vals, out, s));
                 // Pass 2: odd pixels, whose 4 neighbours are all even, from the pass-1 values; written over
                 // the previous Q (each pixel reads its own old value first), with the even ones copied in.
                 let even = &next;
-                q.par_chunks_mut(w * m).enumerate().for_each_init(init, |(p, g, own), (y, out)| {
-                    this.update_row(y, Pass::Odd, even, &[], vals, out, p, g, own)
-                });
+                q.par_chunks_mut(w * m)
+                    .enumerate()
+                    .for_each_init(init, |s, (y, out)| this.update_row(y, Pass::Odd, even, &[], vals, out, s));
             }
         }
         self.q = q;
@@ -291,12 +385,13 @@ impl<'a> MeanField<'a> {
         self_src: &[f32],
         vals: &[f32],
         out_row: &mut [f32],
-        p_tilde: &mut [f32],
-        msg: &mut [f32],
-        own: &mut [f32],
+        s: &mut RowScratch,
     ) {
         let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
         let PairwiseWeights { fcm, lcm } = self.weights;
+        let lattice = self.lattice.as_ref().filter(|_| fcm > 0.0);
+        // Missing neighbours (image border) read a row of zeros with weight 0.
+        let row = |j: Option<usize>| j.map_or(&s.zeros[..], |j| &nbr_src[j * m..][..m]);
         for (x, e) in out_row.chunks_exact_mut(m).enumerate() {
             let i = y * w + x;
             let odd = (x + y) % 2 == 1;
@@ -310,44 +405,30 @@ impl<'a> MeanField<'a> {
                 }
                 Pass::Odd => {}
             }
-            if self_src.is_empty() {
-                own.copy_from_slice(e);
-            } else {
-                own.copy_from_slice(&self_src[i * m..][..m]);
-            }
-            for (e, c) in e.iter_mut().zip(self.cost.pixel(i)) {
-                *e = self.unary_scale * c;
-            }
-            if let (true, Some(lat)) = (fcm > 0.0, &self.lattice) {
-                lat.slice(vals, i, msg);
-                let (out_s, self_w) = self.message_factors(i);
-                let k = fcm * out_s;
-                for ((e, g), qv) in e.iter_mut().zip(msg.iter()).zip(own.iter()) {
-                    *e -= k * (g - self_w * qv).max(0.0);
+            let own: &[f32] = if self_src.is_empty() { e } else { &self_src[i * m..][..m] };
+            let full = lattice.map(|lat| {
+                lat.slice(vals, i, &mut s.msg);
+                let (out_scale, self_weight) = self.message_factors(i);
+                FullTerm { msg: &s.msg, own, omega: fcm, out_scale, self_weight }
+            });
+            let local = (lcm > 0.0).then(|| {
+                let (l, r) = ((x > 0).then(|| i - 1), (x + 1 < w).then(|| i + 1));
+                let (u, d) = ((y > 0).then(|| i - w), (y + 1 < h).then(|| i + w));
+                let wts = [
+                    l.map_or(0.0, |j| self.local.right.data[j]),
+                    r.map_or(0.0, |_| self.local.right.data[i]),
+                    u.map_or(0.0, |j| self.local.down.data[j]),
+                    d.map_or(0.0, |_| self.local.down.data[i]),
+                ];
+                let (ql, qr, qu, qd) = (row(l), row(r), row(u), row(d));
+                // Accumulated in the order left, right, up, down (the sequential reference's order).
+                for (k, p) in s.p_padded[1..=m].iter_mut().enumerate() {
+                    *p = wts[0] * ql[k] + wts[1] * qr[k] + wts[2] * qu[k] + wts[3] * qd[k];
                 }
-            }
-            if lcm > 0.0 {
-                p_tilde.fill(0.0);
-                let mut add = |j: usize, wt: f32| {
-                    for (p, v) in p_tilde.iter_mut().zip(&nbr_src[j * m..][..m]) {
-                        *p += wt * v;
-                    }
-                };
-                if x > 0 {
-                    add(i - 1, self.local.right.data[i - 1]);
-                }
-                if x + 1 < w {
-                    add(i + 1, self.local.right.data[i]);
-                }
-                if y > 0 {
-                    add(i - w, self.local.down.data[i - w]);
-                }
-                if y + 1 < h {
-                    add(i + w, self.local.down.data[i]);
-                }
-                add_local_energy(p_tilde, lcm, self.beta, e);
-            }
-            softmax_neg_in_place(e);
+                LocalTerm { p_padded: &s.p_padded, omega: lcm, beta: self.beta }
+            });
+            pixel_energies(self.cost.pixel(i), self.unary_scale, full, local, &mut s.energy);
+            softmax_neg_into(&s.energy, e);
         }
     }
 
@@ -475,6 +556,42 @@ mod tests {
                 fast[d] + omega * s,
                 naive[d]
             );
+        }
+    }
+
+    #[test]
+    fn meanfield_softmax_into_is_bit_identical_to_in_place() {
+        for m in [1, 5, 8, 13, 70, 191] {
+            let mut en: Vec<f32> = rand_vec(m, m as u64).iter().map(|v| v * 40.0 - 10.0).collect();
+            if m > 5 {
+                en[3] = f32::INFINITY;
+            }
+            let mut reference = en.clone();
+            softmax_neg_in_place(&mut reference);
+            let mut out = vec![0.0; m];
+            softmax_neg_into(&en, &mut out);
+            assert!(out.iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()), "m = {m}");
+        }
+    }
+
+    /// The one-pass energy with both pairwise terms against the terms written out separately.
+    #[test]
+    fn meanfield_pixel_energies_match_the_terms() {
+        let m = 11;
+        let (cost, msg, own) = (rand_vec(m, 1), rand_vec(m, 2), rand_vec(m, 3));
+        let p_tilde: Vec<f32> = rand_vec(m, 4).iter().map(|v| v * 3.0).collect();
+        let mut p_padded = vec![0.0; m + 2];
+        p_padded[1..=m].copy_from_slice(&p_tilde);
+        let (us, fcm, out_scale, self_weight, lcm, beta) = (0.7, 9.0, 0.3, 0.8, 2.0, 0.25);
+        let full = FullTerm { msg: &msg, own: &own, omega: fcm, out_scale, self_weight };
+        let local = LocalTerm { p_padded: &p_padded, omega: lcm, beta };
+        let mut en = vec![0.0; m];
+        pixel_energies(&cost, us, Some(full), Some(local), &mut en);
+        let mut expected: Vec<f32> =
+            (0..m).map(|d| us * cost[d] - fcm * out_scale * (msg[d] - self_weight * own[d]).max(0.0)).collect();
+        add_local_energy(&p_tilde, lcm, beta, &mut expected);
+        for d in 0..m {
+            assert!((en[d] - expected[d]).abs() < 1e-5, "label {d}: {} vs {}", en[d], expected[d]);
         }
     }
 
