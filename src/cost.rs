@@ -103,7 +103,8 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
     let (gx_l, gx_r) = (sobel_x(&grey_l), sobel_x(&grey_r));
     let out_of_view = truncation_cost(p);
     let (a, tc, b, tg) = (p.census_weight, p.census_trunc, p.grad_weight, p.grad_trunc);
-    let mut vol = CostVolume::new(w, h, ndisp, out_of_view);
+    // Zeroed (fresh pages from the OS, no fill pass); every entry is written below, rows in parallel.
+    let mut vol = CostVolume::new(w, h, ndisp, 0.0);
     vol.data.par_chunks_mut(w * ndisp).enumerate().for_each_init(
         || (vec![0u64; w], vec![0.0f32; w]),
         |(cr_rev, gr_rev), (y, row)| {
@@ -120,10 +121,12 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
                 let k0 = w - 1 - x;
                 let cr = &cr_rev[k0..][..in_view];
                 let gr = &gr_rev[k0..][..in_view];
-                for ((c, &cr), &gr) in costs[..in_view].iter_mut().zip(cr).zip(gr) {
+                let (inside, outside) = costs.split_at_mut(in_view);
+                for ((c, &cr), &gr) in inside.iter_mut().zip(cr).zip(gr) {
                     let ham = (cl ^ cr).count_ones() as f32;
                     *c = a * ham.min(tc) + b * (gl - gr).abs().min(tg);
                 }
+                outside.fill(out_of_view);
             }
         },
     );
@@ -140,7 +143,9 @@ pub fn derive_right_volume(left: &CostVolume, out_of_view: f32) -> CostVolume {
 /// an allocation that is already paged in.
 pub fn derive_right_volume_in(left: &CostVolume, out_of_view: f32, mut storage: Vec<f32>) -> CostVolume {
     let (w, h, nd) = (left.width, left.height, left.ndisp);
-    storage.resize(w * h * nd, 0.0);
+    if storage.len() != w * h * nd {
+        storage = vec![0.0; w * h * nd]; // zeroed pages from the OS, no fill pass
+    }
     storage.par_chunks_mut(w * nd).enumerate().for_each(|(y, row)| {
         let lrow = &left.data[y * w * nd..][..w * nd];
         for (x, costs) in row.chunks_exact_mut(nd).enumerate() {

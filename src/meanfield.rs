@@ -24,6 +24,7 @@
 //! Memory: Q, the next Q and the message, each `N × M` f32, plus the lattice's two `vertices × M` buffers; each
 //! iteration is O(N·M) and allocation-free (scratch is per row, made once per iteration chunk).
 
+use multiversion::multiversion;
 use rayon::prelude::*;
 
 use crate::fastmath::{exp_nonpositive, lane_min, lane_sum};
@@ -305,13 +306,17 @@ impl<'a> MeanField<'a> {
             }
         }
         let Buffers { mut q, mut next, scratch } = buffers;
-        q.clear();
-        q.extend_from_slice(&cost.data);
-        next.clear();
-        next.resize(n * m, 0.0);
+        // Fresh buffers are zeroed by the OS (no fill pass); Q is then written in parallel, and `next` is
+        // written by each iteration before it is read.
+        if q.len() != n * m {
+            q = vec![0.0; n * m];
+        }
+        if next.len() != n * m {
+            next = vec![0.0; n * m];
+        }
         let scale = p.unary_scale;
-        q.par_chunks_mut(m).with_min_len(256).for_each(|e| {
-            e.iter_mut().for_each(|v| *v *= scale);
+        q.par_chunks_mut(m).zip(cost.data.par_chunks(m)).with_min_len(256).for_each(|(e, c)| {
+            e.iter_mut().zip(c).for_each(|(v, c)| *v = c * scale);
             softmax_neg_in_place(e);
         });
         MeanField {
@@ -351,7 +356,7 @@ impl<'a> MeanField<'a> {
                 let src = &q;
                 next.par_chunks_mut(w * m)
                     .enumerate()
-                    .for_each_init(init, |s, (y, out)| this.update_row(y, Pass::All, src, src, vals, out, s));
+                    .for_each_init(init, |s, (y, out)| update_row(this, y, Pass::All, src, src, vals, out, s));
                 std::mem::swap(&mut q, &mut next);
             }
             Schedule::Checkerboard => {
@@ -359,77 +364,18 @@ impl<'a> MeanField<'a> {
                 let src = &q;
                 next.par_chunks_mut(w * m)
                     .enumerate()
-                    .for_each_init(init, |s, (y, out)| this.update_row(y, Pass::Even, src, src, vals, out, s));
+                    .for_each_init(init, |s, (y, out)| update_row(this, y, Pass::Even, src, src, vals, out, s));
                 // Pass 2: odd pixels, whose 4 neighbours are all even, from the pass-1 values; written over
                 // the previous Q (each pixel reads its own old value first), with the even ones copied in.
                 let even = &next;
                 q.par_chunks_mut(w * m)
                     .enumerate()
-                    .for_each_init(init, |s, (y, out)| this.update_row(y, Pass::Odd, even, &[], vals, out, s));
+                    .for_each_init(init, |s, (y, out)| update_row(this, y, Pass::Odd, even, &[], vals, out, s));
             }
         }
         self.q = q;
         self.scratch = scratch;
         self.next = next;
-    }
-
-    /// Computes the new Q for row `y` into `out_row`: neighbours' marginals come from `nbr_src`, the pixel's
-    /// own previous marginal (for the self term) from `self_src`, or from `out_row` itself when that is empty.
-    /// `pass` picks the pixels to compute; with [`Pass::Odd`] the even pixels are copied from `nbr_src`.
-    #[allow(clippy::too_many_arguments)]
-    fn update_row(
-        &self,
-        y: usize,
-        pass: Pass,
-        nbr_src: &[f32],
-        self_src: &[f32],
-        vals: &[f32],
-        out_row: &mut [f32],
-        s: &mut RowScratch,
-    ) {
-        let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
-        let PairwiseWeights { fcm, lcm } = self.weights;
-        let lattice = self.lattice.as_ref().filter(|_| fcm > 0.0);
-        // Missing neighbours (image border) read a row of zeros with weight 0.
-        let row = |j: Option<usize>| j.map_or(&s.zeros[..], |j| &nbr_src[j * m..][..m]);
-        for (x, e) in out_row.chunks_exact_mut(m).enumerate() {
-            let i = y * w + x;
-            let odd = (x + y) % 2 == 1;
-            match pass {
-                Pass::All => {}
-                Pass::Even if odd => continue,
-                Pass::Even => {}
-                Pass::Odd if !odd => {
-                    e.copy_from_slice(&nbr_src[i * m..][..m]);
-                    continue;
-                }
-                Pass::Odd => {}
-            }
-            let own: &[f32] = if self_src.is_empty() { e } else { &self_src[i * m..][..m] };
-            let full = lattice.map(|lat| {
-                lat.slice(vals, i, &mut s.msg);
-                let (out_scale, self_weight) = self.message_factors(i);
-                FullTerm { msg: &s.msg, own, omega: fcm, out_scale, self_weight }
-            });
-            let local = (lcm > 0.0).then(|| {
-                let (l, r) = ((x > 0).then(|| i - 1), (x + 1 < w).then(|| i + 1));
-                let (u, d) = ((y > 0).then(|| i - w), (y + 1 < h).then(|| i + w));
-                let wts = [
-                    l.map_or(0.0, |j| self.local.right.data[j]),
-                    r.map_or(0.0, |_| self.local.right.data[i]),
-                    u.map_or(0.0, |j| self.local.down.data[j]),
-                    d.map_or(0.0, |_| self.local.down.data[i]),
-                ];
-                let (ql, qr, qu, qd) = (row(l), row(r), row(u), row(d));
-                // Accumulated in the order left, right, up, down (the sequential reference's order).
-                for (k, p) in s.p_padded[1..=m].iter_mut().enumerate() {
-                    *p = wts[0] * ql[k] + wts[1] * qr[k] + wts[2] * qu[k] + wts[3] * qd[k];
-                }
-                LocalTerm { p_padded: &s.p_padded, omega: lcm, beta: self.beta }
-            });
-            pixel_energies(self.cost.pixel(i), self.unary_scale, full, local, &mut s.energy);
-            softmax_neg_into(&s.energy, e);
-        }
     }
 
     /// Pixel i's message factors: Q̃_i(l) = out_scale · (raw_i(l) − self_w · Q_i(l)), where raw is the lattice
@@ -477,6 +423,67 @@ impl<'a> MeanField<'a> {
         let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
         let buffers = Buffers { q: Vec::new(), next: self.next, scratch: self.scratch };
         (CostVolume { width: w, height: h, ndisp: m, data: self.q }, buffers)
+    }
+}
+
+/// Computes the new Q for row `y` into `out_row`: neighbours' marginals come from `nbr_src`, the pixel's
+/// own previous marginal (for the self term) from `self_src`, or from `out_row` itself when that is empty.
+/// `pass` picks the pixels to compute; with [`Pass::Odd`] the even pixels are copied from `nbr_src`.
+/// Compiled for AVX2 + FMA as well, picked at run time (same results: no contraction of a·b + c).
+#[allow(clippy::too_many_arguments)]
+#[multiversion(targets("x86_64+avx2+fma"))]
+fn update_row<'c>(
+    mf: &MeanField<'c>,
+    y: usize,
+    pass: Pass,
+    nbr_src: &[f32],
+    self_src: &[f32],
+    vals: &[f32],
+    out_row: &mut [f32],
+    s: &mut RowScratch,
+) {
+    let (w, h, m) = (mf.cost.width, mf.cost.height, mf.cost.ndisp);
+    let PairwiseWeights { fcm, lcm } = mf.weights;
+    let lattice = mf.lattice.as_ref().filter(|_| fcm > 0.0);
+    // Missing neighbours (image border) read a row of zeros with weight 0.
+    let row = |j: Option<usize>| j.map_or(&s.zeros[..], |j| &nbr_src[j * m..][..m]);
+    for (x, e) in out_row.chunks_exact_mut(m).enumerate() {
+        let i = y * w + x;
+        let odd = (x + y) % 2 == 1;
+        match pass {
+            Pass::All => {}
+            Pass::Even if odd => continue,
+            Pass::Even => {}
+            Pass::Odd if !odd => {
+                e.copy_from_slice(&nbr_src[i * m..][..m]);
+                continue;
+            }
+            Pass::Odd => {}
+        }
+        let own: &[f32] = if self_src.is_empty() { e } else { &self_src[i * m..][..m] };
+        let full = lattice.map(|lat| {
+            lat.slice(vals, i, &mut s.msg);
+            let (out_scale, self_weight) = mf.message_factors(i);
+            FullTerm { msg: &s.msg, own, omega: fcm, out_scale, self_weight }
+        });
+        let local = (lcm > 0.0).then(|| {
+            let (l, r) = ((x > 0).then(|| i - 1), (x + 1 < w).then(|| i + 1));
+            let (u, d) = ((y > 0).then(|| i - w), (y + 1 < h).then(|| i + w));
+            let wts = [
+                l.map_or(0.0, |j| mf.local.right.data[j]),
+                r.map_or(0.0, |_| mf.local.right.data[i]),
+                u.map_or(0.0, |j| mf.local.down.data[j]),
+                d.map_or(0.0, |_| mf.local.down.data[i]),
+            ];
+            let (ql, qr, qu, qd) = (row(l), row(r), row(u), row(d));
+            // Accumulated in the order left, right, up, down (the sequential reference's order).
+            for (k, p) in s.p_padded[1..=m].iter_mut().enumerate() {
+                *p = wts[0] * ql[k] + wts[1] * qr[k] + wts[2] * qu[k] + wts[3] * qd[k];
+            }
+            LocalTerm { p_padded: &s.p_padded, omega: lcm, beta: mf.beta }
+        });
+        pixel_energies(mf.cost.pixel(i), mf.unary_scale, full, local, &mut s.energy);
+        softmax_neg_into(&s.energy, e);
     }
 }
 
