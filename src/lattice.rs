@@ -25,6 +25,7 @@
 //! lattice (and every filter result) deterministic. Keys are five `i16` lattice coordinates (the (d+1)-th is
 //! implied by the zero sum); the largest coordinate is ~724 at quarter resolution (SPEC §6), far from the limit.
 
+use multiversion::multiversion;
 use rayon::prelude::*;
 
 use crate::image::RgbImage;
@@ -223,33 +224,18 @@ impl Lattice {
         let (mut cur, mut next) = (a, b);
 
         // Splat: gather each vertex's contributions in pixel order.
-        cur.par_chunks_mut(nc).enumerate().with_min_len(256).for_each(|(v, acc)| {
-            acc.fill(0.0);
-            let entries = &self.splat_entries[self.splat_start[v] as usize..self.splat_start[v + 1] as usize];
-            for &e in entries {
-                let p = e as usize / D1;
-                let w = self.pix_weight[e as usize] * pixel_scale.map_or(1.0, |s| s[p]);
-                let src = &input[p * nc..][..nc];
-                for (a, s) in acc.iter_mut().zip(src) {
-                    *a += w * s;
-                }
-            }
+        const CHUNK: usize = 256;
+        cur.par_chunks_mut(nc * CHUNK).enumerate().for_each(|(k, acc)| {
+            splat_vertices(self, input, pixel_scale, k * CHUNK, acc, nc);
         });
 
         // Blur along each of the d+1 directions: v ← v + ½(down + up), a missing neighbour counting as 0.
         for dir in 0..D1 {
             let nbrs = &self.blur_nbr[dir * self.nvert..][..self.nvert];
             let src: &[f32] = cur;
-            next.par_chunks_mut(nc).zip(nbrs.par_iter()).enumerate().with_min_len(256).for_each(
-                |(v, (dst, &[down, up]))| {
-                    let own = &src[v * nc..][..nc];
-                    let lo = if down == NONE { zero } else { &src[down as usize * nc..][..nc] };
-                    let hi = if up == NONE { zero } else { &src[up as usize * nc..][..nc] };
-                    for (((d, &o), &l), &h) in dst.iter_mut().zip(own).zip(lo).zip(hi) {
-                        *d = o + 0.5 * (l + h);
-                    }
-                },
-            );
+            next.par_chunks_mut(nc * CHUNK).zip(nbrs.par_chunks(CHUNK)).enumerate().for_each(|(k, (dst, nbrs))| {
+                blur_vertices(src, zero, k * CHUNK, nbrs, dst, nc);
+            });
             std::mem::swap(&mut cur, &mut next);
         }
         cur
@@ -257,7 +243,7 @@ impl Lattice {
 
     /// The last step of [`Lattice::filter`] for one pixel: `out = Σ_k w_k · vals[v_k]` (scaled by
     /// [`OUTPUT_SCALE`]), with `vals` from [`Lattice::splat_blur`] and `out.len()` channels.
-    #[inline]
+    #[inline(always)]
     pub fn slice(&self, vals: &[f32], pixel: usize, out: &mut [f32]) {
         let nc = out.len();
         out.fill(0.0);
@@ -269,6 +255,38 @@ impl Lattice {
             for (o, s) in out.iter_mut().zip(src) {
                 *o += w * s;
             }
+        }
+    }
+}
+
+/// Splats into the vertices `first..` (one `nc`-channel row each in `acc`): each gathers its contributing
+/// pixels' values (times `pixel_scale`) in pixel order. Compiled for AVX2 + FMA as well (same results).
+#[multiversion(targets("x86_64+avx2+fma"))]
+fn splat_vertices(lat: &Lattice, input: &[f32], pixel_scale: Option<&[f32]>, first: usize, acc: &mut [f32], nc: usize) {
+    for (v, acc) in (first..).zip(acc.chunks_exact_mut(nc)) {
+        acc.fill(0.0);
+        let entries = &lat.splat_entries[lat.splat_start[v] as usize..lat.splat_start[v + 1] as usize];
+        for &e in entries {
+            let p = e as usize / D1;
+            let w = lat.pix_weight[e as usize] * pixel_scale.map_or(1.0, |s| s[p]);
+            let src = &input[p * nc..][..nc];
+            for (a, s) in acc.iter_mut().zip(src) {
+                *a += w * s;
+            }
+        }
+    }
+}
+
+/// One blur pass for the vertices `first..`: `dst = own + ½(down + up)` from `src`, a missing neighbour reading
+/// `zero`. Compiled for AVX2 + FMA as well (same results).
+#[multiversion(targets("x86_64+avx2+fma"))]
+fn blur_vertices(src: &[f32], zero: &[f32], first: usize, nbrs: &[[u32; 2]], dst: &mut [f32], nc: usize) {
+    for ((v, dst), &[down, up]) in (first..).zip(dst.chunks_exact_mut(nc)).zip(nbrs) {
+        let own = &src[v * nc..][..nc];
+        let lo = if down == NONE { zero } else { &src[down as usize * nc..][..nc] };
+        let hi = if up == NONE { zero } else { &src[up as usize * nc..][..nc] };
+        for (((d, &o), &l), &h) in dst.iter_mut().zip(own).zip(lo).zip(hi) {
+            *d = o + 0.5 * (l + h);
         }
     }
 }
