@@ -34,6 +34,7 @@
 //! A target pixel whose window holds no finite disparity keeps its input value (possibly `inf`). Pixels that are
 //! not targets are copied unchanged.
 
+use multiversion::multiversion;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -114,60 +115,81 @@ pub fn weighted_median(
         })
         .collect();
     let inv_rgb = 1.0 / (2.0 * p.sigma_rgb * p.sigma_rgb);
-    let [red, green, blue] = &image.channels;
 
-    out.data.par_chunks_mut(w).enumerate().for_each_init(
-        || Scratch::new(side * side),
-        |scratch: &mut Scratch, (y, row)| {
-            let trow = targets.row(y);
-            let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1));
-            // The previous result on this row: a good guess for the next median (see `Scratch::median`).
-            let mut last: Option<f32> = None;
-            for (x, (d_out, _)) in row.iter_mut().zip(trow).enumerate().filter(|(_, (_, t))| **t) {
-                let (x0, x1) = (x.saturating_sub(r), (x + r).min(w - 1));
-                let i = y * w + x;
-                let (ci_r, ci_g, ci_b) = (red[i], green[i], blue[i]);
-                scratch.vals.clear();
-                scratch.wts.clear();
-                for yy in y0..=y1 {
-                    let base = yy * w;
-                    let (dseg, rseg, gseg, bseg) = (
-                        &disp.data[base + x0..=base + x1],
-                        &red[base + x0..=base + x1],
-                        &green[base + x0..=base + x1],
-                        &blue[base + x0..=base + x1],
-                    );
-                    let sseg = &spatial[(yy + r - y) * side + x0 + r - x..][..dseg.len()];
-                    let exponent = |(((s, r), g), b): (((&f32, &f32), &f32), &f32)| {
-                        let (dr, dg, db) = (r - ci_r, g - ci_g, b - ci_b);
-                        s + (dr * dr + dg * dg + db * db) * inv_rgb
-                    };
-                    let terms = sseg.iter().zip(rseg).zip(gseg).zip(bseg);
-                    if dseg.iter().all(|d| d.is_finite()) {
-                        // The usual case after the occlusion fill: a branch-free loop that vectorises.
-                        scratch.vals.extend_from_slice(dseg);
-                        scratch.wts.extend(terms.map(exponent));
-                    } else {
-                        for (&d, t) in dseg.iter().zip(terms) {
-                            if d.is_finite() {
-                                scratch.vals.push(d);
-                                scratch.wts.push(exponent(t));
-                            }
-                        }
+    let ctx = RowContext { disp, targets, image, spatial: &spatial, radius: r, inv_rgb };
+    out.data
+        .par_chunks_mut(w)
+        .enumerate()
+        .for_each_init(|| Scratch::new(side * side), |scratch, (y, row)| filter_row(&ctx, scratch, y, row));
+    out
+}
+
+/// What [`filter_row`] reads.
+struct RowContext<'a> {
+    disp: &'a DisparityMap,
+    targets: &'a Plane<bool>,
+    image: &'a RgbImage,
+    /// Spatial exponents |Δxy|²/2σ², indexed [(dy + r) * side + dx + r].
+    spatial: &'a [f32],
+    radius: usize,
+    /// 1/2σ_rgb².
+    inv_rgb: f32,
+}
+
+/// The weighted median at the target pixels of row `y` into `row` (which holds the input there). Compiled for
+/// AVX2 + FMA as well, picked at run time (same results).
+#[multiversion(targets("x86_64+avx2+fma"))]
+fn filter_row<'c>(ctx: &RowContext<'c>, scratch: &mut Scratch, y: usize, row: &mut [f32]) {
+    let RowContext { disp, targets, image, spatial, radius: r, inv_rgb } = *ctx;
+    let (w, h) = disp.dims();
+    let side = 2 * r + 1;
+    let [red, green, blue] = &image.channels;
+    let trow = targets.row(y);
+    let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1));
+    // The previous result on this row: a good guess for the next median (see `Scratch::median`).
+    let mut last: Option<f32> = None;
+    for (x, (d_out, _)) in row.iter_mut().zip(trow).enumerate().filter(|(_, (_, t))| **t) {
+        let (x0, x1) = (x.saturating_sub(r), (x + r).min(w - 1));
+        let i = y * w + x;
+        let (ci_r, ci_g, ci_b) = (red[i], green[i], blue[i]);
+        scratch.vals.clear();
+        scratch.wts.clear();
+        for yy in y0..=y1 {
+            let base = yy * w;
+            let (dseg, rseg, gseg, bseg) = (
+                &disp.data[base + x0..=base + x1],
+                &red[base + x0..=base + x1],
+                &green[base + x0..=base + x1],
+                &blue[base + x0..=base + x1],
+            );
+            let sseg = &spatial[(yy + r - y) * side + x0 + r - x..][..dseg.len()];
+            let exponent = |(((s, r), g), b): (((&f32, &f32), &f32), &f32)| {
+                let (dr, dg, db) = (r - ci_r, g - ci_g, b - ci_b);
+                s + (dr * dr + dg * dg + db * db) * inv_rgb
+            };
+            let terms = sseg.iter().zip(rseg).zip(gseg).zip(bseg);
+            if dseg.iter().all(|d| d.is_finite()) {
+                // The usual case after the occlusion fill: a branch-free loop that vectorises.
+                scratch.vals.extend_from_slice(dseg);
+                scratch.wts.extend(terms.map(exponent));
+            } else {
+                for (&d, t) in dseg.iter().zip(terms) {
+                    if d.is_finite() {
+                        scratch.vals.push(d);
+                        scratch.wts.push(exponent(t));
                     }
                 }
-                if scratch.vals.is_empty() {
-                    continue; // no valid neighbour: keep the input value
-                }
-                let (v_min, v_max) = (lane_min(&scratch.vals), lane_max(&scratch.vals));
-                let e_min = lane_min(&scratch.wts);
-                let guess = last.or(Some(*d_out).filter(|d| d.is_finite()));
-                *d_out = scratch.median(e_min, v_min, v_max, guess);
-                last = Some(*d_out);
             }
-        },
-    );
-    out
+        }
+        if scratch.vals.is_empty() {
+            continue; // no valid neighbour: keep the input value
+        }
+        let (v_min, v_max) = (lane_min(&scratch.vals), lane_max(&scratch.vals));
+        let e_min = lane_min(&scratch.wts);
+        let guess = last.or(Some(*d_out).filter(|d| d.is_finite()));
+        *d_out = scratch.median(e_min, v_min, v_max, guess);
+        last = Some(*d_out);
+    }
 }
 
 /// Number of value bins [`Scratch::median`] uses to narrow the search.
@@ -210,6 +232,7 @@ impl Scratch {
     /// target. Same result as [`weighted_lower_median`] on all items, in fewer operations. The bins are kept in
     /// four interleaved lanes (item k adds to lane k mod 4) so that runs of equal values do not serialise on one
     /// accumulator; lanes are always summed in the same order.
+    #[inline(always)]
     fn median(&mut self, e_min: f32, v_min: f32, v_max: f32, guess: Option<f32>) -> f32 {
         for e in self.wts.iter_mut() {
             *e = exp_nonpositive(e_min - *e);
