@@ -15,6 +15,7 @@
 //! Layout `[(y·w + x)·nd + d]` (see [`CostVolume`]). Both volumes are built row-parallel with no per-pixel
 //! allocation; cost O(w·h·nd).
 
+use multiversion::multiversion;
 use rayon::prelude::*;
 
 use crate::image::{CostVolume, Plane, RgbImage};
@@ -105,32 +106,52 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
     let (a, tc, b, tg) = (p.census_weight, p.census_trunc, p.grad_weight, p.grad_trunc);
     // Zeroed (fresh pages from the OS, no fill pass); every entry is written below, rows in parallel.
     let mut vol = CostVolume::new(w, h, ndisp, 0.0);
+    let rows =
+        CostRows { cen_l: &cen_l, cen_r: &cen_r, gx_l: &gx_l, gx_r: &gx_r, weights: [a, tc, b, tg], out_of_view };
     vol.data.par_chunks_mut(w * ndisp).enumerate().for_each_init(
         || (vec![0u64; w], vec![0.0f32; w]),
-        |(cr_rev, gr_rev), (y, row)| {
-            // The right row reversed: label d of left pixel x reads right pixel x − d = w−1−k with
-            // k = w−1−x+d, so consecutive labels are consecutive k and the label loop runs forwards.
-            for (k, (c, g)) in cr_rev.iter_mut().zip(gr_rev.iter_mut()).enumerate() {
-                *c = cen_r.data[y * w + w - 1 - k];
-                *g = gx_r.data[y * w + w - 1 - k];
-            }
-            let (cl_row, gl_row) = (cen_l.row(y), gx_l.row(y));
-            for (x, costs) in row.chunks_exact_mut(ndisp).enumerate() {
-                let (cl, gl) = (cl_row[x], gl_row[x]);
-                let in_view = ndisp.min(x + 1);
-                let k0 = w - 1 - x;
-                let cr = &cr_rev[k0..][..in_view];
-                let gr = &gr_rev[k0..][..in_view];
-                let (inside, outside) = costs.split_at_mut(in_view);
-                for ((c, &cr), &gr) in inside.iter_mut().zip(cr).zip(gr) {
-                    let ham = (cl ^ cr).count_ones() as f32;
-                    *c = a * ham.min(tc) + b * (gl - gr).abs().min(tg);
-                }
-                outside.fill(out_of_view);
-            }
-        },
+        |(cr_rev, gr_rev), (y, row)| cost_row(&rows, y, ndisp, cr_rev, gr_rev, row),
     );
     vol
+}
+
+/// What [`cost_row`] reads: both views' census codes and gradients, the weights and truncations
+/// `[census_weight, census_trunc, grad_weight, grad_trunc]`, and the out-of-view cost.
+struct CostRows<'a> {
+    cen_l: &'a Plane<u64>,
+    cen_r: &'a Plane<u64>,
+    gx_l: &'a Plane<f32>,
+    gx_r: &'a Plane<f32>,
+    weights: [f32; 4],
+    out_of_view: f32,
+}
+
+/// The costs of row `y` (all pixels, `ndisp` labels each) into `row`; `cr_rev` and `gr_rev` are scratch rows.
+/// Compiled for AVX2 + FMA + POPCNT as well, picked at run time (same results).
+#[multiversion(targets("x86_64+avx2+fma+popcnt"))]
+fn cost_row<'c>(rows: &CostRows<'c>, y: usize, ndisp: usize, cr_rev: &mut [u64], gr_rev: &mut [f32], row: &mut [f32]) {
+    let CostRows { cen_l, cen_r, gx_l, gx_r, weights: [a, tc, b, tg], out_of_view } = *rows;
+    let w = cen_l.width;
+    // The right row reversed: label d of left pixel x reads right pixel x − d = w−1−k with
+    // k = w−1−x+d, so consecutive labels are consecutive k and the label loop runs forwards.
+    for (k, (c, g)) in cr_rev.iter_mut().zip(gr_rev.iter_mut()).enumerate() {
+        *c = cen_r.data[y * w + w - 1 - k];
+        *g = gx_r.data[y * w + w - 1 - k];
+    }
+    let (cl_row, gl_row) = (cen_l.row(y), gx_l.row(y));
+    for (x, costs) in row.chunks_exact_mut(ndisp).enumerate() {
+        let (cl, gl) = (cl_row[x], gl_row[x]);
+        let in_view = ndisp.min(x + 1);
+        let k0 = w - 1 - x;
+        let cr = &cr_rev[k0..][..in_view];
+        let gr = &gr_rev[k0..][..in_view];
+        let (inside, outside) = costs.split_at_mut(in_view);
+        for ((c, &cr), &gr) in inside.iter_mut().zip(cr).zip(gr) {
+            let ham = (cl ^ cr).count_ones() as f32;
+            *c = a * ham.min(tc) + b * (gl - gr).abs().min(tg);
+        }
+        outside.fill(out_of_view);
+    }
 }
 
 /// Derives the right view's volume from the left one: `C_R(x, d) = C_L(x + d, d)`, and `out_of_view` where
