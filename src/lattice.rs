@@ -82,6 +82,7 @@ pub struct LatticeScratch {
 }
 
 /// Per-pixel result of embedding a feature vector: simplex vertex keys and barycentric weights.
+#[derive(Clone, Copy, Debug)]
 struct Embedding {
     keys: [[i16; D]; D1],
     weights: [f32; D1],
@@ -99,28 +100,19 @@ impl Lattice {
             features_fit(image.width, image.height, sigma_xy, sigma_rgb),
             "lattice features too large for i16 keys"
         );
-        let (w, npix) = (image.width, image.len());
-        let (inv_xy, inv_rgb) = (1.0 / sigma_xy, 1.0 / sigma_rgb);
+        let npix = image.len();
+        let scales = [1.0 / sigma_xy, 1.0 / sigma_rgb];
 
-        // 1. Embed every pixel (parallel, no shared state).
-        let embeddings: Vec<Embedding> = (0..npix)
-            .into_par_iter()
-            .with_min_len(1024)
-            .map(|i| {
-                let [r, g, b] = image.rgb(i);
-                let f = [(i % w) as f32 * inv_xy, (i / w) as f32 * inv_xy, r * inv_rgb, g * inv_rgb, b * inv_rgb];
-                embed(&f)
-            })
+        // 1. Embed every pixel and number the simplex vertices in raster order of first appearance, block by
+        //    block in parallel.
+        let (pix_vertex, pix_weight, keys, table) = assign_vertex_ids(Features::Image { image, scales });
+        let nvert = keys.len();
+        let self_weight = pix_weight
+            .par_chunks(D1)
+            .map(|w| self_weight_of(w.try_into().expect("D1 weights")) * OUTPUT_SCALE)
             .collect();
 
-        // 2. Vertex ids in raster order of first appearance, found block by block in parallel.
-        let (pix_vertex, keys, table) = assign_vertex_ids(&embeddings);
-        let nvert = keys.len();
-        let pix_weight: Vec<f32> = embeddings.iter().flat_map(|e| e.weights).collect();
-        let self_weight = embeddings.par_iter().map(|e| self_weight_of(&e.weights) * OUTPUT_SCALE).collect();
-        drop(embeddings);
-
-        // 3. Splat gather lists (CSR), entries in pixel order.
+        // 2. Splat gather lists (CSR), entries in pixel order.
         let mut splat_start = vec![0u32; nvert + 1];
         for &v in &pix_vertex {
             splat_start[v as usize + 1] += 1;
@@ -136,7 +128,7 @@ impl Lattice {
             *slot += 1;
         }
 
-        // 4. Blur neighbours along each lattice direction: key ± (1, …, 1) ∓ (d+1)·e_dir.
+        // 3. Blur neighbours along each lattice direction: key ± (1, …, 1) ∓ (d+1)·e_dir.
         let mut blur_nbr = vec![[NONE; 2]; D1 * nvert];
         for (dir, nbrs) in blur_nbr.chunks_exact_mut(nvert.max(1)).enumerate() {
             nbrs.par_iter_mut().zip(keys.par_iter()).with_min_len(1024).for_each(|(n, key)| {
@@ -312,6 +304,7 @@ fn self_weight_of(w: &[f32; D1]) -> f32 {
 /// The feature is scaled so that the lattice blur has unit standard deviation per feature unit, lifted onto the
 /// hyperplane Σ x = 0 of R^(d+1), rounded to the nearest remainder-0 lattice point, and the simplex is read off
 /// the ranking of the rounding residuals (Adams et al. 2010, §3.1).
+#[inline(always)]
 fn embed(f: &[f32; D]) -> Embedding {
     // Elevation onto the hyperplane (E matrix), with the per-axis scale √(2/3)·(d+1)/√((i+1)(i+2)).
     let mut elevated = [0.0f32; D1];
@@ -391,30 +384,68 @@ fn embed(f: &[f32; D]) -> Embedding {
     Embedding { keys, weights }
 }
 
-/// Numbers the simplex vertices of all pixels by first appearance in raster order: per-entry ids
-/// (`[pixel·D1 + k]`), the keys in id order, and the table from key to id.
+/// Where [`number_block`] gets each pixel's embedding from.
+#[derive(Clone, Copy)]
+enum Features<'a> {
+    /// Embedded on the fly from an image, features (x·s_xy, y·s_xy, r·s_rgb, g·s_rgb, b·s_rgb), `scales` =
+    /// [s_xy, s_rgb].
+    Image { image: &'a RgbImage, scales: [f32; 2] },
+    /// Already embedded (tests).
+    #[cfg(test)]
+    Embedded(&'a [Embedding]),
+}
+
+impl Features<'_> {
+    fn len(&self) -> usize {
+        match self {
+            Features::Image { image, .. } => image.len(),
+            #[cfg(test)]
+            Features::Embedded(e) => e.len(),
+        }
+    }
+
+    #[inline(always)]
+    fn at(&self, i: usize) -> Embedding {
+        match self {
+            Features::Image { image, scales: [sxy, srgb] } => {
+                let w = image.width;
+                let [r, g, b] = image.rgb(i);
+                embed(&[(i % w) as f32 * sxy, (i / w) as f32 * sxy, r * srgb, g * srgb, b * srgb])
+            }
+            #[cfg(test)]
+            Features::Embedded(e) => e[i],
+        }
+    }
+}
+
+/// Ids, weights and keys of the simplex vertices of all pixels, numbered by first appearance in raster order:
+/// per-entry ids and barycentric weights (`[pixel·D1 + k]`), the keys in id order, and the table from key to
+/// id.
 ///
-/// Blocks of pixels are numbered in parallel, each with its own table, and the blocks' keys are then merged in
-/// block order into one table; a key's global id is thus its first appearance in the whole raster, exactly as in
-/// one sequential pass, whatever the number of blocks or threads.
-fn assign_vertex_ids(embeddings: &[Embedding]) -> (Vec<u32>, Vec<[i16; D]>, KeyTable) {
-    let block = embeddings.len().div_ceil(rayon::current_num_threads().max(1)).max(16_384);
-    assign_vertex_ids_in_blocks(embeddings, block)
+/// Blocks of pixels are embedded and numbered in parallel, each with its own table, and the blocks' keys are
+/// then merged in block order into one table; a key's global id is thus its first appearance in the whole
+/// raster, exactly as in one sequential pass, whatever the number of blocks or threads.
+fn assign_vertex_ids(features: Features<'_>) -> (Vec<u32>, Vec<f32>, Vec<[i16; D]>, KeyTable) {
+    let block = features.len().div_ceil(rayon::current_num_threads().max(1)).max(16_384);
+    assign_vertex_ids_in_blocks(features, block)
 }
 
 /// [`assign_vertex_ids`] with a given block size in pixels.
-fn assign_vertex_ids_in_blocks(embeddings: &[Embedding], block: usize) -> (Vec<u32>, Vec<[i16; D]>, KeyTable) {
-    let npix = embeddings.len();
+fn assign_vertex_ids_in_blocks(features: Features<'_>, block: usize) -> (Vec<u32>, Vec<f32>, Vec<[i16; D]>, KeyTable) {
+    let npix = features.len();
     let block = block.max(1);
     let mut pix_vertex = vec![0u32; npix * D1];
+    let mut pix_weight = vec![0.0f32; npix * D1];
     // Per block: local ids into pix_vertex, and the block's keys in local id order.
     let local_keys: Vec<Vec<[i16; D]>> = pix_vertex
         .par_chunks_mut(block * D1)
-        .zip(embeddings.par_chunks(block))
-        .map(|(ids, embs)| number_block(embs, ids))
+        .zip(pix_weight.par_chunks_mut(block * D1))
+        .enumerate()
+        .map(|(b, (ids, weights))| number_block(features, b * block, ids, weights))
         .collect();
-    let mut table = KeyTable::with_capacity(npix + 64);
-    let mut keys: Vec<[i16; D]> = Vec::with_capacity(npix);
+    let total: usize = local_keys.iter().map(Vec::len).sum();
+    let mut table = KeyTable::with_capacity(total);
+    let mut keys: Vec<[i16; D]> = Vec::with_capacity(total);
     let maps: Vec<Vec<u32>> = local_keys
         .iter()
         .map(|block_keys| {
@@ -433,20 +464,26 @@ fn assign_vertex_ids_in_blocks(embeddings: &[Embedding], block: usize) -> (Vec<u
     pix_vertex.par_chunks_mut(block * D1).zip(maps.par_iter()).for_each(|(ids, map)| {
         ids.iter_mut().for_each(|id| *id = map[*id as usize]);
     });
-    (pix_vertex, keys, table)
+    (pix_vertex, pix_weight, keys, table)
 }
 
-/// Numbers the vertices of one block of pixels by first appearance (ids into `ids`), returning its keys in id
-/// order.
-fn number_block(embeddings: &[Embedding], ids: &mut [u32]) -> Vec<[i16; D]> {
-    let mut table = KeyTable::with_capacity(embeddings.len() + 64);
-    let mut keys: Vec<[i16; D]> = Vec::with_capacity(embeddings.len());
+/// Embeds the pixels `first..` (as many as `ids` has room for) and numbers their vertices by first appearance
+/// (ids into `ids`, barycentric weights into `weights`), returning the block's keys in id order. Compiled for
+/// AVX2 + FMA as well, where the embedding's rounding is one instruction instead of a libm call (same results).
+#[multiversion(targets("x86_64+avx2+fma"))]
+fn number_block<'f>(features: Features<'f>, first: usize, ids: &mut [u32], weights: &mut [f32]) -> Vec<[i16; D]> {
+    let n = ids.len() / D1;
+    // About 0.4 vertices per pixel on natural images; the table grows if there are more.
+    let mut table = KeyTable::with_capacity(n / 2);
+    let mut keys: Vec<[i16; D]> = Vec::with_capacity(n / 2);
     // Horizontally adjacent pixels share most simplex vertices: look in the previous pixel's first (a few
     // comparisons) and only probe the table on a miss. Same ids as probing every key.
-    let mut prev: Option<(&[[i16; D]; D1], [u32; D1])> = None;
-    for (e, ids) in embeddings.iter().zip(ids.chunks_exact_mut(D1)) {
+    let mut prev: Option<([[i16; D]; D1], [u32; D1])> = None;
+    for (i, (ids, wts)) in (first..).zip(ids.chunks_exact_mut(D1).zip(weights.chunks_exact_mut(D1))) {
+        let e = features.at(i);
+        wts.copy_from_slice(&e.weights);
         for (key, id) in e.keys.iter().zip(ids.iter_mut()) {
-            let cached = prev.and_then(|(pk, pid)| pk.iter().position(|k| k == key).map(|j| pid[j]));
+            let cached = prev.as_ref().and_then(|(pk, pid)| pk.iter().position(|k| k == key).map(|j| pid[j]));
             *id = match cached {
                 Some(found) => found,
                 None => {
@@ -460,7 +497,7 @@ fn number_block(embeddings: &[Embedding], ids: &mut [u32]) -> Vec<[i16; D]> {
         }
         let mut own = [0u32; D1];
         own.copy_from_slice(ids);
-        prev = Some((&e.keys, own));
+        prev = Some((e.keys, own));
     }
     keys
 }
@@ -482,8 +519,9 @@ struct Slot {
 const EMPTY: Slot = Slot { key: [0; D], id: NONE };
 
 impl KeyTable {
+    /// A table with room for `n` keys.
     fn with_capacity(n: usize) -> Self {
-        let cap = n.next_power_of_two().max(16);
+        let cap = (n + n / 3 + 1).next_power_of_two().max(16);
         KeyTable { slots: vec![EMPTY; cap], mask: cap - 1, len: 0 }
     }
 
@@ -510,10 +548,11 @@ impl KeyTable {
         (h ^ (h >> 29)) as usize
     }
 
-    /// The id of `key`, inserting it with `new_id` if absent. Doubles the table when it becomes half full, so
-    /// probing always ends (images with very noisy colours have up to d+1 distinct vertices per pixel).
+    /// The id of `key`, inserting it with `new_id` if absent. Doubles the table when it would become more than
+    /// 3/4 full, so probing always ends (images with very noisy colours have up to d+1 distinct vertices per
+    /// pixel).
     fn insert(&mut self, key: &[i16; D], new_id: u32) -> u32 {
-        if 2 * (self.len + 1) > self.slots.len() {
+        if 4 * (self.len + 1) > 3 * self.slots.len() {
             self.grow();
         }
         let mut s = Self::slot(key) & self.mask;
@@ -744,8 +783,9 @@ mod tests {
         }
         assert!(keys_ref.len() > 100, "too few vertices for a meaningful test: {}", keys_ref.len());
         for block in [1, 5, 37, 100, 851, w * h] {
-            let (ids, keys, table) = assign_vertex_ids_in_blocks(&embeddings, block);
+            let (ids, weights, keys, table) = assign_vertex_ids_in_blocks(Features::Embedded(&embeddings), block);
             assert_eq!(ids, ids_ref, "block {block}");
+            assert!(weights.iter().eq(embeddings.iter().flat_map(|e| e.weights.iter())), "block {block}");
             assert_eq!(keys, keys_ref, "block {block}");
             for (id, key) in keys.iter().enumerate() {
                 assert_eq!(table.get(key), id as u32);
