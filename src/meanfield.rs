@@ -360,32 +360,142 @@ impl<'a> MeanField<'a> {
             None => &[],
         };
         let this = &*self;
-        let init = || RowScratch::new(m);
+        let len = w * m;
         match self.schedule {
             Schedule::Jacobi => {
                 let src = &q;
-                next.par_chunks_mut(w * m)
-                    .enumerate()
-                    .for_each_init(init, |s, (y, out)| update_row(this, y, Pass::All, src, src, vals, out, s));
+                next.par_chunks_mut(len).enumerate().for_each_init(
+                    || RowScratch::new(m),
+                    |s, (y, out)| {
+                        let own = Some(&src[y * len..][..len]);
+                        update_row(this, y, Pass::All, NeighbourRows::of(src, y, len), own, vals, out, s);
+                    },
+                );
                 std::mem::swap(&mut q, &mut next);
             }
             Schedule::Checkerboard => {
-                // Pass 1: pixels with x + y even, from the previous Q, into `next`.
-                let src = &q;
-                next.par_chunks_mut(w * m)
-                    .enumerate()
-                    .for_each_init(init, |s, (y, out)| update_row(this, y, Pass::Even, src, src, vals, out, s));
-                // Pass 2: odd pixels, whose 4 neighbours are all even, from the pass-1 values; written over
-                // the previous Q (each pixel reads its own old value first), with the even ones copied in.
-                let even = &next;
-                q.par_chunks_mut(w * m)
-                    .enumerate()
-                    .for_each_init(init, |s, (y, out)| update_row(this, y, Pass::Odd, even, &[], vals, out, s));
+                let bands = checkerboard_bands(self.cost.height, rayon::current_num_threads());
+                if bands.is_empty() {
+                    this.checkerboard_two_pass(&mut q, &mut next, vals);
+                } else {
+                    this.checkerboard_pipelined(&mut q, &mut next, vals, &bands);
+                }
             }
         }
         self.q = q;
         self.scratch = scratch;
         self.next = next;
+    }
+
+    /// Red-black update in two sweeps over the image: pass 1 computes the pixels with x + y even from the
+    /// previous Q into `next`; pass 2 the odd ones, whose 4 neighbours are all even, from the pass-1 values,
+    /// written over the previous Q (each pixel reads its own old value first), with the even ones copied in.
+    fn checkerboard_two_pass(&self, q: &mut [f32], next: &mut [f32], vals: &[f32]) {
+        let (w, m) = (self.cost.width, self.cost.ndisp);
+        let len = w * m;
+        let src: &[f32] = q;
+        next.par_chunks_mut(len).enumerate().for_each_init(
+            || RowScratch::new(m),
+            |s, (y, out)| {
+                let own = Some(&src[y * len..][..len]);
+                update_row(self, y, Pass::Even, NeighbourRows::of(src, y, len), own, vals, out, s);
+            },
+        );
+        let even: &[f32] = next;
+        q.par_chunks_mut(len).enumerate().for_each_init(
+            || RowScratch::new(m),
+            |s, (y, out)| update_row(self, y, Pass::Odd, NeighbourRows::of(even, y, len), None, vals, out, s),
+        );
+    }
+
+    /// The same update as [`MeanField::checkerboard_two_pass`] in one sweep: pass 2 of row y − 1 follows pass 1
+    /// of row y, while rows y − 1 … y + 1 are still in cache. Within a band of rows, the order pass1(y),
+    /// pass2(y − 1) keeps every dependency (an even pixel reads the old odd values of rows y − 1 … y + 1, whose
+    /// pass 2 comes later; an odd pixel reads the new even values of rows y − 1 … y + 1, computed before).
+    /// Bands run in parallel; pass 2 of each band's first and last rows, which need a neighbouring band's pass 1,
+    /// runs afterwards. Same results as the two sweeps, bit for bit, for any banding.
+    fn checkerboard_pipelined(&self, q: &mut [f32], next: &mut [f32], vals: &[f32], bands: &[(usize, usize)]) {
+        let m = self.cost.ndisp;
+        let len = self.cost.width * m;
+        let h = self.cost.height;
+        // Split Q: each band's first and last rows are only read until phase B; its interior rows are updated
+        // by the band's own task.
+        let mut edges: Vec<(&[f32], &[f32])> = Vec::with_capacity(bands.len());
+        let mut interiors: Vec<&mut [f32]> = Vec::with_capacity(bands.len());
+        let mut rest: &mut [f32] = q;
+        for &(a, b) in bands {
+            let (band, r) = std::mem::take(&mut rest).split_at_mut((b - a) * len);
+            rest = r;
+            let (first, r) = band.split_at_mut(len);
+            let (interior, last) = r.split_at_mut((b - a - 2) * len);
+            edges.push((first, last));
+            interiors.push(interior);
+        }
+        let mut next_bands: Vec<&mut [f32]> = Vec::with_capacity(bands.len());
+        let mut rest: &mut [f32] = next;
+        for &(a, b) in bands {
+            let (band, r) = std::mem::take(&mut rest).split_at_mut((b - a) * len);
+            rest = r;
+            next_bands.push(band);
+        }
+        // Phase A: per band, pass 1 of every row and pass 2 of the interior rows.
+        let edges = &edges;
+        interiors.into_par_iter().zip(next_bands.into_par_iter()).enumerate().for_each(|(k, (interior, nb))| {
+            let (a, b) = bands[k];
+            let mut s = RowScratch::new(m);
+            // Row y of the (old) Q, for y in a − 1 ..= b.
+            for y in a..b {
+                {
+                    let interior: &[f32] = interior;
+                    let q_row = |r: usize| -> &[f32] {
+                        if r + 1 == a {
+                            edges[k - 1].1
+                        } else if r == b {
+                            edges[k + 1].0
+                        } else if r == a {
+                            edges[k].0
+                        } else if r + 1 == b {
+                            edges[k].1
+                        } else {
+                            &interior[(r - a - 1) * len..][..len]
+                        }
+                    };
+                    let nbrs = NeighbourRows {
+                        above: (y > 0).then(|| q_row(y - 1)),
+                        same: q_row(y),
+                        below: (y + 1 < h).then(|| q_row(y + 1)),
+                    };
+                    let out = &mut nb[(y - a) * len..][..len];
+                    update_row(self, y, Pass::Even, nbrs, Some(q_row(y)), vals, out, &mut s);
+                }
+                // Pass 2 of the interior row y − 1 (rows a + 1 ..= b − 2), now that pass 1 of y is done.
+                if y >= a + 2 {
+                    let r = y - 1;
+                    let even: &[f32] = nb;
+                    let nbrs = NeighbourRows::of(even, r - a, len);
+                    let out = &mut interior[(r - a - 1) * len..][..len];
+                    update_row(self, r, Pass::Odd, nbrs, None, vals, out, &mut s);
+                }
+            }
+        });
+        // Phase B: pass 2 of each band's first and last rows, from the complete pass 1.
+        let even: &[f32] = next;
+        let mut edge_rows: Vec<(usize, &mut [f32])> = Vec::with_capacity(2 * bands.len());
+        let mut rest: &mut [f32] = q;
+        let mut at = 0;
+        for &(a, b) in bands {
+            for r in [a, b - 1] {
+                let (_, tail) = std::mem::take(&mut rest).split_at_mut((r - at) * len);
+                let (row, tail) = tail.split_at_mut(len);
+                edge_rows.push((r, row));
+                rest = tail;
+                at = r + 1;
+            }
+        }
+        edge_rows.into_par_iter().for_each_init(
+            || RowScratch::new(m),
+            |s, (r, out)| update_row(self, r, Pass::Odd, NeighbourRows::of(even, r, len), None, vals, out, s),
+        );
     }
 
     /// Pixel i's message factors: Q̃_i(l) = out_scale · (raw_i(l) − self_w · Q_i(l)), where raw is the lattice
@@ -442,21 +552,19 @@ impl<'a> MeanField<'a> {
 /// Compiled for AVX2 + FMA as well, picked at run time (same results: no contraction of a·b + c).
 #[allow(clippy::too_many_arguments)]
 #[multiversion(targets("x86_64+avx2+fma"))]
-fn update_row<'c>(
+fn update_row<'c, 'r>(
     mf: &MeanField<'c>,
     y: usize,
     pass: Pass,
-    nbr_src: &[f32],
-    self_src: &[f32],
+    nbrs: NeighbourRows<'r>,
+    own_row: Option<&[f32]>,
     vals: &[f32],
     out_row: &mut [f32],
     s: &mut RowScratch,
 ) {
-    let (w, h, m) = (mf.cost.width, mf.cost.height, mf.cost.ndisp);
+    let (w, m) = (mf.cost.width, mf.cost.ndisp);
     let PairwiseWeights { fcm, lcm } = mf.weights;
     let lattice = mf.lattice.as_ref().filter(|_| fcm > 0.0);
-    // Missing neighbours (image border) read a row of zeros with weight 0.
-    let row = |j: Option<usize>| j.map_or(&s.zeros[..], |j| &nbr_src[j * m..][..m]);
     for (x, e) in out_row.chunks_exact_mut(m).enumerate() {
         let i = y * w + x;
         let odd = (x + y) % 2 == 1;
@@ -465,27 +573,34 @@ fn update_row<'c>(
             Pass::Even if odd => continue,
             Pass::Even => {}
             Pass::Odd if !odd => {
-                e.copy_from_slice(&nbr_src[i * m..][..m]);
+                e.copy_from_slice(&nbrs.same[x * m..][..m]);
                 continue;
             }
             Pass::Odd => {}
         }
-        let own: &[f32] = if self_src.is_empty() { e } else { &self_src[i * m..][..m] };
+        let own: &[f32] = match own_row {
+            Some(r) => &r[x * m..][..m],
+            None => e,
+        };
         let full = lattice.map(|lat| {
             lat.slice(vals, i, &mut s.msg);
             let (out_scale, self_weight) = mf.message_factors(i);
             FullTerm { msg: &s.msg, own, omega: fcm, out_scale, self_weight }
         });
         let local = (lcm > 0.0).then(|| {
-            let (l, r) = ((x > 0).then(|| i - 1), (x + 1 < w).then(|| i + 1));
-            let (u, d) = ((y > 0).then(|| i - w), (y + 1 < h).then(|| i + w));
+            // Missing neighbours (image border) read a row of zeros with weight 0.
+            let zeros = &s.zeros[..];
+            let (l, r) = ((x > 0).then(|| x - 1), (x + 1 < w).then_some(x + 1));
             let wts = [
-                l.map_or(0.0, |j| mf.local.right.data[j]),
+                l.map_or(0.0, |_| mf.local.right.data[i - 1]),
                 r.map_or(0.0, |_| mf.local.right.data[i]),
-                u.map_or(0.0, |j| mf.local.down.data[j]),
-                d.map_or(0.0, |_| mf.local.down.data[i]),
+                nbrs.above.map_or(0.0, |_| mf.local.down.data[i - w]),
+                nbrs.below.map_or(0.0, |_| mf.local.down.data[i]),
             ];
-            let (ql, qr, qu, qd) = (row(l), row(r), row(u), row(d));
+            let ql = l.map_or(zeros, |l| &nbrs.same[l * m..][..m]);
+            let qr = r.map_or(zeros, |r| &nbrs.same[r * m..][..m]);
+            let qu = nbrs.above.map_or(zeros, |row| &row[x * m..][..m]);
+            let qd = nbrs.below.map_or(zeros, |row| &row[x * m..][..m]);
             // Accumulated in the order left, right, up, down (the sequential reference's order).
             for (k, p) in s.p_padded[1..=m].iter_mut().enumerate() {
                 *p = wts[0] * ql[k] + wts[1] * qr[k] + wts[2] * qu[k] + wts[3] * qd[k];
@@ -494,6 +609,37 @@ fn update_row<'c>(
         });
         pixel_energies(mf.cost.pixel(i), mf.unary_scale, full, local, &mut s.energy);
         softmax_neg_into(&s.energy, e);
+    }
+}
+
+/// Bands of rows for [`MeanField::checkerboard_pipelined`]: about two per thread, each at least 3 rows
+/// (`[a, b)` ranges covering `0..height`); empty if the image has fewer than 3 rows. The banding changes the
+/// order of work only, never the results.
+fn checkerboard_bands(height: usize, threads: usize) -> Vec<(usize, usize)> {
+    if height < 3 {
+        return Vec::new();
+    }
+    let count = (2 * threads.max(1)).min(height / 3).max(1);
+    (0..count).map(|k| (k * height / count, (k + 1) * height / count)).collect()
+}
+
+/// The marginals of the rows around the row being updated (each `width × M`; `None` outside the image).
+#[derive(Clone, Copy)]
+struct NeighbourRows<'s> {
+    above: Option<&'s [f32]>,
+    same: &'s [f32],
+    below: Option<&'s [f32]>,
+}
+
+impl<'s> NeighbourRows<'s> {
+    /// Rows y − 1, y, y + 1 of a whole volume with rows of `len` values.
+    fn of(volume: &'s [f32], y: usize, len: usize) -> Self {
+        let h = volume.len() / len;
+        NeighbourRows {
+            above: (y > 0).then(|| &volume[(y - 1) * len..][..len]),
+            same: &volume[y * len..][..len],
+            below: (y + 1 < h).then(|| &volume[(y + 1) * len..][..len]),
+        }
     }
 }
 
@@ -792,6 +938,47 @@ mod tests {
         for (a, b) in fast.data.iter().zip(&q) {
             assert!((a - b).abs() < 1e-5, "{a} vs {b}");
         }
+    }
+
+    /// The one-sweep (banded) red-black update against the two-sweep one, bit for bit, for several heights and
+    /// bandings, with both pairwise terms.
+    #[test]
+    fn meanfield_pipelined_checkerboard_matches_two_sweeps() {
+        for (w, h) in [(9, 3), (8, 4), (11, 7), (10, 13)] {
+            let (left, right, _) = banded_pair(w, h);
+            let nd = 5;
+            let cost = crate::cost::build_cost_volume(&left, &right, nd, &CostParams::default());
+            let p = MeanFieldParams { schedule: Schedule::Checkerboard, ..MeanFieldParams::default() };
+            let weights = PairwiseWeights { fcm: 8.0, lcm: 1.5 };
+            let reference = {
+                let mut mf = MeanField::new(&cost, &left, &p, weights);
+                for _ in 0..3 {
+                    let (mut q, mut next) = (std::mem::take(&mut mf.q), std::mem::take(&mut mf.next));
+                    let mut scratch = std::mem::take(&mut mf.scratch);
+                    let vals = mf.lattice.as_ref().unwrap().splat_blur(&q, Some(&mf.in_scale), nd, &mut scratch);
+                    mf.checkerboard_two_pass(&mut q, &mut next, vals);
+                    (mf.q, mf.next, mf.scratch) = (q, next, scratch);
+                }
+                mf.q
+            };
+            for count in 1..=h / 3 {
+                let bands: Vec<(usize, usize)> = (0..count).map(|k| (k * h / count, (k + 1) * h / count)).collect();
+                let mut mf = MeanField::new(&cost, &left, &p, weights);
+                for _ in 0..3 {
+                    let (mut q, mut next) = (std::mem::take(&mut mf.q), std::mem::take(&mut mf.next));
+                    let mut scratch = std::mem::take(&mut mf.scratch);
+                    let vals = mf.lattice.as_ref().unwrap().splat_blur(&q, Some(&mf.in_scale), nd, &mut scratch);
+                    mf.checkerboard_pipelined(&mut q, &mut next, vals, &bands);
+                    (mf.q, mf.next, mf.scratch) = (q, next, scratch);
+                }
+                assert!(
+                    mf.q.iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{w}x{h}, bands {bands:?}"
+                );
+            }
+        }
+        assert!(checkerboard_bands(2, 4).is_empty());
+        assert_eq!(checkerboard_bands(7, 4), vec![(0, 3), (3, 7)]);
     }
 
     #[test]
