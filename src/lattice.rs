@@ -181,8 +181,9 @@ impl Lattice {
         let nc = channels;
         assert_eq!(output.len(), self.npix * nc, "lattice filter output has the wrong size");
         let vals = self.splat_blur(input, None, nc, scratch);
-        output.par_chunks_mut(nc.max(1)).enumerate().with_min_len(256).for_each(|(p, out)| {
-            self.slice(vals, p, out);
+        const CHUNK: usize = 256;
+        output.par_chunks_mut(nc.max(1) * CHUNK).enumerate().for_each(|(k, out)| {
+            slice_pixels(self, vals, k * CHUNK, out, nc.max(1));
         });
     }
 
@@ -266,6 +267,15 @@ fn splat_vertices(lat: &Lattice, input: &[f32], pixel_scale: Option<&[f32]>, fir
                 *a += w * s;
             }
         }
+    }
+}
+
+/// Slices the pixels `first..` (one `nc`-channel row each in `out`). Compiled for AVX2 + FMA as well (same
+/// results).
+#[multiversion(targets("x86_64+avx2+fma"))]
+fn slice_pixels(lat: &Lattice, vals: &[f32], first: usize, out: &mut [f32], nc: usize) {
+    for (p, out) in (first..).zip(out.chunks_exact_mut(nc)) {
+        lat.slice(vals, p, out);
     }
 }
 
