@@ -169,9 +169,12 @@ fn filter_row<'c>(ctx: &RowContext<'c>, scratch: &mut Scratch, y: usize, row: &m
             };
             let terms = sseg.iter().zip(rseg).zip(gseg).zip(bseg);
             if dseg.iter().all(|d| d.is_finite()) {
-                // The usual case after the occlusion fill: a branch-free loop that vectorises.
+                // The usual case after the occlusion fill: a branch-free loop that vectorises (written through a
+                // slice: `extend` over this iterator is a push loop that does not).
                 scratch.vals.extend_from_slice(dseg);
-                scratch.wts.extend(terms.map(exponent));
+                let start = scratch.wts.len();
+                scratch.wts.resize(start + dseg.len(), 0.0);
+                scratch.wts[start..].iter_mut().zip(terms).for_each(|(o, t)| *o = exponent(t));
             } else {
                 for (&d, t) in dseg.iter().zip(terms) {
                     if d.is_finite() {
