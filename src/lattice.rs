@@ -105,8 +105,9 @@ impl Lattice {
 
         // 1. Embed every pixel and number the simplex vertices in raster order of first appearance, block by
         //    block in parallel.
-        let (pix_vertex, pix_weight, keys, table) = assign_vertex_ids(Features::Image { image, scales });
-        let nvert = keys.len();
+        let (pix_vertex, pix_weight, table) = assign_vertex_ids(Features::Image { image, scales });
+        let keys = &table.keys;
+        let nvert = table.len();
         let self_weight = pix_weight
             .par_chunks(D1)
             .map(|w| self_weight_of(w.try_into().expect("D1 weights")) * OUTPUT_SCALE)
@@ -435,13 +436,13 @@ impl Features<'_> {
 /// Blocks of pixels are embedded and numbered in parallel, each with its own table, and the blocks' keys are
 /// then merged in block order into one table; a key's global id is thus its first appearance in the whole
 /// raster, exactly as in one sequential pass, whatever the number of blocks or threads.
-fn assign_vertex_ids(features: Features<'_>) -> (Vec<u32>, Vec<f32>, Vec<[i16; D]>, KeyTable) {
+fn assign_vertex_ids(features: Features<'_>) -> (Vec<u32>, Vec<f32>, KeyTable) {
     let block = features.len().div_ceil(rayon::current_num_threads().max(1)).max(16_384);
     assign_vertex_ids_in_blocks(features, block)
 }
 
 /// [`assign_vertex_ids`] with a given block size in pixels.
-fn assign_vertex_ids_in_blocks(features: Features<'_>, block: usize) -> (Vec<u32>, Vec<f32>, Vec<[i16; D]>, KeyTable) {
+fn assign_vertex_ids_in_blocks(features: Features<'_>, block: usize) -> (Vec<u32>, Vec<f32>, KeyTable) {
     let npix = features.len();
     let block = block.max(1);
     let mut pix_vertex = vec![0u32; npix * D1];
@@ -455,26 +456,12 @@ fn assign_vertex_ids_in_blocks(features: Features<'_>, block: usize) -> (Vec<u32
         .collect();
     let total: usize = local_keys.iter().map(Vec::len).sum();
     let mut table = KeyTable::with_capacity(total);
-    let mut keys: Vec<[i16; D]> = Vec::with_capacity(total);
-    let maps: Vec<Vec<u32>> = local_keys
-        .iter()
-        .map(|block_keys| {
-            block_keys
-                .iter()
-                .map(|key| {
-                    let id = table.insert(key, keys.len() as u32);
-                    if id as usize == keys.len() {
-                        keys.push(*key);
-                    }
-                    id
-                })
-                .collect()
-        })
-        .collect();
+    let maps: Vec<Vec<u32>> =
+        local_keys.iter().map(|block_keys| block_keys.iter().map(|key| table.insert(key)).collect()).collect();
     pix_vertex.par_chunks_mut(block * D1).zip(maps.par_iter()).for_each(|(ids, map)| {
         ids.iter_mut().for_each(|id| *id = map[*id as usize]);
     });
-    (pix_vertex, pix_weight, keys, table)
+    (pix_vertex, pix_weight, table)
 }
 
 /// Embeds the pixels `first..` (as many as `ids` has room for) and numbers their vertices by first appearance
@@ -485,7 +472,6 @@ fn number_block<'f>(features: Features<'f>, first: usize, ids: &mut [u32], weigh
     let n = ids.len() / D1;
     // About 0.4 vertices per pixel on natural images; the table grows if there are more.
     let mut table = KeyTable::with_capacity(n / 2);
-    let mut keys: Vec<[i16; D]> = Vec::with_capacity(n / 2);
     // Horizontally adjacent pixels share most simplex vertices: look in the previous pixel's first (a few
     // comparisons) and only probe the table on a miss. Same ids as probing every key.
     let mut prev: Option<([[i16; D]; D1], [u32; D1])> = None;
@@ -496,85 +482,85 @@ fn number_block<'f>(features: Features<'f>, first: usize, ids: &mut [u32], weigh
             let cached = prev.as_ref().and_then(|(pk, pid)| pk.iter().position(|k| k == key).map(|j| pid[j]));
             *id = match cached {
                 Some(found) => found,
-                None => {
-                    let found = table.insert(key, keys.len() as u32);
-                    if found as usize == keys.len() {
-                        keys.push(*key);
-                    }
-                    found
-                }
+                None => table.insert(key),
             };
         }
         let mut own = [0u32; D1];
         own.copy_from_slice(ids);
         prev = Some((e.keys, own));
     }
-    keys
+    table.keys
 }
 
-/// Open-addressing hash table from lattice keys to vertex ids (linear probing, power-of-two capacity). Key and id
-/// share a 16-byte slot, so a probe touches one cache line.
+/// Open-addressing hash table from lattice keys to vertex ids, numbering new keys in insertion order (linear
+/// probing, power-of-two capacity). A slot is 8 bytes, the id and 32 bits of the key's hash, so the table stays
+/// small enough for the L2 cache and a probe only reads the stored key (`keys[id]`) when the hash bits match.
 struct KeyTable {
-    slots: Vec<Slot>,
+    /// `hash_bits << 32 | id`, or `EMPTY`.
+    slots: Vec<u64>,
+    /// The keys in id order.
+    keys: Vec<[i16; D]>,
     mask: usize,
-    len: usize,
 }
 
-#[derive(Clone, Copy)]
-struct Slot {
-    key: [i16; D],
-    id: u32,
-}
-
-const EMPTY: Slot = Slot { key: [0; D], id: NONE };
+const EMPTY: u64 = u64::MAX;
 
 impl KeyTable {
     /// A table with room for `n` keys.
     fn with_capacity(n: usize) -> Self {
         let cap = (n + n / 3 + 1).next_power_of_two().max(16);
-        KeyTable { slots: vec![EMPTY; cap], mask: cap - 1, len: 0 }
+        KeyTable { slots: vec![EMPTY; cap], keys: Vec::with_capacity(n), mask: cap - 1 }
+    }
+
+    /// Number of keys.
+    fn len(&self) -> usize {
+        self.keys.len()
     }
 
     /// Rehashes into a table twice the size (ids are kept, so vertex numbering does not change).
     fn grow(&mut self) {
         let cap = self.slots.len() * 2;
-        let old = std::mem::replace(&mut self.slots, vec![EMPTY; cap]);
+        self.slots = vec![EMPTY; cap];
         self.mask = cap - 1;
-        for slot in old.into_iter().filter(|s| s.id != NONE) {
-            let mut s = Self::slot(&slot.key) & self.mask;
-            while self.slots[s].id != NONE {
+        for (id, key) in self.keys.iter().enumerate() {
+            let h = Self::hash(key);
+            let mut s = h as usize & self.mask;
+            while self.slots[s] != EMPTY {
                 s = (s + 1) & self.mask;
             }
-            self.slots[s] = slot;
+            self.slots[s] = (h >> 32) << 32 | id as u64;
         }
     }
 
     #[inline]
-    fn slot(key: &[i16; D]) -> usize {
+    fn hash(key: &[i16; D]) -> u64 {
         let mut h: u64 = 0;
         for &k in key {
             h = (h ^ (k as u16 as u64)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
         }
-        (h ^ (h >> 29)) as usize
+        h ^ (h >> 29)
     }
 
-    /// The id of `key`, inserting it with `new_id` if absent. Doubles the table when it would become more than
-    /// 3/4 full, so probing always ends (images with very noisy colours have up to d+1 distinct vertices per
-    /// pixel).
-    fn insert(&mut self, key: &[i16; D], new_id: u32) -> u32 {
-        if 4 * (self.len + 1) > 3 * self.slots.len() {
+    /// The id of `key`, inserting it with the next id (the number of keys so far) if absent. Doubles the
+    /// table when it would become more than 3/4 full, so probing always ends (images with very noisy colours
+    /// have up to d+1 distinct vertices per pixel).
+    fn insert(&mut self, key: &[i16; D]) -> u32 {
+        if 4 * (self.keys.len() + 1) > 3 * self.slots.len() {
             self.grow();
         }
-        let mut s = Self::slot(key) & self.mask;
+        let h = Self::hash(key);
+        let tag = h >> 32;
+        let mut s = h as usize & self.mask;
         loop {
-            let slot = &mut self.slots[s];
-            if slot.id == NONE {
-                *slot = Slot { key: *key, id: new_id };
-                self.len += 1;
-                return new_id;
+            let slot = self.slots[s];
+            if slot == EMPTY {
+                let id = self.keys.len() as u32;
+                self.slots[s] = tag << 32 | u64::from(id);
+                self.keys.push(*key);
+                return id;
             }
-            if slot.key == *key {
-                return slot.id;
+            if slot >> 32 == tag && self.keys[slot as u32 as usize] == *key {
+                return slot as u32;
             }
             s = (s + 1) & self.mask;
         }
@@ -582,11 +568,16 @@ impl KeyTable {
 
     /// The id of `key`, or `NONE`.
     fn get(&self, key: &[i16; D]) -> u32 {
-        let mut s = Self::slot(key) & self.mask;
+        let h = Self::hash(key);
+        let tag = h >> 32;
+        let mut s = h as usize & self.mask;
         loop {
-            let slot = &self.slots[s];
-            if slot.id == NONE || slot.key == *key {
-                return slot.id;
+            let slot = self.slots[s];
+            if slot == EMPTY {
+                return NONE;
+            }
+            if slot >> 32 == tag && self.keys[slot as u32 as usize] == *key {
+                return slot as u32;
             }
             s = (s + 1) & self.mask;
         }
@@ -793,10 +784,11 @@ mod tests {
         }
         assert!(keys_ref.len() > 100, "too few vertices for a meaningful test: {}", keys_ref.len());
         for block in [1, 5, 37, 100, 851, w * h] {
-            let (ids, weights, keys, table) = assign_vertex_ids_in_blocks(Features::Embedded(&embeddings), block);
+            let (ids, weights, table) = assign_vertex_ids_in_blocks(Features::Embedded(&embeddings), block);
+            let keys = &table.keys;
             assert_eq!(ids, ids_ref, "block {block}");
             assert!(weights.iter().eq(embeddings.iter().flat_map(|e| e.weights.iter())), "block {block}");
-            assert_eq!(keys, keys_ref, "block {block}");
+            assert_eq!(*keys, keys_ref, "block {block}");
             for (id, key) in keys.iter().enumerate() {
                 assert_eq!(table.get(key), id as u32);
             }
