@@ -261,6 +261,37 @@ fn sps_output_is_clamped() {
     assert!(out.data.iter().all(|d| (0.0..=max).contains(d)), "max {}", out.data.iter().fold(0.0f32, |a, b| a.max(*b)));
 }
 
+/// `min_support_fraction` scales the support a segment needs with its size: a cell with a small cluster of data
+/// (16 px of 256, above `min_support` = 10 but below 30% of the cell) fits its own plane without it and borrows
+/// its neighbour's with it.
+#[test]
+fn sparse_segments_borrow_with_min_support_fraction() {
+    let (w, h) = (32, 16);
+    // Two 16×16 cells: the left one fully trusted at d = 5, the right one only a 4×4 cluster at d = 9 in its
+    // bottom-right corner, nothing else.
+    let disp: Vec<f32> = (0..w * h)
+        .map(|i| match (i % w, i / w) {
+            (x, _) if x < 16 => 5.0,
+            (x, y) if x >= 28 && y >= 12 => 9.0,
+            _ => f32::INFINITY,
+        })
+        .collect();
+    let trusted: Vec<bool> = disp.iter().map(|d| d.is_finite()).collect();
+    let run = |fraction: f32| {
+        let p = SpsParams { segments: 2, min_support: 10.0, min_support_fraction: fraction, ..SpsParams::default() };
+        let (d, t) = (Plane::from_vec(w, h, disp.clone()), Plane::from_vec(w, h, trusted.clone()));
+        fit_slanted_planes(&RgbImage::new(w, h), &d, &t, &p)
+    };
+    // Far from the cluster, in the right cell.
+    let (x, y) = (22, 3);
+    let own = run(0.0);
+    assert!((own.at(x, y) - 9.0).abs() < 1e-3, "absolute threshold: own plane, got {}", own.at(x, y));
+    let borrowed = run(0.3);
+    assert!((borrowed.at(x, y) - 5.0).abs() < 1e-3, "fraction 0.3: neighbour's plane, got {}", borrowed.at(x, y));
+    // The left cell is the same either way.
+    assert!((0..h).all(|y| (0..12).all(|x| own.at(x, y) == 5.0 && borrowed.at(x, y) == 5.0)));
+}
+
 /// Weighted median on the synthetic scene: filling the holes from same-coloured neighbours recovers the truth
 /// to within the noise, far better than the row-wise fill near the region borders.
 #[test]

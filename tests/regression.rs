@@ -59,7 +59,16 @@ fn regression_issue5_default_trainingq() {
     check("default.toml", DEFAULT_ACHIEVED, 0.05);
 }
 
+#[test]
+fn regression_issue5_jem_sps_trainingq() {
+    check("jem-sps.toml", JEM_SPS_ACHIEVED, 0.05);
+}
+
 /// Weighted avgErr of `configs/jem-lrc.toml` when it was tuned: 6.3386 (docs/RESULTS.md; paper 6.34).
 const JEM_LRC_ACHIEVED: f64 = 6.339;
 /// Weighted avgErr of `configs/default.toml` when it was tuned: 4.9374 (docs/RESULTS.md; paper 5.33).
 const DEFAULT_ACHIEVED: f64 = 4.938;
+/// Weighted avgErr of `configs/jem-sps.toml` when it was tuned: 5.1230 (docs/RESULTS.md; paper 5.52). The planes
+/// are the stage most sensitive to small perturbations: other RANSAC seeds (`post.sps.seed` = 2, 3) give 5.164 and
+/// 5.146, inside the margin.
+const JEM_SPS_ACHIEVED: f64 = 5.123;

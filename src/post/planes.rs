@@ -55,12 +55,13 @@
 //! single row or column, one point); a small ridge (0.25 px² × weight) on the slopes is then added, which keeps the
 //! well-determined slope and sets the undetermined one to 0 (down to a fronto-parallel plane at the mean).
 //!
-//! A segment whose data weight is below `min_support` and which has no hinge/coplanar neighbour gets no plane of
-//! its own; it borrows, in rounds, the plane of an adjacent segment: the one that fits its few data points best,
-//! or without data the one that is *lowest* (smallest disparity) on their common boundary — occluded regions
-//! belong to the background, the rule the occlusion fill uses too. If no segment has a plane (no data at all),
-//! every segment is fronto-parallel at the median of the data, or 0 without data. The output is therefore always
-//! finite.
+//! A segment whose data weight is below `min_support`, or below `min_support_fraction` × its pixel count if that
+//! is more, and which has no hinge/coplanar neighbour gets no plane of its own (RANSAC skips it too, and the
+//! stale-plane test uses the same threshold); it borrows, in rounds, the plane of an adjacent segment: the one
+//! that fits its few data points best, or without data the one that is *lowest* (smallest disparity) on their
+//! common boundary — occluded regions belong to the background, the rule the occlusion fill uses too. If no
+//! segment has a plane (no data at all), every segment is fronto-parallel at the median of the data, or 0 without
+//! data. The output is therefore always finite.
 //!
 //! Defaults: `segments = 1000` (≈ 19 px cells at Q, Yamaguchi et al. use 1000 on KITTI's 0.47 Mpx); the weights
 //! were set by reasoning about magnitudes (an outlier costs λ_d·τ² = 200, about a Lab distance of 14; the
@@ -81,6 +82,8 @@
 //! - Segments that lack data borrow a neighbour's plane (see above) so that the output is dense; stale planes are
 //!   re-initialised by RANSAC.
 //! - Untrusted (filled) pixels may enter the data term with a small weight.
+//! - The data a segment needs for a plane of its own can be a fraction of its size (`min_support_fraction`): a
+//!   few consistent pixels in one corner of a segment otherwise set a plane that is extrapolated over the rest.
 //!
 //! # Complexity
 //! Per iteration O(N) for the sweep and statistics (N pixels) plus O(K) for K segments; RANSAC is
@@ -125,6 +128,10 @@ pub struct SpsParams {
     pub untrusted_weight: f32,
     /// A segment needs at least this much data weight to fit a plane without coupled neighbours.
     pub min_support: f32,
+    /// ... and at least this fraction of its pixel count (0 to 1; 0 = only `min_support` applies). A fraction
+    /// scales with the segment size, which an absolute count does not (cells are 64 px on ArtL Q at 1500
+    /// segments, about 245 px on Motorcycle Q).
+    pub min_support_fraction: f32,
     /// RANSAC trials per segment at initialisation.
     pub ransac_iterations: usize,
     /// Seed of the RANSAC sampling.
@@ -149,6 +156,7 @@ impl Default for SpsParams {
             impossible_penalty: 30.0,
             untrusted_weight: 0.3,
             min_support: 10.0,
+            min_support_fraction: 0.0,
             ransac_iterations: 64,
             seed: 1,
         }
@@ -179,6 +187,9 @@ impl SpsParams {
         check_nonneg("post.sps.occlusion_penalty", self.occlusion_penalty)?;
         check_nonneg("post.sps.impossible_penalty", self.impossible_penalty)?;
         check_nonneg("post.sps.min_support", self.min_support)?;
+        if !(0.0..=1.0).contains(&self.min_support_fraction) {
+            return Err(crate::Error::param("post.sps.min_support_fraction", self.min_support_fraction, "0 to 1"));
+        }
         if !(0.0..=1.0).contains(&self.untrusted_weight) {
             return Err(crate::Error::param("post.sps.untrusted_weight", self.untrusted_weight, "0 to 1"));
         }
@@ -243,11 +254,11 @@ fn segment_and_fit(scene: &Scene, p: &SpsParams) -> (Vec<u32>, Vec<[f64; 3]>) {
         }
         let mut planes = refit_planes(&acc, &adj, &bounds, &planes_full, p);
         // Segments whose plane no longer explains their data start again from RANSAC.
-        let min_support = f64::from(p.min_support);
-        if acc.iter().any(|a| a.is_stale(min_support)) {
-            let fresh = ransac_planes(scene, &labels, nseg, p, |k| acc[k].is_stale(min_support));
+        let stale = |a: &SegAcc| a.is_stale(support_needed(p, a.geom.s1));
+        if acc.iter().any(stale) {
+            let fresh = ransac_planes(scene, &labels, nseg, p, |k| stale(&acc[k]));
             for ((pl, f), a) in planes.iter_mut().zip(fresh).zip(&acc) {
-                if a.is_stale(min_support) {
+                if stale(a) {
                     *pl = f;
                 }
             }
@@ -690,12 +701,18 @@ fn refit_planes(
                     BoundaryLabel::OcclusionA | BoundaryLabel::OcclusionB => {}
                 }
             }
-            if !(coupled && ls > 0.0) && acc[k].data.s1 < f64::from(p.min_support).max(f64::MIN_POSITIVE) {
+            if !(coupled && ls > 0.0) && acc[k].data.s1 < support_needed(p, acc[k].geom.s1).max(f64::MIN_POSITIVE) {
                 return None;
             }
             sys.solve(true)
         })
         .collect()
+}
+
+/// The data weight a segment of `pixels` pixels needs to fit a plane of its own: `min_support`, or
+/// `min_support_fraction` of its pixels if that is more.
+fn support_needed(p: &SpsParams, pixels: f64) -> f64 {
+    f64::from(p.min_support).max(f64::from(p.min_support_fraction) * pixels)
 }
 
 /// Gives every segment without a plane the plane of an adjacent segment, in rounds: the one that fits the
@@ -766,8 +783,8 @@ impl SplitMix {
     }
 }
 
-/// RANSAC plane per `selected` segment (see the module doc); `None` where the data weight is below `min_support`
-/// and for the others.
+/// RANSAC plane per `selected` segment (see the module doc); `None` where the data weight is below
+/// [`support_needed`] and for the others.
 fn ransac_planes(
     scene: &Scene,
     labels: &[u32],
@@ -777,7 +794,9 @@ fn ransac_planes(
 ) -> Vec<Option<[f64; 3]>> {
     // Data pixels grouped by segment (counting sort, raster order within a segment).
     let mut start = vec![0usize; nseg + 1];
+    let mut pixels = vec![0usize; nseg];
     for (l, w) in labels.iter().zip(&scene.weight) {
+        pixels[*l as usize] += 1;
         if *w > 0.0 {
             start[*l as usize + 1] += 1;
         }
@@ -801,7 +820,7 @@ fn ransac_planes(
             }
             pts.load(scene, &members[start[k]..start[k + 1]]);
             let mut rng = SplitMix(p.seed ^ (k as u64).wrapping_mul(0xd6e8_feb8_6659_fd93));
-            ransac_segment(pts, p, &mut rng)
+            ransac_segment(pts, p, support_needed(p, pixels[k] as f64), &mut rng)
         })
         .collect()
 }
@@ -872,9 +891,9 @@ impl Points {
     }
 }
 
-fn ransac_segment(pts: &Points, p: &SpsParams, rng: &mut SplitMix) -> Option<[f64; 3]> {
+fn ransac_segment(pts: &Points, p: &SpsParams, min_weight: f64, rng: &mut SplitMix) -> Option<[f64; 3]> {
     let total: f64 = pts.w.iter().map(|&w| f64::from(w)).sum();
-    if pts.len() == 0 || total < f64::from(p.min_support) {
+    if pts.len() == 0 || total < min_weight {
         return None;
     }
     let n = pts.len();
@@ -1303,5 +1322,8 @@ mod tests {
         assert!(e.to_string().contains("post.sps.inlier_thresh_px"), "{e}");
         let e = SpsParams { untrusted_weight: 2.0, ..Default::default() }.validate().unwrap_err();
         assert!(e.to_string().contains("post.sps.untrusted_weight"), "{e}");
+        let e = SpsParams { min_support_fraction: 1.5, ..Default::default() }.validate().unwrap_err();
+        assert!(e.to_string().contains("post.sps.min_support_fraction"), "{e}");
+        SpsParams { min_support_fraction: 1.0, ..Default::default() }.validate().unwrap();
     }
 }
