@@ -63,12 +63,14 @@
 //! segment has a plane (no data at all), every segment is fronto-parallel at the median of the data, or 0 without
 //! data. The output is therefore always finite.
 //!
-//! Defaults: `segments = 1000` (≈ 19 px cells at Q, Yamaguchi et al. use 1000 on KITTI's 0.47 Mpx); the weights
-//! were set by reasoning about magnitudes (an outlier costs λ_d·τ² = 200, about a Lab distance of 14; the
-//! position term reaches λ_pos at one grid step) and checked on synthetic scenes and a few trainingQ WTA maps,
-//! not tuned. `untrusted_weight = 0.1` lets filled pixels steer segments that have little trusted data (on WTA +
-//! LRC + fill + weighted median over Motorcycle, Teddy, Adirondack, Jadeplant and PianoL it lowered avgErr in all
-//! five, e.g. PianoL 19.8 → 13.3 full-res px); it has no effect when the fill is off (untrusted pixels are `inf`).
+//! Defaults: `segments = 1500` (≈ 15 px cells at Q; Yamaguchi et al. use 1000 on KITTI's 0.47 Mpx),
+//! `untrusted_weight = 0.3`, `disparity_weight = 100` and `inlier_thresh_px = 3`, tuned on trainingQ with the full
+//! pipeline (docs/RESULTS.md); the other weights were set by reasoning about magnitudes (the position term reaches
+//! λ_pos at one grid step) and checked on synthetic scenes, and the sweeps show them to matter little.
+//! `untrusted_weight` lets filled pixels steer segments that have little trusted data; it has no effect when the
+//! fill is off (untrusted pixels are `inf`). `min_support_fraction` (0 by default; 0.25 in `jem-sps.toml`, where
+//! there is no fill) makes a segment with trusted data on too small a share of its pixels borrow a neighbour's
+//! plane instead of stretching its own over the whole segment.
 //!
 //! # Deviations from the paper
 //! - Stereo only: the flow and the motion terms are left out. As in the paper, the disparity term is the distance
