@@ -86,7 +86,7 @@ pub fn local_weights(image: &RgbImage, p: &MeanFieldParams) -> LocalWeights {
 
 /// The local term's contribution to E_i(d) for all d, given P̃_i (the O(M) form without the constant S_i):
 /// `out[d] += −ω̃·(P̃(d) + (1 − β)(P̃(d−1) + P̃(d+1)))`. (The update computes the same through
-/// [`pixel_energies`]; this form is for tests and callers with an unpadded P̃.)
+/// its one-pass energy function; this form is for tests and callers with an unpadded P̃.)
 pub fn add_local_energy(p_tilde: &[f32], omega: f32, beta: f32, out: &mut [f32]) {
     let m = p_tilde.len();
     let mut padded = vec![0.0f32; m + 2];
