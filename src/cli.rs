@@ -135,11 +135,27 @@ pub struct ConfigArgs {
     /// Override one key, e.g. `--set meanfield.iterations=8` (repeatable; wins over --config).
     #[arg(long = "set", value_name = "KEY=VALUE", help_heading = "Configuration")]
     overrides: Vec<String>,
+    /// Run at 1/N resolution and upsample the disparity map (the `downscale` key; wins over --config and --set):
+    /// ~1/N³ of the memory and time of inference.
+    #[arg(long, value_name = "N", allow_negative_numbers = true, help_heading = "Configuration")]
+    downscale: Option<String>,
 }
 
 impl ConfigArgs {
     fn params(&self) -> Result<Params> {
-        Params::load(self.config.as_deref(), &self.overrides)
+        let mut overrides = self.overrides.clone();
+        if let Some(text) = &self.downscale {
+            overrides.push(format!("downscale={}", parse_downscale(text)?));
+        }
+        Params::load(self.config.as_deref(), &overrides)
+    }
+}
+
+/// The `--downscale` value: an integer ≥ 1 (parsed here rather than by clap, for a one-line error).
+fn parse_downscale(text: &str) -> Result<usize> {
+    match text.trim().parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(Error::param("--downscale", format!("{text:?}"), "an integer >= 1; 1 = full resolution")),
     }
 }
 

@@ -204,6 +204,10 @@ impl Default for PostParams {
 pub struct Params {
     /// The energy to minimise.
     pub model: Model,
+    /// Run at 1/N resolution (N×N box averaging, ceil(ndisp / N) labels) and bring the disparity map back to
+    /// the input size (bilinear, × N); 1 = full resolution. About 1/N³ of the memory and time of inference.
+    /// See [`crate::scale`].
+    pub downscale: usize,
     /// Matching cost.
     pub cost: CostParams,
     /// Mean-field inference.
@@ -216,6 +220,7 @@ impl Default for Params {
     fn default() -> Self {
         Params {
             model: Model::Jem,
+            downscale: 1,
             cost: CostParams::default(),
             meanfield: MeanFieldParams::default(),
             post: PostParams::default(),
@@ -278,6 +283,9 @@ impl Params {
     /// # Errors
     /// [`Error::InvalidParam`] naming the first offending key, its value and the valid range.
     pub fn validate(&self) -> Result<()> {
+        if self.downscale == 0 {
+            return Err(Error::param("downscale", 0, "an integer >= 1; 1 = full resolution"));
+        }
         let c = &self.cost;
         for (name, v) in [("cost.census_width", c.census_width), ("cost.census_height", c.census_height)] {
             if v == 0 || v % 2 == 0 || v > 15 {
@@ -417,6 +425,11 @@ mod tests {
         assert_eq!(e.to_string(), "invalid meanfield.sigma_xy = -2 (expected a finite number > 0)");
         let e = Params::load(None, &["cost.census_width=4".into()]).unwrap_err();
         assert!(e.to_string().contains("cost.census_width = 4"), "{e}");
+        let e = Params::from_toml_str("downscale = 0\n", Path::new("c.toml")).unwrap_err();
+        assert_eq!(e.to_string(), "invalid downscale = 0 (expected an integer >= 1; 1 = full resolution)");
+        let e = Params::from_toml_str("downscale = -2\n", Path::new("c.toml")).unwrap_err().to_string();
+        assert!(e.contains("c.toml") && e.contains("downscale"), "{e}");
+        assert_eq!(Params::from_toml_str("downscale = 3\n", Path::new("c.toml")).unwrap().downscale, 3);
     }
 
     #[test]

@@ -237,3 +237,85 @@ fn nan_and_inf_never_reach_the_output() {
     let d = pfm::read_pfm(&dir.path().join("big.pfm")).unwrap();
     assert!(d.data.iter().all(|v| !v.is_nan()), "NaN in the output");
 }
+
+/// Issue 7: `--downscale N` runs at 1/N resolution and writes a full-size map; the same bytes whatever the thread
+/// count; the flag wins over --config and --set; `jem batch` takes it too.
+#[test]
+fn downscale_flag_writes_a_full_size_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    for (threads, name) in [("1", "t1.pfm"), ("2", "t2.pfm")] {
+        let out = run_in(d, &["--threads", threads, "-v", &l, &r, "-o", name, "--downscale", "2"]);
+        let err = stderr(&out);
+        assert!(out.status.success(), "{err}");
+        assert!(err.contains("downsample") && err.contains("upsample"), "-v lists the resample stages: {err}");
+    }
+    let first = std::fs::read(d.join("t1.pfm")).unwrap();
+    assert!(std::fs::read(d.join("t2.pfm")).unwrap() == first, "1 and 2 threads differ");
+    let map = pfm::read_pfm(&d.join("t1.pfm")).unwrap();
+    assert_eq!(map.dims(), (320, 240));
+    assert!(map.data.iter().all(|v| v.is_finite() && (0.0..48.0).contains(v)), "dense and in range");
+    let full = run_in(d, &["--threads", "1", &l, &r, "-o", "full.pfm"]);
+    assert!(full.status.success(), "{}", stderr(&full));
+    assert!(std::fs::read(d.join("full.pfm")).unwrap() != first, "--downscale 2 changes the result");
+
+    // The flag wins over the config file and --set.
+    std::fs::write(d.join("ds.toml"), "downscale = 4\n").unwrap();
+    let out = run_in(d, &["config", "-c", "ds.toml", "--set", "downscale=3", "--downscale", "2"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(String::from_utf8(out.stdout).unwrap().contains("downscale = 2\n"));
+    let out = run_in(d, &["config", "-c", "ds.toml"]);
+    assert!(String::from_utf8(out.stdout).unwrap().contains("downscale = 4\n"));
+
+    // jem batch: a copy of the example scene.
+    let scene = d.join("scenes").join("Synth");
+    std::fs::create_dir_all(&scene).unwrap();
+    for f in ["im0.png", "im1.png", "calib.txt"] {
+        std::fs::copy(example(f), scene.join(f)).unwrap();
+    }
+    let out = run_in(d, &["batch", "scenes", "--alg", "DS2", "--downscale", "2", "--threads", "1", "-q"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(std::fs::read(scene.join("disp0DS2.pfm")).unwrap() == first, "batch and match agree");
+}
+
+/// Issue 7: a bad `--downscale` (0, negative, not an integer), a bad `downscale` key, or a factor too large for
+/// the pair is one error line, exit code 2, and no output file.
+#[test]
+fn bad_downscale_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    for bad in ["0", "-2", "two", "1.5", ""] {
+        assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "--downscale", bad], &["--downscale", ">= 1"]);
+        assert_clean_failure(d, &["batch", ".", "--alg", "X", "--downscale", bad], &["--downscale"]);
+    }
+    std::fs::write(d.join("zero.toml"), "downscale = 0\n").unwrap();
+    assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "-c", "zero.toml"], &["downscale = 0", ">= 1"]);
+    std::fs::write(d.join("neg.toml"), "downscale = -1\n").unwrap();
+    assert_clean_failure(d, &[&l, &r, "-o", "x.pfm", "-c", "neg.toml"], &["neg.toml", "downscale"]);
+    for f in ["zero.toml", "neg.toml"] {
+        std::fs::remove_file(d.join(f)).unwrap();
+    }
+    // 320 px with ndisp 319: at 1/2 the search range (160) would not stay below the width (160).
+    assert_clean_failure(
+        d,
+        &[&l, &r, "-o", "x.pfm", "--ndisp", "319", "--downscale", "2", "--set", "model=wta"],
+        &["downscale = 2", "at most 1", "320x240"],
+    );
+}
+
+/// Issue 7: the memory guard names the smallest `--downscale` that fits, and that factor then runs.
+#[test]
+fn memory_guard_suggests_a_downscale() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    // 320x240, ndisp 48: ~97 MB at full size, ~17 MB at 1/2.
+    assert_clean_failure(
+        dir.path(),
+        &["--max-memory", "20M", &l, &r, "-o", "x.pfm"],
+        &["needs about", "20.0 MiB", "--downscale 2 ", "--max-memory"],
+    );
+    let out = run_in(dir.path(), &["--threads", "1", "--max-memory", "20M", &l, &r, "-o", "x.pfm", "--downscale", "2"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
