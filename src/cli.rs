@@ -54,6 +54,29 @@ impl GlobalArgs {
     }
 }
 
+/// Moves global flags written before a subcommand to just after it: `jem --threads 1 batch …` becomes
+/// `jem batch --threads 1 …`. (The top-level command takes the match arguments too, so clap reads any flag before
+/// the subcommand as belonging to a match and then rejects the subcommand name as a stray argument.)
+pub fn global_flags_after_subcommand(mut args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsString> {
+    const SUBCOMMANDS: [&str; 7] = ["match", "config", "synth", "batch", "eval", "viz", "help"];
+    let mut i = 1;
+    while i < args.len() {
+        let Some(arg) = args[i].to_str() else { return args };
+        match arg {
+            "-q" | "--quiet" | "-v" | "--verbose" => i += 1,
+            "--threads" | "--max-memory" => i += 2,
+            _ if arg.starts_with("--threads=") || arg.starts_with("--max-memory=") => i += 1,
+            _ if i > 1 && SUBCOMMANDS.contains(&arg) => {
+                let sub = args.remove(i);
+                args.insert(1, sub);
+                return args;
+            }
+            _ => return args,
+        }
+    }
+    args
+}
+
 /// Parses `123`, `800K`, `1500M`, `8G` (binary units; a trailing `B`/`iB` is allowed) into bytes.
 fn parse_size(text: &str) -> std::result::Result<u64, String> {
     let t = text.trim().trim_end_matches(['B', 'b']).trim_end_matches('i');

@@ -319,3 +319,22 @@ fn memory_guard_suggests_a_downscale() {
     let out = run_in(dir.path(), &["--threads", "1", "--max-memory", "20M", &l, &r, "-o", "x.pfm", "--downscale", "2"]);
     assert!(out.status.success(), "{}", stderr(&out));
 }
+
+/// Global flags may come before a subcommand as well as after it.
+#[test]
+fn global_flags_before_a_subcommand() {
+    let dir = tempfile::tempdir().unwrap();
+    for args in [&["--threads", "1", "-q", "config"][..], &["-v", "--max-memory=2G", "config"], &["config", "-q"]] {
+        let out = run_in(dir.path(), args);
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+        assert!(String::from_utf8_lossy(&out.stdout).contains("model = \"jem\""), "{args:?} printed no config");
+    }
+    // A match with global flags first still works, and so does a bad one fail cleanly.
+    let out = run_in(dir.path(), &["--threads", "2", &example("im0.png"), &example("im1.png"), "-o", "d.pfm"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_clean_failure(
+        dir.path(),
+        &["--threads", "1", "nothing.png", "nothing2.png", "-o", "x.pfm"],
+        &["nothing.png"],
+    );
+}
