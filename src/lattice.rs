@@ -132,18 +132,28 @@ impl Lattice {
         // 3. Blur neighbours along each lattice direction: key ± (1, …, 1) ∓ (d+1)·e_dir.
         let mut blur_nbr = vec![[NONE; 2]; D1 * nvert];
         for (dir, nbrs) in blur_nbr.chunks_exact_mut(nvert.max(1)).enumerate() {
-            nbrs.par_iter_mut().zip(keys.par_iter()).with_min_len(1024).for_each(|(n, key)| {
-                let mut down = *key;
-                let mut up = *key;
-                for c in 0..D {
-                    down[c] -= 1;
-                    up[c] += 1;
+            const CHUNK: usize = 64;
+            nbrs.par_chunks_mut(CHUNK).zip(keys.par_chunks(CHUNK)).for_each(|(n, keys)| {
+                let mut queries = [[0i16; D]; 2 * CHUNK];
+                for (q, key) in queries.chunks_exact_mut(2).zip(keys) {
+                    let (mut down, mut up) = (*key, *key);
+                    for c in 0..D {
+                        down[c] -= 1;
+                        up[c] += 1;
+                    }
+                    if dir < D {
+                        down[dir] += D1 as i16;
+                        up[dir] -= D1 as i16;
+                    }
+                    q[0] = down;
+                    q[1] = up;
                 }
-                if dir < D {
-                    down[dir] += D1 as i16;
-                    up[dir] -= D1 as i16;
+                let mut ids = [NONE; 2 * CHUNK];
+                let len = 2 * keys.len();
+                table.get_many(&queries[..len], &mut ids[..len]);
+                for (n, id) in n.iter_mut().zip(ids.chunks_exact(2)) {
+                    *n = [id[0], id[1]];
                 }
-                *n = [table.get(&down), table.get(&up)];
             });
         }
 
@@ -563,6 +573,29 @@ impl KeyTable {
                 return slot as u32;
             }
             s = (s + 1) & self.mask;
+        }
+    }
+
+    /// [`KeyTable::get`] for many keys: the first slot of every key is loaded in a branch-free loop before any
+    /// is examined, so the cache misses overlap instead of waiting on each other.
+    fn get_many(&self, keys: &[[i16; D]], ids: &mut [u32]) {
+        const MAX: usize = 128;
+        for (keys, ids) in keys.chunks(MAX).zip(ids.chunks_mut(MAX)) {
+            let mut hashes = [0u64; MAX];
+            let mut first = [0u64; MAX];
+            for ((h, f), key) in hashes.iter_mut().zip(first.iter_mut()).zip(keys) {
+                *h = Self::hash(key);
+                *f = self.slots[*h as usize & self.mask];
+            }
+            for (((id, key), &h), &f) in ids.iter_mut().zip(keys).zip(&hashes).zip(&first) {
+                *id = if f == EMPTY {
+                    NONE
+                } else if f >> 32 == h >> 32 && self.keys[f as u32 as usize] == *key {
+                    f as u32
+                } else {
+                    self.get(key)
+                };
+            }
         }
     }
 
