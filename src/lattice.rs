@@ -551,6 +551,22 @@ impl KeyTable {
         h ^ (h >> 29)
     }
 
+    /// Whether `slot` holds `key` (whose hash has upper bits `tag`); the key itself is read only on a tag match.
+    #[inline]
+    fn holds(&self, slot: u64, tag: u64, key: &[i16; D]) -> bool {
+        slot != EMPTY && slot >> 32 == tag && self.keys[slot as u32 as usize] == *key
+    }
+
+    /// Linear probing from hash `h`: the slot index holding `key`, or the empty slot where it would go.
+    #[inline]
+    fn probe(&self, h: u64, key: &[i16; D]) -> usize {
+        let mut s = h as usize & self.mask;
+        while self.slots[s] != EMPTY && !self.holds(self.slots[s], h >> 32, key) {
+            s = (s + 1) & self.mask;
+        }
+        s
+    }
+
     /// The id of `key`, inserting it with the next id (the number of keys so far) if absent. Doubles the
     /// table when it would become more than 3/4 full, so probing always ends (images with very noisy colours
     /// have up to d+1 distinct vertices per pixel).
@@ -559,21 +575,13 @@ impl KeyTable {
             self.grow();
         }
         let h = Self::hash(key);
-        let tag = h >> 32;
-        let mut s = h as usize & self.mask;
-        loop {
-            let slot = self.slots[s];
-            if slot == EMPTY {
-                let id = self.keys.len() as u32;
-                self.slots[s] = tag << 32 | u64::from(id);
-                self.keys.push(*key);
-                return id;
-            }
-            if slot >> 32 == tag && self.keys[slot as u32 as usize] == *key {
-                return slot as u32;
-            }
-            s = (s + 1) & self.mask;
+        let s = self.probe(h, key);
+        if self.slots[s] == EMPTY {
+            let id = self.keys.len() as u32;
+            self.slots[s] = (h >> 32) << 32 | u64::from(id);
+            self.keys.push(*key);
         }
+        self.slots[s] as u32
     }
 
     /// [`KeyTable::get`] for many keys: the first slot of every key is loaded in a branch-free loop before any
@@ -588,12 +596,10 @@ impl KeyTable {
                 *f = self.slots[*h as usize & self.mask];
             }
             for (((id, key), &h), &f) in ids.iter_mut().zip(keys).zip(&hashes).zip(&first) {
-                *id = if f == EMPTY {
-                    NONE
-                } else if f >> 32 == h >> 32 && self.keys[f as u32 as usize] == *key {
-                    f as u32
-                } else {
-                    self.get(key)
+                *id = match f {
+                    EMPTY => NONE,
+                    _ if self.holds(f, h >> 32, key) => f as u32,
+                    _ => self.get(key),
                 };
             }
         }
@@ -601,19 +607,8 @@ impl KeyTable {
 
     /// The id of `key`, or `NONE`.
     fn get(&self, key: &[i16; D]) -> u32 {
-        let h = Self::hash(key);
-        let tag = h >> 32;
-        let mut s = h as usize & self.mask;
-        loop {
-            let slot = self.slots[s];
-            if slot == EMPTY {
-                return NONE;
-            }
-            if slot >> 32 == tag && self.keys[slot as u32 as usize] == *key {
-                return slot as u32;
-            }
-            s = (s + 1) & self.mask;
-        }
+        let slot = self.slots[self.probe(Self::hash(key), key)];
+        if slot == EMPTY { NONE } else { slot as u32 }
     }
 }
 
