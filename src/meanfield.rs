@@ -21,8 +21,9 @@
 //! structures), so one ω cannot suit both; we default to `symmetric` (D^{-1/2} K D^{-1/2}, as in Krähenbühl's
 //! dense-CRF code), chosen by measurement on trainingQ (docs/RESULTS.md); `none` and `pixel` remain available.
 //!
-//! Memory: Q, the next Q and the message, each `N × M` f32, plus the lattice's two `vertices × M` buffers; each
-//! iteration is O(N·M) and allocation-free (scratch is per row, made once per iteration chunk).
+//! Memory: Q and the next Q, each `N × M` f32, plus the lattice's two `vertices × M` buffers (the fully connected
+//! message is sliced per pixel inside the update, never stored); each iteration is O(N·M) and allocation-free
+//! apart from a few `M`-long scratch vectors per thread.
 
 use multiversion::multiversion;
 use rayon::prelude::*;
@@ -163,14 +164,7 @@ fn softmax_neg_into(en: &[f32], out: &mut [f32]) {
     for (o, e) in out.iter_mut().zip(en) {
         *o = exp_nonpositive(min - e);
     }
-    let sum = lane_sum(out);
-    if sum > 0.0 && sum.is_finite() {
-        let inv = 1.0 / sum;
-        out.iter_mut().for_each(|v| *v *= inv);
-    } else {
-        let u = 1.0 / m as f32;
-        out.iter_mut().for_each(|v| *v = u);
-    }
+    normalise(out);
 }
 
 /// In place: `e ← softmax(−e)`, subtracting the minimum energy first.
@@ -181,14 +175,20 @@ fn softmax_neg_in_place(e: &mut [f32]) {
     for v in e.iter_mut() {
         *v = exp_nonpositive(min - *v);
     }
-    let sum = lane_sum(e);
+    normalise(e);
+}
+
+/// Divides non-negative weights by their sum, or, if the sum is 0 or not finite (only with non-finite
+/// energies), makes them uniform rather than NaN.
+#[inline(always)]
+fn normalise(q: &mut [f32]) {
+    let sum = lane_sum(q);
     if sum > 0.0 && sum.is_finite() {
         let inv = 1.0 / sum;
-        e.iter_mut().for_each(|v| *v *= inv);
+        q.iter_mut().for_each(|v| *v *= inv);
     } else {
-        // Only reachable with non-finite energies: fall back to a uniform distribution rather than NaN.
-        let u = 1.0 / e.len() as f32;
-        e.iter_mut().for_each(|v| *v = u);
+        let u = 1.0 / q.len() as f32;
+        q.iter_mut().for_each(|v| *v = u);
     }
 }
 
@@ -346,9 +346,9 @@ impl<'a> MeanField<'a> {
         }
     }
 
-    /// One Jacobi mean-field iteration over all pixels.
+    /// One mean-field iteration over all pixels, with the configured [`Schedule`].
     pub fn step(&mut self) {
-        let (w, m) = (self.cost.width, self.cost.ndisp);
+        let m = self.cost.ndisp;
         let mut next = std::mem::take(&mut self.next);
         let mut q = std::mem::take(&mut self.q);
         let mut scratch = std::mem::take(&mut self.scratch);
@@ -360,17 +360,9 @@ impl<'a> MeanField<'a> {
             None => &[],
         };
         let this = &*self;
-        let len = w * m;
         match self.schedule {
             Schedule::Jacobi => {
-                let src = &q;
-                next.par_chunks_mut(len).enumerate().for_each_init(
-                    || RowScratch::new(m),
-                    |s, (y, out)| {
-                        let own = Some(&src[y * len..][..len]);
-                        update_row(this, y, Pass::All, NeighbourRows::of(src, y, len), own, vals, out, s);
-                    },
-                );
+                this.sweep(Pass::All, &q, true, vals, &mut next);
                 std::mem::swap(&mut q, &mut next);
             }
             Schedule::Checkerboard => {
@@ -391,20 +383,21 @@ impl<'a> MeanField<'a> {
     /// previous Q into `next`; pass 2 the odd ones, whose 4 neighbours are all even, from the pass-1 values,
     /// written over the previous Q (each pixel reads its own old value first), with the even ones copied in.
     fn checkerboard_two_pass(&self, q: &mut [f32], next: &mut [f32], vals: &[f32]) {
-        let (w, m) = (self.cost.width, self.cost.ndisp);
-        let len = w * m;
-        let src: &[f32] = q;
-        next.par_chunks_mut(len).enumerate().for_each_init(
+        self.sweep(Pass::Even, q, true, vals, next);
+        self.sweep(Pass::Odd, next, false, vals, q);
+    }
+
+    /// One parallel sweep of `pass` over all rows of `out`: neighbours from `src`, each pixel's own previous
+    /// marginal from `src` (`own_in_src`) or from `out` itself.
+    fn sweep(&self, pass: Pass, src: &[f32], own_in_src: bool, vals: &[f32], out: &mut [f32]) {
+        let m = self.cost.ndisp;
+        let len = self.cost.width * m;
+        out.par_chunks_mut(len).enumerate().for_each_init(
             || RowScratch::new(m),
-            |s, (y, out)| {
-                let own = Some(&src[y * len..][..len]);
-                update_row(self, y, Pass::Even, NeighbourRows::of(src, y, len), own, vals, out, s);
+            |s, (y, row)| {
+                let own = own_in_src.then(|| &src[y * len..][..len]);
+                update_row(self, y, pass, NeighbourRows::of(src, y, len), own, vals, row, s);
             },
-        );
-        let even: &[f32] = next;
-        q.par_chunks_mut(len).enumerate().for_each_init(
-            || RowScratch::new(m),
-            |s, (y, out)| update_row(self, y, Pass::Odd, NeighbourRows::of(even, y, len), None, vals, out, s),
         );
     }
 
@@ -546,9 +539,9 @@ impl<'a> MeanField<'a> {
     }
 }
 
-/// Computes the new Q for row `y` into `out_row`: neighbours' marginals come from `nbr_src`, the pixel's
-/// own previous marginal (for the self term) from `self_src`, or from `out_row` itself when that is empty.
-/// `pass` picks the pixels to compute; with [`Pass::Odd`] the even pixels are copied from `nbr_src`.
+/// Computes the new Q for row `y` into `out_row`: neighbours' marginals come from `nbrs` (rows y − 1, y, y + 1),
+/// the pixel's own previous marginal (for the self term) from `own_row`, or from `out_row` itself when `None`.
+/// `pass` picks the pixels to compute; with [`Pass::Odd`] the even pixels are copied from `nbrs.same`.
 /// Compiled for AVX2 + FMA as well, picked at run time (same results: no contraction of a·b + c).
 #[allow(clippy::too_many_arguments)]
 #[multiversion(targets("x86_64+avx2+fma"))]
