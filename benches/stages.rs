@@ -24,8 +24,7 @@ fn scene() -> (String, StereoPair) {
         eprintln!("note: Middlebury data not found; benchmarking the synthetic example instead");
         (Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/synth"), "synth")
     };
-    let left = jem::io::png::load_rgb(&dir.join("im0.png")).expect("left image");
-    let right = jem::io::png::load_rgb(&dir.join("im1.png")).expect("right image");
+    let (left, right) = jem::io::png::load_rgb_pair(&dir.join("im0.png"), &dir.join("im1.png")).expect("images");
     let ndisp = jem::io::calib::read_ndisp(&dir.join("calib.txt")).expect("calib.txt");
     let pair = StereoPair::new(left, right, ndisp).expect("valid pair");
     (format!("{name} {}x{} nd{}", pair.left.width, pair.left.height, ndisp), pair)

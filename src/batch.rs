@@ -229,11 +229,8 @@ pub fn run_scene(
 ) -> Result<SceneRun> {
     on_stage("loading");
     let ndisp = calib::read_ndisp(&dir.join("calib.txt"))?;
-    let (left, right) = rayon::join(
-        || crate::io::png::load_rgb(&dir.join("im0.png")),
-        || crate::io::png::load_rgb(&dir.join("im1.png")),
-    );
-    let pair = StereoPair::new(left?, right?, ndisp)?;
+    let (left, right) = crate::io::png::load_rgb_pair(&dir.join("im0.png"), &dir.join("im1.png"))?;
+    let pair = StereoPair::new(left, right, ndisp)?;
     crate::check_memory(pair.left.width, pair.left.height, ndisp, params, max_memory_bytes)?;
     let start = Instant::now();
     let out = crate::run_observed(params, &pair, on_stage)?;

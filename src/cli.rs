@@ -275,8 +275,7 @@ fn resolve_ndisp(flag: Option<usize>, left: &Path) -> Result<usize> {
 
 /// Loads a pair and checks sizes and ndisp.
 pub fn load_pair(left: &Path, right: &Path, ndisp: Option<usize>) -> Result<StereoPair> {
-    let (l, r) = rayon::join(|| jem::io::png::load_rgb(left), || jem::io::png::load_rgb(right));
-    let (l, r) = (l?, r?);
+    let (l, r) = jem::io::png::load_rgb_pair(left, right)?;
     let ndisp = resolve_ndisp(ndisp, left)?;
     StereoPair::new(l, r, ndisp)
 }

@@ -11,6 +11,15 @@ use image::{DynamicImage, ImageEncoder, ImageReader};
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane, RgbImage};
 
+/// Loads the two images of a pair at the same time (see [`load_rgb`]).
+///
+/// # Errors
+/// As [`load_rgb`]; the left image's error is reported if both fail.
+pub fn load_rgb_pair(left: &Path, right: &Path) -> Result<(RgbImage, RgbImage)> {
+    let (l, r) = rayon::join(|| load_rgb(left), || load_rgb(right));
+    Ok((l?, r?))
+}
+
 /// Loads an image file as planar RGB `f32` in 0..=255.
 ///
 /// # Errors
