@@ -213,6 +213,28 @@ pub fn evaluate(
     }
 }
 
+/// Fails unless a map read from `path` has the size of the map it is compared with: "`path`: `what` is W×H but
+/// `against` is W×H".
+pub(crate) fn check_size(
+    path: &Path,
+    what: &str,
+    dims: (usize, usize),
+    against: &str,
+    expected: (usize, usize),
+) -> Result<()> {
+    if dims == expected {
+        return Ok(());
+    }
+    Err(Error::Input(format!(
+        "{}: {what} is {}x{} but {against} is {}x{}",
+        path.display(),
+        dims.0,
+        dims.1,
+        expected.0,
+        expected.1
+    )))
+}
+
 /// Loads a result, the GT and an optional mask, checks their sizes and scores them with [`evaluate`].
 ///
 /// # Errors
@@ -227,29 +249,11 @@ pub fn evaluate_files(
 ) -> Result<Metrics> {
     let gt_map = crate::io::read_disparity(gt)?;
     let result_map = crate::io::read_disparity(result)?;
-    if result_map.dims() != gt_map.dims() {
-        return Err(Error::Input(format!(
-            "{}: result is {}x{} but the ground truth {} is {}x{}",
-            result.display(),
-            result_map.width,
-            result_map.height,
-            gt.display(),
-            gt_map.width,
-            gt_map.height
-        )));
-    }
+    let truth = format!("the ground truth {}", gt.display());
+    check_size(result, "result", result_map.dims(), &truth, gt_map.dims())?;
     let mask_plane = mask.map(crate::io::png::load_grey8).transpose()?;
     if let (Some(m), Some(path)) = (&mask_plane, mask) {
-        if m.dims() != gt_map.dims() {
-            return Err(Error::Input(format!(
-                "{}: mask is {}x{} but the ground truth is {}x{}",
-                path.display(),
-                m.width,
-                m.height,
-                gt_map.width,
-                gt_map.height
-            )));
-        }
+        check_size(path, "mask", m.dims(), "the ground truth", gt_map.dims())?;
     }
     let metrics = evaluate(&result_map, &gt_map, mask_plane.as_ref(), ndisp, scale, mask_mode);
     if metrics.pixels == 0 {

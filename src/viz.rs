@@ -270,9 +270,7 @@ fn mask_beside(gt_path: &Path, gt: &DisparityMap) -> Result<Option<Plane<u8>>> {
         return Ok(None);
     }
     let m = crate::io::png::load_grey8(&path)?;
-    if m.dims() != gt.dims() {
-        return Err(Error::Input(format!("{}: mask size differs from the ground truth", path.display())));
-    }
+    crate::eval::check_size(&path, "mask", m.dims(), "the ground truth", gt.dims())?;
     Ok(Some(m))
 }
 
@@ -282,16 +280,7 @@ fn mask_beside(gt_path: &Path, gt: &DisparityMap) -> Result<Option<Plane<u8>>> {
 /// Unreadable files or unequal sizes.
 pub fn load_gt_for(result: &DisparityMap, gt_path: &Path) -> Result<(DisparityMap, Option<Plane<u8>>)> {
     let gt = crate::io::read_disparity(gt_path)?;
-    if gt.dims() != result.dims() {
-        return Err(Error::Input(format!(
-            "{}: ground truth is {}x{} but the result is {}x{}",
-            gt_path.display(),
-            gt.width,
-            gt.height,
-            result.width,
-            result.height
-        )));
-    }
+    crate::eval::check_size(gt_path, "ground truth", gt.dims(), "the result", result.dims())?;
     let mask = mask_beside(gt_path, &gt)?;
     Ok((gt, mask))
 }
