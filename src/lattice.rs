@@ -22,8 +22,9 @@
 //! infinite lattice (see its doc), so callers can leave each pixel's own value out (the paper's j ≠ i).
 //!
 //! Vertex ids are assigned in order of first appearance while scanning pixels in raster order, which makes the
-//! lattice (and every filter result) deterministic. Keys are five `i16` lattice coordinates (the (d+1)-th is
-//! implied by the zero sum); the largest coordinate is ~724 at quarter resolution (SPEC §6), far from the limit.
+//! lattice (and every filter result) deterministic. Keys are five 16-bit lattice coordinates (the (d+1)-th is
+//! implied by the zero sum; see [`Key`]); the largest coordinate is ~724 at quarter resolution (SPEC §6), far
+//! from the limit.
 
 use multiversion::multiversion;
 use rayon::prelude::*;
@@ -45,8 +46,9 @@ const NONE: u32 = u32::MAX;
 /// this factor; the peak k̃(i, i) is then ~0.9–1.0 instead of 1. Checked by `lattice_output_scale_matches_mass`.
 pub const OUTPUT_SCALE: f32 = 1.0 / 0.5536;
 
-/// The largest feature value (position/σxy or colour/σrgb) the lattice accepts: its i16 keys hold the elevated
-/// coordinates, which are at most ~34.6 × the largest feature (2d · (d+1)·√(2/3)/√2 for d = 5), plus d+1.
+/// The largest feature value (position/σxy or colour/σrgb) the lattice accepts: its 16-bit keys hold the
+/// elevated coordinates, which are at most ~34.6 × the largest feature (2d · (d+1)·√(2/3)/√2 for d = 5), plus
+/// d+1, so they stay within ±31 200 and a blur step (at most d+1) never leaves the 16-bit range.
 pub const MAX_FEATURE: f32 = 900.0;
 
 /// Whether an image of this size with these σ can be embedded (see [`MAX_FEATURE`]).
@@ -81,11 +83,34 @@ pub struct LatticeScratch {
     zero: Vec<f32>,
 }
 
-/// Per-pixel result of embedding a feature vector: simplex vertex keys and barycentric weights.
-#[derive(Clone, Copy, Debug)]
+/// Per-pixel result of embedding a feature vector: the enclosing simplex (its remainder-0 vertex and the ranking
+/// that orders the other vertices) and the barycentric weights.
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct Embedding {
-    keys: [[i16; D]; D1],
+    /// The simplex's remainder-0 vertex, all d+1 coordinates (they sum to zero).
+    origin: [i32; D1],
+    /// Rank of each coordinate's rounding residual (0 = largest … d = smallest).
+    rank: [i32; D1],
     weights: [f32; D1],
+}
+
+impl Embedding {
+    /// The key of the simplex vertex with remainder `rem`: the origin plus the canonical offset `rem` for the
+    /// coordinates ranked within the first d+1−rem, `rem` − (d+1) for the others. The d+1-th coordinate is
+    /// implied by the zero sum and left out.
+    #[inline(always)]
+    fn key(&self, rem: usize) -> Key {
+        Key::from_coords(std::array::from_fn(|i| {
+            let offset = if self.rank[i] as usize <= D - rem { rem as i32 } else { rem as i32 - D1 as i32 };
+            self.origin[i] + offset
+        }))
+    }
+
+    /// All d+1 vertex keys, by remainder.
+    #[cfg(test)]
+    fn keys(&self) -> [Key; D1] {
+        std::array::from_fn(|rem| self.key(rem))
+    }
 }
 
 impl Lattice {
@@ -93,19 +118,20 @@ impl Lattice {
     ///
     /// # Panics
     /// If a σ is not positive, or the features exceed [`MAX_FEATURE`] (check with [`features_fit`]; e.g. more
-    /// than 4 500 pixels per side at σxy = 5) so that a lattice coordinate could overflow `i16`.
+    /// than 4 500 pixels per side at σxy = 5) so that a lattice coordinate could overflow its 16 bits.
     pub fn build(image: &RgbImage, sigma_xy: f32, sigma_rgb: f32) -> Lattice {
         assert!(sigma_xy > 0.0 && sigma_rgb > 0.0, "lattice sigmas must be positive");
         assert!(
             features_fit(image.width, image.height, sigma_xy, sigma_rgb),
-            "lattice features too large for i16 keys"
+            "lattice features too large for 16-bit keys"
         );
         let npix = image.len();
         let scales = [1.0 / sigma_xy, 1.0 / sigma_rgb];
 
         // 1. Embed every pixel and number the simplex vertices in raster order of first appearance, block by
         //    block in parallel.
-        let (pix_vertex, pix_weight, table) = assign_vertex_ids(Features::Image { image, scales });
+        let (pix_vertex, pix_weight, table) =
+            assign_vertex_ids(Features::Image { image, scales, elevation: elevation_scales() });
         let keys = &table.keys;
         let nvert = table.len();
         let self_weight = pix_weight
@@ -114,39 +140,17 @@ impl Lattice {
             .collect();
 
         // 2. Splat gather lists (CSR), entries in pixel order.
-        let mut splat_start = vec![0u32; nvert + 1];
-        for &v in &pix_vertex {
-            splat_start[v as usize + 1] += 1;
-        }
-        for v in 0..nvert {
-            splat_start[v + 1] += splat_start[v];
-        }
-        let mut fill = splat_start.clone();
-        let mut splat_entries = vec![0u32; npix * D1];
-        for (entry, &v) in pix_vertex.iter().enumerate() {
-            let slot = &mut fill[v as usize];
-            splat_entries[*slot as usize] = entry as u32;
-            *slot += 1;
-        }
+        let (splat_start, splat_entries) = splat_lists(&pix_vertex, nvert);
 
         // 3. Blur neighbours along each lattice direction: key ± (1, …, 1) ∓ (d+1)·e_dir.
         let mut blur_nbr = vec![[NONE; 2]; D1 * nvert];
         for (dir, nbrs) in blur_nbr.chunks_exact_mut(nvert.max(1)).enumerate() {
             const CHUNK: usize = 64;
             nbrs.par_chunks_mut(CHUNK).zip(keys.par_chunks(CHUNK)).for_each(|(n, keys)| {
-                let mut queries = [[0i16; D]; 2 * CHUNK];
+                let mut queries = [Key::default(); 2 * CHUNK];
                 for (q, key) in queries.chunks_exact_mut(2).zip(keys) {
-                    let (mut down, mut up) = (*key, *key);
-                    for c in 0..D {
-                        down[c] -= 1;
-                        up[c] += 1;
-                    }
-                    if dir < D {
-                        down[dir] += D1 as i16;
-                        up[dir] -= D1 as i16;
-                    }
-                    q[0] = down;
-                    q[1] = up;
+                    q[0] = key.step(dir, false);
+                    q[1] = key.step(dir, true);
                 }
                 let mut ids = [NONE; 2 * CHUNK];
                 let len = 2 * keys.len();
@@ -263,6 +267,49 @@ impl Lattice {
     }
 }
 
+/// The splat gather lists: CSR offsets (`nvert + 1`) and, per vertex, the entries `pixel·D1 + k` whose vertex
+/// it is, in pixel order.
+///
+/// Parallel over ranges of vertex ids: every range scans all entries and keeps its own, so counting and filling
+/// need no shared writes and the result does not depend on how the ranges are cut.
+fn splat_lists(pix_vertex: &[u32], nvert: usize) -> (Vec<u32>, Vec<u32>) {
+    let ranges = rayon::current_num_threads().clamp(1, nvert.max(1));
+    let per_range = nvert.div_ceil(ranges).max(1);
+    let mut splat_start = vec![0u32; nvert + 1];
+    splat_start[1..].par_chunks_mut(per_range).enumerate().for_each(|(r, counts)| {
+        let first = r * per_range;
+        for &v in pix_vertex {
+            if let Some(c) = counts.get_mut((v as usize).wrapping_sub(first)) {
+                *c += 1;
+            }
+        }
+    });
+    for v in 0..nvert {
+        splat_start[v + 1] += splat_start[v];
+    }
+    // Each range's entries are one contiguous run of the list.
+    let mut splat_entries = vec![0u32; pix_vertex.len()];
+    let mut runs = Vec::with_capacity(ranges);
+    let mut rest = splat_entries.as_mut_slice();
+    for first in (0..nvert).step_by(per_range) {
+        let last = (first + per_range).min(nvert);
+        let (run, tail) = rest.split_at_mut((splat_start[last] - splat_start[first]) as usize);
+        runs.push((first, last, run));
+        rest = tail;
+    }
+    runs.into_par_iter().for_each(|(first, last, run)| {
+        let base = splat_start[first];
+        let mut fill: Vec<u32> = splat_start[first..last].iter().map(|s| s - base).collect();
+        for (entry, &v) in pix_vertex.iter().enumerate() {
+            if let Some(slot) = fill.get_mut((v as usize).wrapping_sub(first)) {
+                run[*slot as usize] = entry as u32;
+                *slot += 1;
+            }
+        }
+    });
+    (splat_start, splat_entries)
+}
+
 /// Splats into the vertices `first..` (one `nc`-channel row each in `acc`): each gathers its contributing
 /// pixels' values (times `pixel_scale`) in pixel order. Compiled for AVX2 + FMA as well (same results).
 #[multiversion(targets("x86_64+avx2+fma"))]
@@ -320,19 +367,27 @@ fn self_weight_of(w: &[f32; D1]) -> f32 {
     s
 }
 
-/// Embeds a feature vector in the permutohedral lattice: the enclosing simplex's vertices and barycentric weights.
+/// The per-axis elevation scales √(2/3)·(d+1)/√(i(i+1)) for features i = 1..=d (index i − 1).
+fn elevation_scales() -> [f32; D] {
+    std::array::from_fn(|k| {
+        let i = k + 1;
+        (D1 as f32) * (2.0f32 / 3.0).sqrt() / ((i * (i + 1)) as f32).sqrt()
+    })
+}
+
+/// Embeds a feature vector in the permutohedral lattice: the enclosing simplex and barycentric weights.
 ///
-/// The feature is scaled so that the lattice blur has unit standard deviation per feature unit, lifted onto the
-/// hyperplane Σ x = 0 of R^(d+1), rounded to the nearest remainder-0 lattice point, and the simplex is read off
-/// the ranking of the rounding residuals (Adams et al. 2010, §3.1).
+/// The feature is scaled (`scales` from [`elevation_scales`]) so that the lattice blur has unit standard
+/// deviation per feature unit, lifted onto the hyperplane Σ x = 0 of R^(d+1), rounded to the nearest
+/// remainder-0 lattice point, and the simplex is read off the ranking of the rounding residuals (Adams et al.
+/// 2010, §3.1).
 #[inline(always)]
-fn embed(f: &[f32; D]) -> Embedding {
-    // Elevation onto the hyperplane (E matrix), with the per-axis scale √(2/3)·(d+1)/√((i+1)(i+2)).
+fn embed(f: &[f32; D], scales: &[f32; D]) -> Embedding {
+    // Elevation onto the hyperplane (E matrix).
     let mut elevated = [0.0f32; D1];
     let mut sum = 0.0f32;
     for i in (1..=D).rev() {
-        let scale = (D1 as f32) * (2.0f32 / 3.0).sqrt() / ((i * (i + 1)) as f32).sqrt();
-        let cf = f[i - 1] * scale;
+        let cf = f[i - 1] * scales[i - 1];
         elevated[i] = sum - i as f32 * cf;
         sum += cf;
     }
@@ -390,27 +445,17 @@ fn embed(f: &[f32; D]) -> Embedding {
         bary[D1 - r] -= delta;
     }
     bary[0] += 1.0 + bary[D1];
-
-    // Simplex vertices: the remainder-0 point plus the canonical offsets, permuted by rank.
-    let mut keys = [[0i16; D]; D1];
-    for (rem, key) in keys.iter_mut().enumerate() {
-        for i in 0..D {
-            let r = rank[i] as usize;
-            let offset = if r <= D - rem { rem as i32 } else { rem as i32 - D1 as i32 };
-            key[i] = i16::try_from(greedy[i] + offset).expect("lattice coordinate overflows i16");
-        }
-    }
     let mut weights = [0.0f32; D1];
     weights.copy_from_slice(&bary[..D1]);
-    Embedding { keys, weights }
+    Embedding { origin: greedy, rank, weights }
 }
 
 /// Where [`number_block`] gets each pixel's embedding from.
 #[derive(Clone, Copy)]
 enum Features<'a> {
     /// Embedded on the fly from an image, features (x·s_xy, y·s_xy, r·s_rgb, g·s_rgb, b·s_rgb), `scales` =
-    /// [s_xy, s_rgb].
-    Image { image: &'a RgbImage, scales: [f32; 2] },
+    /// [s_xy, s_rgb]; `elevation` from [`elevation_scales`].
+    Image { image: &'a RgbImage, scales: [f32; 2], elevation: [f32; D] },
     /// Already embedded (tests).
     #[cfg(test)]
     Embedded(&'a [Embedding]),
@@ -428,10 +473,10 @@ impl Features<'_> {
     #[inline(always)]
     fn at(&self, i: usize) -> Embedding {
         match self {
-            Features::Image { image, scales: [sxy, srgb] } => {
+            Features::Image { image, scales: [sxy, srgb], elevation } => {
                 let w = image.width;
                 let [r, g, b] = image.rgb(i);
-                embed(&[(i % w) as f32 * sxy, (i / w) as f32 * sxy, r * srgb, g * srgb, b * srgb])
+                embed(&[(i % w) as f32 * sxy, (i / w) as f32 * sxy, r * srgb, g * srgb, b * srgb], elevation)
             }
             #[cfg(test)]
             Features::Embedded(e) => e[i],
@@ -457,49 +502,120 @@ fn assign_vertex_ids_in_blocks(features: Features<'_>, block: usize) -> (Vec<u32
     let block = block.max(1);
     let mut pix_vertex = vec![0u32; npix * D1];
     let mut pix_weight = vec![0.0f32; npix * D1];
-    // Per block: local ids into pix_vertex, and the block's keys in local id order.
-    let local_keys: Vec<Vec<[i16; D]>> = pix_vertex
+    // Per block: local ids into pix_vertex, and the block's table of keys in local id order. The first block's
+    // table becomes the global one (its ids already are global), so it gets room for the whole image (about 0.4
+    // vertices per pixel on natural images; a table grows if there are more).
+    let mut tables: Vec<KeyTable> = pix_vertex
         .par_chunks_mut(block * D1)
         .zip(pix_weight.par_chunks_mut(block * D1))
         .enumerate()
-        .map(|(b, (ids, weights))| number_block(features, b * block, ids, weights))
+        .map(|(b, (ids, weights))| {
+            let expected = if b == 0 { npix } else { ids.len() / D1 } / 2;
+            number_block(features, b * block, ids, weights, expected)
+        })
         .collect();
-    let total: usize = local_keys.iter().map(Vec::len).sum();
-    let mut table = KeyTable::with_capacity(total);
-    let maps: Vec<Vec<u32>> =
-        local_keys.iter().map(|block_keys| block_keys.iter().map(|key| table.insert(key)).collect()).collect();
-    pix_vertex.par_chunks_mut(block * D1).zip(maps.par_iter()).for_each(|(ids, map)| {
+    if tables.is_empty() {
+        return (pix_vertex, pix_weight, KeyTable::with_capacity(0));
+    }
+    let rest = tables.split_off(1);
+    let mut table = tables.pop().expect("the first block's table");
+    let maps: Vec<Vec<u32>> = rest.iter().map(|t| t.keys.iter().map(|key| table.insert(key)).collect()).collect();
+    pix_vertex.par_chunks_mut(block * D1).skip(1).zip(maps.par_iter()).for_each(|(ids, map)| {
         ids.iter_mut().for_each(|id| *id = map[*id as usize]);
     });
     (pix_vertex, pix_weight, table)
 }
 
 /// Embeds the pixels `first..` (as many as `ids` has room for) and numbers their vertices by first appearance
-/// (ids into `ids`, barycentric weights into `weights`), returning the block's keys in id order. Compiled for
+/// (ids into `ids`, barycentric weights into `weights`), returning the block's table (sized for `expected`
+/// keys; it grows if there are more), its keys in id order. Compiled for
 /// AVX2 + FMA as well, where the embedding's rounding is one instruction instead of a libm call (same results).
 #[multiversion(targets("x86_64+avx2+fma"))]
-fn number_block<'f>(features: Features<'f>, first: usize, ids: &mut [u32], weights: &mut [f32]) -> Vec<[i16; D]> {
-    let n = ids.len() / D1;
-    // About 0.4 vertices per pixel on natural images; the table grows if there are more.
-    let mut table = KeyTable::with_capacity(n / 2);
-    // Horizontally adjacent pixels share most simplex vertices: look in the previous pixel's first (a few
-    // comparisons) and only probe the table on a miss. Same ids as probing every key.
-    let mut prev: Option<([[i16; D]; D1], [u32; D1])> = None;
+fn number_block<'f>(
+    features: Features<'f>,
+    first: usize,
+    ids: &mut [u32],
+    weights: &mut [f32],
+    expected: usize,
+) -> KeyTable {
+    let mut table = KeyTable::with_capacity(expected);
+    // Horizontally adjacent pixels often lie in the same simplex (then they share all ids) and otherwise share
+    // some of its vertices: a vertex can only equal the previous pixel's vertex of the same remainder, so
+    // compare with that one (one comparison) and probe the table only on a miss. Same ids as probing every key.
+    let mut prev: Option<(Embedding, [Key; D1], [u32; D1])> = None;
     for (i, (ids, wts)) in (first..).zip(ids.chunks_exact_mut(D1).zip(weights.chunks_exact_mut(D1))) {
         let e = features.at(i);
         wts.copy_from_slice(&e.weights);
-        for (key, id) in e.keys.iter().zip(ids.iter_mut()) {
-            let cached = prev.as_ref().and_then(|(pk, pid)| pk.iter().position(|k| k == key).map(|j| pid[j]));
-            *id = match cached {
-                Some(found) => found,
-                None => table.insert(key),
-            };
+        if let Some((pe, pkeys, pids)) = &mut prev {
+            if pe.origin == e.origin && pe.rank == e.rank {
+                ids.copy_from_slice(pids);
+                continue;
+            }
+            for (rem, (id, (pkey, pid))) in ids.iter_mut().zip(pkeys.iter_mut().zip(pids.iter_mut())).enumerate() {
+                let key = e.key(rem);
+                if key != *pkey {
+                    *pkey = key;
+                    *pid = table.insert(&key);
+                }
+                *id = *pid;
+            }
+            *pe = e;
+        } else {
+            let keys: [Key; D1] = std::array::from_fn(|rem| e.key(rem));
+            for (id, key) in ids.iter_mut().zip(&keys) {
+                *id = table.insert(key);
+            }
+            let mut own = [0u32; D1];
+            own.copy_from_slice(ids);
+            prev = Some((e, keys, own));
         }
-        let mut own = [0u32; D1];
-        own.copy_from_slice(ids);
-        prev = Some((e.keys, own));
     }
-    table.keys
+    table
+}
+
+/// A lattice vertex: its first d coordinates (the d+1-th is minus their sum), each stored biased by 2¹⁵ in a
+/// 16-bit lane, lanes 0–3 in `lo` and lane 4 in `hi`. Built and compared in registers; the bias keeps every lane
+/// away from wrapping, so a blur step is one add per word (see [`MAX_FEATURE`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(C, packed)]
+struct Key {
+    lo: u64,
+    hi: u16,
+}
+
+const KEY_BIAS: i32 = 1 << 15;
+
+impl Key {
+    /// The key of lattice coordinates `c` (the first d).
+    ///
+    /// # Panics
+    /// If a coordinate does not fit 16 bits (prevented by [`features_fit`]).
+    #[inline(always)]
+    fn from_coords(c: [i32; D]) -> Key {
+        let lane = |v: i32| u16::try_from(v + KEY_BIAS).expect("lattice coordinate overflows 16 bits");
+        let lo = (0..4).fold(0u64, |lo, i| lo | u64::from(lane(c[i])) << (16 * i));
+        Key { lo, hi: lane(c[4]) }
+    }
+
+    /// The lattice coordinates.
+    #[cfg(test)]
+    fn coords(&self) -> [i32; D] {
+        let Key { lo, hi } = *self;
+        std::array::from_fn(|i| if i < 4 { (lo >> (16 * i)) as u16 } else { hi } as i32 - KEY_BIAS)
+    }
+
+    /// The neighbour one blur step along lattice direction `dir` (0..=d), up or down: ±((1, …, 1) − (d+1)·e_dir)
+    /// (for dir = d the moved coordinate is the implied one, so only the all-ones part shows).
+    #[inline(always)]
+    fn step(&self, dir: usize, up: bool) -> Key {
+        let Key { lo, hi } = *self;
+        let moved = |c: usize| {
+            let lane = if c < 4 { (lo >> (16 * c)) as u16 } else { hi };
+            let offset = 1 - if c == dir { D1 as i16 } else { 0 };
+            lane.wrapping_add((if up { offset } else { -offset }) as u16)
+        };
+        Key { lo: (0..4).fold(0u64, |w, c| w | u64::from(moved(c)) << (16 * c)), hi: moved(4) }
+    }
 }
 
 /// Open-addressing hash table from lattice keys to vertex ids, numbering new keys in insertion order (linear
@@ -509,7 +625,7 @@ struct KeyTable {
     /// `hash_bits << 32 | id`, or `EMPTY`.
     slots: Vec<u64>,
     /// The keys in id order.
-    keys: Vec<[i16; D]>,
+    keys: Vec<Key>,
     mask: usize,
 }
 
@@ -543,23 +659,22 @@ impl KeyTable {
     }
 
     #[inline]
-    fn hash(key: &[i16; D]) -> u64 {
-        let mut h: u64 = 0;
-        for &k in key {
-            h = (h ^ (k as u16 as u64)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        }
-        h ^ (h >> 29)
+    fn hash(key: &Key) -> u64 {
+        let Key { lo, hi } = *key;
+        let h = (lo ^ u64::from(hi).rotate_right(23)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let h = (h ^ (h >> 32)).wrapping_mul(0xD6E8_FEB8_6659_FD93);
+        h ^ (h >> 32)
     }
 
     /// Whether `slot` holds `key` (whose hash has upper bits `tag`); the key itself is read only on a tag match.
     #[inline]
-    fn holds(&self, slot: u64, tag: u64, key: &[i16; D]) -> bool {
+    fn holds(&self, slot: u64, tag: u64, key: &Key) -> bool {
         slot != EMPTY && slot >> 32 == tag && self.keys[slot as u32 as usize] == *key
     }
 
     /// Linear probing from hash `h`: the slot index holding `key`, or the empty slot where it would go.
     #[inline]
-    fn probe(&self, h: u64, key: &[i16; D]) -> usize {
+    fn probe(&self, h: u64, key: &Key) -> usize {
         let mut s = h as usize & self.mask;
         while self.slots[s] != EMPTY && !self.holds(self.slots[s], h >> 32, key) {
             s = (s + 1) & self.mask;
@@ -570,7 +685,7 @@ impl KeyTable {
     /// The id of `key`, inserting it with the next id (the number of keys so far) if absent. Doubles the
     /// table when it would become more than 3/4 full, so probing always ends (images with very noisy colours
     /// have up to d+1 distinct vertices per pixel).
-    fn insert(&mut self, key: &[i16; D]) -> u32 {
+    fn insert(&mut self, key: &Key) -> u32 {
         if 4 * (self.keys.len() + 1) > 3 * self.slots.len() {
             self.grow();
         }
@@ -586,7 +701,7 @@ impl KeyTable {
 
     /// [`KeyTable::get`] for many keys: the first slot of every key is loaded in a branch-free loop before any
     /// is examined, so the cache misses overlap instead of waiting on each other.
-    fn get_many(&self, keys: &[[i16; D]], ids: &mut [u32]) {
+    fn get_many(&self, keys: &[Key], ids: &mut [u32]) {
         const MAX: usize = 128;
         for (keys, ids) in keys.chunks(MAX).zip(ids.chunks_mut(MAX)) {
             let mut hashes = [0u64; MAX];
@@ -606,7 +721,7 @@ impl KeyTable {
     }
 
     /// The id of `key`, or `NONE`.
-    fn get(&self, key: &[i16; D]) -> u32 {
+    fn get(&self, key: &Key) -> u32 {
         let slot = self.slots[self.probe(Self::hash(key), key)];
         if slot == EMPTY { NONE } else { slot as u32 }
     }
@@ -754,16 +869,36 @@ mod tests {
     #[test]
     fn lattice_embedding_weights_form_a_partition_of_unity() {
         for f in [[0.0; D], [1.3, -2.2, 0.7, 4.1, 0.05], [100.0, 37.5, 2.0, 2.0, 2.0]] {
-            let e = embed(&f);
+            let e = embed(&f, &elevation_scales());
             let sum: f32 = e.weights.iter().sum();
             assert!((sum - 1.0).abs() < 1e-5 && e.weights.iter().all(|&w| w >= -1e-6), "{f:?}: {:?}", e.weights);
             // The d+1 vertices are distinct lattice points whose coordinates have remainders 0..=d.
             // Vertex `rem` is a remainder-`rem` lattice point: every coordinate ≡ rem (mod d+1), including the
             // implied last one (minus the sum of the others).
-            for (rem, key) in e.keys.iter().enumerate() {
-                let last = -key.iter().map(|&k| i32::from(k)).sum::<i32>();
-                for c in key.iter().map(|&k| i32::from(k)).chain([last]) {
+            for (rem, key) in e.keys().iter().enumerate() {
+                let coords = key.coords();
+                let last = -coords.iter().sum::<i32>();
+                for c in coords.into_iter().chain([last]) {
                     assert_eq!(c.rem_euclid(D1 as i32), rem as i32, "vertex {rem} of {f:?}");
+                }
+            }
+        }
+    }
+
+    /// Packed keys against plain coordinate arithmetic: round trip, and a blur step in every direction, for
+    /// coordinates of both signs up to the largest the features allow.
+    #[test]
+    fn lattice_keys_step_like_coordinates() {
+        let big = (34.6 * MAX_FEATURE) as i32 + D1 as i32;
+        for c in [[0, 0, 0, 0, 0], [1, -2, 3, -4, 5], [-big, big, -7, 0, big], [big, big, big, big, -big]] {
+            let key = Key::from_coords(c);
+            assert_eq!(key.coords(), c);
+            for dir in 0..D1 {
+                for up in [false, true] {
+                    let sign = if up { 1 } else { -1 };
+                    let expected: [i32; D] =
+                        std::array::from_fn(|i| c[i] + sign * (1 - if i == dir { D1 as i32 } else { 0 }));
+                    assert_eq!(key.step(dir, up).coords(), expected, "{c:?} dir {dir} up {up}");
                 }
             }
         }
@@ -795,28 +930,29 @@ mod tests {
         let embeddings: Vec<Embedding> = (0..w * h)
             .map(|i| {
                 let [r, g, b] = img.rgb(i);
-                embed(&[(i % w) as f32 / 2.0, (i / w) as f32 / 2.0, r / 20.0, g / 20.0, b / 20.0])
+                embed(&[(i % w) as f32 / 2.0, (i / w) as f32 / 2.0, r / 20.0, g / 20.0, b / 20.0], &elevation_scales())
             })
             .collect();
+        // The reference numbers plain coordinates, independently of the packed keys and their hash.
         let mut ids_ref = Vec::new();
-        let mut keys_ref: Vec<[i16; D]> = Vec::new();
+        let mut coords_ref: Vec<[i32; D]> = Vec::new();
         let mut seen = std::collections::HashMap::new();
         for e in &embeddings {
-            for key in &e.keys {
-                let id = *seen.entry(*key).or_insert_with(|| {
-                    keys_ref.push(*key);
-                    keys_ref.len() as u32 - 1
+            for key in &e.keys() {
+                let id = *seen.entry(key.coords()).or_insert_with(|| {
+                    coords_ref.push(key.coords());
+                    coords_ref.len() as u32 - 1
                 });
                 ids_ref.push(id);
             }
         }
-        assert!(keys_ref.len() > 100, "too few vertices for a meaningful test: {}", keys_ref.len());
+        assert!(coords_ref.len() > 100, "too few vertices for a meaningful test: {}", coords_ref.len());
         for block in [1, 5, 37, 100, 851, w * h] {
             let (ids, weights, table) = assign_vertex_ids_in_blocks(Features::Embedded(&embeddings), block);
             let keys = &table.keys;
             assert_eq!(ids, ids_ref, "block {block}");
             assert!(weights.iter().eq(embeddings.iter().flat_map(|e| e.weights.iter())), "block {block}");
-            assert_eq!(*keys, keys_ref, "block {block}");
+            assert!(keys.iter().map(Key::coords).eq(coords_ref.iter().copied()), "block {block}");
             for (id, key) in keys.iter().enumerate() {
                 assert_eq!(table.get(key), id as u32);
             }
