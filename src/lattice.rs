@@ -511,11 +511,11 @@ fn assign_vertex_ids_in_blocks(features: Features<'_>, block: usize) -> (Vec<u32
         .enumerate()
         .map(|(b, (ids, weights))| {
             let expected = if b == 0 { npix } else { ids.len() / D1 } / 2;
-            number_block(features, b * block, ids, weights, expected)
+            number_block(features, b * block, ids, weights, expected, npix * D1)
         })
         .collect();
     if tables.is_empty() {
-        return (pix_vertex, pix_weight, KeyTable::with_capacity(0));
+        return (pix_vertex, pix_weight, KeyTable::with_capacity(0, 0));
     }
     let rest = tables.split_off(1);
     let mut table = tables.pop().expect("the first block's table");
@@ -528,7 +528,8 @@ fn assign_vertex_ids_in_blocks(features: Features<'_>, block: usize) -> (Vec<u32
 
 /// Embeds the pixels `first..` (as many as `ids` has room for) and numbers their vertices by first appearance
 /// (ids into `ids`, barycentric weights into `weights`), returning the block's table (sized for `expected`
-/// keys; it grows if there are more), its keys in id order. Compiled for
+/// keys, it grows if there are more; ids below `max_keys`, the whole image's bound, as it may become the global
+/// table), its keys in id order. Compiled for
 /// AVX2 + FMA as well, where the embedding's rounding is one instruction instead of a libm call (same results).
 #[multiversion(targets("x86_64+avx2+fma"))]
 fn number_block<'f>(
@@ -537,8 +538,9 @@ fn number_block<'f>(
     ids: &mut [u32],
     weights: &mut [f32],
     expected: usize,
+    max_keys: usize,
 ) -> KeyTable {
-    let mut table = KeyTable::with_capacity(expected);
+    let mut table = KeyTable::with_capacity(expected, max_keys);
     // Horizontally adjacent pixels often lie in the same simplex (then they share all ids) and otherwise share
     // some of its vertices: a vertex can only equal the previous pixel's vertex of the same remainder, so
     // compare with that one (one comparison) and probe the table only on a miss. Same ids as probing every key.
@@ -619,28 +621,42 @@ impl Key {
 }
 
 /// Open-addressing hash table from lattice keys to vertex ids, numbering new keys in insertion order (linear
-/// probing, power-of-two capacity). A slot is 8 bytes, the id and 32 bits of the key's hash, so the table stays
-/// small enough for the L2 cache and a probe only reads the stored key (`keys[id]`) when the hash bits match.
+/// probing, power-of-two capacity). A slot is 4 bytes: the id in the low bits (as many as the largest possible
+/// id needs) and the top bits of the key's hash above it, so the table stays small enough for the L2 cache and a
+/// probe reads the stored key (`keys[id]`, usually cached: ids follow the raster) only when those bits match.
 struct KeyTable {
-    /// `hash_bits << 32 | id`, or `EMPTY`.
-    slots: Vec<u64>,
+    /// `hash_bits | id`, or `EMPTY`.
+    slots: Vec<u32>,
     /// The keys in id order.
     keys: Vec<Key>,
     mask: usize,
+    /// Selects the id bits of a slot; the rest hold hash bits. Ids stay below it, so a slot is never `EMPTY`.
+    id_mask: u32,
 }
 
-const EMPTY: u64 = u64::MAX;
+const EMPTY: u32 = u32::MAX;
 
 impl KeyTable {
-    /// A table with room for `n` keys.
-    fn with_capacity(n: usize) -> Self {
+    /// A table with room for `n` keys that will never hold more than `max_keys`.
+    ///
+    /// # Panics
+    /// If `max_keys` ≥ 2³¹.
+    fn with_capacity(n: usize, max_keys: usize) -> Self {
+        assert!(max_keys < 1 << 31, "too many lattice vertices for 32-bit ids");
+        let id_bits = usize::BITS - max_keys.leading_zeros();
         let cap = (n + n / 3 + 1).next_power_of_two().max(16);
-        KeyTable { slots: vec![EMPTY; cap], keys: Vec::with_capacity(n), mask: cap - 1 }
+        KeyTable { slots: vec![EMPTY; cap], keys: Vec::with_capacity(n), mask: cap - 1, id_mask: (1 << id_bits) - 1 }
     }
 
     /// Number of keys.
     fn len(&self) -> usize {
         self.keys.len()
+    }
+
+    /// The slot of key id `id` with hash `h`.
+    #[inline]
+    fn slot(&self, h: u64, id: usize) -> u32 {
+        (h >> 32) as u32 & !self.id_mask | id as u32
     }
 
     /// Rehashes into a table twice the size (ids are kept, so vertex numbering does not change).
@@ -654,7 +670,7 @@ impl KeyTable {
             while self.slots[s] != EMPTY {
                 s = (s + 1) & self.mask;
             }
-            self.slots[s] = (h >> 32) << 32 | id as u64;
+            self.slots[s] = self.slot(h, id);
         }
     }
 
@@ -666,17 +682,19 @@ impl KeyTable {
         h ^ (h >> 32)
     }
 
-    /// Whether `slot` holds `key` (whose hash has upper bits `tag`); the key itself is read only on a tag match.
+    /// Whether `slot` holds `key` (whose hash is `h`); the key itself is read only when the hash bits match.
     #[inline]
-    fn holds(&self, slot: u64, tag: u64, key: &Key) -> bool {
-        slot != EMPTY && slot >> 32 == tag && self.keys[slot as u32 as usize] == *key
+    fn holds(&self, slot: u32, h: u64, key: &Key) -> bool {
+        slot != EMPTY
+            && (slot ^ (h >> 32) as u32) & !self.id_mask == 0
+            && self.keys[(slot & self.id_mask) as usize] == *key
     }
 
     /// Linear probing from hash `h`: the slot index holding `key`, or the empty slot where it would go.
     #[inline]
     fn probe(&self, h: u64, key: &Key) -> usize {
         let mut s = h as usize & self.mask;
-        while self.slots[s] != EMPTY && !self.holds(self.slots[s], h >> 32, key) {
+        while self.slots[s] != EMPTY && !self.holds(self.slots[s], h, key) {
             s = (s + 1) & self.mask;
         }
         s
@@ -692,11 +710,11 @@ impl KeyTable {
         let h = Self::hash(key);
         let s = self.probe(h, key);
         if self.slots[s] == EMPTY {
-            let id = self.keys.len() as u32;
-            self.slots[s] = (h >> 32) << 32 | u64::from(id);
+            let id = self.keys.len();
+            self.slots[s] = self.slot(h, id);
             self.keys.push(*key);
         }
-        self.slots[s] as u32
+        self.slots[s] & self.id_mask
     }
 
     /// [`KeyTable::get`] for many keys: the first slot of every key is loaded in a branch-free loop before any
@@ -705,7 +723,7 @@ impl KeyTable {
         const MAX: usize = 128;
         for (keys, ids) in keys.chunks(MAX).zip(ids.chunks_mut(MAX)) {
             let mut hashes = [0u64; MAX];
-            let mut first = [0u64; MAX];
+            let mut first = [0u32; MAX];
             for ((h, f), key) in hashes.iter_mut().zip(first.iter_mut()).zip(keys) {
                 *h = Self::hash(key);
                 *f = self.slots[*h as usize & self.mask];
@@ -713,7 +731,7 @@ impl KeyTable {
             for (((id, key), &h), &f) in ids.iter_mut().zip(keys).zip(&hashes).zip(&first) {
                 *id = match f {
                     EMPTY => NONE,
-                    _ if self.holds(f, h >> 32, key) => f as u32,
+                    _ if self.holds(f, h, key) => f & self.id_mask,
                     _ => self.get(key),
                 };
             }
@@ -723,7 +741,7 @@ impl KeyTable {
     /// The id of `key`, or `NONE`.
     fn get(&self, key: &Key) -> u32 {
         let slot = self.slots[self.probe(Self::hash(key), key)];
-        if slot == EMPTY { NONE } else { slot as u32 }
+        if slot == EMPTY { NONE } else { slot & self.id_mask }
     }
 }
 
