@@ -85,7 +85,7 @@ pub struct LatticeScratch {
 
 /// Per-pixel result of embedding a feature vector: the enclosing simplex (its remainder-0 vertex and the ranking
 /// that orders the other vertices) and the barycentric weights.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Embedding {
     /// The simplex's remainder-0 vertex, all d+1 coordinates (they sum to zero).
     origin: [i32; D1],
@@ -380,8 +380,8 @@ fn elevation_scales() -> [f32; D] {
 /// The feature is scaled (`scales` from [`elevation_scales`]) so that the lattice blur has unit standard
 /// deviation per feature unit, lifted onto the hyperplane Σ x = 0 of R^(d+1), rounded to the nearest
 /// remainder-0 lattice point, and the simplex is read off the ranking of the rounding residuals (Adams et al.
-/// 2010, §3.1).
-#[inline(always)]
+/// 2010, §3.1). The scalar reference for [`embed_lanes`], which the build uses.
+#[cfg(test)]
 fn embed(f: &[f32; D], scales: &[f32; D]) -> Embedding {
     // Elevation onto the hyperplane (E matrix).
     let mut elevated = [0.0f32; D1];
@@ -450,6 +450,90 @@ fn embed(f: &[f32; D], scales: &[f32; D]) -> Embedding {
     Embedding { origin: greedy, rank, weights }
 }
 
+/// Pixels embedded at once by [`embed_lanes`]: one AVX2 register of `f32`.
+const LANES: usize = 8;
+
+/// [`embed`] for `LANES` feature vectors at once (`f[feature][lane]`), written lane by lane so that it
+/// vectorises; every lane performs exactly [`embed`]'s floating-point operations, so the results are
+/// bit-identical (tested).
+#[inline(always)]
+fn embed_lanes(f: &[[f32; LANES]; D], scales: &[f32; D]) -> [Embedding; LANES] {
+    let mut elevated = [[0.0f32; LANES]; D1];
+    let mut sum = [0.0f32; LANES];
+    for i in (1..=D).rev() {
+        for l in 0..LANES {
+            let cf = f[i - 1][l] * scales[i - 1];
+            elevated[i][l] = sum[l] - i as f32 * cf;
+            sum[l] += cf;
+        }
+    }
+    elevated[0] = sum;
+
+    // The nearest remainder-0 point, kept in f32 (its coordinates are integers far below 2²⁴, so exact), and
+    // its coordinate sum over d+1 (exact as well: a sum of multiples of d+1).
+    let d1 = D1 as f32;
+    let mut greedy = [[0.0f32; LANES]; D1];
+    let mut total = [0.0f32; LANES];
+    for i in 0..D1 {
+        for l in 0..LANES {
+            let e = elevated[i][l];
+            let v = e / d1;
+            let up = v.ceil() * d1;
+            let down = v.floor() * d1;
+            greedy[i][l] = if up - e < e - down { up } else { down };
+            total[l] += greedy[i][l];
+        }
+    }
+    let total: [i32; LANES] = std::array::from_fn(|l| (total[l] / d1) as i32);
+    let mut rank = [[0i32; LANES]; D1];
+    for i in 0..D {
+        for j in i + 1..D1 {
+            for l in 0..LANES {
+                let below = (elevated[i][l] - greedy[i][l]) < (elevated[j][l] - greedy[j][l]);
+                rank[i][l] += i32::from(below);
+                rank[j][l] += i32::from(!below);
+            }
+        }
+    }
+    // Fix the point so its coordinates sum to zero (no change where the total is already 0).
+    let n = D1 as i32;
+    for i in 0..D1 {
+        for l in 0..LANES {
+            let (t, r) = (total[l], rank[i][l]);
+            let (dg, dr) = if t > 0 {
+                if r >= n - t { (-d1, t - n) } else { (0.0, t) }
+            } else if r < -t {
+                (d1, n + t)
+            } else {
+                (0.0, t)
+            };
+            greedy[i][l] += dg;
+            rank[i][l] += dr;
+        }
+    }
+
+    // Barycentric weights: the same additions into the same slots, in the same order, as `embed`.
+    let mut bary = [[0.0f32; LANES]; D1 + 1];
+    for i in 0..D1 {
+        for l in 0..LANES {
+            let delta = (elevated[i][l] - greedy[i][l]) / d1;
+            let r = rank[i][l];
+            for (k, b) in bary.iter_mut().enumerate() {
+                let k = k as i32;
+                let v = b[l];
+                b[l] = if k == D as i32 - r { v + delta } else { v };
+                let v = b[l];
+                b[l] = if k == n - r { v - delta } else { v };
+            }
+        }
+    }
+    std::array::from_fn(|l| Embedding {
+        origin: std::array::from_fn(|i| greedy[i][l] as i32),
+        rank: std::array::from_fn(|i| rank[i][l]),
+        weights: std::array::from_fn(|k| if k == 0 { bary[0][l] + (1.0 + bary[D1][l]) } else { bary[k][l] }),
+    })
+}
+
 /// Where [`number_block`] gets each pixel's embedding from.
 #[derive(Clone, Copy)]
 enum Features<'a> {
@@ -470,16 +554,30 @@ impl Features<'_> {
         }
     }
 
+    /// The embeddings of the pixels `first..first + n` (n ≤ `LANES`; lanes past n repeat the last pixel).
     #[inline(always)]
-    fn at(&self, i: usize) -> Embedding {
+    fn lanes_at(&self, first: usize, n: usize) -> [Embedding; LANES] {
+        let pixel = |l: usize| first + l.min(n - 1);
         match self {
             Features::Image { image, scales: [sxy, srgb], elevation } => {
                 let w = image.width;
-                let [r, g, b] = image.rgb(i);
-                embed(&[(i % w) as f32 * sxy, (i / w) as f32 * sxy, r * srgb, g * srgb, b * srgb], elevation)
+                let (mut x, mut y) = (first % w, first / w);
+                let mut px = [[0.0f32; D]; LANES];
+                for (l, px) in px.iter_mut().enumerate() {
+                    let [r, g, b] = image.rgb(pixel(l));
+                    *px = [x as f32 * sxy, y as f32 * sxy, r * srgb, g * srgb, b * srgb];
+                    if l + 1 < n {
+                        x += 1;
+                        if x == w {
+                            (x, y) = (0, y + 1);
+                        }
+                    }
+                }
+                let f = std::array::from_fn(|k| std::array::from_fn(|l| px[l][k]));
+                embed_lanes(&f, elevation)
             }
             #[cfg(test)]
-            Features::Embedded(e) => e[i],
+            Features::Embedded(e) => std::array::from_fn(|l| e[pixel(l)]),
         }
     }
 }
@@ -545,8 +643,13 @@ fn number_block<'f>(
     // some of its vertices: a vertex can only equal the previous pixel's vertex of the same remainder, so
     // compare with that one (one comparison) and probe the table only on a miss. Same ids as probing every key.
     let mut prev: Option<(Embedding, [Key; D1], [u32; D1])> = None;
-    for (i, (ids, wts)) in (first..).zip(ids.chunks_exact_mut(D1).zip(weights.chunks_exact_mut(D1))) {
-        let e = features.at(i);
+    let npix = ids.len() / D1;
+    let mut batch = [Embedding::default(); LANES];
+    for (k, (ids, wts)) in ids.chunks_exact_mut(D1).zip(weights.chunks_exact_mut(D1)).enumerate() {
+        if k % LANES == 0 {
+            batch = features.lanes_at(first + k, (npix - k).min(LANES));
+        }
+        let e = batch[k % LANES];
         wts.copy_from_slice(&e.weights);
         if let Some((pe, pkeys, pids)) = &mut prev {
             if pe.origin == e.origin && pe.rank == e.rank {
@@ -899,6 +1002,28 @@ mod tests {
                 for c in coords.into_iter().chain([last]) {
                     assert_eq!(c.rem_euclid(D1 as i32), rem as i32, "vertex {rem} of {f:?}");
                 }
+            }
+        }
+    }
+
+    /// The eight-lane embedding against the scalar one, bit for bit, on random features of every magnitude the
+    /// lattice accepts, integer-valued ones (ties in the rounding) and partial batches.
+    #[test]
+    fn lattice_embed_lanes_matches_scalar_embed() {
+        let scales = elevation_scales();
+        let noise = rand_vec(4096 * D, 12);
+        for (b, chunk) in noise.chunks_exact(LANES * D).enumerate() {
+            let magnitude = [1.0, 10.0, 100.0, MAX_FEATURE][b % 4];
+            let mut f = [[0.0f32; LANES]; D];
+            for (k, &u) in chunk.iter().enumerate() {
+                let v = u * magnitude;
+                f[k % D][k / D] = if b % 5 == 0 { v.round() } else { v };
+            }
+            let lanes = embed_lanes(&f, &scales);
+            for l in 0..LANES {
+                let e = embed(&std::array::from_fn(|k| f[k][l]), &scales);
+                assert_eq!((e.origin, e.rank), (lanes[l].origin, lanes[l].rank), "batch {b} lane {l}");
+                assert!(e.weights.iter().zip(&lanes[l].weights).all(|(a, b)| a.to_bits() == b.to_bits()));
             }
         }
     }
