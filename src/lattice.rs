@@ -142,24 +142,30 @@ impl Lattice {
         // 2. Splat gather lists (CSR), entries in pixel order.
         let (splat_start, splat_entries) = splat_lists(&pix_vertex, nvert);
 
-        // 3. Blur neighbours along each lattice direction: key ± (1, …, 1) ∓ (d+1)·e_dir.
+        // 3. Blur neighbours along each lattice direction: key ± (1, …, 1) ∓ (d+1)·e_dir. Only the upper ones
+        //    are looked up; v is the lower neighbour of its upper neighbour, so the lower ones are filled by
+        //    inverting (one direction per task, in vertex order: no shared writes).
         let mut blur_nbr = vec![[NONE; 2]; D1 * nvert];
         for (dir, nbrs) in blur_nbr.chunks_exact_mut(nvert.max(1)).enumerate() {
-            const CHUNK: usize = 64;
+            const CHUNK: usize = 128;
             nbrs.par_chunks_mut(CHUNK).zip(keys.par_chunks(CHUNK)).for_each(|(n, keys)| {
-                let mut queries = [Key::default(); 2 * CHUNK];
-                for (q, key) in queries.chunks_exact_mut(2).zip(keys) {
-                    q[0] = key.step(dir, false);
-                    q[1] = key.step(dir, true);
-                }
-                let mut ids = [NONE; 2 * CHUNK];
-                let len = 2 * keys.len();
-                table.get_many(&queries[..len], &mut ids[..len]);
-                for (n, id) in n.iter_mut().zip(ids.chunks_exact(2)) {
-                    *n = [id[0], id[1]];
+                let queries: [Key; CHUNK] =
+                    std::array::from_fn(|k| keys.get(k).map_or(Key::default(), |key| key.step(dir, true)));
+                let mut ids = [NONE; CHUNK];
+                table.get_many(&queries[..keys.len()], &mut ids[..keys.len()]);
+                for (n, &id) in n.iter_mut().zip(&ids) {
+                    n[1] = id;
                 }
             });
         }
+        blur_nbr.par_chunks_exact_mut(nvert.max(1)).for_each(|nbrs| {
+            for v in 0..nbrs.len() {
+                let up = nbrs[v][1];
+                if up != NONE {
+                    nbrs[up as usize][0] = v as u32;
+                }
+            }
+        });
 
         Lattice { npix, nvert, pix_vertex, pix_weight, splat_start, splat_entries, blur_nbr, self_weight }
     }
@@ -1026,6 +1032,26 @@ mod tests {
                 assert!(e.weights.iter().zip(&lanes[l].weights).all(|(a, b)| a.to_bits() == b.to_bits()));
             }
         }
+    }
+
+    /// The blur neighbours (upper ones looked up, lower ones by inversion) against a direct lookup of both.
+    #[test]
+    fn lattice_blur_neighbours_match_direct_lookups() {
+        let img = test_image(45, 31, 2);
+        let lat = Lattice::build(&img, 3.0, 30.0);
+        let features = Features::Image { image: &img, scales: [1.0 / 3.0, 1.0 / 30.0], elevation: elevation_scales() };
+        let (_, _, table) = assign_vertex_ids(features);
+        let nvert = lat.num_vertices();
+        assert_eq!(table.len(), nvert);
+        let mut found = 0;
+        for dir in 0..D1 {
+            for (v, key) in table.keys.iter().enumerate() {
+                let expected = [table.get(&key.step(dir, false)), table.get(&key.step(dir, true))];
+                assert_eq!(lat.blur_nbr[dir * nvert + v], expected, "vertex {v} direction {dir}");
+                found += expected.iter().filter(|&&id| id != NONE).count();
+            }
+        }
+        assert!(found > nvert, "too few neighbours for a meaningful test: {found}");
     }
 
     /// Packed keys against plain coordinate arithmetic: round trip, and a blur step in every direction, for
