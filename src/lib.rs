@@ -43,6 +43,8 @@ pub mod viz;
 
 use std::time::{Duration, Instant};
 
+use params::Schedule;
+
 pub use error::{Error, Result};
 pub use image::{CostVolume, DisparityMap, Plane, RgbImage, StereoPair};
 pub use params::{LrcMode, Model, Params};
@@ -86,10 +88,11 @@ pub struct Output {
 ///
 /// The model, at the resolution the pipeline runs at (the input reduced by `params.downscale`: N pixels,
 /// M labels, one N × M `f32` volume = 4NM bytes):
-/// - JEM and FCM: three volumes alive at the peak — the cost volume, the marginals Q and the next Q (the right
-///   view reuses the left view's spent buffers, so it adds none) — plus the lattice's two vertex buffers,
-///   V × M `f32` each with V ≤ N vertices (~0.4 N on natural images; the bound is used): 5 volumes;
-/// - LCM: the three volumes;
+/// - JEM and FCM: two volumes alive at the peak — the cost volume and the marginals Q (the right view reuses
+///   the left view's spent buffers, so it adds none), three with the Jacobi schedule (the next Q; the
+///   checkerboard updates Q in place) — plus the lattice's two vertex buffers, V × M `f32` each with V ≤ N
+///   vertices (~0.4 N on natural images; the bound is used): 4 volumes (5 with Jacobi);
+/// - LCM: the two (three) volumes;
 /// - WTA: one volume, two with the left-right check (both views' cost volumes);
 /// - plus ~300 bytes per pixel: the images, the lattice's per-pixel tables, the maps of the post-processing.
 ///
@@ -104,11 +107,12 @@ fn estimate_at_factor(width: usize, height: usize, ndisp: usize, params: &Params
         (scale::reduced_len(width, factor), scale::reduced_len(height, factor), scale::reduced_ndisp(ndisp, factor));
     let n = w as u64 * h as u64;
     let volume = 4 * n * m as u64;
+    let next_q = u64::from(params.meanfield.schedule == Schedule::Jacobi);
     let volumes = match params.model {
         Model::Wta if params.post.lrc.mode == LrcMode::Off => 1,
         Model::Wta => 2,
-        Model::Lcm => 3,
-        Model::Fcm | Model::Jem => 5,
+        Model::Lcm => 2 + next_q,
+        Model::Fcm | Model::Jem => 4 + next_q,
     };
     let full_size = if factor > 1 { 32 * width as u64 * height as u64 } else { 0 };
     volumes * volume + 300 * n + full_size
@@ -323,19 +327,23 @@ mod tests {
     #[test]
     fn memory_estimate_scales_with_pixels_and_labels() {
         let p = Params::default();
-        // Vintage at quarter resolution: 720x480 (about), ndisp 190: 5 volumes of 263 MB plus 300 B/px = 1.42 GB.
+        // Vintage at quarter resolution: 720x480 (about), ndisp 190: 4 volumes of 263 MB plus 300 B/px = 1.15 GB.
         let vintage = estimate_memory_bytes(720, 480, 190, &p);
-        assert_eq!(vintage, 5 * 4 * 720 * 480 * 190 + 300 * 720 * 480);
+        assert_eq!(vintage, 4 * 4 * 720 * 480 * 190 + 300 * 720 * 480);
         assert!(vintage > 1 << 30 && vintage < 2 << 30, "{vintage}");
         assert_eq!(estimate_memory_bytes(200, 100, 10, &p) * 4, estimate_memory_bytes(400, 200, 10, &p));
+        let volume = 4 * 720 * 480 * 190;
         let wta = Params { model: Model::Wta, ..Params::default() };
-        assert!(estimate_memory_bytes(720, 480, 190, &wta) < vintage / 2);
+        assert_eq!(vintage - estimate_memory_bytes(720, 480, 190, &wta), 2 * volume);
         let mut one = wta.clone();
         one.post.lrc.mode = LrcMode::Off;
-        let volume = 4 * 720 * 480 * 190;
         assert_eq!(estimate_memory_bytes(720, 480, 190, &wta) - estimate_memory_bytes(720, 480, 190, &one), volume);
         let lcm = Params { model: Model::Lcm, ..Params::default() };
         assert_eq!(vintage - estimate_memory_bytes(720, 480, 190, &lcm), 2 * volume);
+        // The Jacobi schedule keeps a second Q.
+        let mut jacobi = Params::default();
+        jacobi.meanfield.schedule = Schedule::Jacobi;
+        assert_eq!(estimate_memory_bytes(720, 480, 190, &jacobi) - vintage, volume);
     }
 
     #[test]
@@ -343,7 +351,7 @@ mod tests {
         let p = Params { downscale: 2, ..Params::default() };
         // 722x480 at 1/2: 361x240 with 95 labels, plus the full-size images and maps (32 B per input pixel).
         let n = 361 * 240;
-        assert_eq!(estimate_memory_bytes(722, 480, 190, &p), 5 * 4 * n * 95 + 300 * n + 32 * 722 * 480);
+        assert_eq!(estimate_memory_bytes(722, 480, 190, &p), 4 * 4 * n * 95 + 300 * n + 32 * 722 * 480);
         let full = estimate_memory_bytes(722, 480, 190, &Params::default());
         assert!(estimate_memory_bytes(722, 480, 190, &p) * 6 < full, "about 1/8 of the memory");
     }
@@ -351,14 +359,14 @@ mod tests {
     #[test]
     fn memory_guard_refuses_before_allocating() {
         let p = Params::default();
-        // Full resolution 2880x1988 at ndisp 760 would need ~85 GB: refused at once with the numbers and the
-        // smallest downscale that fits (1/2: ~11 GB).
+        // Full resolution 2880x1988 at ndisp 760 would need ~70 GB: refused at once with the numbers and the
+        // smallest downscale that fits (1/2: ~9 GB).
         let e = check_memory(2880, 1988, 760, &p, 24 << 30).unwrap_err();
         let msg = e.to_string();
         assert!(msg.contains("needs about") && msg.contains("GiB") && msg.contains("2880x1988"), "{msg}");
         assert!(msg.contains("--downscale 2 ") && msg.contains("--max-memory"), "{msg}");
         check_memory(450, 375, 64, &p, 24 << 30).unwrap();
-        // With 2 GiB the same input needs 1/4 (~1.5 GB); downscale 2 in the config already is taken into account.
+        // With 2 GiB the same input needs 1/4 (~1.2 GB); downscale 2 in the config already is taken into account.
         let msg = check_memory(2880, 1988, 760, &p, 2 << 30).unwrap_err().to_string();
         assert!(msg.contains("--downscale 4 "), "{msg}");
         let msg = check_memory(2880, 1988, 760, &Params { downscale: 2, ..p.clone() }, 2 << 30).unwrap_err();

@@ -21,9 +21,10 @@
 //! structures), so one ω cannot suit both; we default to `symmetric` (D^{-1/2} K D^{-1/2}, as in Krähenbühl's
 //! dense-CRF code), chosen by measurement on trainingQ (docs/RESULTS.md); `none` and `pixel` remain available.
 //!
-//! Memory: Q and the next Q, each `N × M` f32, plus the lattice's two `vertices × M` buffers (the fully connected
-//! message is sliced per pixel inside the update, never stored); each iteration is O(N·M) and allocation-free
-//! apart from a few `M`-long scratch vectors per thread.
+//! Memory: Q, `N × M` f32 (and the next Q with the Jacobi schedule; the checkerboard updates Q in place), plus
+//! the lattice's two `vertices × M` buffers (the fully connected message is sliced per pixel inside the update,
+//! never stored); each iteration is O(N·M) and allocation-free apart from a few `M`-long scratch vectors per
+//! thread.
 
 use multiversion::multiversion;
 use rayon::prelude::*;
@@ -266,7 +267,10 @@ pub struct MeanField<'a> {
     /// Per-pixel self-weight to subtract (scaled like the input) — empty if the self term is kept.
     self_weight: Vec<f32>,
     q: Vec<f32>,
+    /// The next Q (Jacobi schedule only; the checkerboard updates Q in place).
     next: Vec<f32>,
+    /// Two rows per band of rows for the in-place checkerboard.
+    edges: Vec<f32>,
     scratch: LatticeScratch,
 }
 
@@ -316,14 +320,21 @@ impl<'a> MeanField<'a> {
             }
         }
         let Buffers { mut q, mut next, scratch } = buffers;
-        // Fresh buffers are zeroed by the OS (no fill pass); Q is then written in parallel, and `next` is
-        // written by each iteration before it is read.
+        // Fresh buffers are zeroed by the OS (no fill pass); Q is then written in parallel, and `next` (needed by
+        // the Jacobi schedule only) is written by each iteration before it is read.
         if q.len() != n * m {
             q = vec![0.0; n * m];
         }
-        if next.len() != n * m {
-            next = vec![0.0; n * m];
+        let next_len = if p.schedule == Schedule::Jacobi { n * m } else { 0 };
+        if next.len() != next_len {
+            next = vec![0.0; next_len];
         }
+        let edges = match p.schedule {
+            Schedule::Jacobi => Vec::new(),
+            Schedule::Checkerboard => {
+                vec![0.0; 2 * checkerboard_bands(cost.height, rayon::current_num_threads()).len() * cost.width * m]
+            }
+        };
         let scale = p.unary_scale;
         const CHUNK: usize = 256;
         q.par_chunks_mut(m * CHUNK).zip(cost.data.par_chunks(m * CHUNK)).for_each(|(q, c)| {
@@ -342,6 +353,7 @@ impl<'a> MeanField<'a> {
             self_weight,
             q,
             next,
+            edges,
             scratch,
         }
     }
@@ -352,6 +364,7 @@ impl<'a> MeanField<'a> {
         let mut next = std::mem::take(&mut self.next);
         let mut q = std::mem::take(&mut self.q);
         let mut scratch = std::mem::take(&mut self.scratch);
+        let mut edges_slot = std::mem::take(&mut self.edges);
         let vals: &[f32] = match &self.lattice {
             Some(lat) => {
                 let scale = (!self.in_scale.is_empty()).then_some(self.in_scale.as_slice());
@@ -367,21 +380,24 @@ impl<'a> MeanField<'a> {
             }
             Schedule::Checkerboard => {
                 let bands = checkerboard_bands(self.cost.height, rayon::current_num_threads());
-                if bands.is_empty() {
-                    this.checkerboard_two_pass(&mut q, &mut next, vals);
-                } else {
-                    this.checkerboard_pipelined(&mut q, &mut next, vals, &bands);
-                }
+                let mut edges = std::mem::take(&mut edges_slot);
+                // Sized in `with_buffers` for the current thread count; only a different pool resizes it.
+                edges.resize(2 * bands.len() * self.cost.width * m, 0.0);
+                this.checkerboard_in_place(&mut q, vals, &bands, &mut edges);
+                edges_slot = edges;
             }
         }
         self.q = q;
         self.scratch = scratch;
         self.next = next;
+        self.edges = edges_slot;
     }
 
     /// Red-black update in two sweeps over the image: pass 1 computes the pixels with x + y even from the
     /// previous Q into `next`; pass 2 the odd ones, whose 4 neighbours are all even, from the pass-1 values,
     /// written over the previous Q (each pixel reads its own old value first), with the even ones copied in.
+    /// The reference for [`MeanField::checkerboard_in_place`].
+    #[cfg(test)]
     fn checkerboard_two_pass(&self, q: &mut [f32], next: &mut [f32], vals: &[f32]) {
         self.sweep(Pass::Even, q, true, vals, next);
         self.sweep(Pass::Odd, next, false, vals, q);
@@ -401,94 +417,104 @@ impl<'a> MeanField<'a> {
         );
     }
 
-    /// The same update as [`MeanField::checkerboard_two_pass`] in one sweep: pass 2 of row y − 1 follows pass 1
-    /// of row y, while rows y − 1 … y + 1 are still in cache. Within a band of rows, the order pass1(y),
-    /// pass2(y − 1) keeps every dependency (an even pixel reads the old odd values of rows y − 1 … y + 1, whose
-    /// pass 2 comes later; an odd pixel reads the new even values of rows y − 1 … y + 1, computed before).
-    /// Bands run in parallel; pass 2 of each band's first and last rows, which need a neighbouring band's pass 1,
-    /// runs afterwards. Same results as the two sweeps, bit for bit, for any banding.
-    fn checkerboard_pipelined(&self, q: &mut [f32], next: &mut [f32], vals: &[f32], bands: &[(usize, usize)]) {
+    /// The same update as [`MeanField::checkerboard_two_pass`] in place, in one buffer: pass 1 writes the even
+    /// pixels over their old values (an even pixel reads only odd neighbours and its own old value), pass 2 the
+    /// odd ones (reading the new even values). No second N × M buffer, and no copy of the even pixels.
+    ///
+    /// The rows run in one sweep per band of rows: pass 2 of row y − 1 right after pass 1 of row y, while rows
+    /// y − 1 … y + 1 are in cache. Bands run in parallel; each band's first and last rows are read by the
+    /// neighbouring bands during the sweep, so their pass 1 goes into `edges` (two rows per band, copies of the
+    /// old rows) and is copied back afterwards, when pass 2 of those rows runs. Without bands (fewer than 3 rows)
+    /// the two passes run one after the other. Same results as the two sweeps, bit for bit, for any banding.
+    fn checkerboard_in_place(&self, q: &mut [f32], vals: &[f32], bands: &[(usize, usize)], edges: &mut [f32]) {
         let m = self.cost.ndisp;
         let len = self.cost.width * m;
         let h = self.cost.height;
-        // Split Q: each band's first and last rows are only read until phase B; its interior rows are updated
-        // by the band's own task.
-        let mut edges: Vec<(&[f32], &[f32])> = Vec::with_capacity(bands.len());
-        let mut interiors: Vec<&mut [f32]> = Vec::with_capacity(bands.len());
-        let mut rest: &mut [f32] = q;
-        for &(a, b) in bands {
-            let (band, r) = std::mem::take(&mut rest).split_at_mut((b - a) * len);
-            rest = r;
-            let (first, r) = band.split_at_mut(len);
-            let (interior, last) = r.split_at_mut((b - a - 2) * len);
-            edges.push((first, last));
-            interiors.push(interior);
+        let mut s = RowScratch::new(m);
+        if bands.is_empty() {
+            for pass in [Pass::Even, Pass::Odd] {
+                for y in 0..h {
+                    let (nbrs, row) = split_rows(q, y, len);
+                    update_row(self, y, pass, nbrs, None, vals, row, &mut s);
+                }
+            }
+            return;
         }
-        let mut next_bands: Vec<&mut [f32]> = Vec::with_capacity(bands.len());
-        let mut rest: &mut [f32] = next;
-        for &(a, b) in bands {
-            let (band, r) = std::mem::take(&mut rest).split_at_mut((b - a) * len);
-            rest = r;
-            next_bands.push(band);
-        }
-        // Phase A: per band, pass 1 of every row and pass 2 of the interior rows.
-        let edges = &edges;
-        interiors.into_par_iter().zip(next_bands.into_par_iter()).enumerate().for_each(|(k, (interior, nb))| {
-            let (a, b) = bands[k];
-            let mut s = RowScratch::new(m);
-            // Row y of the (old) Q, for y in a − 1 ..= b.
-            for y in a..b {
-                {
-                    let interior: &[f32] = interior;
-                    let q_row = |r: usize| -> &[f32] {
-                        if r + 1 == a {
-                            edges[k - 1].1
-                        } else if r == b {
-                            edges[k + 1].0
-                        } else if r == a {
-                            edges[k].0
-                        } else if r + 1 == b {
-                            edges[k].1
-                        } else {
-                            &interior[(r - a - 1) * len..][..len]
+        {
+            // Per band: its first and last rows of Q (read-only here), its interior rows (updated in place), and
+            // its two edge buffers.
+            let mut tasks = Vec::with_capacity(bands.len());
+            let mut rest: &mut [f32] = q;
+            let mut edge_rest: &mut [f32] = edges;
+            for &(a, b) in bands {
+                let (band, r) = std::mem::take(&mut rest).split_at_mut((b - a) * len);
+                rest = r;
+                let (first, r) = band.split_at_mut(len);
+                let (interior, last) = r.split_at_mut((b - a - 2) * len);
+                let (edge, r) = std::mem::take(&mut edge_rest).split_at_mut(2 * len);
+                edge_rest = r;
+                let (first_new, last_new) = edge.split_at_mut(len);
+                tasks.push(((a, b), (&*first, &*last), interior, (first_new, last_new)));
+            }
+            let olds: Vec<(&[f32], &[f32])> = tasks.iter().map(|t| t.1).collect();
+            let olds = &olds;
+            tasks.into_par_iter().enumerate().for_each(
+                |(k, ((a, b), (first, last), interior, (first_new, last_new)))| {
+                    first_new.copy_from_slice(first);
+                    last_new.copy_from_slice(last);
+                    let mut s = RowScratch::new(m);
+                    let interior_rows = b - a - 2;
+                    for y in a..b {
+                        // Pass 1 of row y: rows a − 1 and b are the neighbouring bands' (old) edge rows.
+                        {
+                            let outside_above = (y == a && a > 0).then(|| olds[k - 1].1);
+                            let outside_below = (y + 1 == b && b < h).then(|| olds[k + 1].0);
+                            band_step(
+                                self,
+                                Pass::Even,
+                                y,
+                                (a, b),
+                                interior,
+                                first_new,
+                                last_new,
+                                outside_above,
+                                outside_below,
+                                vals,
+                                &mut s,
+                            );
                         }
-                    };
-                    let nbrs = NeighbourRows {
-                        above: (y > 0).then(|| q_row(y - 1)),
-                        same: q_row(y),
-                        below: (y + 1 < h).then(|| q_row(y + 1)),
-                    };
-                    let out = &mut nb[(y - a) * len..][..len];
-                    update_row(self, y, Pass::Even, nbrs, Some(q_row(y)), vals, out, &mut s);
-                }
-                // Pass 2 of the interior row y − 1 (rows a + 1 ..= b − 2), now that pass 1 of y is done.
-                if y >= a + 2 {
-                    let r = y - 1;
-                    let even: &[f32] = nb;
-                    let nbrs = NeighbourRows::of(even, r - a, len);
-                    let out = &mut interior[(r - a - 1) * len..][..len];
-                    update_row(self, r, Pass::Odd, nbrs, None, vals, out, &mut s);
-                }
-            }
-        });
-        // Phase B: pass 2 of each band's first and last rows, from the complete pass 1.
-        let even: &[f32] = next;
-        let mut edge_rows: Vec<(usize, &mut [f32])> = Vec::with_capacity(2 * bands.len());
-        let mut rest: &mut [f32] = q;
-        let mut at = 0;
+                        // Pass 2 of the interior row y − 1 (rows a + 1 ..= b − 2), now that pass 1 of y is done.
+                        if y >= a + 2 && interior_rows > 0 {
+                            band_step(
+                                self,
+                                Pass::Odd,
+                                y - 1,
+                                (a, b),
+                                interior,
+                                first_new,
+                                last_new,
+                                None,
+                                None,
+                                vals,
+                                &mut s,
+                            );
+                        }
+                    }
+                },
+            );
+        }
+        // Pass 1 of the edge rows back into Q, then their pass 2 (reading only the even pixels of the rows
+        // around, all final now).
+        for (&(a, b), edge) in bands.iter().zip(edges.chunks_exact(2 * len)) {
+            q[a * len..][..len].copy_from_slice(&edge[..len]);
+            q[(b - 1) * len..][..len].copy_from_slice(&edge[len..]);
+        }
         for &(a, b) in bands {
-            for r in [a, b - 1] {
-                let (_, tail) = std::mem::take(&mut rest).split_at_mut((r - at) * len);
-                let (row, tail) = tail.split_at_mut(len);
-                edge_rows.push((r, row));
-                rest = tail;
-                at = r + 1;
+            for y in [a, b - 1] {
+                let (nbrs, row) = split_rows(q, y, len);
+                update_row(self, y, Pass::Odd, nbrs, None, vals, row, &mut s);
             }
         }
-        edge_rows.into_par_iter().for_each_init(
-            || RowScratch::new(m),
-            |s, (r, out)| update_row(self, r, Pass::Odd, NeighbourRows::of(even, r, len), None, vals, out, s),
-        );
     }
 
     /// Pixel i's message factors: Q̃_i(l) = out_scale · (raw_i(l) − self_w · Q_i(l)), where raw is the lattice
@@ -539,9 +565,10 @@ impl<'a> MeanField<'a> {
     }
 }
 
-/// Computes the new Q for row `y` into `out_row`: neighbours' marginals come from `nbrs` (rows y − 1, y, y + 1),
-/// the pixel's own previous marginal (for the self term) from `own_row`, or from `out_row` itself when `None`.
-/// `pass` picks the pixels to compute; with [`Pass::Odd`] the even pixels are copied from `nbrs.same`.
+/// Computes the new Q for row `y` into `out_row`: neighbours' marginals come from `nbrs` (rows y − 1, y, y + 1;
+/// row y from `out_row` itself when `nbrs.same` is `None`), the pixel's own previous marginal (for the self
+/// term) from `own_row`, or from `out_row` itself when `None`. `pass` picks the pixels to compute; with
+/// [`Pass::Odd`] and a separate `nbrs.same`, the even pixels are copied from it.
 /// Compiled for AVX2 + FMA as well, picked at run time (same results: no contraction of a·b + c).
 #[allow(clippy::too_many_arguments)]
 #[multiversion(targets("x86_64+avx2+fma"))]
@@ -558,7 +585,7 @@ fn update_row<'c, 'r>(
     let (w, m) = (mf.cost.width, mf.cost.ndisp);
     let PairwiseWeights { fcm, lcm } = mf.weights;
     let lattice = mf.lattice.as_ref().filter(|_| fcm > 0.0);
-    for (x, e) in out_row.chunks_exact_mut(m).enumerate() {
+    for x in 0..w {
         let i = y * w + x;
         let odd = (x + y) % 2 == 1;
         match pass {
@@ -566,11 +593,18 @@ fn update_row<'c, 'r>(
             Pass::Even if odd => continue,
             Pass::Even => {}
             Pass::Odd if !odd => {
-                e.copy_from_slice(&nbrs.same[x * m..][..m]);
+                if let Some(same) = nbrs.same {
+                    out_row[x * m..][..m].copy_from_slice(&same[x * m..][..m]);
+                }
                 continue;
             }
             Pass::Odd => {}
         }
+        // The pixel's own slot, and the row's other pixels (its left and right neighbours when updating in
+        // place: they are of the other colour, so not written by this pass).
+        let (before, rest) = out_row.split_at_mut(x * m);
+        let (e, after) = rest.split_at_mut(m);
+        let (before, after): (&[f32], &[f32]) = (before, after);
         let own: &[f32] = match own_row {
             Some(r) => &r[x * m..][..m],
             None => e,
@@ -590,8 +624,14 @@ fn update_row<'c, 'r>(
                 nbrs.above.map_or(0.0, |_| mf.local.down.data[i - w]),
                 nbrs.below.map_or(0.0, |_| mf.local.down.data[i]),
             ];
-            let ql = l.map_or(zeros, |l| &nbrs.same[l * m..][..m]);
-            let qr = r.map_or(zeros, |r| &nbrs.same[r * m..][..m]);
+            let ql = l.map_or(zeros, |l| match nbrs.same {
+                Some(same) => &same[l * m..][..m],
+                None => &before[l * m..][..m],
+            });
+            let qr = r.map_or(zeros, |r| match nbrs.same {
+                Some(same) => &same[r * m..][..m],
+                None => &after[..m],
+            });
             let qu = nbrs.above.map_or(zeros, |row| &row[x * m..][..m]);
             let qd = nbrs.below.map_or(zeros, |row| &row[x * m..][..m]);
             // Accumulated in the order left, right, up, down (the sequential reference's order).
@@ -605,7 +645,44 @@ fn update_row<'c, 'r>(
     }
 }
 
-/// Bands of rows for [`MeanField::checkerboard_pipelined`]: about two per thread, each at least 3 rows
+/// One pass over row y of a band `[a, b)` in [`MeanField::checkerboard_in_place`]: the band's interior rows
+/// a + 1 … b − 2 are `interior` (updated in place), its first and last rows `first` and `last` (the edge
+/// buffers); rows a − 1 and b, outside the band, are `outside_above` and `outside_below` when needed.
+#[allow(clippy::too_many_arguments)]
+fn band_step(
+    mf: &MeanField<'_>,
+    pass: Pass,
+    y: usize,
+    (a, b): (usize, usize),
+    interior: &mut [f32],
+    first: &mut [f32],
+    last: &mut [f32],
+    outside_above: Option<&[f32]>,
+    outside_below: Option<&[f32]>,
+    vals: &[f32],
+    s: &mut RowScratch,
+) {
+    let len = first.len();
+    if y == a {
+        let below = if b - a > 2 { &interior[..len] } else { &*last };
+        let nbrs = NeighbourRows { above: outside_above, same: None, below: Some(below) };
+        update_row(mf, y, pass, nbrs, None, vals, first, s);
+    } else if y + 1 == b {
+        let above = if b - a > 2 { &interior[interior.len() - len..] } else { &*first };
+        let nbrs = NeighbourRows { above: Some(above), same: None, below: outside_below };
+        update_row(mf, y, pass, nbrs, None, vals, last, s);
+    } else {
+        let r = y - a - 1;
+        let (before, rest) = interior.split_at_mut(r * len);
+        let (row, after) = rest.split_at_mut(len);
+        let above: &[f32] = if r == 0 { first } else { &before[(r - 1) * len..] };
+        let below: &[f32] = if after.is_empty() { last } else { &after[..len] };
+        let nbrs = NeighbourRows { above: Some(above), same: None, below: Some(below) };
+        update_row(mf, y, pass, nbrs, None, vals, row, s);
+    }
+}
+
+/// Bands of rows for [`MeanField::checkerboard_in_place`]: about two per thread, each at least 3 rows
 /// (`[a, b)` ranges covering `0..height`); empty if the image has fewer than 3 rows. The banding changes the
 /// order of work only, never the results.
 fn checkerboard_bands(height: usize, threads: usize) -> Vec<(usize, usize)> {
@@ -616,11 +693,12 @@ fn checkerboard_bands(height: usize, threads: usize) -> Vec<(usize, usize)> {
     (0..count).map(|k| (k * height / count, (k + 1) * height / count)).collect()
 }
 
-/// The marginals of the rows around the row being updated (each `width × M`; `None` outside the image).
+/// The marginals of the rows around the row being updated (each `width × M`; `None` outside the image, and
+/// `same` is `None` when the row is updated in place).
 #[derive(Clone, Copy)]
 struct NeighbourRows<'s> {
     above: Option<&'s [f32]>,
-    same: &'s [f32],
+    same: Option<&'s [f32]>,
     below: Option<&'s [f32]>,
 }
 
@@ -630,10 +708,20 @@ impl<'s> NeighbourRows<'s> {
         let h = volume.len() / len;
         NeighbourRows {
             above: (y > 0).then(|| &volume[(y - 1) * len..][..len]),
-            same: &volume[y * len..][..len],
+            same: Some(&volume[y * len..][..len]),
             below: (y + 1 < h).then(|| &volume[(y + 1) * len..][..len]),
         }
     }
+}
+
+/// Splits rows y − 1, y, y + 1 out of a volume with rows of `len` values: row y mutable, its neighbours as
+/// [`NeighbourRows`] with `same` = `None` (for an update in place).
+fn split_rows(volume: &mut [f32], y: usize, len: usize) -> (NeighbourRows<'_>, &mut [f32]) {
+    let (before, rest) = volume.split_at_mut(y * len);
+    let (row, after) = rest.split_at_mut(len);
+    let above = (y > 0).then(|| &before[(y - 1) * len..]);
+    let below = (!after.is_empty()).then(|| &after[..len]);
+    (NeighbourRows { above, same: None, below }, row)
 }
 
 /// Runs `p.iterations` mean-field iterations and returns the marginals.
@@ -933,10 +1021,10 @@ mod tests {
         }
     }
 
-    /// The one-sweep (banded) red-black update against the two-sweep one, bit for bit, for several heights and
-    /// bandings, with both pairwise terms.
+    /// The in-place red-black update (one sweep per band, and two plain sweeps without bands) against the
+    /// two-buffer, two-sweep one, bit for bit, for several heights and bandings, with both pairwise terms.
     #[test]
-    fn meanfield_pipelined_checkerboard_matches_two_sweeps() {
+    fn meanfield_in_place_checkerboard_matches_two_sweeps() {
         for (w, h) in [(9, 3), (8, 4), (11, 7), (10, 13)] {
             let (left, right, _) = banded_pair(w, h);
             let nd = 5;
@@ -945,6 +1033,7 @@ mod tests {
             let weights = PairwiseWeights { fcm: 8.0, lcm: 1.5 };
             let reference = {
                 let mut mf = MeanField::new(&cost, &left, &p, weights);
+                mf.next = vec![0.0; mf.q.len()];
                 for _ in 0..3 {
                     let (mut q, mut next) = (std::mem::take(&mut mf.q), std::mem::take(&mut mf.next));
                     let mut scratch = std::mem::take(&mut mf.scratch);
@@ -954,15 +1043,16 @@ mod tests {
                 }
                 mf.q
             };
-            for count in 1..=h / 3 {
+            for count in 0..=h / 3 {
                 let bands: Vec<(usize, usize)> = (0..count).map(|k| (k * h / count, (k + 1) * h / count)).collect();
                 let mut mf = MeanField::new(&cost, &left, &p, weights);
+                let mut edges = vec![0.0; 2 * count * w * nd];
                 for _ in 0..3 {
-                    let (mut q, mut next) = (std::mem::take(&mut mf.q), std::mem::take(&mut mf.next));
+                    let mut q = std::mem::take(&mut mf.q);
                     let mut scratch = std::mem::take(&mut mf.scratch);
                     let vals = mf.lattice.as_ref().unwrap().splat_blur(&q, Some(&mf.in_scale), nd, &mut scratch);
-                    mf.checkerboard_pipelined(&mut q, &mut next, vals, &bands);
-                    (mf.q, mf.next, mf.scratch) = (q, next, scratch);
+                    mf.checkerboard_in_place(&mut q, vals, &bands, &mut edges);
+                    (mf.q, mf.scratch) = (q, scratch);
                 }
                 assert!(
                     mf.q.iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()),
