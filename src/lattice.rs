@@ -8,8 +8,9 @@
 //! lattice values are *blurred* with a [1/2 1 1/2] kernel along each of the d+1 lattice directions, and *sliced*
 //! back with the same weights.
 //!
-//! Build once per image ([`Lattice::build`]): per-pixel vertex indices and weights, the vertex hash table, a
-//! per-vertex list of contributing pixels (so splatting is a parallel *gather*: no racing scatters, results do not
+//! Build once per image ([`Lattice::build`]): per-pixel vertex indices and weights, the vertex hash table, ranges
+//! of vertices with the span of pixels contributing to each (so the splat runs range by range in parallel, each
+//! range scanning its pixels in order: no racing scatters, every vertex sums in pixel order, results do not
 //! depend on the thread count) and the blur neighbours of every vertex. [`Lattice::filter`] then runs any number
 //! of channels at once, channels innermost (`[i·nc + c]`, the cost-volume layout), with no allocation after its
 //! scratch buffers have grown once.
@@ -65,10 +66,9 @@ pub struct Lattice {
     pix_vertex: Vec<u32>,
     /// `[pixel·D1 + k]`: its barycentric weight.
     pix_weight: Vec<f32>,
-    /// CSR offsets into `splat_entries`, `nvert + 1` of them.
-    splat_start: Vec<u32>,
-    /// `pixel·D1 + k` entries contributing to each vertex, in pixel order.
-    splat_entries: Vec<u32>,
+    /// Ranges of vertices splatted in parallel, `(first, end, first pixel, end pixel)`: the pixels contributing
+    /// to vertices `first..end` are all within `first pixel..end pixel`.
+    splat_ranges: Vec<(usize, usize, usize, usize)>,
     /// `[dir·nvert + v]`: the two blur neighbours of vertex v along lattice direction `dir` (or `NONE`).
     blur_nbr: Vec<[u32; 2]>,
     /// k̃(i, i) per pixel (see [`Lattice::self_weight`]).
@@ -138,8 +138,8 @@ impl Lattice {
         const CHUNK: usize = 64 * LANES;
         self_weight.par_chunks_mut(CHUNK).zip(pix_weight.par_chunks(CHUNK * D1)).for_each(|(s, w)| self_weights(w, s));
 
-        // 2. Splat gather lists (CSR), entries in pixel order.
-        let (splat_start, splat_entries) = splat_lists(&pix_vertex, nvert);
+        // 2. Ranges of vertices for the parallel splat, and the pixels each needs.
+        let splat_ranges = splat_ranges(&pix_vertex, nvert, 4 * rayon::current_num_threads());
 
         // 3. Blur neighbours along each lattice direction: key ± (1, …, 1) ∓ (d+1)·e_dir. Only the upper ones
         //    are looked up; v is the lower neighbour of its upper neighbour, so the lower ones are filled by
@@ -166,7 +166,7 @@ impl Lattice {
             }
         });
 
-        Lattice { npix, nvert, pix_vertex, pix_weight, splat_start, splat_entries, blur_nbr, self_weight }
+        Lattice { npix, nvert, pix_vertex, pix_weight, splat_ranges, blur_nbr, self_weight }
     }
 
     /// Number of pixels the lattice was built for.
@@ -236,11 +236,8 @@ impl Lattice {
         let zero: &[f32] = zero;
         let (mut cur, mut next) = (a, b);
 
-        // Splat: gather each vertex's contributions in pixel order.
+        self.splat(input, pixel_scale, nc, cur);
         const CHUNK: usize = 256;
-        cur.par_chunks_mut(nc * CHUNK).enumerate().for_each(|(k, acc)| {
-            splat_vertices(self, input, pixel_scale, k * CHUNK, acc, nc);
-        });
 
         // Blur along each of the d+1 directions: v ← v + ½(down + up), a missing neighbour counting as 0.
         for dir in 0..D1 {
@@ -252,6 +249,23 @@ impl Lattice {
             std::mem::swap(&mut cur, &mut next);
         }
         cur
+    }
+
+    /// The splat: `vals[v]` = Σ over the pixels p with vertex v, in pixel order, of weight × `pixel_scale[p]` ×
+    /// `input[p]`. Each range of vertices (in parallel) scans the pixels that contribute to it in order, so the
+    /// pixels' values are read in order rather than gathered, and every sum is taken in pixel order whatever
+    /// the ranges: the result does not depend on the thread count.
+    fn splat(&self, input: &[f32], pixel_scale: Option<&[f32]>, nc: usize, vals: &mut [f32]) {
+        let mut parts = Vec::with_capacity(self.splat_ranges.len());
+        let mut rest: &mut [f32] = vals;
+        for &(v0, v1, p0, p1) in &self.splat_ranges {
+            let (part, r) = std::mem::take(&mut rest).split_at_mut((v1 - v0) * nc);
+            rest = r;
+            parts.push((v0, p0..p1, part));
+        }
+        parts.into_par_iter().for_each(|(v0, pixels, acc)| {
+            splat_scatter(self, input, pixel_scale, v0, pixels, acc, nc);
+        });
     }
 
     /// The last step of [`Lattice::filter`] for one pixel: `out = Σ_k w_k · vals[v_k]` (scaled by
@@ -272,62 +286,66 @@ impl Lattice {
     }
 }
 
-/// The splat gather lists: CSR offsets (`nvert + 1`) and, per vertex, the entries `pixel·D1 + k` whose vertex
-/// it is, in pixel order.
-///
-/// Parallel over ranges of vertex ids: every range scans all entries and keeps its own, so counting and filling
-/// need no shared writes and the result does not depend on how the ranges are cut.
-fn splat_lists(pix_vertex: &[u32], nvert: usize) -> (Vec<u32>, Vec<u32>) {
-    let ranges = rayon::current_num_threads().clamp(1, nvert.max(1));
-    let per_range = nvert.div_ceil(ranges).max(1);
-    let mut splat_start = vec![0u32; nvert + 1];
-    splat_start[1..].par_chunks_mut(per_range).enumerate().for_each(|(r, counts)| {
-        let first = r * per_range;
-        for &v in pix_vertex {
-            if let Some(c) = counts.get_mut((v as usize).wrapping_sub(first)) {
-                *c += 1;
+/// `count` ranges of vertex ids, `(first, end, first pixel, end pixel)`, each with the pixels that contribute to
+/// its vertices (all within `first pixel..end pixel`), found in one parallel pass over the pixels' vertices.
+fn splat_ranges(pix_vertex: &[u32], nvert: usize, count: usize) -> Vec<(usize, usize, usize, usize)> {
+    let count = count.clamp(1, nvert.max(1));
+    let per_range = nvert.div_ceil(count).max(1);
+    let count = nvert.div_ceil(per_range).max(1);
+    const BLOCK: usize = 4096;
+    let windows = pix_vertex
+        .par_chunks(BLOCK * D1)
+        .enumerate()
+        .map(|(b, ids)| {
+            let mut w = vec![(usize::MAX, 0usize); count];
+            for (k, ids) in ids.chunks_exact(D1).enumerate() {
+                let p = b * BLOCK + k;
+                for &v in ids {
+                    let (lo, hi) = &mut w[v as usize / per_range];
+                    *lo = (*lo).min(p);
+                    *hi = p + 1;
+                }
             }
-        }
-    });
-    for v in 0..nvert {
-        splat_start[v + 1] += splat_start[v];
-    }
-    // Each range's entries are one contiguous run of the list.
-    let mut splat_entries = vec![0u32; pix_vertex.len()];
-    let mut runs = Vec::with_capacity(ranges);
-    let mut rest = splat_entries.as_mut_slice();
-    for first in (0..nvert).step_by(per_range) {
-        let last = (first + per_range).min(nvert);
-        let (run, tail) = rest.split_at_mut((splat_start[last] - splat_start[first]) as usize);
-        runs.push((first, last, run));
-        rest = tail;
-    }
-    runs.into_par_iter().for_each(|(first, last, run)| {
-        let base = splat_start[first];
-        let mut fill: Vec<u32> = splat_start[first..last].iter().map(|s| s - base).collect();
-        for (entry, &v) in pix_vertex.iter().enumerate() {
-            if let Some(slot) = fill.get_mut((v as usize).wrapping_sub(first)) {
-                run[*slot as usize] = entry as u32;
-                *slot += 1;
-            }
-        }
-    });
-    (splat_start, splat_entries)
+            w
+        })
+        .reduce(
+            || vec![(usize::MAX, 0usize); count],
+            |a, b| a.iter().zip(&b).map(|(&(a0, a1), &(b0, b1))| (a0.min(b0), a1.max(b1))).collect(),
+        );
+    windows
+        .iter()
+        .enumerate()
+        .map(|(r, &(p0, p1))| (r * per_range, ((r + 1) * per_range).min(nvert), p0.min(p1), p1))
+        .collect()
 }
 
-/// Splats into the vertices `first..` (one `nc`-channel row each in `acc`): each gathers its contributing
-/// pixels' values (times `pixel_scale`) in pixel order. Compiled for AVX2 + FMA as well (same results).
+/// Splats into the vertices `first..first + acc.len() / nc` by scanning the pixels `pixels` (which include
+/// every pixel contributing to them) in order and adding each one's value to those of its vertices in the range:
+/// every vertex sums its contributions in pixel order. Compiled for AVX2 + FMA as well (same results).
 #[multiversion(targets("x86_64+avx2+fma"))]
-fn splat_vertices(lat: &Lattice, input: &[f32], pixel_scale: Option<&[f32]>, first: usize, acc: &mut [f32], nc: usize) {
-    for (v, acc) in (first..).zip(acc.chunks_exact_mut(nc)) {
-        acc.fill(0.0);
-        let entries = &lat.splat_entries[lat.splat_start[v] as usize..lat.splat_start[v + 1] as usize];
-        for &e in entries {
-            let p = e as usize / D1;
-            let w = lat.pix_weight[e as usize] * pixel_scale.map_or(1.0, |s| s[p]);
-            let src = &input[p * nc..][..nc];
-            for (a, s) in acc.iter_mut().zip(src) {
-                *a += w * s;
+fn splat_scatter(
+    lat: &Lattice,
+    input: &[f32],
+    pixel_scale: Option<&[f32]>,
+    first: usize,
+    pixels: std::ops::Range<usize>,
+    acc: &mut [f32],
+    nc: usize,
+) {
+    acc.fill(0.0);
+    let count = acc.len() / nc;
+    for p in pixels {
+        let ids = &lat.pix_vertex[p * D1..][..D1];
+        let ws = &lat.pix_weight[p * D1..][..D1];
+        let scale = pixel_scale.map_or(1.0, |s| s[p]);
+        let src = &input[p * nc..][..nc];
+        for (&v, &w) in ids.iter().zip(ws) {
+            let local = (v as usize).wrapping_sub(first);
+            if local < count {
+                let w = w * scale;
+                for (a, s) in acc[local * nc..][..nc].iter_mut().zip(src) {
+                    *a += w * s;
+                }
             }
         }
     }
@@ -1062,6 +1080,34 @@ mod tests {
                 assert_eq!((e.origin, e.rank), (lanes[l].origin, lanes[l].rank), "batch {b} lane {l}");
                 assert!(e.weights.iter().zip(&lanes[l].weights).all(|(a, b)| a.to_bits() == b.to_bits()));
             }
+        }
+    }
+
+    /// The range-parallel splat against a plain per-vertex sum over the pixels in order, bit for bit, for several
+    /// range counts (one range: a single sequential scan).
+    #[test]
+    fn lattice_splat_matches_per_vertex_sums() {
+        let img = test_image(33, 21, 4);
+        let nc = 3;
+        let input = rand_vec(img.len() * nc, 5);
+        let scale: Vec<f32> = rand_vec(img.len(), 6).iter().map(|s| 0.5 + s).collect();
+        let mut lat = Lattice::build(&img, 3.0, 30.0);
+        let nv = lat.num_vertices();
+        let mut reference = vec![0.0f32; nv * nc];
+        for p in 0..img.len() {
+            for k in 0..D1 {
+                let v = lat.pix_vertex[p * D1 + k] as usize;
+                let w = lat.pix_weight[p * D1 + k] * scale[p];
+                for c in 0..nc {
+                    reference[v * nc + c] += w * input[p * nc + c];
+                }
+            }
+        }
+        for count in [1, 2, 5, 64] {
+            lat.splat_ranges = splat_ranges(&lat.pix_vertex, nv, count);
+            let mut vals = vec![0.0; nv * nc];
+            lat.splat(&input, Some(&scale), nc, &mut vals);
+            assert!(vals.iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()), "{count} ranges");
         }
     }
 
