@@ -12,6 +12,12 @@
 //! computed; the update uses E_i(d) = ψ_u(d) − ω·Q̃_i(d) − ω̃·(P̃_i(d) + (1 − β)(P̃_i(d−1) + P̃_i(d+1))), and
 //! Q_i = softmax(−E_i) with the maximum subtracted first (no overflow, never NaN for finite costs).
 //!
+//! Deterministic annealing (`unary_scale_start` > 0, off by default): the unary temperature changes over the
+//! iterations, geometrically from `unary_scale_start` (the initial marginals) to `unary_scale` (the last
+//! iteration); see [`UnarySchedule`]. Starting hot (a small scale) keeps the marginals soft while the neighbours'
+//! evidence accumulates, ending cold sharpens them to the unary's full strength, the classic remedy for mean
+//! field freezing into its first, winner-take-all-like state.
+//!
 //! Models: `lcm` sets ω = 0, `fcm` sets ω̃ = 0 (same code path). After T iterations the disparity is argmax Q (the
 //! paper's WTA) with an optional sub-pixel offset from a parabola through ln Q at d−1, d, d+1; the confidence is
 //! max Q.
@@ -202,6 +208,37 @@ fn unary_marginals(cost: &[f32], scale: f32, m: usize, q: &mut [f32]) {
     }
 }
 
+/// The unary scale (inverse temperature of the cost) of each mean-field iteration.
+///
+/// Without annealing (`unary_scale_start` = 0) every iteration uses `unary_scale`. With it, step t (0 = the
+/// initial marginals, 1..=T the iterations) uses s_t = s_0·(s_T / s_0)^(t/T), s_0 = `unary_scale_start`,
+/// s_T = `unary_scale`: a geometric schedule, i.e. equal ratios between consecutive temperatures, ending exactly at
+/// `unary_scale` (and staying there if more than T steps are run). With T = 0 there is nothing to anneal and the
+/// initial marginals use `unary_scale`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UnarySchedule {
+    start: f32,
+    end: f32,
+    iterations: usize,
+}
+
+impl UnarySchedule {
+    /// The schedule configured in `p`.
+    pub fn new(p: &MeanFieldParams) -> Self {
+        UnarySchedule { start: p.unary_scale_start, end: p.unary_scale, iterations: p.iterations }
+    }
+
+    /// The scale of step `t` (0 = the initial marginals, 1..=T the iterations).
+    pub fn at(&self, t: usize) -> f32 {
+        if self.start <= 0.0 || self.iterations == 0 || t >= self.iterations {
+            return self.end;
+        }
+        let frac = t as f64 / self.iterations as f64;
+        let (start, end) = (f64::from(self.start), f64::from(self.end));
+        (start * (end / start).powf(frac)) as f32
+    }
+}
+
 /// Large buffers a [`MeanField`] can take over from a previous one (the other view), so that they are not
 /// allocated and page-faulted again.
 #[derive(Debug, Default)]
@@ -253,7 +290,11 @@ enum Pass {
 /// Mean-field state for one view: build once, then [`MeanField::step`] T times.
 pub struct MeanField<'a> {
     cost: &'a CostVolume,
+    /// The unary scale of the current step, from `unary_schedule`.
     unary_scale: f32,
+    unary_schedule: UnarySchedule,
+    /// Iterations done so far.
+    done: usize,
     weights: PairwiseWeights,
     beta: f32,
     schedule: Schedule,
@@ -324,14 +365,17 @@ impl<'a> MeanField<'a> {
         if next.len() != n * m {
             next = vec![0.0; n * m];
         }
-        let scale = p.unary_scale;
+        let unary_schedule = UnarySchedule::new(p);
+        let scale = unary_schedule.at(0);
         const CHUNK: usize = 256;
         q.par_chunks_mut(m * CHUNK).zip(cost.data.par_chunks(m * CHUNK)).for_each(|(q, c)| {
             unary_marginals(c, scale, m, q);
         });
         MeanField {
             cost,
-            unary_scale: p.unary_scale,
+            unary_scale: scale,
+            unary_schedule,
+            done: 0,
             weights,
             beta: p.beta,
             schedule: p.schedule,
@@ -346,8 +390,11 @@ impl<'a> MeanField<'a> {
         }
     }
 
-    /// One mean-field iteration over all pixels, with the configured [`Schedule`].
+    /// One mean-field iteration over all pixels, with the configured [`Schedule`] and the next unary scale of the
+    /// [`UnarySchedule`].
     pub fn step(&mut self) {
+        self.done += 1;
+        self.unary_scale = self.unary_schedule.at(self.done);
         let m = self.cost.ndisp;
         let mut next = std::mem::take(&mut self.next);
         let mut q = std::mem::take(&mut self.q);
@@ -1007,6 +1054,61 @@ mod tests {
             pool.install(|| crate::run(&Params::default(), &pair).unwrap().disparity)
         };
         let (a, b) = (run(1), run(2));
+        assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()));
+    }
+
+    /// The annealing schedule: off gives `unary_scale` at every step; on, it starts at `unary_scale_start`, ends at
+    /// `unary_scale` after T iterations (and stays there), and consecutive scales have a constant ratio.
+    #[test]
+    fn meanfield_unary_schedule_is_geometric_from_start_to_end() {
+        let off = MeanFieldParams { iterations: 4, unary_scale: 0.1, ..MeanFieldParams::default() };
+        assert!((0..8).all(|t| UnarySchedule::new(&off).at(t) == 0.1));
+        let p = MeanFieldParams { iterations: 4, unary_scale: 0.16, unary_scale_start: 0.01, ..off };
+        let s = UnarySchedule::new(&p);
+        let expected = [0.01, 0.02, 0.04, 0.08, 0.16, 0.16, 0.16];
+        for (t, e) in expected.iter().enumerate() {
+            assert!((s.at(t) - e).abs() < 1e-7, "step {t}: {} vs {e}", s.at(t));
+        }
+        assert_eq!(s.at(4), 0.16, "the last iteration uses unary_scale exactly");
+        // Cooling as well as heating, and T = 0 (nothing to anneal).
+        let down = UnarySchedule::new(&MeanFieldParams { unary_scale_start: 0.4, ..p });
+        assert!((down.at(2) - 0.4 * (0.16f32 / 0.4).sqrt()).abs() < 1e-6);
+        assert_eq!(UnarySchedule::new(&MeanFieldParams { iterations: 0, ..p }).at(0), 0.16);
+    }
+
+    /// With annealing the initial marginals are the softmax of the starting scale, each iteration uses the next
+    /// scale of the schedule (checked against a Jacobi run built from scratch with that scale), and without it
+    /// the output is bit for bit the plain run's.
+    #[test]
+    fn meanfield_annealing_applies_the_schedule_per_iteration() {
+        let (w, h, nd) = (24, 9, 7);
+        let (left, right, _) = banded_pair(w, h);
+        let cost = crate::cost::build_cost_volume(&left, &right, nd, &CostParams::default());
+        let weights = PairwiseWeights { fcm: 0.0, lcm: 1.5 };
+        let plain =
+            MeanFieldParams { iterations: 3, unary_scale: 0.2, schedule: Schedule::Jacobi, ..Default::default() };
+        let annealed = MeanFieldParams { unary_scale_start: 0.05, ..plain.clone() };
+        let schedule = UnarySchedule::new(&annealed);
+        // Reference: one Jacobi step from the given marginals with a fixed scale.
+        let jacobi_step = |q: &[f32], scale: f32| -> Vec<f32> {
+            let p = MeanFieldParams { iterations: 1, unary_scale: scale, ..plain.clone() };
+            let mut mf = MeanField::new(&cost, &left, &p, weights);
+            mf.q.copy_from_slice(q);
+            mf.step();
+            mf.q
+        };
+        let mut mf = MeanField::new(&cost, &left, &annealed, weights);
+        let mut reference: Vec<f32> = cost.data.iter().map(|c| c * 0.05).collect();
+        reference.chunks_exact_mut(nd).for_each(softmax_neg_in_place);
+        assert!(mf.marginals().iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()));
+        for t in 1..=3 {
+            mf.step();
+            reference = jacobi_step(&reference, schedule.at(t));
+            assert!(mf.marginals().iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()), "step {t}");
+        }
+        let off = MeanFieldParams { unary_scale_start: 0.0, ..annealed };
+        let a = infer_mean_field(&cost, &left, &off, weights);
+        let b = infer_mean_field(&cost, &left, &plain, weights);
         assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()));
     }
 

@@ -104,6 +104,11 @@ pub struct MeanFieldParams {
     pub iterations: usize,
     /// Unary scale: ψ_u = unary_scale × cost (the cost is a log-probability up to this temperature).
     pub unary_scale: f32,
+    /// Deterministic annealing of the unary temperature; 0 = off (every iteration uses `unary_scale`). When > 0,
+    /// the initial marginals use this scale and iteration t = 1..T uses the geometric interpolation
+    /// `unary_scale_start` × (`unary_scale` / `unary_scale_start`)^(t / T), so the last iteration uses
+    /// `unary_scale` (start below `unary_scale` = start hot, end cold). See [`crate::meanfield`].
+    pub unary_scale_start: f32,
     /// ω, the weight of the fully connected Potts term.
     pub fcm_weight: f32,
     /// ω̃, the weight of the locally connected term.
@@ -139,6 +144,7 @@ impl Default for MeanFieldParams {
         MeanFieldParams {
             iterations: 5,
             unary_scale: 0.5,
+            unary_scale_start: 0.0,
             fcm_weight: 10.0,
             lcm_weight: 2.0,
             beta: 0.3,
@@ -312,6 +318,13 @@ impl Params {
             return Err(Error::param("meanfield.iterations", m.iterations, "0 to 1000"));
         }
         check_positive("meanfield.unary_scale", m.unary_scale)?;
+        if !(m.unary_scale_start.is_finite() && m.unary_scale_start >= 0.0) {
+            return Err(Error::param(
+                "meanfield.unary_scale_start",
+                m.unary_scale_start,
+                "0 (off) or a finite number > 0",
+            ));
+        }
         check_nonneg("meanfield.fcm_weight", m.fcm_weight)?;
         check_nonneg("meanfield.lcm_weight", m.lcm_weight)?;
         if !(0.0..=1.0).contains(&m.beta) {
@@ -423,6 +436,16 @@ mod tests {
     fn out_of_range_names_key_value_and_range() {
         let e = Params::load(None, &["meanfield.sigma_xy=-2".into()]).unwrap_err();
         assert_eq!(e.to_string(), "invalid meanfield.sigma_xy = -2 (expected a finite number > 0)");
+        let e = Params::load(None, &["meanfield.unary_scale_start=-0.1".into()]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "invalid meanfield.unary_scale_start = -0.1 (expected 0 (off) or a finite number > 0)"
+        );
+        assert!(Params::load(None, &["meanfield.unary_scale_start=nan".into()]).is_err());
+        assert_eq!(
+            Params::load(None, &["meanfield.unary_scale_start=0.05".into()]).unwrap().meanfield.unary_scale_start,
+            0.05
+        );
         let e = Params::load(None, &["cost.census_width=4".into()]).unwrap_err();
         assert!(e.to_string().contains("cost.census_width = 4"), "{e}");
         let e = Params::from_toml_str("downscale = 0\n", Path::new("c.toml")).unwrap_err();
