@@ -109,10 +109,26 @@ pub struct MeanFieldParams {
     /// `unary_scale_start` × (`unary_scale` / `unary_scale_start`)^(t / T), so the last iteration uses
     /// `unary_scale` (start below `unary_scale` = start hot, end cold). See [`crate::meanfield`].
     pub unary_scale_start: f32,
+    /// With annealing: the number of iterations K over which the scale goes from `unary_scale_start` to
+    /// `unary_scale` (t / K in place of t / T), the remaining T − K iterations staying at `unary_scale`;
+    /// 0 = all T iterations. Must not exceed `iterations`.
+    pub unary_anneal_iterations: usize,
+    /// Label-aware temperature; 0 = off. When > 0, the scale of the initial marginals is chosen per view so that
+    /// softmax(−scale × cost) has this mean entropy over the pixels, in nats (the log of the effective number of
+    /// labels; uniform over M labels is ln M), whatever M and the cost statistics of the scene: a diffuse
+    /// marginal then spreads over about the same number of labels, and gives its neighbours about the same field,
+    /// for 60 labels as for 190. `unary_scale` is then not used as such: every scale of the annealing schedule
+    /// is multiplied by (chosen scale / its scale at the start), so only the ratio `unary_scale` /
+    /// `unary_scale_start` is kept. See [`crate::meanfield`].
+    pub unary_entropy_nats: f32,
     /// ω, the weight of the fully connected Potts term.
     pub fcm_weight: f32,
     /// ω̃, the weight of the locally connected term.
     pub lcm_weight: f32,
+    /// Label-aware local coupling; 0 = off. When > 0, ω̃ is multiplied by M / `lcm_weight_ref_labels` for a scene
+    /// with M labels, so the local term's gain around the uniform marginal, ~ω̃·Σλ·(3 − 2β) / M, is the same for
+    /// every M (ω̃ is the weight at M = `lcm_weight_ref_labels`). See [`crate::meanfield`].
+    pub lcm_weight_ref_labels: usize,
     /// β, the local penalty for |d_i − d_j| = 1 (the penalty for > 1 is 1).
     pub beta: f32,
     /// σx of the bilateral kernel, in pixels.
@@ -145,8 +161,11 @@ impl Default for MeanFieldParams {
             iterations: 5,
             unary_scale: 0.5,
             unary_scale_start: 0.0,
+            unary_anneal_iterations: 0,
+            unary_entropy_nats: 0.0,
             fcm_weight: 10.0,
             lcm_weight: 2.0,
+            lcm_weight_ref_labels: 0,
             beta: 0.3,
             sigma_xy: 5.0,
             sigma_rgb: 55.0,
@@ -325,6 +344,20 @@ impl Params {
                 "0 (off) or a finite number > 0",
             ));
         }
+        if m.unary_anneal_iterations > m.iterations {
+            return Err(Error::param(
+                "meanfield.unary_anneal_iterations",
+                m.unary_anneal_iterations,
+                format!("0 (all) to meanfield.iterations = {}", m.iterations),
+            ));
+        }
+        if !(m.unary_entropy_nats.is_finite() && m.unary_entropy_nats >= 0.0) {
+            return Err(Error::param(
+                "meanfield.unary_entropy_nats",
+                m.unary_entropy_nats,
+                "0 (off) or a finite number > 0",
+            ));
+        }
         check_nonneg("meanfield.fcm_weight", m.fcm_weight)?;
         check_nonneg("meanfield.lcm_weight", m.lcm_weight)?;
         if !(0.0..=1.0).contains(&m.beta) {
@@ -442,6 +475,19 @@ mod tests {
             "invalid meanfield.unary_scale_start = -0.1 (expected 0 (off) or a finite number > 0)"
         );
         assert!(Params::load(None, &["meanfield.unary_scale_start=nan".into()]).is_err());
+        let e = Params::load(None, &["meanfield.iterations=5".into(), "meanfield.unary_anneal_iterations=6".into()])
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "invalid meanfield.unary_anneal_iterations = 6 (expected 0 (all) to meanfield.iterations = 5)"
+        );
+        let e = Params::load(None, &["meanfield.unary_entropy_nats=-1".into()]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "invalid meanfield.unary_entropy_nats = -1 (expected 0 (off) or a finite number > 0)"
+        );
+        let e = Params::load(None, &["meanfield.lcm_weight_ref_labels=-3".into()]).unwrap_err().to_string();
+        assert!(e.contains("lcm_weight_ref_labels"), "{e}");
         assert_eq!(
             Params::load(None, &["meanfield.unary_scale_start=0.05".into()]).unwrap().meanfield.unary_scale_start,
             0.05
