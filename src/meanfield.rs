@@ -18,11 +18,18 @@
 //! evidence accumulates, ending cold sharpens them to the unary's full strength, the classic remedy for mean
 //! field freezing into its first, winner-take-all-like state.
 //!
-//! Label-aware temperature (`unary_entropy_nats` > 0, off by default): the scale of the initial marginals is
-//! chosen per view by bisection so that their mean entropy over the pixels is the target ([`calibrate_unary`]).
-//! A diffuse marginal over M labels gives each neighbour a field of only ~ω̃·λ/M, so one fixed scale that keeps
-//! the marginals usefully soft for M = 60 leaves them near uniform, and the local term powerless, for M = 190;
-//! a fixed entropy is a fixed effective number of labels whatever M and the texture of the scene.
+//! Label-aware start (`unary_entropy_nats` > 0, off by default): the scale of the initial marginals is chosen
+//! per view by bisection so that their mean entropy over the pixels is the target ([`calibrate_unary`]), and the
+//! annealing runs from it to `unary_scale`. A fixed entropy is a fixed effective number of labels whatever M and
+//! the texture of the scene. (On trainingQ this made the large-range scenes colder without helping them; the
+//! label-aware coupling below is what works, docs/RESULTS.md.)
+//!
+//! Label-aware local coupling (`lcm_weight_ref_labels` > 0, off by default): ω̃ is multiplied by M / reference.
+//! Around the uniform marginal the softmax has slope 1/M, so a perturbation of the neighbours' marginals comes
+//! back amplified by ~ω̃·Σ_j w̃(i, j)·(3 − 2β) / M: with a fixed ω̃ the local term propagates evidence through diffuse
+//! regions far less for M = 190 than for M = 60 (and a hot start, which keeps the marginals diffuse for longer,
+//! ruins the large-range scenes). Scaling ω̃ with M keeps that gain the same for every M. Measured on trainingQ
+//! in docs/RESULTS.md ("Sweep log: LCM — annealing / label-aware temperature").
 //!
 //! Models: `lcm` sets ω = 0, `fcm` sets ω̃ = 0 (same code path). After T iterations the disparity is argmax Q (the
 //! paper's WTA) with an optional sub-pixel offset from a parabola through ln Q at d−1, d, d+1; the confidence is

@@ -113,13 +113,12 @@ pub struct MeanFieldParams {
     /// `unary_scale` (t / K in place of t / T), the remaining T − K iterations staying at `unary_scale`;
     /// 0 = all T iterations. Must not exceed `iterations`.
     pub unary_anneal_iterations: usize,
-    /// Label-aware temperature; 0 = off. When > 0, the scale of the initial marginals is chosen per view so that
-    /// softmax(−scale × cost) has this mean entropy over the pixels, in nats (the log of the effective number of
-    /// labels; uniform over M labels is ln M), whatever M and the cost statistics of the scene: a diffuse
-    /// marginal then spreads over about the same number of labels, and gives its neighbours about the same field,
-    /// for 60 labels as for 190. `unary_scale` is then not used as such: every scale of the annealing schedule
-    /// is multiplied by (chosen scale / its scale at the start), so only the ratio `unary_scale` /
-    /// `unary_scale_start` is kept. See [`crate::meanfield`].
+    /// Label-aware start of the annealing; 0 = off. When > 0, the scale of the initial marginals is chosen per view
+    /// so that softmax(−scale × cost) has this mean entropy over the pixels, in nats (the log of the effective
+    /// number of labels; uniform over M labels is ln M), whatever M and the cost statistics of the scene; it
+    /// replaces `unary_scale_start`, and the schedule goes from it to `unary_scale` as usual (over
+    /// `unary_anneal_iterations`). A target at or above ln M gives the hottest scale tried (1e-4). See
+    /// [`crate::meanfield::calibrate_unary`].
     pub unary_entropy_nats: f32,
     /// ω, the weight of the fully connected Potts term.
     pub fcm_weight: f32,
