@@ -12,6 +12,25 @@
 //! computed; the update uses E_i(d) = ψ_u(d) − ω·Q̃_i(d) − ω̃·(P̃_i(d) + (1 − β)(P̃_i(d−1) + P̃_i(d+1))), and
 //! Q_i = softmax(−E_i) with the maximum subtracted first (no overflow, never NaN for finite costs).
 //!
+//! Deterministic annealing (`unary_scale_start` > 0, off by default): the unary temperature changes over the
+//! iterations, geometrically from `unary_scale_start` (the initial marginals) to `unary_scale` (the last
+//! iteration); see [`UnarySchedule`]. Starting hot (a small scale) keeps the marginals soft while the neighbours'
+//! evidence accumulates, ending cold sharpens them to the unary's full strength, the classic remedy for mean
+//! field freezing into its first, winner-take-all-like state.
+//!
+//! Label-aware start (`unary_entropy_nats` > 0, off by default): the scale of the initial marginals is chosen
+//! per view by bisection so that their mean entropy over the pixels is the target ([`calibrate_unary`]), and the
+//! annealing runs from it to `unary_scale`. A fixed entropy is a fixed effective number of labels whatever M and
+//! the texture of the scene. (On trainingQ this made the large-range scenes colder without helping them; the
+//! label-aware coupling below is what works, docs/RESULTS.md.)
+//!
+//! Label-aware local coupling (`lcm_weight_ref_labels` > 0, off by default): ω̃ is multiplied by M / reference.
+//! Around the uniform marginal the softmax has slope 1/M, so a perturbation of the neighbours' marginals comes
+//! back amplified by ~ω̃·Σ_j w̃(i, j)·(3 − 2β) / M: with a fixed ω̃ the local term propagates evidence through diffuse
+//! regions far less for M = 190 than for M = 60 (and a hot start, which keeps the marginals diffuse for longer,
+//! ruins the large-range scenes). Scaling ω̃ with M keeps that gain the same for every M. Measured on trainingQ
+//! in docs/RESULTS.md ("Sweep log: LCM — annealing / label-aware temperature").
+//!
 //! Models: `lcm` sets ω = 0, `fcm` sets ω̃ = 0 (same code path). After T iterations the disparity is argmax Q (the
 //! paper's WTA) with an optional sub-pixel offset from a parabola through ln Q at d−1, d, d+1; the confidence is
 //! max Q.
@@ -203,6 +222,108 @@ fn unary_marginals(cost: &[f32], scale: f32, m: usize, q: &mut [f32]) {
     }
 }
 
+/// The weights `weights` with the label-aware local coupling of `p` applied for `m` labels: ω̃ × m /
+/// `lcm_weight_ref_labels`, or unchanged when that is 0.
+pub fn label_aware_weights(weights: PairwiseWeights, p: &MeanFieldParams, m: usize) -> PairwiseWeights {
+    if p.lcm_weight_ref_labels == 0 {
+        return weights;
+    }
+    PairwiseWeights { lcm: weights.lcm * (m as f32 / p.lcm_weight_ref_labels as f32), ..weights }
+}
+
+/// The unary scale (inverse temperature of the cost) of each mean-field iteration.
+///
+/// Without annealing (`unary_scale_start` = 0) every iteration uses `unary_scale`. With it, step t (0 = the
+/// initial marginals, 1..=T the iterations) uses s_t = s_0·(s_K / s_0)^(t/K), s_0 = `unary_scale_start`,
+/// s_K = `unary_scale`, K = `unary_anneal_iterations` (0 = T): a geometric schedule, i.e. equal ratios between
+/// consecutive temperatures, reaching `unary_scale` exactly at step K and staying there. With T = 0 there is
+/// nothing to anneal and the initial marginals use `unary_scale`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UnarySchedule {
+    start: f32,
+    end: f32,
+    iterations: usize,
+}
+
+impl UnarySchedule {
+    /// The schedule configured in `p`, before any label-aware calibration (see [`UnarySchedule::for_cost`]).
+    pub fn new(p: &MeanFieldParams) -> Self {
+        let iterations = if p.unary_anneal_iterations > 0 { p.unary_anneal_iterations } else { p.iterations };
+        UnarySchedule { start: p.unary_scale_start, end: p.unary_scale, iterations }
+    }
+
+    /// The schedule for one view: [`UnarySchedule::new`], except that with `unary_entropy_nats` > 0 the starting
+    /// scale is the one [`calibrate_unary`] finds for `cost` (annealing from it to `unary_scale`).
+    pub fn for_cost(p: &MeanFieldParams, cost: &CostVolume) -> Self {
+        let plain = Self::new(p);
+        if p.unary_entropy_nats <= 0.0 {
+            return plain;
+        }
+        let start = calibrate_unary(cost, p.unary_entropy_nats);
+        UnarySchedule { start, ..plain }
+    }
+
+    /// The scale of step `t` (0 = the initial marginals, 1..=T the iterations).
+    pub fn at(&self, t: usize) -> f32 {
+        if self.start <= 0.0 || self.iterations == 0 || t >= self.iterations {
+            return self.end;
+        }
+        let frac = t as f64 / self.iterations as f64;
+        let (start, end) = (f64::from(self.start), f64::from(self.end));
+        (start * (end / start).powf(frac)) as f32
+    }
+}
+
+/// The unary scale s at which softmax(−s·cost) has a mean entropy of `target_nats` over the pixels (label-aware
+/// temperature). Pixels on a fixed grid of at most ~8k are used; the mean entropy falls monotonically as s grows
+/// (dH/ds = −s·Var_Q(cost) ≤ 0), so s is found by bisection on ln s in [1e-4, 1e3] (32 halvings: ln s to 4e-9, below
+/// f32 precision). An unreachable target gives the bracket's end (1e-4 for targets ≥ ln M, when even the hottest
+/// marginals are not diffuse enough; 1e3 for a target below the entropy of ties in the cost). Deterministic: the
+/// per-chunk sums are added in a fixed order whatever the thread count.
+pub fn calibrate_unary(cost: &CostVolume, target_nats: f32) -> f32 {
+    let (n, m) = (cost.width * cost.height, cost.ndisp);
+    if n == 0 || m == 0 {
+        return 1.0;
+    }
+    let stride = n.div_ceil(1 << 13);
+    let samples: Vec<usize> = (0..n).step_by(stride).collect();
+    let mean_entropy = |s: f64| -> f64 {
+        let sums: Vec<f64> = samples
+            .par_chunks(256)
+            .map(|chunk| chunk.iter().map(|&i| softmax_entropy(cost.pixel(i), s)).sum::<f64>())
+            .collect();
+        sums.iter().sum::<f64>() / samples.len() as f64
+    };
+    let target = f64::from(target_nats);
+    let (mut lo, mut hi) = (1e-4f64.ln(), 1e3f64.ln());
+    for _ in 0..32 {
+        let mid = 0.5 * (lo + hi);
+        // Too diffuse at this scale: colder (larger s) is needed.
+        if mean_entropy(mid.exp()) > target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (0.5 * (lo + hi)).exp() as f32
+}
+
+/// Entropy in nats of softmax(−s·c): ln Z + s·E_Q[c − min c], with Z = Σ exp(−s(c − min c)).
+fn softmax_entropy(c: &[f32], s: f64) -> f64 {
+    let min = f64::from(lane_min(c));
+    let (mut z, mut zc) = (0.0f64, 0.0f64);
+    for &v in c {
+        let dc = f64::from(v) - min;
+        if !dc.is_finite() {
+            continue;
+        }
+        let e = (-s * dc).exp();
+        z += e;
+        zc += e * dc;
+    }
+    z.ln() + s * zc / z
+}
+
 /// Large buffers a [`MeanField`] can take over from a previous one (the other view), so that they are not
 /// allocated and page-faulted again.
 #[derive(Debug, Default)]
@@ -254,7 +375,11 @@ enum Pass {
 /// Mean-field state for one view: build once, then [`MeanField::step`] T times.
 pub struct MeanField<'a> {
     cost: &'a CostVolume,
+    /// The unary scale of the current step, from `unary_schedule`.
     unary_scale: f32,
+    unary_schedule: UnarySchedule,
+    /// Iterations done so far.
+    done: usize,
     weights: PairwiseWeights,
     beta: f32,
     schedule: Schedule,
@@ -297,6 +422,7 @@ impl<'a> MeanField<'a> {
         assert_eq!((cost.width, cost.height), image.dims(), "cost volume and image differ in size");
         let n = image.len();
         let m = cost.ndisp;
+        let weights = label_aware_weights(weights, p, m);
         let lattice = (weights.fcm > 0.0).then(|| Lattice::build(image, p.sigma_xy, p.sigma_rgb));
         let (mut in_scale, mut out_scale, mut self_weight) = (Vec::new(), Vec::new(), Vec::new());
         if let Some(lat) = &lattice {
@@ -335,14 +461,17 @@ impl<'a> MeanField<'a> {
                 vec![0.0; 2 * checkerboard_bands(cost.height, rayon::current_num_threads()).len() * cost.width * m]
             }
         };
-        let scale = p.unary_scale;
+        let unary_schedule = UnarySchedule::for_cost(p, cost);
+        let scale = unary_schedule.at(0);
         const CHUNK: usize = 256;
         q.par_chunks_mut(m * CHUNK).zip(cost.data.par_chunks(m * CHUNK)).for_each(|(q, c)| {
             unary_marginals(c, scale, m, q);
         });
         MeanField {
             cost,
-            unary_scale: p.unary_scale,
+            unary_scale: scale,
+            unary_schedule,
+            done: 0,
             weights,
             beta: p.beta,
             schedule: p.schedule,
@@ -358,8 +487,11 @@ impl<'a> MeanField<'a> {
         }
     }
 
-    /// One mean-field iteration over all pixels, with the configured [`Schedule`].
+    /// One mean-field iteration over all pixels, with the configured [`Schedule`] and the next unary scale of the
+    /// [`UnarySchedule`].
     pub fn step(&mut self) {
+        self.done += 1;
+        self.unary_scale = self.unary_schedule.at(self.done);
         let m = self.cost.ndisp;
         let mut next = std::mem::take(&mut self.next);
         let mut q = std::mem::take(&mut self.q);
@@ -1097,6 +1229,142 @@ mod tests {
             pool.install(|| crate::run(&Params::default(), &pair).unwrap().disparity)
         };
         let (a, b) = (run(1), run(2));
+        assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()));
+    }
+
+    /// The annealing schedule: off gives `unary_scale` at every step; on, it starts at `unary_scale_start`, ends at
+    /// `unary_scale` after T iterations (and stays there), and consecutive scales have a constant ratio.
+    #[test]
+    fn meanfield_unary_schedule_is_geometric_from_start_to_end() {
+        let off = MeanFieldParams { iterations: 4, unary_scale: 0.1, ..MeanFieldParams::default() };
+        assert!((0..8).all(|t| UnarySchedule::new(&off).at(t) == 0.1));
+        let p = MeanFieldParams { iterations: 4, unary_scale: 0.16, unary_scale_start: 0.01, ..off };
+        let s = UnarySchedule::new(&p);
+        let expected = [0.01, 0.02, 0.04, 0.08, 0.16, 0.16, 0.16];
+        for (t, e) in expected.iter().enumerate() {
+            assert!((s.at(t) - e).abs() < 1e-7, "step {t}: {} vs {e}", s.at(t));
+        }
+        assert_eq!(s.at(4), 0.16, "the last iteration uses unary_scale exactly");
+        // Cooling as well as heating, and T = 0 (nothing to anneal).
+        let down = UnarySchedule::new(&MeanFieldParams { unary_scale_start: 0.4, ..p });
+        assert!((down.at(2) - 0.4 * (0.16f32 / 0.4).sqrt()).abs() < 1e-6);
+        assert_eq!(UnarySchedule::new(&MeanFieldParams { iterations: 0, ..p }).at(0), 0.16);
+    }
+
+    /// `unary_anneal_iterations` = K: the schedule reaches `unary_scale` at step K and stays there.
+    #[test]
+    fn meanfield_unary_schedule_holds_after_k_iterations() {
+        let p = MeanFieldParams {
+            iterations: 6,
+            unary_scale: 0.16,
+            unary_scale_start: 0.04,
+            unary_anneal_iterations: 2,
+            ..MeanFieldParams::default()
+        };
+        let s = UnarySchedule::new(&p);
+        let expected = [0.04, 0.08, 0.16, 0.16, 0.16, 0.16, 0.16];
+        for (t, e) in expected.iter().enumerate() {
+            assert!((s.at(t) - e).abs() < 1e-7, "step {t}: {} vs {e}", s.at(t));
+        }
+        let all = UnarySchedule::new(&MeanFieldParams { unary_anneal_iterations: 6, ..p.clone() });
+        assert_eq!(all, UnarySchedule::new(&MeanFieldParams { unary_anneal_iterations: 0, ..p }));
+    }
+
+    /// The label-aware start: the calibrated scale gives the target mean entropy (checked by brute force), the
+    /// entropy falls as the scale grows, and an unreachable target gives the end of the bracket.
+    #[test]
+    fn meanfield_calibrate_unary_hits_the_target_entropy() {
+        let (w, h, m) = (40, 30, 12);
+        let cost = CostVolume {
+            width: w,
+            height: h,
+            ndisp: m,
+            data: rand_vec(w * h * m, 9).iter().map(|v| v * 30.0).collect(),
+        };
+        let mean_entropy = |s: f32| -> f64 {
+            let mut total = 0.0f64;
+            for i in 0..w * h {
+                let mut q: Vec<f32> = cost.pixel(i).iter().map(|c| c * s).collect();
+                softmax_neg_in_place(&mut q);
+                total -= q.iter().filter(|&&v| v > 0.0).map(|&v| f64::from(v) * f64::from(v).ln()).sum::<f64>();
+            }
+            total / (w * h) as f64
+        };
+        let mut last = f64::INFINITY;
+        for target in [2.4f32, 2.0, 1.0, 0.5] {
+            let s = calibrate_unary(&cost, target);
+            let got = mean_entropy(s);
+            assert!((got - f64::from(target)).abs() < 1e-3, "target {target}: scale {s} gives {got}");
+            assert!(got < last);
+            last = got;
+        }
+        // ln 12 = 2.48: even uniform marginals are not that diffuse.
+        assert!((calibrate_unary(&cost, 2.6) - 1e-4).abs() < 1e-8);
+    }
+
+    /// The schedule for a view with `unary_entropy_nats`: calibrated start, configured end; without it, the plain
+    /// schedule.
+    #[test]
+    fn meanfield_unary_schedule_for_cost_starts_at_the_calibrated_scale() {
+        let (w, h, m) = (16, 8, 9);
+        let cost = CostVolume {
+            width: w,
+            height: h,
+            ndisp: m,
+            data: rand_vec(w * h * m, 4).iter().map(|v| v * 20.0).collect(),
+        };
+        let p =
+            MeanFieldParams { iterations: 4, unary_scale: 0.3, unary_scale_start: 0.1, ..MeanFieldParams::default() };
+        assert_eq!(UnarySchedule::for_cost(&p, &cost), UnarySchedule::new(&p));
+        let q = MeanFieldParams { unary_entropy_nats: 1.5, ..p };
+        let s = UnarySchedule::for_cost(&q, &cost);
+        assert_eq!(s.at(0), calibrate_unary(&cost, 1.5));
+        assert_eq!(s.at(4), 0.3);
+    }
+
+    /// The label-aware local coupling: ω̃ × M / reference, ω untouched; off = unchanged.
+    #[test]
+    fn meanfield_label_aware_weights_scale_with_the_labels() {
+        let w = PairwiseWeights { fcm: 7.0, lcm: 1.5 };
+        assert_eq!(label_aware_weights(w, &MeanFieldParams::default(), 190), w);
+        let p = MeanFieldParams { lcm_weight_ref_labels: 60, ..MeanFieldParams::default() };
+        assert_eq!(label_aware_weights(w, &p, 60), w);
+        assert_eq!(label_aware_weights(w, &p, 180), PairwiseWeights { fcm: 7.0, lcm: 4.5 });
+    }
+
+    /// With annealing the initial marginals are the softmax of the starting scale, each iteration uses the next
+    /// scale of the schedule (checked against a Jacobi run built from scratch with that scale), and without it
+    /// the output is bit for bit the plain run's.
+    #[test]
+    fn meanfield_annealing_applies_the_schedule_per_iteration() {
+        let (w, h, nd) = (24, 9, 7);
+        let (left, right, _) = banded_pair(w, h);
+        let cost = crate::cost::build_cost_volume(&left, &right, nd, &CostParams::default());
+        let weights = PairwiseWeights { fcm: 0.0, lcm: 1.5 };
+        let plain =
+            MeanFieldParams { iterations: 3, unary_scale: 0.2, schedule: Schedule::Jacobi, ..Default::default() };
+        let annealed = MeanFieldParams { unary_scale_start: 0.05, ..plain.clone() };
+        let schedule = UnarySchedule::new(&annealed);
+        // Reference: one Jacobi step from the given marginals with a fixed scale.
+        let jacobi_step = |q: &[f32], scale: f32| -> Vec<f32> {
+            let p = MeanFieldParams { iterations: 1, unary_scale: scale, ..plain.clone() };
+            let mut mf = MeanField::new(&cost, &left, &p, weights);
+            mf.q.copy_from_slice(q);
+            mf.step();
+            mf.q
+        };
+        let mut mf = MeanField::new(&cost, &left, &annealed, weights);
+        let mut reference: Vec<f32> = cost.data.iter().map(|c| c * 0.05).collect();
+        reference.chunks_exact_mut(nd).for_each(softmax_neg_in_place);
+        assert!(mf.marginals().iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()));
+        for t in 1..=3 {
+            mf.step();
+            reference = jacobi_step(&reference, schedule.at(t));
+            assert!(mf.marginals().iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()), "step {t}");
+        }
+        let off = MeanFieldParams { unary_scale_start: 0.0, ..annealed };
+        let a = infer_mean_field(&cost, &left, &off, weights);
+        let b = infer_mean_field(&cost, &left, &plain, weights);
         assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()));
     }
 

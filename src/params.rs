@@ -104,10 +104,30 @@ pub struct MeanFieldParams {
     pub iterations: usize,
     /// Unary scale: ψ_u = unary_scale × cost (the cost is a log-probability up to this temperature).
     pub unary_scale: f32,
+    /// Deterministic annealing of the unary temperature; 0 = off (every iteration uses `unary_scale`). When > 0,
+    /// the initial marginals use this scale and iteration t = 1..T uses the geometric interpolation
+    /// `unary_scale_start` × (`unary_scale` / `unary_scale_start`)^(t / T), so the last iteration uses
+    /// `unary_scale` (start below `unary_scale` = start hot, end cold). See [`crate::meanfield`].
+    pub unary_scale_start: f32,
+    /// With annealing: the number of iterations K over which the scale goes from `unary_scale_start` to
+    /// `unary_scale` (t / K in place of t / T), the remaining T − K iterations staying at `unary_scale`;
+    /// 0 = all T iterations. Must not exceed `iterations`.
+    pub unary_anneal_iterations: usize,
+    /// Label-aware start of the annealing; 0 = off. When > 0, the scale of the initial marginals is chosen per view
+    /// so that softmax(−scale × cost) has this mean entropy over the pixels, in nats (the log of the effective
+    /// number of labels; uniform over M labels is ln M), whatever M and the cost statistics of the scene; it
+    /// replaces `unary_scale_start`, and the schedule goes from it to `unary_scale` as usual (over
+    /// `unary_anneal_iterations`). A target at or above ln M gives the hottest scale tried (1e-4). See
+    /// [`crate::meanfield::calibrate_unary`].
+    pub unary_entropy_nats: f32,
     /// ω, the weight of the fully connected Potts term.
     pub fcm_weight: f32,
     /// ω̃, the weight of the locally connected term.
     pub lcm_weight: f32,
+    /// Label-aware local coupling; 0 = off. When > 0, ω̃ is multiplied by M / `lcm_weight_ref_labels` for a scene
+    /// with M labels, so the local term's gain around the uniform marginal, ~ω̃·Σλ·(3 − 2β) / M, is the same for
+    /// every M (ω̃ is the weight at M = `lcm_weight_ref_labels`). See [`crate::meanfield`].
+    pub lcm_weight_ref_labels: usize,
     /// β, the local penalty for |d_i − d_j| = 1 (the penalty for > 1 is 1).
     pub beta: f32,
     /// σx of the bilateral kernel, in pixels.
@@ -139,8 +159,12 @@ impl Default for MeanFieldParams {
         MeanFieldParams {
             iterations: 5,
             unary_scale: 0.5,
+            unary_scale_start: 0.0,
+            unary_anneal_iterations: 0,
+            unary_entropy_nats: 0.0,
             fcm_weight: 10.0,
             lcm_weight: 2.0,
+            lcm_weight_ref_labels: 0,
             beta: 0.3,
             sigma_xy: 5.0,
             sigma_rgb: 55.0,
@@ -312,6 +336,27 @@ impl Params {
             return Err(Error::param("meanfield.iterations", m.iterations, "0 to 1000"));
         }
         check_positive("meanfield.unary_scale", m.unary_scale)?;
+        if !(m.unary_scale_start.is_finite() && m.unary_scale_start >= 0.0) {
+            return Err(Error::param(
+                "meanfield.unary_scale_start",
+                m.unary_scale_start,
+                "0 (off) or a finite number > 0",
+            ));
+        }
+        if m.unary_anneal_iterations > m.iterations {
+            return Err(Error::param(
+                "meanfield.unary_anneal_iterations",
+                m.unary_anneal_iterations,
+                format!("0 (all) to meanfield.iterations = {}", m.iterations),
+            ));
+        }
+        if !(m.unary_entropy_nats.is_finite() && m.unary_entropy_nats >= 0.0) {
+            return Err(Error::param(
+                "meanfield.unary_entropy_nats",
+                m.unary_entropy_nats,
+                "0 (off) or a finite number > 0",
+            ));
+        }
         check_nonneg("meanfield.fcm_weight", m.fcm_weight)?;
         check_nonneg("meanfield.lcm_weight", m.lcm_weight)?;
         if !(0.0..=1.0).contains(&m.beta) {
@@ -423,6 +468,29 @@ mod tests {
     fn out_of_range_names_key_value_and_range() {
         let e = Params::load(None, &["meanfield.sigma_xy=-2".into()]).unwrap_err();
         assert_eq!(e.to_string(), "invalid meanfield.sigma_xy = -2 (expected a finite number > 0)");
+        let e = Params::load(None, &["meanfield.unary_scale_start=-0.1".into()]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "invalid meanfield.unary_scale_start = -0.1 (expected 0 (off) or a finite number > 0)"
+        );
+        assert!(Params::load(None, &["meanfield.unary_scale_start=nan".into()]).is_err());
+        let e = Params::load(None, &["meanfield.iterations=5".into(), "meanfield.unary_anneal_iterations=6".into()])
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "invalid meanfield.unary_anneal_iterations = 6 (expected 0 (all) to meanfield.iterations = 5)"
+        );
+        let e = Params::load(None, &["meanfield.unary_entropy_nats=-1".into()]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "invalid meanfield.unary_entropy_nats = -1 (expected 0 (off) or a finite number > 0)"
+        );
+        let e = Params::load(None, &["meanfield.lcm_weight_ref_labels=-3".into()]).unwrap_err().to_string();
+        assert!(e.contains("lcm_weight_ref_labels"), "{e}");
+        assert_eq!(
+            Params::load(None, &["meanfield.unary_scale_start=0.05".into()]).unwrap().meanfield.unary_scale_start,
+            0.05
+        );
         let e = Params::load(None, &["cost.census_width=4".into()]).unwrap_err();
         assert!(e.to_string().contains("cost.census_width = 4"), "{e}");
         let e = Params::from_toml_str("downscale = 0\n", Path::new("c.toml")).unwrap_err();
