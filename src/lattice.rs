@@ -24,7 +24,7 @@
 //!
 //! Vertex ids are assigned in order of first appearance while scanning pixels in raster order, which makes the
 //! lattice (and every filter result) deterministic. Keys are five 16-bit lattice coordinates (the (d+1)-th is
-//! implied by the zero sum; see [`Key`]); the largest coordinate is ~724 at quarter resolution (SPEC §6), far
+//! implied by the zero sum; see `Key`); the largest coordinate is ~724 at quarter resolution (SPEC §6), far
 //! from the limit.
 
 use multiversion::multiversion;
