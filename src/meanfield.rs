@@ -1270,17 +1270,22 @@ mod tests {
         assert_eq!(all, UnarySchedule::new(&MeanFieldParams { unary_anneal_iterations: 0, ..p }));
     }
 
+    /// A `w × h × m` cost volume of uniform random costs in `[0, scale)`.
+    fn random_cost(w: usize, h: usize, m: usize, seed: u64, scale: f32) -> CostVolume {
+        CostVolume {
+            width: w,
+            height: h,
+            ndisp: m,
+            data: rand_vec(w * h * m, seed).iter().map(|v| v * scale).collect(),
+        }
+    }
+
     /// The label-aware start: the calibrated scale gives the target mean entropy (checked by brute force), the
     /// entropy falls as the scale grows, and an unreachable target gives the end of the bracket.
     #[test]
     fn meanfield_calibrate_unary_hits_the_target_entropy() {
         let (w, h, m) = (40, 30, 12);
-        let cost = CostVolume {
-            width: w,
-            height: h,
-            ndisp: m,
-            data: rand_vec(w * h * m, 9).iter().map(|v| v * 30.0).collect(),
-        };
+        let cost = random_cost(w, h, m, 9, 30.0);
         let mean_entropy = |s: f32| -> f64 {
             let mut total = 0.0f64;
             for i in 0..w * h {
@@ -1306,13 +1311,7 @@ mod tests {
     /// schedule.
     #[test]
     fn meanfield_unary_schedule_for_cost_starts_at_the_calibrated_scale() {
-        let (w, h, m) = (16, 8, 9);
-        let cost = CostVolume {
-            width: w,
-            height: h,
-            ndisp: m,
-            data: rand_vec(w * h * m, 4).iter().map(|v| v * 20.0).collect(),
-        };
+        let cost = random_cost(16, 8, 9, 4, 20.0);
         let p =
             MeanFieldParams { iterations: 4, unary_scale: 0.3, unary_scale_start: 0.1, ..MeanFieldParams::default() };
         assert_eq!(UnarySchedule::for_cost(&p, &cost), UnarySchedule::new(&p));
