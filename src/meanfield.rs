@@ -496,7 +496,7 @@ impl<'a> MeanField<'a> {
         let mut next = std::mem::take(&mut self.next);
         let mut q = std::mem::take(&mut self.q);
         let mut scratch = std::mem::take(&mut self.scratch);
-        let mut edges_slot = std::mem::take(&mut self.edges);
+        let mut edges = std::mem::take(&mut self.edges);
         let vals: &[f32] = match &self.lattice {
             Some(lat) => {
                 let scale = (!self.in_scale.is_empty()).then_some(self.in_scale.as_slice());
@@ -512,17 +512,15 @@ impl<'a> MeanField<'a> {
             }
             Schedule::Checkerboard => {
                 let bands = checkerboard_bands(self.cost.height, rayon::current_num_threads());
-                let mut edges = std::mem::take(&mut edges_slot);
                 // Sized in `with_buffers` for the current thread count; only a different pool resizes it.
                 edges.resize(2 * bands.len() * self.cost.width * m, 0.0);
                 this.checkerboard_in_place(&mut q, vals, &bands, &mut edges);
-                edges_slot = edges;
             }
         }
         self.q = q;
         self.scratch = scratch;
         self.next = next;
-        self.edges = edges_slot;
+        self.edges = edges;
     }
 
     /// Red-black update in two sweeps over the image: pass 1 computes the pixels with x + y even from the
