@@ -93,6 +93,8 @@ pub struct Output {
 ///   checkerboard updates Q in place) — plus the lattice's two vertex buffers, V × M `f32` each with V ≤ N
 ///   vertices (~0.4 N on natural images; the bound is used): 4 volumes (5 with Jacobi);
 /// - LCM: the two (three) volumes;
+/// - coarse-to-fine (`meanfield.pyramid_levels` = L > 1): each coarse level k < L adds its volume and marginals
+///   (and next Q with Jacobi) at 4^−k of the size, at most 2/3 (1) of a volume more;
 /// - WTA: one volume, two with the left-right check (both views' cost volumes);
 /// - plus ~300 bytes per pixel: the images, the lattice's per-pixel tables, the maps of the post-processing.
 ///
@@ -114,8 +116,13 @@ fn estimate_at_factor(width: usize, height: usize, ndisp: usize, params: &Params
         Model::Lcm => 2 + next_q,
         Model::Fcm | Model::Jem => 4 + next_q,
     };
+    // Coarse-to-fine: each coarse level's volume and marginals (and next Q with Jacobi), at 4^−k of the size.
+    let pyramid = match params.model {
+        Model::Wta => 0,
+        _ => (1..params.meanfield.pyramid_levels as u32).map(|k| (2 + next_q) * volume.div_ceil(4u64.pow(k))).sum(),
+    };
     let full_size = if factor > 1 { 32 * width as u64 * height as u64 } else { 0 };
-    volumes * volume + 300 * n + full_size
+    volumes * volume + pyramid + 300 * n + full_size
 }
 
 /// Fails fast, before anything large is allocated, when a run would need more than `limit_bytes`.
@@ -289,11 +296,15 @@ fn estimate_view(
             let weights =
                 meanfield::PairwiseWeights { fcm: params.effective_fcm_weight(), lcm: params.effective_lcm_weight() };
             let reuse = std::mem::take(buffers);
-            let mut mf = t.time("mf setup", || {
-                meanfield::MeanField::with_buffers(cost, image, &params.meanfield, weights, reuse)
-            });
-            t.time("mf iterations", || (0..params.meanfield.iterations).for_each(|_| mf.step()));
-            let (q, rest) = mf.into_marginals_and_buffers();
+            let (q, rest) = if params.meanfield.pyramid_levels > 1 {
+                t.time("mf pyramid", || meanfield::infer_coarse_to_fine(cost, image, &params.meanfield, weights, reuse))
+            } else {
+                let mut mf = t.time("mf setup", || {
+                    meanfield::MeanField::with_buffers(cost, image, &params.meanfield, weights, reuse)
+                });
+                t.time("mf iterations", || (0..params.meanfield.iterations).for_each(|_| mf.step()));
+                mf.into_marginals_and_buffers()
+            };
             let (disparity, confidence) =
                 t.time("decode", || meanfield::decode_marginals(&q, params.meanfield.subpixel));
             *buffers = rest;
@@ -344,6 +355,11 @@ mod tests {
         let mut jacobi = Params::default();
         jacobi.meanfield.schedule = Schedule::Jacobi;
         assert_eq!(estimate_memory_bytes(720, 480, 190, &jacobi) - vintage, volume);
+        // Two pyramid levels: a coarse volume and its marginals, a quarter of the size each.
+        let mut pyramid = lcm.clone();
+        pyramid.meanfield.pyramid_levels = 2;
+        let extra = estimate_memory_bytes(720, 480, 190, &pyramid) - estimate_memory_bytes(720, 480, 190, &lcm);
+        assert_eq!(extra, 2 * volume / 4);
     }
 
     #[test]

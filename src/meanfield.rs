@@ -677,6 +677,26 @@ impl<'a> MeanField<'a> {
         out
     }
 
+    /// Replaces the marginals by those of a level reduced 2 times: every pixel takes its 2 × 2 block's.
+    ///
+    /// # Panics
+    /// If `coarse` is not this level's size reduced 2 times, or has another number of labels.
+    pub fn init_from_coarse(&mut self, coarse: &Marginals) {
+        let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
+        let cw = coarse.width;
+        assert_eq!(
+            (cw, coarse.height, coarse.ndisp),
+            (crate::scale::reduced_len(w, 2), crate::scale::reduced_len(h, 2), m),
+            "coarse marginals of the wrong size"
+        );
+        self.q.par_chunks_mut(w * m).enumerate().for_each(|(y, row)| {
+            let crow = &coarse.data[(y / 2) * cw * m..][..cw * m];
+            for (x, qx) in row.chunks_exact_mut(m).enumerate() {
+                qx.copy_from_slice(&crow[(x / 2) * m..][..m]);
+            }
+        });
+    }
+
     /// The current marginals.
     pub fn marginals(&self) -> &[f32] {
         &self.q
@@ -854,18 +874,99 @@ fn split_rows(volume: &mut [f32], y: usize, len: usize) -> (NeighbourRows<'_>, &
     (NeighbourRows { above, same: None, below }, row)
 }
 
-/// Runs `p.iterations` mean-field iterations and returns the marginals.
+/// The block means of a cost volume over `factor × factor` pixels (partial blocks at the right and bottom edges
+/// average the pixels they have); the labels are unchanged.
+pub fn downsample_volume(vol: &CostVolume, factor: usize) -> CostVolume {
+    let (w, h, m) = (vol.width, vol.height, vol.ndisp);
+    let (sw, sh) = (crate::scale::reduced_len(w, factor), crate::scale::reduced_len(h, factor));
+    let mut out = CostVolume::new(sw, sh, m, 0.0);
+    out.data.par_chunks_mut((sw * m).max(1)).enumerate().for_each(|(by, out_row)| {
+        let (y0, y1) = (by * factor, ((by + 1) * factor).min(h));
+        for (bx, o) in out_row.chunks_exact_mut(m).enumerate() {
+            let (x0, x1) = (bx * factor, ((bx + 1) * factor).min(w));
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    o.iter_mut().zip(vol.pixel(y * w + x)).for_each(|(a, c)| *a += c);
+                }
+            }
+            let inv = 1.0 / ((y1 - y0) * (x1 - x0)) as f32;
+            o.iter_mut().for_each(|a| *a *= inv);
+        }
+    });
+    out
+}
+
+/// Coarse-to-fine mean field (`p.pyramid_levels` = L > 1).
+///
+/// Level k (0 = the input) is the image and the cost volume reduced 2^k times by block means, with the same
+/// labels and σx / 2^k (the same kernel in input pixels). The coarsest level starts from the unary and runs
+/// `p.iterations` with the configured annealing; each finer level starts from its parent's marginals (every pixel
+/// takes its 2 × 2 block's, [`MeanField::init_from_coarse`]) and runs `p.pyramid_iterations` at `unary_scale`.
+/// The model is the same at every level; what changes is how far evidence travels per iteration: the local
+/// message crosses one pixel per iteration, so on the full grid a textureless region W pixels wide needs ~W / 2
+/// red-black iterations before its marginals see its textured borders, and 2^(L−1) times fewer at the coarsest
+/// level. Levels stop early when the next one would be narrower or shorter than 2 pixels. With L = 1 this is
+/// `p.iterations` steps of [`MeanField`] from `buffers`, as in [`infer_mean_field`].
+///
+/// Memory: besides the input volume and the final Q (in `buffers` when it holds an `N × M` allocation), the
+/// coarse levels' volumes and marginals, at most 2/3 of a volume more (Σ 2 · 4^−k).
+pub fn infer_coarse_to_fine(
+    cost: &CostVolume,
+    image: &RgbImage,
+    p: &MeanFieldParams,
+    weights: PairwiseWeights,
+    buffers: Buffers,
+) -> (Marginals, Buffers) {
+    // pyramid[k − 1] = the image and the volume reduced 2^k times.
+    let mut pyramid: Vec<(RgbImage, CostVolume)> = Vec::new();
+    for _ in 1..p.pyramid_levels.max(1) {
+        let (img, vol) = pyramid.last().map_or((image, cost), |(i, v)| (i, v));
+        if img.width < 4 || img.height < 4 {
+            break;
+        }
+        let next = (crate::scale::downsample_rgb(img, 2), downsample_volume(vol, 2));
+        pyramid.push(next);
+    }
+    // Finer levels start from their parent, at the final temperature.
+    let refine = MeanFieldParams { unary_scale_start: 0.0, unary_entropy_nats: 0.0, ..p.clone() };
+    let mut parent: Option<Marginals> = None;
+    let mut spare = Buffers::default();
+    while let Some((img, vol)) = pyramid.pop() {
+        let level = pyramid.len() + 1;
+        let base = if parent.is_some() { &refine } else { p };
+        let lp = MeanFieldParams { sigma_xy: p.sigma_xy / (1u32 << level) as f32, ..base.clone() };
+        let mut mf = MeanField::with_buffers(&vol, &img, &lp, weights, spare);
+        let iterations = match parent.take() {
+            Some(q) => {
+                mf.init_from_coarse(&q);
+                p.pyramid_iterations
+            }
+            None => p.iterations,
+        };
+        (0..iterations).for_each(|_| mf.step());
+        let (q, rest) = mf.into_marginals_and_buffers();
+        parent = Some(q);
+        spare = rest;
+    }
+    drop(spare);
+    let (lp, iterations) = if parent.is_some() { (&refine, p.pyramid_iterations) } else { (p, p.iterations) };
+    let mut mf = MeanField::with_buffers(cost, image, lp, weights, buffers);
+    if let Some(q) = parent {
+        mf.init_from_coarse(&q);
+    }
+    (0..iterations).for_each(|_| mf.step());
+    mf.into_marginals_and_buffers()
+}
+
+/// Runs mean-field inference and returns the marginals: `p.iterations` iterations, coarse to fine when
+/// `p.pyramid_levels` > 1 ([`infer_coarse_to_fine`]).
 pub fn infer_mean_field(
     cost: &CostVolume,
     image: &RgbImage,
     p: &MeanFieldParams,
     weights: PairwiseWeights,
 ) -> Marginals {
-    let mut mf = MeanField::new(cost, image, p, weights);
-    for _ in 0..p.iterations {
-        mf.step();
-    }
-    mf.into_marginals()
+    infer_coarse_to_fine(cost, image, p, weights, Buffers::default()).0
 }
 
 /// Disparity (argmax Q, ties to the smaller label, with an optional sub-pixel parabola through ln Q) and
@@ -1073,8 +1174,11 @@ mod tests {
             ("jem", PairwiseWeights { fcm: 30.0, lcm: 1.0 }, Schedule::Jacobi),
             ("lcm checkerboard", PairwiseWeights { fcm: 0.0, lcm: 1.0 }, Schedule::Checkerboard),
             ("jem checkerboard", PairwiseWeights { fcm: 30.0, lcm: 1.0 }, Schedule::Checkerboard),
+            ("lcm pyramid", PairwiseWeights { fcm: 0.0, lcm: 1.0 }, Schedule::Checkerboard),
+            ("jem pyramid", PairwiseWeights { fcm: 30.0, lcm: 1.0 }, Schedule::Checkerboard),
         ] {
-            let p = MeanFieldParams { iterations: 5, schedule, ..MeanFieldParams::default() };
+            let pyramid_levels = if name.ends_with("pyramid") { 2 } else { 1 };
+            let p = MeanFieldParams { iterations: 5, schedule, pyramid_levels, ..MeanFieldParams::default() };
             let q = infer_mean_field(&cost, &left, &p, weights);
             let (disp, conf) = decode_marginals(&q, false);
             let (mut good, mut total) = (0, 0);
@@ -1269,6 +1373,80 @@ mod tests {
     }
 
     /// A `w × h × m` cost volume of uniform random costs in `[0, scale)`.
+    /// Block means with partial blocks at the right and bottom edges: a 3 × 3 volume of 2 labels reduced 2 times.
+    #[test]
+    fn meanfield_downsample_volume_takes_block_means() {
+        // Label 0 holds the pixel index, label 1 ten times it.
+        let data: Vec<f32> = (0..9).flat_map(|i| [i as f32, 10.0 * i as f32]).collect();
+        let vol = CostVolume { width: 3, height: 3, ndisp: 2, data };
+        let small = downsample_volume(&vol, 2);
+        assert_eq!((small.width, small.height, small.ndisp), (2, 2, 2));
+        // Blocks: {0, 1, 3, 4} | {2, 5} over {6, 7} | {8}.
+        assert_eq!(small.data, vec![2.0, 20.0, 3.5, 35.0, 6.5, 65.0, 8.0, 80.0]);
+    }
+
+    /// Every pixel of a 5 × 3 level takes the marginal of its 2 × 2 block in the 3 × 2 coarse level.
+    #[test]
+    fn meanfield_init_from_coarse_copies_each_block() {
+        let (w, h, m) = (5, 3, 4);
+        let cost = random_cost(w, h, m, 3, 10.0);
+        let mut mf = MeanField::new(&cost, &RgbImage::new(w, h), &MeanFieldParams::default(), LCM_ONLY);
+        let coarse = random_cost(3, 2, m, 9, 1.0);
+        mf.init_from_coarse(&coarse);
+        for y in 0..h {
+            for x in 0..w {
+                let (i, parent) = (y * w + x, (y / 2) * 3 + x / 2);
+                assert_eq!(&mf.marginals()[i * m..][..m], coarse.pixel(parent), "pixel ({x}, {y})");
+            }
+        }
+    }
+
+    /// One level is the plain inference, bit for bit (the pyramid only adds levels in front of it).
+    #[test]
+    fn meanfield_one_level_pyramid_is_plain_inference() {
+        let (w, h, m) = (23, 17, 9);
+        let cost = random_cost(w, h, m, 5, 20.0);
+        let (image, _, _) = banded_pair(w, h);
+        let p = MeanFieldParams { iterations: 4, unary_scale_start: 0.1, ..MeanFieldParams::default() };
+        let weights = PairwiseWeights { fcm: 5.0, lcm: 1.0 };
+        let mut mf = MeanField::new(&cost, &image, &p, weights);
+        (0..p.iterations).for_each(|_| mf.step());
+        let plain = mf.into_marginals();
+        let (pyr, _) = infer_coarse_to_fine(&cost, &image, &p, weights, Buffers::default());
+        assert!(plain.data.iter().zip(&pyr.data).all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
+
+    /// What the pyramid is for: weak evidence under strong noise. Every pixel's cost is uniform noise in 0..6 plus
+    /// 1 for every label but the true one (5 of 8), so the true label wins the winner-take-all at few pixels;
+    /// the local term has to pool evidence over a large neighbourhood. The same number of iterations pools more
+    /// when it starts on a grid reduced 4 times (a 4 × 4 block mean already averages 16 pixels' noise).
+    #[test]
+    fn meanfield_pyramid_pools_weak_evidence() {
+        let (w, h, m) = (64, 32, 8);
+        let noise = rand_vec(w * h * m, 41);
+        let data = noise.iter().enumerate().map(|(k, v)| 6.0 * v + if k % m == 5 { 0.0 } else { 1.0 }).collect();
+        let cost = CostVolume { width: w, height: h, ndisp: m, data };
+        let image = RgbImage::new(w, h);
+        let exact = |disp: &Plane<f32>| disp.data.iter().filter(|&&d| d == 5.0).count() as f64 / (w * h) as f64;
+        let wta = exact(&crate::cost::winner_take_all(&cost));
+        let exact_after = |levels| {
+            let p = MeanFieldParams {
+                iterations: 4,
+                pyramid_levels: levels,
+                pyramid_iterations: 4,
+                ..MeanFieldParams::default()
+            };
+            let q = infer_mean_field(&cost, &image, &p, PairwiseWeights { fcm: 0.0, lcm: 0.5 });
+            exact(&decode_marginals(&q, false).0)
+        };
+        let (plain, pyramid) = (exact_after(1), exact_after(3));
+        // Measured: WTA 0.29, plain 0.70, three levels 0.88.
+        assert!(wta < 0.4, "the evidence is not weak: WTA already gets {wta:.2}");
+        assert!(plain < 0.8 && pyramid > 0.85, "plain {plain:.3}, coarse to fine {pyramid:.3}");
+    }
+
+    const LCM_ONLY: PairwiseWeights = PairwiseWeights { fcm: 0.0, lcm: 1.0 };
+
     fn random_cost(w: usize, h: usize, m: usize, seed: u64, scale: f32) -> CostVolume {
         CostVolume {
             width: w,

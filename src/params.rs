@@ -152,6 +152,13 @@ pub struct MeanFieldParams {
     pub subpixel: bool,
     /// Update order within an iteration.
     pub schedule: Schedule,
+    /// Coarse-to-fine inference: the number of levels (1 = off). Level k runs on the image and cost volume
+    /// reduced 2^k times (block means, the same labels); the coarsest level runs the configured `iterations`
+    /// (and annealing) from the unary, every finer level starts from its parent's marginals and runs
+    /// `pyramid_iterations` at `unary_scale`. See [`crate::meanfield::infer_coarse_to_fine`].
+    pub pyramid_levels: usize,
+    /// Iterations at each level finer than the coarsest (with `pyramid_levels` > 1).
+    pub pyramid_iterations: usize,
 }
 
 impl Default for MeanFieldParams {
@@ -177,6 +184,8 @@ impl Default for MeanFieldParams {
             normalization: Normalization::Symmetric,
             subpixel: true,
             schedule: Schedule::Checkerboard,
+            pyramid_levels: 1,
+            pyramid_iterations: 10,
         }
     }
 }
@@ -356,6 +365,12 @@ impl Params {
                 m.unary_entropy_nats,
                 "0 (off) or a finite number > 0",
             ));
+        }
+        if !(1..=6).contains(&m.pyramid_levels) {
+            return Err(Error::param("meanfield.pyramid_levels", m.pyramid_levels, "1 (off) to 6"));
+        }
+        if m.pyramid_iterations > 1000 {
+            return Err(Error::param("meanfield.pyramid_iterations", m.pyramid_iterations, "0 to 1000"));
         }
         check_nonneg("meanfield.fcm_weight", m.fcm_weight)?;
         check_nonneg("meanfield.lcm_weight", m.lcm_weight)?;
