@@ -173,18 +173,25 @@ fn pixel_energies(
     }
 }
 
-/// `out ← softmax(−en)`, bit-identical to [`softmax_neg_in_place`] on a copy of `en`.
+/// `out ← softmax(−en[..M])`, M = `out.len()`, bit-identical to [`softmax_neg_in_place`] on a copy of
+/// `en[..M]`, with the exponentials
+/// computed into `ex`: `en` and `ex` have the same length, padded past M to whole vectors of 8 lanes (`en`'s
+/// padding finite), so the exp loop has no scalar tail; the reductions still see exactly M values.
 #[inline(always)]
-fn softmax_neg_into(en: &[f32], out: &mut [f32]) {
+fn softmax_neg_padded(en: &[f32], ex: &mut [f32], out: &mut [f32]) {
     let m = out.len();
-    let en = &en[..m];
-    let min = lane_min(en);
+    let min = lane_min(&en[..m]);
     let min = if min.is_finite() { min } else { 0.0 };
-    // Separate passes (each stays in L1): a loop that also accumulated the sum would not vectorise the exp.
-    for (o, e) in out.iter_mut().zip(en) {
-        *o = exp_nonpositive(min - e);
+    for (x, e) in ex.iter_mut().zip(en) {
+        *x = exp_nonpositive(min - e);
     }
-    normalise(out);
+    let sum = lane_sum(&ex[..m]);
+    if sum > 0.0 && sum.is_finite() {
+        let inv = 1.0 / sum;
+        out.iter_mut().zip(&ex[..m]).for_each(|(o, v)| *o = v * inv);
+    } else {
+        out.fill(1.0 / m as f32);
+    }
 }
 
 /// In place: `e ← softmax(−e)`, subtracting the minimum energy first.
@@ -352,15 +359,24 @@ struct RowScratch {
     msg: Vec<f32>,
     /// P̃ with a zero at each end.
     p_padded: Vec<f32>,
-    /// The energies E(d).
+    /// The energies E(d), padded with zeros to a multiple of 8 labels.
     energy: Vec<f32>,
+    /// exp(min E − E(d)), as long as `energy`.
+    exps: Vec<f32>,
     /// A row of zeros standing in for missing neighbours.
     zeros: Vec<f32>,
 }
 
 impl RowScratch {
     fn new(m: usize) -> Self {
-        RowScratch { msg: vec![0.0; m], p_padded: vec![0.0; m + 2], energy: vec![0.0; m], zeros: vec![0.0; m] }
+        let lanes = m.next_multiple_of(8);
+        RowScratch {
+            msg: vec![0.0; m],
+            p_padded: vec![0.0; m + 2],
+            energy: vec![0.0; lanes],
+            exps: vec![0.0; lanes],
+            zeros: vec![0.0; m],
+        }
     }
 }
 
@@ -790,8 +806,8 @@ fn update_row<'c, 'r>(
             }
             LocalTerm { p_padded: &s.p_padded, omega: lcm, beta: mf.beta }
         });
-        pixel_energies(mf.cost.pixel(i), mf.unary_scale, full, local, &mut s.energy);
-        softmax_neg_into(&s.energy, e);
+        pixel_energies(mf.cost.pixel(i), mf.unary_scale, full, local, &mut s.energy[..m]);
+        softmax_neg_padded(&s.energy, &mut s.exps, e);
     }
 }
 
@@ -1032,17 +1048,23 @@ mod tests {
     }
 
     #[test]
-    fn meanfield_softmax_into_is_bit_identical_to_in_place() {
-        for m in [1, 5, 8, 13, 70, 191] {
-            let mut en: Vec<f32> = rand_vec(m, m as u64).iter().map(|v| v * 40.0 - 10.0).collect();
+    fn meanfield_padded_softmax_is_bit_identical_to_in_place() {
+        for m in [1usize, 5, 8, 13, 70, 191] {
+            let lanes = m.next_multiple_of(8);
+            let mut en: Vec<f32> = rand_vec(lanes, m as u64).iter().map(|v| v * 40.0 - 10.0).collect();
             if m > 5 {
                 en[3] = f32::INFINITY;
             }
-            let mut reference = en.clone();
-            softmax_neg_in_place(&mut reference);
-            let mut out = vec![0.0; m];
-            softmax_neg_into(&en, &mut out);
-            assert!(out.iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()), "m = {m}");
+            for all_infinite in [false, true] {
+                if all_infinite {
+                    en[..m].fill(f32::INFINITY);
+                }
+                let mut reference = en[..m].to_vec();
+                softmax_neg_in_place(&mut reference);
+                let (mut exps, mut out) = (vec![0.0; lanes], vec![0.0; m]);
+                softmax_neg_padded(&en, &mut exps, &mut out);
+                assert!(out.iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()), "m = {m}");
+            }
         }
     }
 
