@@ -961,14 +961,12 @@ pub fn infer_coarse_to_fine(
     }
     // Finer levels start from their parent, at the final temperature.
     let refine = MeanFieldParams { unary_scale_start: 0.0, unary_entropy_nats: 0.0, ..p.clone() };
-    let mut parent: Option<Marginals> = None;
-    let mut spare = Buffers::default();
-    while let Some((img, vol)) = pyramid.pop() {
-        let level = pyramid.len() + 1;
+    // One level (σx in its own pixels): from the parent's marginals if there is a parent, else from the unary.
+    let run_level = |vol: &CostVolume, img: &RgbImage, level: u32, parent: Option<Marginals>, buffers: Buffers| {
         let base = if parent.is_some() { &refine } else { p };
         let lp = MeanFieldParams { sigma_xy: p.sigma_xy / (1u32 << level) as f32, ..base.clone() };
-        let mut mf = MeanField::with_buffers(&vol, &img, &lp, weights, spare);
-        let iterations = match parent.take() {
+        let mut mf = MeanField::with_buffers(vol, img, &lp, weights, buffers);
+        let iterations = match parent {
             Some(q) => {
                 mf.init_from_coarse(&q);
                 p.pyramid_iterations
@@ -976,18 +974,14 @@ pub fn infer_coarse_to_fine(
             None => p.iterations,
         };
         (0..iterations).for_each(|_| mf.step());
-        let (q, rest) = mf.into_marginals_and_buffers();
-        parent = Some(q);
-        spare = rest;
+        mf.into_marginals_and_buffers()
+    };
+    let mut parent = None;
+    while let Some((img, vol)) = pyramid.pop() {
+        let level = pyramid.len() as u32 + 1;
+        parent = Some(run_level(&vol, &img, level, parent, Buffers::default()).0);
     }
-    drop(spare);
-    let (lp, iterations) = if parent.is_some() { (&refine, p.pyramid_iterations) } else { (p, p.iterations) };
-    let mut mf = MeanField::with_buffers(cost, image, lp, weights, buffers);
-    if let Some(q) = parent {
-        mf.init_from_coarse(&q);
-    }
-    (0..iterations).for_each(|_| mf.step());
-    mf.into_marginals_and_buffers()
+    run_level(cost, image, 0, parent, buffers)
 }
 
 /// Runs mean-field inference and returns the marginals: `p.iterations` iterations, coarse to fine when
