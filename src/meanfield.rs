@@ -18,12 +18,6 @@
 //! evidence accumulates, ending cold sharpens them to the unary's full strength, the classic remedy for mean
 //! field freezing into its first, winner-take-all-like state.
 //!
-//! Label-aware start (`unary_entropy_nats` > 0, off by default): the scale of the initial marginals is chosen
-//! per view by bisection so that their mean entropy over the pixels is the target ([`calibrate_unary`]), and the
-//! annealing runs from it to `unary_scale`. A fixed entropy is a fixed effective number of labels whatever M and
-//! the texture of the scene. (On trainingQ this made the large-range scenes colder without helping them; the
-//! label-aware coupling below is what works, docs/RESULTS.md.)
-//!
 //! Label-aware local coupling (`lcm_weight_ref_labels` > 0, off by default): ω̃ is multiplied by M / reference.
 //! Around the uniform marginal the softmax has slope 1/M, so a perturbation of the neighbours' marginals comes
 //! back amplified by ~ω̃·Σ_j w̃(i, j)·(3 − 2β) / M: with a fixed ω̃ the local term propagates evidence through diffuse
@@ -269,21 +263,10 @@ pub struct UnarySchedule {
 }
 
 impl UnarySchedule {
-    /// The schedule configured in `p`, before any label-aware calibration (see [`UnarySchedule::for_cost`]).
+    /// The schedule configured in `p`.
     pub fn new(p: &MeanFieldParams) -> Self {
         let iterations = if p.unary_anneal_iterations > 0 { p.unary_anneal_iterations } else { p.iterations };
         UnarySchedule { start: p.unary_scale_start, end: p.unary_scale, iterations }
-    }
-
-    /// The schedule for one view: [`UnarySchedule::new`], except that with `unary_entropy_nats` > 0 the starting
-    /// scale is the one [`calibrate_unary`] finds for `cost` (annealing from it to `unary_scale`).
-    pub fn for_cost(p: &MeanFieldParams, cost: &CostVolume) -> Self {
-        let plain = Self::new(p);
-        if p.unary_entropy_nats <= 0.0 {
-            return plain;
-        }
-        let start = calibrate_unary(cost, p.unary_entropy_nats);
-        UnarySchedule { start, ..plain }
     }
 
     /// The scale of step `t` (0 = the initial marginals, 1..=T the iterations).
@@ -295,56 +278,6 @@ impl UnarySchedule {
         let (start, end) = (f64::from(self.start), f64::from(self.end));
         (start * (end / start).powf(frac)) as f32
     }
-}
-
-/// The unary scale s at which softmax(−s·cost) has a mean entropy of `target_nats` over the pixels (label-aware
-/// temperature). Pixels on a fixed grid of at most ~8k are used; the mean entropy falls monotonically as s grows
-/// (dH/ds = −s·Var_Q(cost) ≤ 0), so s is found by bisection on ln s in [1e-4, 1e3] (32 halvings: ln s to 4e-9, below
-/// f32 precision). An unreachable target gives the bracket's end (1e-4 for targets ≥ ln M, when even the hottest
-/// marginals are not diffuse enough; 1e3 for a target below the entropy of ties in the cost). Deterministic: the
-/// per-chunk sums are added in a fixed order whatever the thread count.
-pub fn calibrate_unary(cost: &CostVolume, target_nats: f32) -> f32 {
-    let (n, m) = (cost.width * cost.height, cost.ndisp);
-    if n == 0 || m == 0 {
-        return 1.0;
-    }
-    let stride = n.div_ceil(1 << 13);
-    let samples: Vec<usize> = (0..n).step_by(stride).collect();
-    let mean_entropy = |s: f64| -> f64 {
-        let sums: Vec<f64> = samples
-            .par_chunks(256)
-            .map(|chunk| chunk.iter().map(|&i| softmax_entropy(cost.pixel(i), s)).sum::<f64>())
-            .collect();
-        sums.iter().sum::<f64>() / samples.len() as f64
-    };
-    let target = f64::from(target_nats);
-    let (mut lo, mut hi) = (1e-4f64.ln(), 1e3f64.ln());
-    for _ in 0..32 {
-        let mid = 0.5 * (lo + hi);
-        // Too diffuse at this scale: colder (larger s) is needed.
-        if mean_entropy(mid.exp()) > target {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    (0.5 * (lo + hi)).exp() as f32
-}
-
-/// Entropy in nats of softmax(−s·c): ln Z + s·E_Q[c − min c], with Z = Σ exp(−s(c − min c)).
-fn softmax_entropy(c: &[f32], s: f64) -> f64 {
-    let min = f64::from(lane_min(c));
-    let (mut z, mut zc) = (0.0f64, 0.0f64);
-    for &v in c {
-        let dc = f64::from(v) - min;
-        if !dc.is_finite() {
-            continue;
-        }
-        let e = (-s * dc).exp();
-        z += e;
-        zc += e * dc;
-    }
-    z.ln() + s * zc / z
 }
 
 /// Large buffers a [`MeanField`] can take over from a previous one (the other view), so that they are not
@@ -493,7 +426,7 @@ impl<'a> MeanField<'a> {
                 vec![0.0; 2 * checkerboard_bands(cost.height, rayon::current_num_threads()).len() * cost.width * m]
             }
         };
-        let unary_schedule = UnarySchedule::for_cost(p, cost);
+        let unary_schedule = UnarySchedule::new(p);
         let scale = unary_schedule.at(0);
         const CHUNK: usize = 256;
         q.par_chunks_mut(m * CHUNK).zip(cost.data.par_chunks(m * CHUNK)).for_each(|(q, c)| {
@@ -960,7 +893,7 @@ pub fn infer_coarse_to_fine(
         pyramid.push(next);
     }
     // Finer levels start from their parent, at the final temperature.
-    let refine = MeanFieldParams { unary_scale_start: 0.0, unary_entropy_nats: 0.0, ..p.clone() };
+    let refine = MeanFieldParams { unary_scale_start: 0.0, ..p.clone() };
     // One level (σx in its own pixels): from the parent's marginals if there is a parent, else from the unary.
     let run_level = |vol: &CostVolume, img: &RgbImage, level: u32, parent: Option<Marginals>, buffers: Buffers| {
         let base = if parent.is_some() { &refine } else { p };
@@ -1509,47 +1442,6 @@ mod tests {
             ndisp: m,
             data: rand_vec(w * h * m, seed).iter().map(|v| v * scale).collect(),
         }
-    }
-
-    /// The label-aware start: the calibrated scale gives the target mean entropy (checked by brute force), the
-    /// entropy falls as the scale grows, and an unreachable target gives the end of the bracket.
-    #[test]
-    fn meanfield_calibrate_unary_hits_the_target_entropy() {
-        let (w, h, m) = (40, 30, 12);
-        let cost = random_cost(w, h, m, 9, 30.0);
-        let mean_entropy = |s: f32| -> f64 {
-            let mut total = 0.0f64;
-            for i in 0..w * h {
-                let mut q: Vec<f32> = cost.pixel(i).iter().map(|c| c * s).collect();
-                softmax_neg_in_place(&mut q);
-                total -= q.iter().filter(|&&v| v > 0.0).map(|&v| f64::from(v) * f64::from(v).ln()).sum::<f64>();
-            }
-            total / (w * h) as f64
-        };
-        let mut last = f64::INFINITY;
-        for target in [2.4f32, 2.0, 1.0, 0.5] {
-            let s = calibrate_unary(&cost, target);
-            let got = mean_entropy(s);
-            assert!((got - f64::from(target)).abs() < 1e-3, "target {target}: scale {s} gives {got}");
-            assert!(got < last);
-            last = got;
-        }
-        // ln 12 = 2.48: even uniform marginals are not that diffuse.
-        assert!((calibrate_unary(&cost, 2.6) - 1e-4).abs() < 1e-8);
-    }
-
-    /// The schedule for a view with `unary_entropy_nats`: calibrated start, configured end; without it, the plain
-    /// schedule.
-    #[test]
-    fn meanfield_unary_schedule_for_cost_starts_at_the_calibrated_scale() {
-        let cost = random_cost(16, 8, 9, 4, 20.0);
-        let p =
-            MeanFieldParams { iterations: 4, unary_scale: 0.3, unary_scale_start: 0.1, ..MeanFieldParams::default() };
-        assert_eq!(UnarySchedule::for_cost(&p, &cost), UnarySchedule::new(&p));
-        let q = MeanFieldParams { unary_entropy_nats: 1.5, ..p };
-        let s = UnarySchedule::for_cost(&q, &cost);
-        assert_eq!(s.at(0), calibrate_unary(&cost, 1.5));
-        assert_eq!(s.at(4), 0.3);
     }
 
     /// The label-aware local coupling: ω̃ × M / reference, ω untouched; off = unchanged.
