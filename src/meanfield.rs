@@ -184,9 +184,9 @@ fn unnormalised_weight(x: f32) -> f32 {
 }
 
 /// `out ← softmax(−en[..M])`, M = `out.len()`, bit-identical to [`softmax_neg_in_place`] on a copy of
-/// `en[..M]`, with the exponentials
-/// computed into `ex`: `en` and `ex` have the same length, padded past M to whole vectors of 8 lanes (`en`'s
-/// padding finite), so the exp loop has no scalar tail; the reductions still see exactly M values.
+/// `en[..M]`, with the exponentials computed into `ex`: `en` and `ex` have the same length, padded past M to
+/// whole vectors of 8 lanes (`en`'s padding finite), so the exp loop has no scalar tail; the reductions still
+/// see exactly M values.
 #[inline(always)]
 fn softmax_neg_padded(en: &[f32], ex: &mut [f32], out: &mut [f32]) {
     let m = out.len();
@@ -384,6 +384,35 @@ impl<'a> MeanField<'a> {
         weights: PairwiseWeights,
         buffers: Buffers,
     ) -> Self {
+        Self::build(cost, image, p, weights, buffers, None)
+    }
+
+    /// Like [`MeanField::with_buffers`], but Q starts from the marginals of a level reduced 2 times instead of
+    /// the unary: every pixel takes its 2 × 2 block's (coarse-to-fine inference, [`infer_coarse_to_fine`]).
+    ///
+    /// # Panics
+    /// If the image and the cost volume differ in size, or `coarse` is not their size reduced 2 times or has
+    /// another number of labels.
+    pub fn from_coarse(
+        cost: &'a CostVolume,
+        image: &RgbImage,
+        p: &MeanFieldParams,
+        weights: PairwiseWeights,
+        buffers: Buffers,
+        coarse: &Marginals,
+    ) -> Self {
+        Self::build(cost, image, p, weights, buffers, Some(coarse))
+    }
+
+    /// The constructors' common body: Q from `coarse` if given, else softmax(−ψ_u).
+    fn build(
+        cost: &'a CostVolume,
+        image: &RgbImage,
+        p: &MeanFieldParams,
+        weights: PairwiseWeights,
+        buffers: Buffers,
+        coarse: Option<&Marginals>,
+    ) -> Self {
         assert_eq!((cost.width, cost.height), image.dims(), "cost volume and image differ in size");
         let n = image.len();
         let m = cost.ndisp;
@@ -428,10 +457,15 @@ impl<'a> MeanField<'a> {
         };
         let unary_schedule = UnarySchedule::new(p);
         let scale = unary_schedule.at(0);
-        const CHUNK: usize = 256;
-        q.par_chunks_mut(m * CHUNK).zip(cost.data.par_chunks(m * CHUNK)).for_each(|(q, c)| {
-            unary_marginals(c, scale, m, q);
-        });
+        match coarse {
+            Some(coarse) => copy_from_coarse(&mut q, cost.width, cost.height, m, coarse),
+            None => {
+                const CHUNK: usize = 256;
+                q.par_chunks_mut(m * CHUNK).zip(cost.data.par_chunks(m * CHUNK)).for_each(|(q, c)| {
+                    unary_marginals(c, scale, m, q);
+                });
+            }
+        }
         MeanField {
             cost,
             unary_scale: scale,
@@ -642,26 +676,6 @@ impl<'a> MeanField<'a> {
         out
     }
 
-    /// Replaces the marginals by those of a level reduced 2 times: every pixel takes its 2 × 2 block's.
-    ///
-    /// # Panics
-    /// If `coarse` is not this level's size reduced 2 times, or has another number of labels.
-    pub fn init_from_coarse(&mut self, coarse: &Marginals) {
-        let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
-        let cw = coarse.width;
-        assert_eq!(
-            (cw, coarse.height, coarse.ndisp),
-            (crate::scale::reduced_len(w, 2), crate::scale::reduced_len(h, 2), m),
-            "coarse marginals of the wrong size"
-        );
-        self.q.par_chunks_mut(w * m).enumerate().for_each(|(y, row)| {
-            let crow = &coarse.data[(y / 2) * cw * m..][..cw * m];
-            for (x, qx) in row.chunks_exact_mut(m).enumerate() {
-                qx.copy_from_slice(&crow[(x / 2) * m..][..m]);
-            }
-        });
-    }
-
     /// The current marginals.
     pub fn marginals(&self) -> &[f32] {
         &self.q
@@ -839,6 +853,26 @@ fn split_rows(volume: &mut [f32], y: usize, len: usize) -> (NeighbourRows<'_>, &
     (NeighbourRows { above, same: None, below }, row)
 }
 
+/// Fills `q` (`w × h` pixels of `m` labels) from the marginals of the level reduced 2 times: every pixel takes
+/// its 2 × 2 block's.
+///
+/// # Panics
+/// If `coarse` is not `w × h` reduced 2 times, or has another number of labels.
+fn copy_from_coarse(q: &mut [f32], w: usize, h: usize, m: usize, coarse: &Marginals) {
+    let cw = coarse.width;
+    assert_eq!(
+        (cw, coarse.height, coarse.ndisp),
+        (crate::scale::reduced_len(w, 2), crate::scale::reduced_len(h, 2), m),
+        "coarse marginals of the wrong size"
+    );
+    q.par_chunks_mut(w * m).enumerate().for_each(|(y, row)| {
+        let crow = &coarse.data[(y / 2) * cw * m..][..cw * m];
+        for (x, qx) in row.chunks_exact_mut(m).enumerate() {
+            qx.copy_from_slice(&crow[(x / 2) * m..][..m]);
+        }
+    });
+}
+
 /// The block means of a cost volume over `factor × factor` pixels (partial blocks at the right and bottom edges
 /// average the pixels they have); the labels are unchanged.
 pub fn downsample_volume(vol: &CostVolume, factor: usize) -> CostVolume {
@@ -866,7 +900,7 @@ pub fn downsample_volume(vol: &CostVolume, factor: usize) -> CostVolume {
 /// Level k (0 = the input) is the image and the cost volume reduced 2^k times by block means, with the same
 /// labels and σx / 2^k (the same kernel in input pixels). The coarsest level starts from the unary and runs
 /// `p.iterations` with the configured annealing; each finer level starts from its parent's marginals (every pixel
-/// takes its 2 × 2 block's, [`MeanField::init_from_coarse`]) and runs `p.pyramid_iterations` at `unary_scale`.
+/// takes its 2 × 2 block's, [`MeanField::from_coarse`]) and runs `p.pyramid_iterations` at `unary_scale`.
 /// The model is the same at every level; what changes is how far evidence travels per iteration: the local
 /// message crosses one pixel per iteration, so on the full grid a textureless region W pixels wide needs ~W / 2
 /// red-black iterations before its marginals see its textured borders, and 2^(L−1) times fewer at the coarsest
@@ -898,13 +932,9 @@ pub fn infer_coarse_to_fine(
     let run_level = |vol: &CostVolume, img: &RgbImage, level: u32, parent: Option<Marginals>, buffers: Buffers| {
         let base = if parent.is_some() { &refine } else { p };
         let lp = MeanFieldParams { sigma_xy: p.sigma_xy / (1u32 << level) as f32, ..base.clone() };
-        let mut mf = MeanField::with_buffers(vol, img, &lp, weights, buffers);
-        let iterations = match parent {
-            Some(q) => {
-                mf.init_from_coarse(&q);
-                p.pyramid_iterations
-            }
-            None => p.iterations,
+        let (mut mf, iterations) = match parent {
+            Some(q) => (MeanField::from_coarse(vol, img, &lp, weights, buffers, &q), p.pyramid_iterations),
+            None => (MeanField::with_buffers(vol, img, &lp, weights, buffers), p.iterations),
         };
         (0..iterations).for_each(|_| mf.step());
         mf.into_marginals_and_buffers()
@@ -1337,7 +1367,6 @@ mod tests {
         assert_eq!(all, UnarySchedule::new(&MeanFieldParams { unary_anneal_iterations: 0, ..p }));
     }
 
-    /// A `w × h × m` cost volume of uniform random costs in `[0, scale)`.
     /// Block means with partial blocks at the right and bottom edges: a 3 × 3 volume of 2 labels reduced 2 times.
     #[test]
     fn meanfield_downsample_volume_takes_block_means() {
@@ -1352,12 +1381,12 @@ mod tests {
 
     /// Every pixel of a 5 × 3 level takes the marginal of its 2 × 2 block in the 3 × 2 coarse level.
     #[test]
-    fn meanfield_init_from_coarse_copies_each_block() {
+    fn meanfield_from_coarse_copies_each_block() {
         let (w, h, m) = (5, 3, 4);
         let cost = random_cost(w, h, m, 3, 10.0);
-        let mut mf = MeanField::new(&cost, &RgbImage::new(w, h), &MeanFieldParams::default(), LCM_ONLY);
         let coarse = random_cost(3, 2, m, 9, 1.0);
-        mf.init_from_coarse(&coarse);
+        let p = MeanFieldParams::default();
+        let mf = MeanField::from_coarse(&cost, &RgbImage::new(w, h), &p, LCM_ONLY, Buffers::default(), &coarse);
         for y in 0..h {
             for x in 0..w {
                 let (i, parent) = (y * w + x, (y / 2) * 3 + x / 2);
@@ -1435,6 +1464,7 @@ mod tests {
 
     const LCM_ONLY: PairwiseWeights = PairwiseWeights { fcm: 0.0, lcm: 1.0 };
 
+    /// A `w × h × m` cost volume of uniform random costs in `[0, scale)`.
     fn random_cost(w: usize, h: usize, m: usize, seed: u64, scale: f32) -> CostVolume {
         CostVolume {
             width: w,
