@@ -1,0 +1,286 @@
+//! Joint mean-field inference on the FCM + LCM energy (paper §3, Algorithm 1).
+//!
+//! Q_i(d) ∝ exp(−ψ_u(d) − Q̂_i(d) − P̂_i(d)), where
+//! - ψ_u = `unary_scale` × cost (the cost volume as a log-likelihood up to a temperature);
+//! - the fully connected Potts message Q̂_i(d) = ω·(Σ_l Q̃_i(l) − Q̃_i(d)), Q̃_i(l) = Σ_{j≠i} k(i, j) Q_j(l), with
+//!   Q̃ from the permutohedral lattice for all labels at once ([`full`]);
+//! - the local message P̂_i(d) = ω̃·Σ_l φ̃(d, l) P̃_i(l), P̃_i(l) = Σ_{j∈N4(i)} w̃(i, j) Q_j(l), in its O(M) form
+//!   P̂_i(d) = ω̃·(S_i − P̃_i(d) − (1 − β)(P̃_i(d−1) + P̃_i(d+1))), S_i = Σ_l P̃_i(l) ([`energy`]).
+//!
+//! The terms ω·Σ_l Q̃_i(l) and ω̃·S_i do not depend on d, so they cancel in the normalisation of Q_i and are not
+//! computed; the update uses E_i(d) = ψ_u(d) − ω·Q̃_i(d) − ω̃·(P̃_i(d) + (1 − β)(P̃_i(d−1) + P̃_i(d+1))), and
+//! Q_i = softmax(−E_i) with the minimum energy subtracted first (no overflow, never NaN for finite costs).
+//!
+//! [`MeanField`] is Algorithm 1: build it once per view (Q initialised to softmax(−ψ_u)), then
+//! [`MeanField::step`] T times — message passing (splat and blur on the lattice), then one update pass per pixel
+//! that slices its message, adds the compatibility transform and the local term, and normalises. After T
+//! iterations the disparity is argmax Q (the paper's WTA) and the confidence max Q ([`decode`]). Models: `lcm`
+//! sets ω = 0, `fcm` sets ω̃ = 0 (same code path).
+//!
+//! The files follow the algorithm; the paper's parts:
+//! - [`energy`]: the unary, the local edge weights w̃ (eq. 8) and message, one pixel's energies and softmax;
+//! - [`full`]: the fully connected kernel (lattice, normalisation, the pixel's own term);
+//! - [`update`]: the per-pixel update of one row (Algorithm 1's compatibility transform and local update);
+//! - [`decode`]: argmax and confidence.
+//!
+//! and what we added to it, each measured on trainingQ (docs/tuning-log.md) and switchable by configuration:
+//! - [`schedule`]: red-black (checkerboard) updates in place instead of the paper's all-at-once (Jacobi) update,
+//!   so that the local term converges instead of oscillating;
+//! - [`anneal`]: deterministic annealing of the unary temperature and the label-aware local coupling;
+//! - [`pyramid`]: coarse-to-fine inference (the same model on a 2× reduced grid first);
+//! - in [`full`]: the normalisation of the message (the paper leaves it unnormalised);
+//! - in [`energy`]: the floor under tiny probabilities ([`MIN_RELATIVE_PROBABILITY`]) and the sub-pixel parabola.
+//!
+//! Memory: Q, `N × M` f32 (and the next Q with the Jacobi schedule; the checkerboard updates Q in place), plus
+//! the lattice's two `vertices × M` buffers (the fully connected message is sliced per pixel inside the update,
+//! never stored); each iteration is O(N·M) and allocation-free apart from a few `M`-long scratch vectors per
+//! thread.
+
+pub mod anneal;
+pub mod decode;
+pub mod energy;
+pub mod full;
+pub mod pyramid;
+pub mod schedule;
+pub mod update;
+
+use rayon::prelude::*;
+
+use crate::image::{CostVolume, RgbImage};
+use crate::lattice::LatticeScratch;
+use crate::params::{MeanFieldParams, Schedule};
+
+pub use anneal::{UnarySchedule, label_aware_weights};
+pub use decode::{decode_marginals, parabola_offset};
+pub use energy::{LocalWeights, MIN_RELATIVE_PROBABILITY, add_local_energy, local_edge_weight, local_weights};
+pub use pyramid::{downsample_volume, infer_coarse_to_fine};
+
+use energy::unary_marginals;
+use full::FullKernel;
+use pyramid::copy_from_coarse;
+use schedule::{Pass, checkerboard_bands};
+
+/// Per-pixel label distributions, laid out like a [`CostVolume`]: `data[(y·w + x)·M + d]`.
+pub type Marginals = CostVolume;
+
+/// The weights of the two pairwise terms for one run (0 switches a term off).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PairwiseWeights {
+    /// ω, fully connected.
+    pub fcm: f32,
+    /// ω̃, locally connected.
+    pub lcm: f32,
+}
+
+/// Large buffers a [`MeanField`] can take over from a previous one (the other view), so that they are not
+/// allocated and page-faulted again.
+#[derive(Debug, Default)]
+pub struct Buffers {
+    q: Vec<f32>,
+    next: Vec<f32>,
+    scratch: LatticeScratch,
+}
+
+impl Buffers {
+    /// Gives back an `N × M` allocation that is no longer needed (old marginals, a dropped cost volume): the next
+    /// [`MeanField`] keeps its marginals in it.
+    pub fn recycle(&mut self, storage: Vec<f32>) {
+        self.q = storage;
+    }
+
+    /// Takes the spare `N × M` allocation out (empty if there is none), e.g. to build a cost volume in it.
+    pub fn take_spare(&mut self) -> Vec<f32> {
+        std::mem::take(&mut self.q)
+    }
+}
+
+/// Mean-field state for one view: build once, then [`MeanField::step`] T times.
+pub struct MeanField<'a> {
+    cost: &'a CostVolume,
+    /// The unary scale of the current step, from `unary_schedule`.
+    unary_scale: f32,
+    unary_schedule: UnarySchedule,
+    /// Iterations done so far.
+    done: usize,
+    weights: PairwiseWeights,
+    beta: f32,
+    schedule: Schedule,
+    /// The fully connected kernel (`None` when ω = 0).
+    full: Option<FullKernel>,
+    local: LocalWeights,
+    q: Vec<f32>,
+    /// The next Q (Jacobi schedule only; the checkerboard updates Q in place).
+    next: Vec<f32>,
+    /// Two rows per band of rows for the in-place checkerboard.
+    edges: Vec<f32>,
+    scratch: LatticeScratch,
+}
+
+impl<'a> MeanField<'a> {
+    /// Prepares inference: the lattice (only if ω > 0), the local weights, and Q initialised to softmax(−ψ_u).
+    ///
+    /// # Panics
+    /// If the image and the cost volume differ in size.
+    pub fn new(cost: &'a CostVolume, image: &RgbImage, p: &MeanFieldParams, weights: PairwiseWeights) -> Self {
+        Self::with_buffers(cost, image, p, weights, Buffers::default())
+    }
+
+    /// Like [`MeanField::new`], reusing `buffers` (from [`MeanField::into_marginals_and_buffers`]).
+    ///
+    /// # Panics
+    /// If the image and the cost volume differ in size.
+    pub fn with_buffers(
+        cost: &'a CostVolume,
+        image: &RgbImage,
+        p: &MeanFieldParams,
+        weights: PairwiseWeights,
+        buffers: Buffers,
+    ) -> Self {
+        Self::build(cost, image, p, weights, buffers, None)
+    }
+
+    /// Like [`MeanField::with_buffers`], but Q starts from the marginals of a level reduced 2 times instead of
+    /// the unary: every pixel takes its 2 × 2 block's (coarse-to-fine inference, [`infer_coarse_to_fine`]).
+    ///
+    /// # Panics
+    /// If the image and the cost volume differ in size, or `coarse` is not their size reduced 2 times or has
+    /// another number of labels.
+    pub fn from_coarse(
+        cost: &'a CostVolume,
+        image: &RgbImage,
+        p: &MeanFieldParams,
+        weights: PairwiseWeights,
+        buffers: Buffers,
+        coarse: &Marginals,
+    ) -> Self {
+        Self::build(cost, image, p, weights, buffers, Some(coarse))
+    }
+
+    /// The constructors' common body: Q from `coarse` if given, else softmax(−ψ_u).
+    fn build(
+        cost: &'a CostVolume,
+        image: &RgbImage,
+        p: &MeanFieldParams,
+        weights: PairwiseWeights,
+        buffers: Buffers,
+        coarse: Option<&Marginals>,
+    ) -> Self {
+        assert_eq!((cost.width, cost.height), image.dims(), "cost volume and image differ in size");
+        let (n, m) = (image.len(), cost.ndisp);
+        let weights = label_aware_weights(weights, p, m);
+        let full = (weights.fcm > 0.0).then(|| FullKernel::new(image, p));
+        let Buffers { mut q, mut next, scratch } = buffers;
+        // Fresh buffers are zeroed by the OS (no fill pass); Q is then written in parallel, and `next` (needed by
+        // the Jacobi schedule only) is written by each iteration before it is read.
+        if q.len() != n * m {
+            q = vec![0.0; n * m];
+        }
+        let next_len = if p.schedule == Schedule::Jacobi { n * m } else { 0 };
+        if next.len() != next_len {
+            next = vec![0.0; next_len];
+        }
+        let edges = match p.schedule {
+            Schedule::Jacobi => Vec::new(),
+            Schedule::Checkerboard => {
+                vec![0.0; 2 * checkerboard_bands(cost.height, rayon::current_num_threads()).len() * cost.width * m]
+            }
+        };
+        let unary_schedule = UnarySchedule::new(p);
+        let scale = unary_schedule.at(0);
+        match coarse {
+            Some(coarse) => copy_from_coarse(&mut q, cost.width, cost.height, m, coarse),
+            None => {
+                const CHUNK: usize = 256;
+                q.par_chunks_mut(m * CHUNK).zip(cost.data.par_chunks(m * CHUNK)).for_each(|(q, c)| {
+                    unary_marginals(c, scale, m, q);
+                });
+            }
+        }
+        MeanField {
+            cost,
+            unary_scale: scale,
+            unary_schedule,
+            done: 0,
+            weights,
+            beta: p.beta,
+            schedule: p.schedule,
+            full,
+            local: local_weights(image, p),
+            q,
+            next,
+            edges,
+            scratch,
+        }
+    }
+
+    /// One mean-field iteration over all pixels, with the configured [`Schedule`] and the next unary scale of the
+    /// [`UnarySchedule`].
+    pub fn step(&mut self) {
+        self.done += 1;
+        self.unary_scale = self.unary_schedule.at(self.done);
+        let m = self.cost.ndisp;
+        let mut next = std::mem::take(&mut self.next);
+        let mut q = std::mem::take(&mut self.q);
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let mut edges = std::mem::take(&mut self.edges);
+        let vals: &[f32] = match &self.full {
+            Some(full) => full.splat_blur(&q, m, &mut scratch),
+            None => &[],
+        };
+        let this = &*self;
+        match self.schedule {
+            Schedule::Jacobi => {
+                this.sweep(Pass::All, &q, true, vals, &mut next);
+                std::mem::swap(&mut q, &mut next);
+            }
+            Schedule::Checkerboard => {
+                let bands = checkerboard_bands(self.cost.height, rayon::current_num_threads());
+                // Sized in `with_buffers` for the current thread count; only a different pool resizes it.
+                edges.resize(2 * bands.len() * self.cost.width * m, 0.0);
+                this.checkerboard_in_place(&mut q, vals, &bands, &mut edges);
+            }
+        }
+        self.q = q;
+        self.scratch = scratch;
+        self.next = next;
+        self.edges = edges;
+    }
+
+    /// The fully connected message Q̃ (normalised, self term excluded as configured) for the current marginals,
+    /// `N × M`; empty when ω = 0. For tests and diagnostics: [`MeanField::step`] computes the same values inline.
+    pub fn fcm_message(&mut self) -> Vec<f32> {
+        let Some(full) = &self.full else { return Vec::new() };
+        full.message(&self.q, self.cost.ndisp, &mut self.scratch)
+    }
+
+    /// The current marginals.
+    pub fn marginals(&self) -> &[f32] {
+        &self.q
+    }
+
+    /// Consumes the state, returning the marginals as a volume.
+    pub fn into_marginals(self) -> Marginals {
+        self.into_marginals_and_buffers().0
+    }
+
+    /// Consumes the state, returning the marginals and the buffers for reuse by another [`MeanField`].
+    pub fn into_marginals_and_buffers(self) -> (Marginals, Buffers) {
+        let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
+        let buffers = Buffers { q: Vec::new(), next: self.next, scratch: self.scratch };
+        (CostVolume { width: w, height: h, ndisp: m, data: self.q }, buffers)
+    }
+}
+
+/// Runs mean-field inference and returns the marginals: `p.iterations` iterations, coarse to fine when
+/// `p.pyramid_levels` > 1 ([`infer_coarse_to_fine`]).
+pub fn infer_mean_field(
+    cost: &CostVolume,
+    image: &RgbImage,
+    p: &MeanFieldParams,
+    weights: PairwiseWeights,
+) -> Marginals {
+    infer_coarse_to_fine(cost, image, p, weights, Buffers::default()).0
+}
+
+#[cfg(test)]
+mod tests;

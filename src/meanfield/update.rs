@@ -1,0 +1,150 @@
+//! The update of one row of pixels (Algorithm 1's compatibility transform and local update): each pixel slices
+//! its fully connected message from the lattice, sums its four neighbours' marginals into P̃, computes its
+//! energies ([`super::energy`]) and writes softmax(−E) over its marginal.
+//!
+//! The update is the only O(N·M) loop of an iteration besides the lattice; it is compiled for AVX2 + FMA as well
+//! and picked at run time, with the same results (Rust never contracts a·b + c into an FMA).
+
+use multiversion::multiversion;
+
+use super::energy::{FullTerm, LocalTerm, pixel_energies, softmax_neg_padded};
+use super::schedule::Pass;
+use super::{MeanField, PairwiseWeights};
+
+/// Per-thread scratch of the row update, `M` labels.
+pub(super) struct RowScratch {
+    /// The sliced fully connected message.
+    pub(super) msg: Vec<f32>,
+    /// P̃ with a zero at each end.
+    pub(super) p_padded: Vec<f32>,
+    /// The energies E(d), padded with zeros to a multiple of 8 labels.
+    pub(super) energy: Vec<f32>,
+    /// exp(min E − E(d)), as long as `energy`.
+    pub(super) exps: Vec<f32>,
+    /// A row of zeros standing in for missing neighbours.
+    pub(super) zeros: Vec<f32>,
+}
+
+impl RowScratch {
+    pub(super) fn new(m: usize) -> Self {
+        let lanes = m.next_multiple_of(8);
+        RowScratch {
+            msg: vec![0.0; m],
+            p_padded: vec![0.0; m + 2],
+            energy: vec![0.0; lanes],
+            exps: vec![0.0; lanes],
+            zeros: vec![0.0; m],
+        }
+    }
+}
+
+/// Computes the new Q for row `y` into `out_row`: neighbours' marginals come from `nbrs` (rows y − 1, y, y + 1;
+/// row y from `out_row` itself when `nbrs.same` is `None`), the pixel's own previous marginal (for the self
+/// term) from `own_row`, or from `out_row` itself when `None`. `pass` picks the pixels to compute; with
+/// [`Pass::Odd`] and a separate `nbrs.same`, the even pixels are copied from it.
+/// Compiled for AVX2 + FMA as well, picked at run time (same results: no contraction of a·b + c).
+#[allow(clippy::too_many_arguments)]
+#[multiversion(targets("x86_64+avx2+fma"))]
+pub(super) fn update_row<'c, 'r>(
+    mf: &MeanField<'c>,
+    y: usize,
+    pass: Pass,
+    nbrs: NeighbourRows<'r>,
+    own_row: Option<&[f32]>,
+    vals: &[f32],
+    out_row: &mut [f32],
+    s: &mut RowScratch,
+) {
+    let (w, m) = (mf.cost.width, mf.cost.ndisp);
+    let PairwiseWeights { fcm, lcm } = mf.weights;
+    let full_kernel = mf.full.as_ref().filter(|_| fcm > 0.0);
+    for x in 0..w {
+        let i = y * w + x;
+        let odd = (x + y) % 2 == 1;
+        match pass {
+            Pass::All => {}
+            Pass::Even if odd => continue,
+            Pass::Even => {}
+            Pass::Odd if !odd => {
+                if let Some(same) = nbrs.same {
+                    out_row[x * m..][..m].copy_from_slice(&same[x * m..][..m]);
+                }
+                continue;
+            }
+            Pass::Odd => {}
+        }
+        // The pixel's own slot, and the row's other pixels (its left and right neighbours when updating in
+        // place: they are of the other colour, so not written by this pass).
+        let (before, rest) = out_row.split_at_mut(x * m);
+        let (e, after) = rest.split_at_mut(m);
+        let (before, after): (&[f32], &[f32]) = (before, after);
+        let own: &[f32] = match own_row {
+            Some(r) => &r[x * m..][..m],
+            None => e,
+        };
+        let full = full_kernel.map(|kernel| {
+            kernel.slice(vals, i, &mut s.msg);
+            let (out_scale, self_weight) = kernel.message_factors(i);
+            FullTerm { msg: &s.msg, own, omega: fcm, out_scale, self_weight }
+        });
+        let local = (lcm > 0.0).then(|| {
+            // Missing neighbours (image border) read a row of zeros with weight 0.
+            let zeros = &s.zeros[..];
+            let (l, r) = ((x > 0).then(|| x - 1), (x + 1 < w).then_some(x + 1));
+            let wts = [
+                l.map_or(0.0, |_| mf.local.right.data[i - 1]),
+                r.map_or(0.0, |_| mf.local.right.data[i]),
+                nbrs.above.map_or(0.0, |_| mf.local.down.data[i - w]),
+                nbrs.below.map_or(0.0, |_| mf.local.down.data[i]),
+            ];
+            let ql = l.map_or(zeros, |l| match nbrs.same {
+                Some(same) => &same[l * m..][..m],
+                None => &before[l * m..][..m],
+            });
+            let qr = r.map_or(zeros, |r| match nbrs.same {
+                Some(same) => &same[r * m..][..m],
+                None => &after[..m],
+            });
+            let qu = nbrs.above.map_or(zeros, |row| &row[x * m..][..m]);
+            let qd = nbrs.below.map_or(zeros, |row| &row[x * m..][..m]);
+            // Accumulated in the order left, right, up, down (the sequential reference's order).
+            for (k, p) in s.p_padded[1..=m].iter_mut().enumerate() {
+                *p = wts[0] * ql[k] + wts[1] * qr[k] + wts[2] * qu[k] + wts[3] * qd[k];
+            }
+            LocalTerm { p_padded: &s.p_padded, omega: lcm, beta: mf.beta }
+        });
+        pixel_energies(mf.cost.pixel(i), mf.unary_scale, full, local, &mut s.energy[..m]);
+        softmax_neg_padded(&s.energy, &mut s.exps, e);
+    }
+}
+
+/// The marginals of the rows around the row being updated (each `width × M`; `None` outside the image, and
+/// `same` is `None` when the row is updated in place).
+#[derive(Clone, Copy)]
+pub(super) struct NeighbourRows<'s> {
+    pub(super) above: Option<&'s [f32]>,
+    pub(super) same: Option<&'s [f32]>,
+    pub(super) below: Option<&'s [f32]>,
+}
+
+impl<'s> NeighbourRows<'s> {
+    /// Rows y − 1, y, y + 1 of a whole volume with rows of `len` values.
+    pub(super) fn of(volume: &'s [f32], y: usize, len: usize) -> Self {
+        let h = volume.len() / len;
+        NeighbourRows {
+            above: (y > 0).then(|| &volume[(y - 1) * len..][..len]),
+            same: Some(&volume[y * len..][..len]),
+            below: (y + 1 < h).then(|| &volume[(y + 1) * len..][..len]),
+        }
+    }
+}
+
+/// Splits rows y − 1, y, y + 1 out of a volume with rows of `len` values: row y mutable, its neighbours as
+/// [`NeighbourRows`] with `same` = `None` (for an update in place).
+pub(super) fn split_rows(volume: &mut [f32], y: usize, len: usize) -> (NeighbourRows<'_>, &mut [f32]) {
+    let (before, rest) = volume.split_at_mut(y * len);
+    let (row, after) = rest.split_at_mut(len);
+    let above = (y > 0).then(|| &before[(y - 1) * len..]);
+    let below = (!after.is_empty()).then(|| &after[..len]);
+    (NeighbourRows { above, same: None, below }, row)
+}
