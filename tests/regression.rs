@@ -70,18 +70,18 @@ fn regression_issue5_jem_sps_trainingq() {
     check("jem-sps.toml", JEM_SPS_ACHIEVED, 0.05);
 }
 
-/// Weighted avgErr of `configs/jem-lrc.toml` since the temperature schedule of session 4: 6.2786 (docs/RESULTS.md;
+/// Weighted avgErr of `configs/jem-lrc.toml` since the temperature schedule of session 4: 6.2786 (docs/tuning-log.md, "Sweep log: FCM and JEM — temperature schedule";
 /// paper 6.34; 6.339 before).
 const JEM_LRC_ACHIEVED: f64 = 6.279;
-/// Weighted avgErr of `configs/fcm-lrc.toml` since the temperature schedule of session 4: 6.4152 (docs/RESULTS.md;
+/// Weighted avgErr of `configs/fcm-lrc.toml` since the temperature schedule of session 4: 6.4152 (docs/tuning-log.md, "Sweep log: FCM and JEM — temperature schedule";
 /// paper 6.58; 6.579 before).
 const FCM_LRC_ACHIEVED: f64 = 6.415;
-/// Weighted avgErr of `configs/lcm-lrc.toml` since coarse-to-fine inference: 6.5810 (docs/RESULTS.md; paper
+/// Weighted avgErr of `configs/lcm-lrc.toml` since coarse-to-fine inference: 6.5810 (docs/tuning-log.md, "Sweep log: LCM — coarse to fine"; paper
 /// 7.32; 8.334 before).
 const LCM_LRC_ACHIEVED: f64 = 6.581;
-/// Weighted avgErr of `configs/default.toml` when it was tuned: 4.9374 (docs/RESULTS.md; paper 5.33).
+/// Weighted avgErr of `configs/default.toml` when it was tuned: 4.9374 (docs/tuning-log.md, "Sweep log: full pipeline"; paper 5.33).
 const DEFAULT_ACHIEVED: f64 = 4.938;
-/// Weighted avgErr of `configs/jem-sps.toml` when it was tuned: 5.1230 (docs/RESULTS.md; paper 5.52). The planes
+/// Weighted avgErr of `configs/jem-sps.toml` when it was tuned: 5.1230 (docs/tuning-log.md, "Sweep log: JEM + SPS for issue 5"; paper 5.52). The planes
 /// are the stage most sensitive to small perturbations: other RANSAC seeds (`post.sps.seed` = 2, 3) give 5.164 and
 /// 5.146, inside the margin.
 const JEM_SPS_ACHIEVED: f64 = 5.123;

@@ -3,7 +3,7 @@
 //! k(i, j) = exp(−|p_i − p_j|² / 2σx² − |I_i − I_j|² / 2σf²), for all labels at once through the permutohedral
 //! lattice ([`crate::lattice`]), in O(N·M) instead of O(N²·M).
 //!
-//! Two choices the paper leaves open, made here and measured on trainingQ (docs/tuning-log.md):
+//! Two choices the paper leaves open, made here (the tuning started from them; docs/tuning-log.md):
 //! - normalisation ([`Normalization`]): the paper's unnormalised sum grows with the number of similar pixels
 //!   around i (≈ 2πσx² = 157 in a uniform region, a few near thin structures), so no single ω suits both; the
 //!   default `symmetric` filters D^{-1/2} Q and scales the result by D^{-1/2} (D = the kernel's row sums, as in

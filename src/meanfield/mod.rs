@@ -24,8 +24,8 @@
 //! - [`decode`]: argmax and confidence.
 //!
 //! and what we added to it, each measured on trainingQ (docs/tuning-log.md) and switchable by configuration:
-//! - [`schedule`]: red-black (checkerboard) updates in place instead of the paper's all-at-once (Jacobi) update,
-//!   so that the local term converges instead of oscillating;
+//! - [`schedule`]: red-black (checkerboard) updates in place instead of the paper's all-at-once (Jacobi) update
+//!   (evidence crosses the local term twice as fast per iteration);
 //! - [`anneal`]: deterministic annealing of the unary temperature and the label-aware local coupling;
 //! - [`pyramid`]: coarse-to-fine inference (the same model on a 2× reduced grid first);
 //! - in [`full`]: the normalisation of the message (the paper leaves it unnormalised);
