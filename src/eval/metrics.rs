@@ -261,7 +261,7 @@ mod tests {
 
     const INF: f32 = f32::INFINITY;
 
-    /// 8 pixels: GT, result and mask chosen so each rule of the module doc is exercised once.
+    /// 8 pixels: GT, result and mask chosen so each rule of the `eval` module doc is exercised once.
     fn fixture() -> (DisparityMap, DisparityMap, Plane<u8>) {
         //                     0    1      2    3    4     5     6     7
         let gt = vec![1.0, 2.0, 3.0, INF, 5.0, 6.0, 7.0, 8.0];
