@@ -39,6 +39,7 @@ pub mod params;
 pub mod post;
 pub mod scale;
 pub mod synth;
+pub mod table;
 pub mod viz;
 
 use std::time::{Duration, Instant};

@@ -1,0 +1,242 @@
+//! `jem batch`: runs the pipeline on every scene folder under DIR... with [`jem::batch::run_batch`], shows
+//! progress while scenes run ([`BatchDisplay`]) and prints a summary table at the end.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Args;
+use jem::table::Table;
+use jem::{Error, Result};
+
+use super::GlobalArgs;
+use super::config::ConfigArgs;
+
+/// Arguments of `jem batch` (the help text is on [`Command::Batch`](super::Command::Batch)).
+#[derive(Args, Debug, Clone)]
+pub(super) struct BatchArgs {
+    /// Folders to search, recursively, for scene folders.
+    #[arg(required = true, value_name = "DIR")]
+    dirs: Vec<PathBuf>,
+    /// Algorithm name: the outputs are disp0NAME.pfm and timeNAME.txt (letters, digits, _ and - only).
+    #[arg(long, value_name = "NAME")]
+    alg: String,
+    #[command(flatten)]
+    config: ConfigArgs,
+    /// Scenes processed at the same time (each run is multi-threaded already; more jobs need more memory).
+    #[arg(long, short = 'j', value_name = "N", default_value_t = 1)]
+    jobs: usize,
+    /// Process only part I of N (1-based) of the sorted scene list: scene k (0-based) belongs to part
+    /// k mod N + 1. Over I = 1..N every scene is processed exactly once, e.g. one part per job of a job array.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<jem::batch::Shard>,
+    /// Skip scenes that already have disp0NAME.pfm (to resume an interrupted run).
+    #[arg(long)]
+    skip_existing: bool,
+}
+
+/// What the batch display shows while scenes run.
+struct BatchDisplay {
+    bar: Option<indicatif::ProgressBar>,
+    quiet: bool,
+    total: usize,
+    done: std::sync::atomic::AtomicUsize,
+    active: std::sync::Mutex<std::collections::BTreeMap<usize, (String, String)>>,
+}
+
+impl BatchDisplay {
+    fn new(total: usize, quiet: bool) -> Self {
+        let bar = (!quiet && std::io::stderr().is_terminal()).then(|| {
+            let style = indicatif::ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] [{bar:30}] {pos}/{len} scenes, ETA {eta}  {wide_msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> ");
+            let bar = indicatif::ProgressBar::new(total as u64).with_style(style);
+            bar.enable_steady_tick(std::time::Duration::from_millis(200));
+            bar
+        });
+        BatchDisplay { bar, quiet, total, done: 0.into(), active: Default::default() }
+    }
+
+    fn line(&self, msg: &str) {
+        match &self.bar {
+            Some(bar) => bar.println(msg),
+            None => eprintln!("{msg}"),
+        }
+    }
+
+    fn refresh(&self) {
+        let (Some(bar), Ok(active)) = (&self.bar, self.active.lock()) else {
+            return;
+        };
+        let msg: Vec<String> = active.values().map(|(name, stage)| format!("{name} ({stage})")).collect();
+        bar.set_message(msg.join(", "));
+    }
+
+    fn on_event(&self, event: jem::batch::Event<'_>) {
+        use jem::batch::{Event, SceneStatus};
+        match event {
+            Event::Started { index, name } => {
+                if let Ok(mut a) = self.active.lock() {
+                    a.insert(index, (name.to_string(), "starting".into()));
+                }
+                self.refresh();
+            }
+            Event::Stage { index, stage } => {
+                if let Ok(mut a) = self.active.lock() {
+                    if let Some(entry) = a.get_mut(&index) {
+                        entry.1 = stage.to_string();
+                    }
+                }
+                self.refresh();
+            }
+            Event::Finished { index, report } => {
+                if let Ok(mut a) = self.active.lock() {
+                    a.remove(&index);
+                }
+                let n = self.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                let head = format!("[{n}/{}] {}", self.total, report.name);
+                match &report.status {
+                    SceneStatus::Failed(e) => self.line(&format!("{head}: FAILED: {e}")),
+                    _ if self.quiet || self.bar.is_some() => {}
+                    SceneStatus::Skipped => self.line(&format!("{head}: skipped (result exists)")),
+                    SceneStatus::Done(r) => {
+                        self.line(&format!("{head}: {}x{}, ndisp {}, {:.3} s", r.size.0, r.size.1, r.ndisp, r.seconds))
+                    }
+                }
+                if let Some(bar) = &self.bar {
+                    bar.inc(1);
+                }
+                self.refresh();
+            }
+        }
+    }
+}
+
+/// Runs the pipeline on every scene found, then prints the summary.
+pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
+    use jem::batch::{BatchOptions, SceneStatus};
+    jem::batch::validate_alg_name(&args.alg)?;
+    if args.jobs == 0 {
+        return Err(Error::param("--jobs", 0, "at least 1"));
+    }
+    let params = args.config.params()?;
+    let all = jem::batch::find_scenes(&args.dirs)?;
+    if all.is_empty() {
+        let dirs: Vec<String> = args.dirs.iter().map(|d| d.display().to_string()).collect();
+        return Err(Error::Input(format!(
+            "no scene folder (with im0.png, im1.png and calib.txt) under {}",
+            dirs.join(", ")
+        )));
+    }
+    let scenes = match args.shard {
+        Some(shard) => shard.select(&all),
+        None => all.clone(),
+    };
+    if !global.quiet {
+        let shard =
+            args.shard.map(|s| format!(" (shard {}/{} of {})", s.index, s.count, all.len())).unwrap_or_default();
+        eprintln!("{} scene(s){shard}, alg {}, {} job(s)", scenes.len(), args.alg, args.jobs);
+    }
+    let opts = BatchOptions {
+        alg: args.alg.clone(),
+        jobs: args.jobs,
+        skip_existing: args.skip_existing,
+        max_memory_bytes: global.memory_limit(),
+    };
+    let display = BatchDisplay::new(scenes.len(), global.quiet);
+
+    // Panics inside the pipeline are caught and reported per scene; keep the default hook's message and
+    // backtrace note off the terminal unless -v.
+    let previous_hook = (!global.verbose).then(|| {
+        let prev = std::panic::take_hook();
+        std::panic::set_hook(Box::new(|_| {}));
+        prev
+    });
+    let reports = jem::batch::run_batch(&scenes, &params, &opts, &|e| display.on_event(e));
+    if let Some(prev) = previous_hook {
+        std::panic::set_hook(prev);
+    }
+    if let Some(bar) = &display.bar {
+        bar.finish_and_clear();
+    }
+
+    let failed = reports.iter().filter(|r| matches!(r.status, SceneStatus::Failed(_))).count();
+    if !global.quiet {
+        print!("{}", batch_summary(&reports, global.verbose));
+    }
+    Ok(if failed > 0 { ExitCode::from(2) } else { ExitCode::SUCCESS })
+}
+
+/// The end-of-run table: scene, size, ndisp, seconds (and per-stage seconds with -v), status; then counts and
+/// the failures.
+fn batch_summary(reports: &[jem::batch::SceneReport], verbose: bool) -> String {
+    use jem::batch::SceneStatus;
+    let mut stages: Vec<&'static str> = Vec::new();
+    if verbose {
+        for r in reports {
+            if let SceneStatus::Done(run) = &r.status {
+                for (name, _) in &run.timings.stages {
+                    if !stages.contains(name) {
+                        stages.push(name);
+                    }
+                }
+            }
+        }
+    }
+    let mut header: Vec<String> = ["scene", "size", "ndisp", "seconds"].map(String::from).to_vec();
+    header.extend(stages.iter().map(|s| s.to_string()));
+    header.push("status".into());
+    let mut rows = vec![header];
+    let (mut done, mut skipped, mut failed, mut total_s) = (0, 0, 0, 0.0);
+    for r in reports {
+        let mut row = vec![r.name.clone()];
+        match &r.status {
+            SceneStatus::Done(run) => {
+                done += 1;
+                total_s += run.seconds;
+                row.extend([
+                    format!("{}x{}", run.size.0, run.size.1),
+                    run.ndisp.to_string(),
+                    format!("{:.3}", run.seconds),
+                ]);
+                for s in &stages {
+                    let t =
+                        run.timings.stages.iter().filter(|(n, _)| n == s).map(|(_, d)| d.as_secs_f64()).sum::<f64>();
+                    row.push(format!("{t:.3}"));
+                }
+                row.push("ok".into());
+            }
+            other => {
+                row.extend(std::iter::repeat_n("-".to_string(), 3 + stages.len()));
+                if matches!(other, SceneStatus::Skipped) {
+                    skipped += 1;
+                    row.push("skipped".into());
+                } else {
+                    failed += 1;
+                    row.push("FAILED".into());
+                }
+            }
+        }
+        rows.push(row);
+    }
+    let ncol = rows.iter().map(Vec::len).max().unwrap_or(0);
+    // The scene name and the status are text; the columns between them are numbers.
+    let right_aligned = (0..ncol).map(|c| c >= 1 && c + 1 != ncol).collect();
+    let mut out = Table { rows, right_aligned }.text();
+    let mean = if done > 0 { format!(", mean {:.3} s per pair", total_s / done as f64) } else { String::new() };
+    out.push_str(&format!(
+        "{} scene(s): {done} done, {skipped} skipped, {failed} failed; pipeline time {total_s:.3} s{mean}\n",
+        reports.len()
+    ));
+    if failed > 0 {
+        out.push_str("failures:\n");
+        for r in reports {
+            if let SceneStatus::Failed(e) = &r.status {
+                out.push_str(&format!("  {} ({}): {e}\n", r.name, r.dir.display()));
+            }
+        }
+    }
+    out
+}

@@ -1,0 +1,101 @@
+//! `jem eval`: scores `disp0NAME.pfm` results against the ground truth of every scene under DIR
+//! ([`jem::eval::evaluate_dir`]), optionally beside the paper's numbers, and prints the reports
+//! ([`jem::eval::render`]).
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::Args;
+use jem::{Error, Result};
+
+/// `auto`, 1, 2 or 4.
+#[derive(Clone, Copy, Debug)]
+struct ScaleArg(Option<u32>);
+
+impl std::str::FromStr for ScaleArg {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "auto" => Ok(ScaleArg(None)),
+            "1" => Ok(ScaleArg(Some(1))),
+            "2" => Ok(ScaleArg(Some(2))),
+            "4" => Ok(ScaleArg(Some(4))),
+            _ => Err(format!("invalid scale {s:?} (expected auto, 1, 2 or 4)")),
+        }
+    }
+}
+
+/// Arguments of `jem eval` (the help text is on [`Command::Eval`](super::Command::Eval)).
+#[derive(Args, Debug, Clone)]
+pub(super) struct EvalArgs {
+    /// Folder searched recursively for scene folders with disp0GT.pfm (e.g. MiddEval3/trainingQ, or one scene).
+    #[arg(value_name = "DIR")]
+    dir: PathBuf,
+    /// Result to score: disp0NAME.pfm in each scene folder (repeatable).
+    #[arg(long = "alg", required = true, value_name = "NAME")]
+    algs: Vec<String>,
+    /// Pixels to evaluate: nonocc (mask0nocc.png == 255) or all (mask > 0).
+    #[arg(long, value_name = "nonocc|all", default_value = "nonocc")]
+    mask: jem::eval::MaskMode,
+    /// Factor to full-resolution pixels; auto reads it from the path (trainingQ/testQ = 4, *H = 2, *F = 1).
+    #[arg(long, value_name = "auto|1|2|4", default_value = "auto")]
+    scale: ScaleArg,
+    /// Output format: table, csv, json or markdown.
+    #[arg(long, value_name = "FORMAT", default_value = "table")]
+    format: jem::eval::Format,
+    /// Print the paper's avgErr from this column of paper-results.tsv beside ours (LCM, FCM, JEM_LRC, JEM_SPS,
+    /// JEM_ALL, ...). Give it once for all --alg, or once per --alg in the same order.
+    #[arg(long, value_name = "COLUMN")]
+    paper: Vec<String>,
+    /// The paper's numbers (default: $JEM_DATA/paper-results.tsv, else ../shared/middlebury/paper-results.tsv).
+    #[arg(long, value_name = "PATH")]
+    paper_file: Option<PathBuf>,
+}
+
+/// Where the paper's TSV is: --paper-file, else $JEM_DATA/paper-results.tsv, else ../shared/middlebury/.
+fn paper_file(flag: Option<&Path>) -> PathBuf {
+    if let Some(p) = flag {
+        return p.to_path_buf();
+    }
+    match std::env::var_os("JEM_DATA") {
+        Some(d) if !d.is_empty() => PathBuf::from(d).join("paper-results.tsv"),
+        _ => PathBuf::from("../shared/middlebury/paper-results.tsv"),
+    }
+}
+
+/// Scores every --alg over the folder and prints the reports.
+pub(super) fn run(args: &EvalArgs) -> Result<ExitCode> {
+    use jem::eval::{PaperResults, evaluate_dir, render};
+    for a in &args.algs {
+        jem::batch::validate_alg_name(a)?;
+    }
+    let papers = if args.paper.is_empty() {
+        Vec::new()
+    } else {
+        if args.paper.len() != 1 && args.paper.len() != args.algs.len() {
+            return Err(Error::Input(format!(
+                "{} --paper columns for {} --alg: give one for all, or one per --alg",
+                args.paper.len(),
+                args.algs.len()
+            )));
+        }
+        let path = paper_file(args.paper_file.as_deref());
+        if !path.is_file() {
+            return Err(Error::Input(format!(
+                "--paper needs the paper's numbers, but {} does not exist (use --paper-file or set JEM_DATA)",
+                path.display()
+            )));
+        }
+        let table = PaperResults::load(&path)?;
+        let columns = args.algs.iter().enumerate().map(|(i, _)| &args.paper[if args.paper.len() == 1 { 0 } else { i }]);
+        columns.map(|c| table.column(c).map(Some)).collect::<Result<Vec<_>>>()?
+    };
+    let reports = args
+        .algs
+        .iter()
+        .map(|alg| evaluate_dir(&args.dir, alg, args.mask, args.scale.0))
+        .collect::<Result<Vec<_>>>()?;
+    print!("{}", render(&reports, &papers, args.format));
+    let excluded = reports.iter().any(|r| r.excluded().next().is_some());
+    Ok(if excluded { ExitCode::from(2) } else { ExitCode::SUCCESS })
+}

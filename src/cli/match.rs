@@ -1,0 +1,108 @@
+//! `jem match` and the default command `jem LEFT RIGHT -o OUT`: load a pair (ndisp from `--ndisp` or the
+//! `calib.txt` beside LEFT), check the memory estimate, run the pipeline with a stage spinner, write the disparity
+//! map (and the confidence).
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::Args;
+use jem::io::calib;
+use jem::{Error, Result, StereoPair};
+
+use super::GlobalArgs;
+use super::config::ConfigArgs;
+
+/// Arguments of `jem match` and of the default command (the help text is on [`Cli`](super::Cli)).
+#[derive(Args, Debug, Clone)]
+pub(super) struct MatchArgs {
+    /// Left (reference) image: PNG or PPM/PGM, 8 or 16 bit.
+    #[arg(required = true)]
+    left: Option<PathBuf>,
+    /// Right image, same size as the left.
+    #[arg(required = true)]
+    right: Option<PathBuf>,
+    /// Output disparity map: .pfm (Middlebury), .exr (float) or .png (16-bit, disparity × 256, 0 = invalid).
+    #[arg(long, short, required = true, value_name = "OUT")]
+    output: Option<PathBuf>,
+    /// Disparity search range 0..N−1 (default: `ndisp` from calib.txt beside LEFT).
+    #[arg(long, value_name = "N")]
+    ndisp: Option<usize>,
+    /// Also write the per-pixel confidence (max-marginal of the left view) to this file (.pfm/.exr).
+    #[arg(long, value_name = "FILE")]
+    confidence: Option<PathBuf>,
+    #[command(flatten)]
+    config: ConfigArgs,
+}
+
+/// Matches one pair.
+pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
+    let (Some(left), Some(right), Some(output)) = (&args.left, &args.right, &args.output) else {
+        return Err(Error::Input("usage: jem LEFT RIGHT -o OUT (see --help)".into()));
+    };
+    // Check the output names before doing any work.
+    jem::io::DisparityFormat::from_path(output)?;
+    if let Some(c) = &args.confidence {
+        jem::io::DisparityFormat::from_path(c)?;
+    }
+    let params = args.config.params()?;
+    let start = Instant::now();
+    let pair = load_pair(left, right, args.ndisp)?;
+    jem::check_memory(pair.left.width, pair.left.height, pair.ndisp, &params, global.memory_limit())?;
+    let load_time = start.elapsed();
+
+    let spinner = stage_spinner(global.quiet);
+    let out = jem::run_observed(&params, &pair, &|stage| {
+        if let Some(s) = &spinner {
+            s.set_message(stage.to_string());
+        }
+    })?;
+    if let Some(s) = spinner {
+        s.finish_and_clear();
+    }
+    jem::io::write_disparity(output, &out.disparity)?;
+    if let Some(c) = &args.confidence {
+        jem::io::write_disparity(c, &out.confidence)?;
+    }
+    if global.verbose && !global.quiet {
+        eprintln!("{:<14} {:>9.1} ms", "load", load_time.as_secs_f64() * 1e3);
+        for (name, d) in &out.timings.stages {
+            eprintln!("{name:<14} {:>9.1} ms", d.as_secs_f64() * 1e3);
+        }
+        eprintln!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// ndisp from the flag, else from calib.txt beside the left image.
+fn resolve_ndisp(flag: Option<usize>, left: &Path) -> Result<usize> {
+    if let Some(n) = flag {
+        return Ok(n);
+    }
+    let calib_path = left.parent().unwrap_or(Path::new(".")).join("calib.txt");
+    if !calib_path.exists() {
+        return Err(Error::Input(format!(
+            "no --ndisp given and no calib.txt beside {} to read it from",
+            left.display()
+        )));
+    }
+    calib::read_ndisp(&calib_path)
+}
+
+/// Loads a pair and checks sizes and ndisp.
+fn load_pair(left: &Path, right: &Path, ndisp: Option<usize>) -> Result<StereoPair> {
+    let (l, r) = jem::io::png::load_rgb_pair(left, right)?;
+    let ndisp = resolve_ndisp(ndisp, left)?;
+    StereoPair::new(l, r, ndisp)
+}
+
+/// A spinner on stderr showing the current stage, only on a terminal and without --quiet.
+fn stage_spinner(quiet: bool) -> Option<indicatif::ProgressBar> {
+    if quiet || !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let bar = indicatif::ProgressBar::new_spinner();
+    bar.enable_steady_tick(std::time::Duration::from_millis(100));
+    Some(bar)
+}

@@ -1,0 +1,200 @@
+//! Command-line interface: clap derive structs (doc comments are the help text) and one handler per command.
+//!
+//! Raw flags are merged with the defaults and `--config FILE` into one validated [`jem::Params`] (flags win);
+//! the pipeline only ever sees `Params`.
+//!
+//! This file holds the parser ([`Cli`], the [`GlobalArgs`] every command takes, and `Command`, whose doc
+//! comments are the subcommands' help), [`run`], which hands each command to its own file, and
+//! [`print_error`]. One file per command: `match.rs` (also the default, `jem LEFT RIGHT -o OUT`), `config.rs`
+//! (and the `--config`/`--set`/`--downscale` flags that `match` and `batch` share), `synth.rs`, `batch.rs`,
+//! `eval.rs`, `viz.rs`.
+
+mod batch;
+mod config;
+mod eval;
+mod r#match;
+mod synth;
+mod viz;
+
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+use jem::{Error, Result};
+
+use batch::BatchArgs;
+use config::ConfigArgs;
+use eval::EvalArgs;
+use r#match::MatchArgs;
+use synth::SynthArgs;
+use viz::VizArgs;
+
+/// Stereo matching by joint energy minimization.
+///
+/// `jem LEFT RIGHT -o OUT` reads a rectified pair and writes the left view's disparity map (PFM, EXR or 16-bit
+/// PNG by extension). ndisp comes from --ndisp, else from calib.txt beside LEFT.
+#[derive(Parser, Debug)]
+#[command(name = "jem", version, args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+
+    #[command(flatten)]
+    match_args: MatchArgs,
+
+    #[command(flatten)]
+    global: GlobalArgs,
+}
+
+/// Options every command takes.
+#[derive(Args, Debug, Clone)]
+pub struct GlobalArgs {
+    /// Worker threads (default: one per core).
+    #[arg(long, global = true, value_name = "N", help_heading = "Global")]
+    threads: Option<usize>,
+    /// Print nothing but errors.
+    #[arg(long, short, global = true, help_heading = "Global")]
+    quiet: bool,
+    /// Print per-stage timings to stderr.
+    #[arg(long, short, global = true, help_heading = "Global")]
+    verbose: bool,
+    /// Refuse runs estimated to need more memory than this, before allocating (e.g. 1500M, 8G; default: 80% of
+    /// physical memory).
+    #[arg(long, global = true, value_name = "SIZE", value_parser = parse_size, help_heading = "Global")]
+    max_memory: Option<u64>,
+}
+
+impl GlobalArgs {
+    /// The memory limit in bytes.
+    fn memory_limit(&self) -> u64 {
+        self.max_memory.unwrap_or_else(jem::default_memory_limit)
+    }
+}
+
+/// Moves global flags written before a subcommand to just after it: `jem --threads 1 batch …` becomes
+/// `jem batch --threads 1 …`. (The top-level command takes the match arguments too, so clap reads any flag before
+/// the subcommand as belonging to a match and then rejects the subcommand name as a stray argument.)
+pub fn global_flags_after_subcommand(mut args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsString> {
+    const SUBCOMMANDS: [&str; 7] = ["match", "config", "synth", "batch", "eval", "viz", "help"];
+    let mut i = 1;
+    while i < args.len() {
+        let Some(arg) = args[i].to_str() else { return args };
+        match arg {
+            "-q" | "--quiet" | "-v" | "--verbose" => i += 1,
+            "--threads" | "--max-memory" => i += 2,
+            _ if arg.starts_with("--threads=") || arg.starts_with("--max-memory=") => i += 1,
+            _ if i > 1 && SUBCOMMANDS.contains(&arg) => {
+                let sub = args.remove(i);
+                args.insert(1, sub);
+                return args;
+            }
+            _ => return args,
+        }
+    }
+    args
+}
+
+/// Parses `123`, `800K`, `1500M`, `8G` (binary units; a trailing `B`/`iB` is allowed) into bytes.
+fn parse_size(text: &str) -> std::result::Result<u64, String> {
+    let t = text.trim().trim_end_matches(['B', 'b']).trim_end_matches('i');
+    let (digits, unit) = match t.char_indices().find(|(_, c)| c.is_ascii_alphabetic()) {
+        Some((i, _)) => (&t[..i], &t[i..]),
+        None => (t, ""),
+    };
+    let shift = match unit.to_ascii_uppercase().as_str() {
+        "" => 0,
+        "K" => 10,
+        "M" => 20,
+        "G" => 30,
+        "T" => 40,
+        _ => return Err(format!("unknown unit in {text:?} (use K, M, G or T)")),
+    };
+    let value: f64 = digits.trim().parse().map_err(|_| format!("{text:?} is not a size like 1500M or 8G"))?;
+    if !(value.is_finite() && value > 0.0) {
+        return Err(format!("{text:?} must be positive"));
+    }
+    Ok((value * (1u64 << shift) as f64) as u64)
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Match one pair (the same as `jem LEFT RIGHT -o OUT`).
+    Match(MatchArgs),
+    /// Print the effective configuration (defaults ← --config ← --set) as TOML.
+    Config(ConfigArgs),
+    /// Render a synthetic scene with exact ground truth in MiddEval3 layout.
+    Synth(SynthArgs),
+    /// Run the pipeline on every scene under DIR... (MiddEval3 layout): disp0NAME.pfm + timeNAME.txt.
+    ///
+    /// A scene is a folder with im0.png, im1.png and calib.txt (ndisp is read from it); every scene under each DIR is
+    /// found recursively and processed in path order. Each gets disp0NAME.pfm and timeNAME.txt (seconds spent in the
+    /// pipeline for that pair, loading and writing excluded), written atomically. A failing scene is reported and the
+    /// others still run; the exit code is 2 if any scene failed.
+    #[command(verbatim_doc_comment)]
+    Batch(BatchArgs),
+    /// Score disp0NAME.pfm results against the ground truth, MiddEval3 `evaldisp` style.
+    ///
+    /// Every scene folder under DIR with a disp0GT.pfm is scored.
+    ///
+    /// Ground-truth pixels that are inf are skipped; the mask selects mask0nocc.png == 255 (nonocc) or > 0 (all).
+    /// Invalid (inf/NaN) result pixels count in `invalid` and `totbad2` but not in avgErr/rms; valid ones are
+    /// clipped to [0, ndisp]. Errors and the bad thresholds 0.5/1/2/4 are in full-resolution pixels (err = s·|d − gt|,
+    /// s = 4 for trainingQ, 2 for *H, 1 for *F). All percentages are of the masked GT-valid pixels (bad counts only
+    /// valid pixels; totbad2 = bad2 + invalid). "weighted" is the MiddEval3 average (PianoL, Playroom, Playtable,
+    /// Shelves, Vintage weigh 0.5, other scenes 1), "mean" the plain one. Scenes whose result is missing or
+    /// unreadable are listed, left out of both averages, and make the exit code 2.
+    ///
+    /// JSON: one object per --alg (an array when several): {"alg", "mask", "scale", "scenes": {SCENE: {"avgerr",
+    /// "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2"}}, "weighted": {...}, "mean": {...}}, plus
+    /// "excluded": {SCENE: reason} when scenes were left out and "paper": {...} with --paper; NaN is null.
+    ///
+    /// Environment: JEM_DATA, if set, is the folder holding paper-results.tsv (used for --paper when --paper-file
+    /// is not given; otherwise ../shared/middlebury/paper-results.tsv relative to the current folder).
+    #[command(verbatim_doc_comment)]
+    Eval(EvalArgs),
+    /// Draw a disparity map (colour, error map against --gt) or a contact sheet of a folder.
+    ///
+    /// `jem viz DISP -o OUT.png [--gt GT.pfm]` or `jem viz DIR --alg NAME -o SHEET.png`.
+    /// The disparity is colour-mapped (dark indigo = low, through blue, green, yellow to dark red = high; invalid
+    /// pixels black) over --vmin..--vmax, else vmin/vmax from calib.txt beside DISP, else the finite data range.
+    /// With --gt the picture is the colour map and the error map side by side (disparity | error): error ≤ 2
+    /// full-resolution px in grey (white = exact), > 2 px in red, occluded pixels (mask0nocc.png beside GT == 128)
+    /// shaded darker, no ground truth dark grey, invalid result black.
+    /// For a folder, a contact sheet with one row per scene (sorted by path): left image | result | error map,
+    /// each panel downscaled to at most --panel-width px.
+    #[command(verbatim_doc_comment)]
+    Viz(VizArgs),
+}
+
+/// Runs the parsed command line.
+pub fn run(cli: Cli) -> Result<ExitCode> {
+    if let Some(n) = cli.global.threads {
+        if n == 0 {
+            return Err(Error::param("--threads", 0, "at least 1"));
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| Error::Input(format!("cannot start {n} threads: {e}")))?;
+    }
+    match cli.command {
+        None => r#match::run(&cli.match_args, &cli.global),
+        Some(Command::Match(args)) => r#match::run(&args, &cli.global),
+        Some(Command::Config(args)) => config::run(&args),
+        Some(Command::Synth(args)) => synth::run(&args, &cli.global),
+        Some(Command::Batch(args)) => batch::run(&args, &cli.global),
+        Some(Command::Eval(args)) => eval::run(&args),
+        Some(Command::Viz(args)) => viz::run(&args, &cli.global),
+    }
+}
+
+/// Prints `error: ...` and each cause on one line.
+pub fn print_error(err: &Error) {
+    let mut msg = format!("error: {err}");
+    let mut source = std::error::Error::source(err);
+    while let Some(s) = source {
+        msg.push_str(": ");
+        msg.push_str(&s.to_string());
+        source = s.source();
+    }
+    eprintln!("{msg}");
+}

@@ -1,0 +1,326 @@
+//! Printing [`AlgReport`]s: [`render`] writes an aligned text table or Markdown tables (two decimals, laid out
+//! by [`Table`]), one JSON object per algorithm, or CSV rows (full precision).
+
+use std::fmt::Write as _;
+use std::str::FromStr;
+
+use super::metrics::Metrics;
+use super::paper::PaperColumn;
+use super::report::AlgReport;
+use crate::table::Table;
+
+/// How [`render`] prints reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// Aligned plain-text table, two decimals.
+    Table,
+    /// Comma-separated values, full precision, one row per (algorithm, scene) plus `weighted` and `mean` rows.
+    Csv,
+    /// One JSON object per algorithm (an array when several), full precision; NaN is `null`.
+    Json,
+    /// GitHub-flavoured Markdown tables, two decimals.
+    Markdown,
+}
+
+impl FromStr for Format {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "table" => Ok(Format::Table),
+            "csv" => Ok(Format::Csv),
+            "json" => Ok(Format::Json),
+            "markdown" | "md" => Ok(Format::Markdown),
+            _ => Err(format!("unknown format {s:?} (expected table, csv, json or markdown)")),
+        }
+    }
+}
+
+/// Renders reports; `papers[i]` (if any) is printed beside `reports[i]`'s avgerr.
+///
+/// JSON: `{"alg", "mask", "scale", "scenes": {NAME: {metrics}}, "weighted": {metrics}|null, "mean": ...}` with
+/// the keys of [`Metrics::NAMES`]; scenes that could not be evaluated are left out of `scenes`, and then an
+/// `"excluded": {NAME: "reason"}` key is added; with a paper column, `"paper": {"column", "scenes", "weighted"}`.
+///
+/// # Panics
+/// If `papers` is non-empty and not as long as `reports`.
+pub fn render(reports: &[AlgReport], papers: &[Option<PaperColumn>], format: Format) -> String {
+    assert!(papers.is_empty() || papers.len() == reports.len(), "one paper column per report");
+    let paper: Vec<Option<&PaperColumn>> = (0..reports.len()).map(|i| papers.get(i).and_then(Option::as_ref)).collect();
+    let paper = paper.as_slice();
+    match format {
+        Format::Json => render_json(reports, paper),
+        Format::Csv => render_csv(reports, paper),
+        Format::Table => render_text(reports, paper, false),
+        Format::Markdown => render_text(reports, paper, true),
+    }
+}
+
+fn json_str(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\r' => out.push_str("\\r"),
+            '\t' => out.push_str("\\t"),
+            c if (c as u32) < 0x20 => {
+                let _ = write!(out, "\\u{:04x}", c as u32);
+            }
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+fn json_num(v: f64) -> String {
+    if v.is_finite() { format!("{v}") } else { "null".into() }
+}
+
+fn json_metrics(m: Option<&Metrics>) -> String {
+    match m {
+        None => "null".into(),
+        Some(m) => {
+            let fields: Vec<String> = Metrics::NAMES
+                .iter()
+                .zip(m.values())
+                .map(|(k, v)| format!("{}: {}", json_str(k), json_num(v)))
+                .collect();
+            format!("{{{}}}", fields.join(", "))
+        }
+    }
+}
+
+fn render_json(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String {
+    let objects: Vec<String> = reports
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let scenes: Vec<String> = r
+                .scenes
+                .iter()
+                .filter_map(|s| {
+                    s.metrics.as_ref().ok().map(|m| format!("    {}: {}", json_str(&s.name), json_metrics(Some(m))))
+                })
+                .collect();
+            let mut o = format!(
+                "{{\n  \"alg\": {},\n  \"mask\": {},\n  \"scale\": {},\n  \"scenes\": {{{}}},\n  \"weighted\": {},\n  \
+                 \"mean\": {}",
+                json_str(&r.alg),
+                json_str(r.mask.name()),
+                r.scale,
+                if scenes.is_empty() { String::new() } else { format!("\n{}\n  ", scenes.join(",\n")) },
+                json_metrics(r.weighted().as_ref()),
+                json_metrics(r.mean().as_ref()),
+            );
+            let excluded: Vec<String> =
+                r.excluded().map(|(n, e)| format!("{}: {}", json_str(n), json_str(e))).collect();
+            if !excluded.is_empty() {
+                let _ = write!(o, ",\n  \"excluded\": {{{}}}", excluded.join(", "));
+            }
+            if let Some(p) = paper[i] {
+                let scenes: Vec<String> =
+                    p.scenes.iter().map(|(k, v)| format!("{}: {}", json_str(k), json_num(*v))).collect();
+                let _ = write!(
+                    o,
+                    ",\n  \"paper\": {{\"column\": {}, \"scenes\": {{{}}}, \"weighted\": {}}}",
+                    json_str(&p.name),
+                    scenes.join(", "),
+                    p.weighted.map_or("null".into(), json_num)
+                );
+            }
+            o.push_str("\n}");
+            o
+        })
+        .collect();
+    if objects.len() == 1 { format!("{}\n", objects[0]) } else { format!("[\n{}\n]\n", objects.join(",\n")) }
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
+}
+
+fn csv_num(v: Option<f64>) -> String {
+    match v {
+        Some(v) if v.is_finite() => format!("{v}"),
+        Some(_) => "nan".into(),
+        None => String::new(),
+    }
+}
+
+fn render_csv(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String {
+    let mut out = format!("alg,mask,scale,scene,weight,{},time_s,paper,error\n", Metrics::NAMES.join(","));
+    for (i, r) in reports.iter().enumerate() {
+        let p = paper[i];
+        let prefix = format!("{},{},{}", csv_field(&r.alg), r.mask.name(), r.scale);
+        let mut row =
+            |scene: &str, weight: Option<f64>, m: Option<&Metrics>, t: Option<f64>, pv: Option<f64>, e: &str| {
+                let values: Vec<String> = match m {
+                    Some(m) => m.values().iter().map(|v| csv_num(Some(*v))).collect(),
+                    None => vec![String::new(); 8],
+                };
+                let _ = writeln!(
+                    out,
+                    "{prefix},{},{},{},{},{},{}",
+                    csv_field(scene),
+                    csv_num(weight),
+                    values.join(","),
+                    csv_num(t),
+                    csv_num(pv),
+                    csv_field(e)
+                );
+            };
+        for s in &r.scenes {
+            let pv = p.and_then(|p| p.scenes.get(&s.name).copied());
+            match &s.metrics {
+                Ok(m) => row(&s.name, Some(s.weight), Some(m), s.seconds, pv, ""),
+                Err(e) => row(&s.name, Some(s.weight), None, s.seconds, pv, e),
+            }
+        }
+        let mean_t = r.mean_seconds().map(|(t, _)| t);
+        row("weighted", None, r.weighted().as_ref(), None, p.and_then(|p| p.weighted), "");
+        row("mean", None, r.mean().as_ref(), mean_t, None, "");
+    }
+    out
+}
+
+/// Two decimals, `nan` for NaN, `-` for nothing.
+fn fixed(v: Option<f64>) -> String {
+    match v {
+        Some(v) if v.is_finite() => format!("{v:.2}"),
+        Some(_) => "nan".into(),
+        None => "-".into(),
+    }
+}
+
+/// The table as aligned text, or as Markdown when `markdown`.
+fn layout(table: &Table, markdown: bool) -> String {
+    if markdown { table.markdown() } else { table.text() }
+}
+
+fn render_text(reports: &[AlgReport], paper: &[Option<&PaperColumn>], md: bool) -> String {
+    let mut out = String::new();
+    if reports.len() > 1 {
+        out.push_str(&layout(&summary_table(reports, paper), md));
+        out.push('\n');
+    }
+    for (i, r) in reports.iter().enumerate() {
+        let p = paper[i];
+        let title = format!(
+            "{} — mask {}, errors ×{} (full-resolution px){}",
+            r.alg,
+            r.mask.name(),
+            r.scale,
+            p.map(|p| format!(", paper column {}", p.name)).unwrap_or_default()
+        );
+        if md {
+            let _ = writeln!(out, "#### {title}\n");
+        } else {
+            let _ = writeln!(out, "{title}");
+        }
+        let mut header: Vec<String> = vec!["scene".into(), "weight".into(), "avgErr".into()];
+        if p.is_some() {
+            header.push("paper".into());
+        }
+        header.extend(["rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2", "time s"].map(String::from));
+        let ncol = header.len();
+        let mut rows = vec![header];
+        let mut push = |name: String, weight: String, m: Option<&Metrics>, pv: Option<f64>, t: Option<f64>| {
+            let v = m.map(Metrics::values);
+            let mut r = vec![name, weight, fixed(v.map(|v| v[0]))];
+            if p.is_some() {
+                r.push(fixed(pv));
+            }
+            r.extend((1..8).map(|k| fixed(v.map(|v| v[k]))));
+            r.push(t.map_or("-".into(), |t| format!("{t:.3}")));
+            rows.push(r);
+        };
+        for s in &r.scenes {
+            let pv = p.and_then(|p| p.scenes.get(&s.name).copied());
+            let name = if s.metrics.is_ok() { s.name.clone() } else { format!("{} (excluded)", s.name) };
+            push(name, format!("{}", s.weight), s.metrics.as_ref().ok(), pv, s.seconds);
+        }
+        let strong = |s: &str| {
+            if md { format!("**{s}**") } else { s.to_string() }
+        };
+        push(strong("weighted"), String::new(), r.weighted().as_ref(), p.and_then(|p| p.weighted), None);
+        push("mean".into(), String::new(), r.mean().as_ref(), None, r.mean_seconds().map(|(t, _)| t));
+        let mut right_aligned = vec![true; ncol];
+        right_aligned[0] = false;
+        out.push_str(&layout(&Table { rows, right_aligned }, md));
+        let evaluated = r.scenes.iter().filter(|s| s.metrics.is_ok()).count();
+        let mut notes = vec![format!("{evaluated} of {} scenes evaluated", r.scenes.len())];
+        if let Some((t, k)) = r.mean_seconds() {
+            notes.push(format!("mean time per pair {t:.3} s (over {k})"));
+        }
+        if md {
+            out.push('\n');
+        }
+        let _ = writeln!(out, "{}.", notes.join("; "));
+        let excluded: Vec<(&str, &str)> = r.excluded().collect();
+        if !excluded.is_empty() {
+            let _ = writeln!(out, "Excluded from the averages:");
+            for (n, e) in excluded {
+                let _ = writeln!(out, "{}{n}: {e}", if md { "- " } else { "  " });
+            }
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// One row per algorithm: weighted and mean avgErr (and the paper's), weighted bad2 and invalid, mean time.
+fn summary_table(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> Table {
+    let has_paper = paper.iter().any(Option::is_some);
+    let mut header: Vec<String> = vec!["alg".into(), "weighted avgErr".into()];
+    if has_paper {
+        header.extend(["paper".into(), "paper column".into()]);
+    }
+    header.extend(["mean avgErr", "weighted bad2", "weighted invalid", "scenes", "mean time s"].map(String::from));
+    let mut rows = vec![header];
+    for (i, r) in reports.iter().enumerate() {
+        let w = r.weighted();
+        let mut row = vec![r.alg.clone(), fixed(w.map(|m| m.avgerr))];
+        if has_paper {
+            let p = paper[i];
+            row.push(fixed(p.and_then(|p| p.weighted)));
+            row.push(p.map_or("-".into(), |p| p.name.clone()));
+        }
+        row.push(fixed(r.mean().map(|m| m.avgerr)));
+        row.push(fixed(w.map(|m| m.bad2)));
+        row.push(fixed(w.map(|m| m.invalid)));
+        row.push(format!("{}/{}", r.scenes.iter().filter(|s| s.metrics.is_ok()).count(), r.scenes.len()));
+        row.push(r.mean_seconds().map_or("-".into(), |(t, _)| format!("{t:.3}")));
+        rows.push(row);
+    }
+    let ncol = rows[0].len();
+    let right_aligned = (0..ncol).map(|c| !(c == 0 || (has_paper && c == 3))).collect();
+    Table { rows, right_aligned }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::MaskMode;
+    use crate::eval::report::tests::scene;
+
+    #[test]
+    fn json_shape_and_nan() {
+        let mut r = AlgReport {
+            alg: "A\"B".into(),
+            mask: MaskMode::All,
+            scale: 2,
+            scenes: vec![scene("Teddy", 1.5, true), scene("Pipes", 0.0, false)],
+        };
+        if let Ok(m) = &mut r.scenes[0].metrics {
+            m.rms = f64::NAN;
+        }
+        let json = render(&[r], &[], Format::Json);
+        assert!(json.starts_with("{\n  \"alg\": \"A\\\"B\",\n  \"mask\": \"all\",\n  \"scale\": 2,\n"), "{json}");
+        assert!(json.contains("\"Teddy\": {\"avgerr\": 1.5, \"rms\": null, \"bad0.5\": 0, \"bad1\": 0, \"bad2\": 10,"));
+        assert!(json.contains("\"excluded\": {\"Pipes\": \"no result\"}"));
+        assert!(!json.contains("\"paper\""));
+    }
+}

@@ -1,0 +1,54 @@
+//! Evaluation against ground truth with the semantics of the MiddEval3 SDK's `evaldisp` (SPEC §5).
+//!
+//! # What is counted
+//! For every pixel whose ground truth is finite (an `inf` GT pixel is unknown and skipped) and that the mask
+//! selects ([`MaskMode::Nonocc`]: `mask0nocc.png == 255`; [`MaskMode::All`]: `mask > 0`; no mask: every
+//! GT-valid pixel), let `n` be the number of such pixels. A result pixel that is not finite (`+inf`, `-inf`,
+//! NaN) is *invalid*; a finite one is clipped to `[0, ndisp]` (inclusive, at the result's resolution, as
+//! `evaldisp` clips to its `maxdisp`) and its error is `err = s·|d − gt|`, with `s` the resolution scale
+//! (4 for quarter, 2 for half, 1 for full resolution), so errors and thresholds are in full-resolution pixels.
+//!
+//! | metric     | definition                                                            |
+//! |------------|-----------------------------------------------------------------------|
+//! | `avgerr`   | Σ err / (n − invalid) — invalid pixels are left out                     |
+//! | `rms`      | √(Σ err² / (n − invalid))                                               |
+//! | `badT`     | 100 · #{valid pixels with err > T} / n, T ∈ {0.5, 1, 2, 4} (strict `>`) |
+//! | `invalid`  | 100 · #{invalid pixels} / n                                            |
+//! | `totbad2`  | `bad2 + invalid` = 100 · (#{err > 2} + #{invalid}) / n                 |
+//!
+//! So the bad percentages count bad *valid* pixels among *all* `n` masked GT-valid pixels, exactly as
+//! `evaldisp` does (its `badpercent = 100·bad/n`, `totalbadpercent = 100·(bad + invalid)/n`, and since 2014
+//! `avgErr = serr/(n − invalid)`). When `n − invalid = 0`, `avgerr` and `rms` are NaN (printed as `nan`,
+//! `null` in JSON); a scene with `n = 0` is an error.
+//!
+//! # Deviations from `evaldisp`
+//! - `evaldisp` upsamples a low-resolution result to the full-resolution GT; here the result and the GT have the
+//!   same size (a Q result is scored against the Q ground truth) and the factor `s` restores full-res units.
+//! - `evaldisp` treats only `+inf` as invalid; here every non-finite value is invalid (it would clip `-inf` to 0
+//!   and let a NaN poison its sums). GT pixels that are NaN are skipped like `inf` ones.
+//! - Sums are `f64` (not `f32`), accumulated in raster order, so results are deterministic.
+//!
+//! # Averages
+//! [`AlgReport::weighted`] is the MiddEval3 weighted mean over the scenes that were evaluated: PianoL, Playroom,
+//! Playtable, Shelves and Vintage weigh 0.5, every other scene 1 ([`scene_weight`]); [`AlgReport::mean`] is the
+//! plain mean. Each metric is averaged separately. Scenes whose result is missing or unreadable are listed and
+//! left out of both.
+//!
+//! # Files
+//! - `metrics.rs`: the rules above for one result: [`evaluate`] (maps in memory), [`evaluate_files`],
+//!   [`evaluate_scene`] (a MiddEval3 scene folder).
+//! - `report.rs`: one algorithm over a folder of scenes: [`evaluate_dir`] finds the scenes with ground truth,
+//!   their resolution and weight, scores them in parallel and collects an [`AlgReport`] with its averages.
+//! - `paper.rs`: the paper's numbers ([`PaperResults`], `paper-results.tsv`), printed beside ours.
+//! - `format.rs`: [`render`] prints reports as a text or Markdown table, JSON or CSV.
+
+mod format;
+mod metrics;
+mod paper;
+mod report;
+
+pub use format::{Format, render};
+pub(crate) use metrics::check_size;
+pub use metrics::{BAD_THRESHOLDS_PX, MaskMode, Metrics, evaluate, evaluate_files, evaluate_scene};
+pub use paper::{PaperColumn, PaperResults};
+pub use report::{AlgReport, SceneResult, evaluate_dir, find_gt_scenes, scale_from_path, scene_weight};
