@@ -3,8 +3,9 @@
 //! thread count. One `#[ignore]`d test runs both stages on a Middlebury scene for timings.
 
 use jem::image::{DisparityMap, Plane, RgbImage};
+use jem::params::WmedianParams;
 use jem::post::planes::{SpsParams, fit_slanted_planes};
-use jem::post::wmedian::{WmedianParams, weighted_median};
+use jem::post::wmedian::weighted_median;
 
 /// Seeded generator (SplitMix64) with uniform and Gaussian samples.
 struct Rng(u64);

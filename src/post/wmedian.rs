@@ -36,45 +36,10 @@
 
 use multiversion::multiversion;
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 
-use crate::error::Result;
 use crate::fastmath::{exp_nonpositive, lane_max, lane_min};
 use crate::image::{DisparityMap, Plane, RgbImage};
-
-/// Weighted-median parameters.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct WmedianParams {
-    /// Run the filter.
-    pub enabled: bool,
-    /// Window radius in pixels (window (2r+1)²).
-    pub radius: usize,
-    /// Spatial σ of the weights, in pixels.
-    pub sigma_xy: f32,
-    /// Colour σ of the weights, in RGB units (0..255).
-    pub sigma_rgb: f32,
-}
-
-impl Default for WmedianParams {
-    fn default() -> Self {
-        WmedianParams { enabled: true, radius: 9, sigma_xy: 9.0, sigma_rgb: 20.0 }
-    }
-}
-
-impl WmedianParams {
-    /// Checks ranges.
-    ///
-    /// # Errors
-    /// [`crate::Error::InvalidParam`] naming the key.
-    pub fn validate(&self) -> Result<()> {
-        if self.radius == 0 || self.radius > 64 {
-            return Err(crate::Error::param("post.wmedian.radius", self.radius, "1 to 64"));
-        }
-        crate::params::check_positive("post.wmedian.sigma_xy", self.sigma_xy)?;
-        crate::params::check_positive("post.wmedian.sigma_rgb", self.sigma_rgb)
-    }
-}
+use crate::params::WmedianParams;
 
 /// Replaces the disparity at every `targets` pixel by the weighted median of the valid disparities in its window
 /// (see the module doc for the weights and the tie rule).
@@ -85,7 +50,8 @@ impl WmedianParams {
 /// # Examples
 /// ```
 /// use jem::image::{Plane, RgbImage};
-/// use jem::post::wmedian::{weighted_median, WmedianParams};
+/// use jem::params::WmedianParams;
+/// use jem::post::wmedian::weighted_median;
 /// let disp = Plane::from_vec(3, 1, vec![2.0, 9.0, 2.0]);
 /// let targets = Plane::from_vec(3, 1, vec![false, true, false]);
 /// let out = weighted_median(&disp, &RgbImage::new(3, 1), &targets, &WmedianParams::default());

@@ -1,0 +1,66 @@
+//! Parameters of the matching cost ([`crate::cost`]).
+
+use serde::{Deserialize, Serialize};
+
+use super::check_nonneg;
+use crate::error::{Error, Result};
+
+/// Matching cost: Census on the grey image plus truncated gradient difference (SPEC §2).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CostParams {
+    /// Census window width in pixels (odd).
+    pub census_width: usize,
+    /// Census window height in pixels (odd); width × height − 1 ≤ 64 bits.
+    pub census_height: usize,
+    /// Weight `a` of the Census Hamming distance.
+    pub census_weight: f32,
+    /// Truncation τc of the Hamming distance, in bits.
+    pub census_trunc: f32,
+    /// Weight `b` of the gradient term.
+    pub grad_weight: f32,
+    /// Truncation τg of |∇xL − ∇xR| (Sobel x on 0..255 grey).
+    pub grad_trunc: f32,
+}
+
+impl Default for CostParams {
+    fn default() -> Self {
+        CostParams {
+            census_width: 7,
+            census_height: 7,
+            census_weight: 1.0,
+            census_trunc: 48.0,
+            grad_weight: 0.3,
+            grad_trunc: 60.0,
+        }
+    }
+}
+
+impl CostParams {
+    /// Checks every value's range.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParam`] naming the first offending key, its value and the valid range.
+    pub fn validate(&self) -> Result<()> {
+        for (name, v) in [("cost.census_width", self.census_width), ("cost.census_height", self.census_height)] {
+            if v == 0 || v % 2 == 0 || v > 15 {
+                return Err(Error::param(name, v, "an odd number from 1 to 15"));
+            }
+        }
+        if self.census_width * self.census_height > 65 {
+            return Err(Error::param(
+                "cost.census_width × cost.census_height",
+                self.census_width * self.census_height,
+                "at most 65 (the Census code is 64 bits)",
+            ));
+        }
+        check_nonneg("cost.census_weight", self.census_weight)?;
+        check_nonneg("cost.census_trunc", self.census_trunc)?;
+        check_nonneg("cost.grad_weight", self.grad_weight)?;
+        check_nonneg("cost.grad_trunc", self.grad_trunc)?;
+        if self.census_weight == 0.0 && self.grad_weight == 0.0 {
+            return Err(Error::param("cost.census_weight", 0, "> 0 when cost.grad_weight is 0"));
+        }
+        Ok(())
+    }
+}

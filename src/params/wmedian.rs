@@ -1,0 +1,40 @@
+//! Parameters of the weighted median ([`crate::post::wmedian`]).
+
+use serde::{Deserialize, Serialize};
+
+use super::check_positive;
+use crate::error::{Error, Result};
+
+/// Weighted-median parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WmedianParams {
+    /// Run the filter.
+    pub enabled: bool,
+    /// Window radius in pixels (window (2r+1)²).
+    pub radius: usize,
+    /// Spatial σ of the weights, in pixels.
+    pub sigma_xy: f32,
+    /// Colour σ of the weights, in RGB units (0..255).
+    pub sigma_rgb: f32,
+}
+
+impl Default for WmedianParams {
+    fn default() -> Self {
+        WmedianParams { enabled: true, radius: 9, sigma_xy: 9.0, sigma_rgb: 20.0 }
+    }
+}
+
+impl WmedianParams {
+    /// Checks ranges.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParam`] naming the key.
+    pub fn validate(&self) -> Result<()> {
+        if self.radius == 0 || self.radius > 64 {
+            return Err(Error::param("post.wmedian.radius", self.radius, "1 to 64"));
+        }
+        check_positive("post.wmedian.sigma_xy", self.sigma_xy)?;
+        check_positive("post.wmedian.sigma_rgb", self.sigma_rgb)
+    }
+}
