@@ -28,6 +28,7 @@
 
 pub mod batch;
 pub mod cost;
+pub mod degrade;
 pub mod error;
 pub mod eval;
 pub mod fastmath;

@@ -338,3 +338,40 @@ fn global_flags_before_a_subcommand() {
         &["nothing.png"],
     );
 }
+
+/// `jem degrade` (issue 15's measuring stick): a whole tree, ground truth copied, images degraded, the same bytes
+/// on a rerun; never into (or around) its input, never into a non-empty folder, nothing left on failure.
+#[test]
+fn degrade_copies_a_tree_and_never_writes_into_its_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("src");
+    std::fs::create_dir(&src).unwrap();
+    for seed in ["1", "2"] {
+        let out =
+            run_in(dir.path(), &["synth", &format!("src/s{seed}"), "--seed", seed, "--width", "96", "--height", "64"]);
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    for (name, out_dir) in [("a", "deg/a"), ("b", "deg/b")] {
+        let out = run_in(dir.path(), &["degrade", "src", out_dir, "--recipe", "blur:1+noise:5", "--seed", "9"]);
+        assert!(out.status.success(), "{name}: {}", stderr(&out));
+    }
+    let a = dir.path().join("deg/a");
+    assert_eq!(files_in(&a), ["degrade.txt", "s1", "s2"]);
+    assert_eq!(files_in(&a.join("s1")), ["calib.txt", "disp0GT.pfm", "im0.png", "im1.png", "mask0nocc.png"]);
+    for f in ["im0.png", "im1.png", "disp0GT.pfm", "calib.txt"] {
+        let (x, y) =
+            (std::fs::read(a.join("s2").join(f)).unwrap(), std::fs::read(dir.path().join("deg/b/s2").join(f)).unwrap());
+        assert_eq!(x, y, "{f} differs between two runs with one seed");
+        let original = std::fs::read(src.join("s2").join(f)).unwrap();
+        assert_eq!(f.starts_with("im"), x != original, "{f}: images degraded, everything else copied");
+    }
+    let before = files_in(&src);
+    assert_clean_failure(dir.path(), &["degrade", "src", "src/inner", "--recipe", "noise:2"], &["outside the input"]);
+    assert_clean_failure(&src, &["degrade", "s1", "..", "--recipe", "noise:2"], &["not an empty folder"]);
+    assert_clean_failure(dir.path(), &["degrade", "src", "deg/a", "--recipe", "noise:2"], &["not an empty folder"]);
+    assert_eq!(files_in(&src), before);
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    assert_clean_failure(dir.path(), &["degrade", "empty", "deg/c", "--recipe", "noise:2"], &["no scene folder"]);
+    assert!(!dir.path().join("deg/c").exists());
+}

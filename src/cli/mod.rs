@@ -11,6 +11,7 @@
 
 mod batch;
 mod config;
+mod degrade;
 mod eval;
 mod r#match;
 mod synth;
@@ -23,6 +24,7 @@ use jem::{Error, Result};
 
 use batch::BatchArgs;
 use config::ConfigArgs;
+use degrade::DegradeArgs;
 use eval::EvalArgs;
 use r#match::MatchArgs;
 use synth::SynthArgs;
@@ -123,6 +125,19 @@ enum Command {
     Config(ConfigArgs),
     /// Render a synthetic scene with exact ground truth in MiddEval3 layout.
     Synth(SynthArgs),
+    /// Write a degraded copy of a scene tree (noise, low light, exposure mismatch, blur), seeded.
+    ///
+    /// Every scene under SRC (folders with im0.png, im1.png, calib.txt) is copied to OUT under the same relative
+    /// path, its images degraded by the recipe, its calib.txt, disp0GT.pfm and mask0nocc.png copied unchanged,
+    /// so `jem batch OUT` and `jem eval OUT` work as on SRC. Recipes (grey levels of the 8-bit input):
+    ///   noise:S        Gaussian noise of σ S on every channel of both views
+    ///   lowlight:G:R   light × G (values taken as linear), photon shot noise, read noise σ R, no gain after
+    ///   exposure:G:P   right view only: v -> 255 (G v / 255)^P
+    ///   blur:S         Gaussian blur of σ S pixels, both views
+    ///   A+B            A, then B
+    /// OUT is written as a whole or not at all; it must not exist (or be empty) and must be outside SRC.
+    #[command(verbatim_doc_comment)]
+    Degrade(DegradeArgs),
     /// Run the pipeline on every scene under DIR... (MiddEval3 layout): disp0NAME.pfm + timeNAME.txt.
     ///
     /// A scene is a folder with im0.png, im1.png and calib.txt (ndisp is read from it); every scene under each DIR is
@@ -181,6 +196,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Match(args)) => r#match::run(&args, &cli.global),
         Some(Command::Config(args)) => config::run(&args),
         Some(Command::Synth(args)) => synth::run(&args, &cli.global),
+        Some(Command::Degrade(args)) => degrade::run(&args, &cli.global),
         Some(Command::Batch(args)) => batch::run(&args, &cli.global),
         Some(Command::Eval(args)) => eval::run(&args),
         Some(Command::Viz(args)) => viz::run(&args, &cli.global),

@@ -1,0 +1,492 @@
+//! Seeded degradations of a stereo pair, the measuring stick for robustness (`jem degrade`): sensor noise, low
+//! light, an exposure and gamma mismatch between the views, and blur, applied to 8-bit images as a camera would
+//! produce them (the result is rounded to 8 bits again, so quantisation is part of the degradation).
+//!
+//! Every degradation is a pure function of the input images, its parameters and a seed: the same call writes the
+//! same bytes. The two views get independent noise (different streams of one seed).
+//!
+//! The models, in grey levels of the 8-bit input (0..=255):
+//! - `noise:S` — additive Gaussian noise of standard deviation S on every channel of both views;
+//! - `lowlight:G:R` — the light scaled by G (0 < G ≤ 1), the 8-bit values taken as linear in the light (a raw,
+//!   linear sensor response), with photon shot noise (variance equal to the signal in electrons, a full-scale
+//!   pixel holding 255 × 16 electrons) and read noise of R grey levels, and no gain applied afterwards: a dark
+//!   image whose values span 0..255·G, as a camera without auto-exposure gives;
+//! - `exposure:G:P` — the right view only: v ↦ 255·(G·v/255)^P (a darker or brighter view with another tone
+//!   curve); Census is invariant to it, the gradient term and colour weights are not;
+//! - `blur:S` — a Gaussian blur of standard deviation S pixels on both views (defocus);
+//! - several degradations separated by `+` apply in order (e.g. `blur:1+noise:4`).
+//!
+//! [`degrade_tree`] makes a degraded copy of a whole MiddEval3-style tree (every scene folder with `im0.png`,
+//! `im1.png` and `calib.txt`): the images degraded, the ground truth, masks and calibration copied unchanged, so
+//! `jem batch` and `jem eval` run on it as on the original.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::image::RgbImage;
+
+/// One degradation step (see the module doc for the models).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Degradation {
+    /// Additive Gaussian noise, σ in grey levels, both views.
+    Noise {
+        /// Standard deviation in grey levels.
+        sigma: f64,
+    },
+    /// Less light: linear intensity × `gain`, shot noise and read noise, no gain applied afterwards.
+    LowLight {
+        /// The fraction of the light that remains (0 < gain ≤ 1).
+        gain: f64,
+        /// Read noise in grey levels.
+        read_sigma: f64,
+    },
+    /// The right view's tone curve changed: v ↦ 255·(gain·v/255)^gamma.
+    Exposure {
+        /// Multiplies the right view's intensity before the power.
+        gain: f64,
+        /// The power applied to the scaled, normalised intensity.
+        gamma: f64,
+    },
+    /// Gaussian blur of both views.
+    Blur {
+        /// Standard deviation in pixels.
+        sigma: f64,
+    },
+}
+
+/// A chain of degradations, applied in order; parsed from `step+step+…`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Recipe(pub Vec<Degradation>);
+
+/// Electrons of a full-scale (255) pixel in the low-light model: sets how strong shot noise is.
+const FULL_WELL_ELECTRONS: f64 = 255.0 * 16.0;
+
+impl FromStr for Degradation {
+    type Err = String;
+
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        let mut parts = text.split(':');
+        let kind = parts.next().unwrap_or_default();
+        let args: Vec<&str> = parts.collect();
+        let num = |k: usize, name: &str| -> std::result::Result<f64, String> {
+            let s = args.get(k).ok_or_else(|| format!("`{text}`: missing {name} (expected {})", usage(kind)))?;
+            s.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("`{text}`: {name} `{s}` is not a finite number"))
+        };
+        let arity = |n: usize| {
+            if args.len() == n { Ok(()) } else { Err(format!("`{text}`: expected {}", usage(kind))) }
+        };
+        let step = match kind {
+            "noise" => {
+                arity(1)?;
+                Degradation::Noise { sigma: num(0, "sigma")? }
+            }
+            "lowlight" => {
+                arity(2)?;
+                Degradation::LowLight { gain: num(0, "gain")?, read_sigma: num(1, "read noise")? }
+            }
+            "exposure" => {
+                arity(2)?;
+                Degradation::Exposure { gain: num(0, "gain")?, gamma: num(1, "gamma")? }
+            }
+            "blur" => {
+                arity(1)?;
+                Degradation::Blur { sigma: num(0, "sigma")? }
+            }
+            _ => return Err(format!("unknown degradation `{kind}` (expected noise, lowlight, exposure or blur)")),
+        };
+        step.validate().map_err(|e| format!("`{text}`: {e}"))?;
+        Ok(step)
+    }
+}
+
+/// The form of each degradation, for error messages.
+fn usage(kind: &str) -> &'static str {
+    match kind {
+        "noise" => "noise:SIGMA",
+        "lowlight" => "lowlight:GAIN:READ_SIGMA",
+        "exposure" => "exposure:GAIN:GAMMA",
+        "blur" => "blur:SIGMA",
+        _ => "noise:S, lowlight:G:R, exposure:G:P or blur:S",
+    }
+}
+
+impl Degradation {
+    fn validate(&self) -> std::result::Result<(), String> {
+        let ok = match *self {
+            Degradation::Noise { sigma } | Degradation::Blur { sigma } => (0.0..=100.0).contains(&sigma),
+            Degradation::LowLight { gain, read_sigma } => {
+                gain > 0.0 && gain <= 1.0 && (0.0..=100.0).contains(&read_sigma)
+            }
+            Degradation::Exposure { gain, gamma } => gain > 0.0 && gain <= 10.0 && gamma > 0.0 && gamma <= 10.0,
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err("out of range (sigma 0..=100, gain 0 < g ≤ 1 for lowlight and ≤ 10 for exposure, gamma 0 < p ≤ 10)"
+                .to_string())
+        }
+    }
+}
+
+impl fmt::Display for Degradation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Degradation::Noise { sigma } => write!(f, "noise:{sigma}"),
+            Degradation::LowLight { gain, read_sigma } => write!(f, "lowlight:{gain}:{read_sigma}"),
+            Degradation::Exposure { gain, gamma } => write!(f, "exposure:{gain}:{gamma}"),
+            Degradation::Blur { sigma } => write!(f, "blur:{sigma}"),
+        }
+    }
+}
+
+impl FromStr for Recipe {
+    type Err = String;
+
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        let steps = text.split('+').map(str::parse).collect::<std::result::Result<Vec<_>, _>>()?;
+        Ok(Recipe(steps))
+    }
+}
+
+impl fmt::Display for Recipe {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (k, step) in self.0.iter().enumerate() {
+            if k > 0 {
+                f.write_str("+")?;
+            }
+            write!(f, "{step}")?;
+        }
+        Ok(())
+    }
+}
+
+/// Which view an image is (the views get independent noise; exposure changes the right one only).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum View {
+    /// The left (reference) view.
+    Left,
+    /// The right view.
+    Right,
+}
+
+/// Applies `recipe` to one view, with noise drawn from `seed` (and the view, and the step's position).
+///
+/// # Errors
+/// Never for a valid recipe; `InvalidParam` for a step out of range (a recipe built by hand).
+pub fn degrade(image: &RgbImage, recipe: &Recipe, view: View, seed: u64) -> Result<RgbImage> {
+    let mut img = image.clone();
+    for (k, step) in recipe.0.iter().enumerate() {
+        step.validate().map_err(|e| Error::InvalidParam {
+            name: "degradation".into(),
+            value: step.to_string(),
+            expected: e,
+        })?;
+        let stream = seed ^ ((k as u64 + 1) << 40) ^ if view == View::Right { 0x9e37_79b9_7f4a_7c15 } else { 0 };
+        img = apply(&img, *step, view, stream);
+    }
+    Ok(img)
+}
+
+fn apply(image: &RgbImage, step: Degradation, view: View, seed: u64) -> RgbImage {
+    let mut out = image.clone();
+    let mut rng = Gaussian::new(seed);
+    match step {
+        Degradation::Noise { sigma } => {
+            for ch in &mut out.channels {
+                ch.iter_mut().for_each(|v| *v = quantise(f64::from(*v) + sigma * rng.sample()));
+            }
+        }
+        Degradation::LowLight { gain, read_sigma } => {
+            for ch in &mut out.channels {
+                ch.iter_mut().for_each(|v| {
+                    let electrons = f64::from(*v) / 255.0 * gain * FULL_WELL_ELECTRONS;
+                    let shot = electrons.sqrt() * rng.sample();
+                    let signal = (electrons + shot) / FULL_WELL_ELECTRONS * 255.0;
+                    *v = quantise(signal + read_sigma * rng.sample());
+                });
+            }
+        }
+        Degradation::Exposure { gain, gamma } => {
+            if view == View::Right {
+                for ch in &mut out.channels {
+                    ch.iter_mut().for_each(|v| {
+                        *v = quantise(255.0 * (gain * f64::from(*v) / 255.0).clamp(0.0, 1.0).powf(gamma));
+                    });
+                }
+            }
+        }
+        Degradation::Blur { sigma } => {
+            for ch in &mut out.channels {
+                *ch = gaussian_blur(ch, image.width, image.height, sigma);
+            }
+        }
+    }
+    out
+}
+
+/// Rounds to the nearest 8-bit level, clamped to 0..=255.
+fn quantise(v: f64) -> f32 {
+    v.round().clamp(0.0, 255.0) as f32
+}
+
+/// A separable Gaussian blur (σ in pixels, kernel radius ⌈3σ⌉, borders clamped), rounded to 8 bits.
+fn gaussian_blur(data: &[f32], w: usize, h: usize, sigma: f64) -> Vec<f32> {
+    if sigma <= 0.0 {
+        return data.to_vec();
+    }
+    let r = (3.0 * sigma).ceil() as isize;
+    let kernel: Vec<f64> = (-r..=r).map(|k| (-((k * k) as f64) / (2.0 * sigma * sigma)).exp()).collect();
+    let total: f64 = kernel.iter().sum();
+    let clamp = |v: isize, n: usize| v.clamp(0, n as isize - 1) as usize;
+    let mut tmp = vec![0.0f64; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let s: f64 =
+                kernel.iter().zip(-r..=r).map(|(k, d)| k * f64::from(data[y * w + clamp(x as isize + d, w)])).sum();
+            tmp[y * w + x] = s / total;
+        }
+    }
+    let mut out = vec![0.0f32; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let s: f64 = kernel.iter().zip(-r..=r).map(|(k, d)| k * tmp[clamp(y as isize + d, h) * w + x]).sum();
+            out[y * w + x] = quantise(s / total);
+        }
+    }
+    out
+}
+
+/// Standard normal samples (Box–Muller on a SplitMix64 stream).
+struct Gaussian {
+    state: u64,
+    spare: Option<f64>,
+}
+
+impl Gaussian {
+    fn new(seed: u64) -> Self {
+        Gaussian { state: seed, spare: None }
+    }
+
+    fn uniform(&mut self) -> f64 {
+        self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn sample(&mut self) -> f64 {
+        if let Some(v) = self.spare.take() {
+            return v;
+        }
+        let u1 = 1.0 - self.uniform(); // (0, 1]
+        let u2 = self.uniform();
+        let r = (-2.0 * u1.ln()).sqrt();
+        let t = std::f64::consts::TAU * u2;
+        self.spare = Some(r * t.sin());
+        r * t.cos()
+    }
+}
+
+/// Files copied unchanged into each degraded scene, when the source scene has them.
+pub const COPIED_FILES: [&str; 5] = ["calib.txt", "disp0GT.pfm", "mask0nocc.png", "disp1GT.pfm", "mask1nocc.png"];
+
+/// Makes a degraded copy of every scene under `src` in the new folder `out` (same relative paths; a `src` that
+/// is itself a scene becomes `out/NAME`), and writes `out/degrade.txt` with the recipe, seed and jem version.
+/// Each scene's noise comes from `seed` and the scene's relative path, so scenes differ and a rerun is
+/// byte-identical. The tree is built in a temporary sibling folder and renamed into place at the end: a failed
+/// run leaves nothing behind. Returns the degraded scene folders.
+///
+/// # Errors
+/// [`Error::Input`] if `out` exists and is not an empty folder, or `out` and `src` contain one another, or `src`
+/// holds no scene; [`Error::Io`] / [`Error::Image`] naming the file for unreadable inputs or failed writes.
+pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Result<Vec<PathBuf>> {
+    let src_real = std::fs::canonicalize(src).map_err(|e| Error::io(src, e))?;
+    if out.exists() {
+        let empty = std::fs::read_dir(out).map_err(|e| Error::io(out, e))?.next().is_none();
+        if !out.is_dir() || !empty {
+            return Err(Error::Input(format!(
+                "{}: exists and is not an empty folder (refusing to write into it)",
+                out.display()
+            )));
+        }
+    }
+    let out_real = resolve_new_path(out)?;
+    if out_real.starts_with(&src_real) || src_real.starts_with(&out_real) {
+        return Err(Error::Input(format!(
+            "{}: the output folder must be outside the input {} (and not contain it)",
+            out.display(),
+            src.display()
+        )));
+    }
+    let parent = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
+    let scenes = crate::batch::find_scenes(&[src.to_path_buf()])?;
+    if scenes.is_empty() {
+        return Err(Error::Input(format!(
+            "{}: no scene folder (with im0.png, im1.png, calib.txt) found",
+            src.display()
+        )));
+    }
+    let tmp = parent.join(format!(
+        ".{}.jem-tmp-{}",
+        out.file_name().unwrap_or_default().to_string_lossy(),
+        std::process::id()
+    ));
+    let result = (|| {
+        std::fs::create_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
+        let rels: Vec<PathBuf> = scenes
+            .iter()
+            .map(|s| match s.strip_prefix(src) {
+                Ok(r) if !r.as_os_str().is_empty() => r.to_path_buf(),
+                _ => PathBuf::from(crate::batch::scene_name(s)),
+            })
+            .collect();
+        scenes
+            .par_iter()
+            .zip(&rels)
+            .try_for_each(|(scene, rel)| degrade_scene(scene, &tmp.join(rel), rel, recipe, seed))?;
+        let note = format!("recipe {recipe}\nseed {seed}\njem {}\n", env!("CARGO_PKG_VERSION"));
+        crate::io::write_atomic(&tmp.join("degrade.txt"), note.as_bytes())?;
+        if out.exists() {
+            std::fs::remove_dir(out).map_err(|e| Error::io(out, e))?;
+        }
+        std::fs::rename(&tmp, out).map_err(|e| Error::io(out, e))?;
+        Ok(rels.iter().map(|r| out.join(r)).collect())
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_dir_all(&tmp);
+    }
+    result
+}
+
+/// `path` made absolute through its deepest existing ancestor (links resolved), the missing components appended.
+fn resolve_new_path(path: &Path) -> Result<PathBuf> {
+    let mut existing = path.to_path_buf();
+    let mut rest = Vec::new();
+    while !existing.exists() {
+        match (existing.parent(), existing.file_name()) {
+            (Some(p), Some(name)) => {
+                rest.push(name.to_os_string());
+                existing = if p.as_os_str().is_empty() { PathBuf::from(".") } else { p.to_path_buf() };
+            }
+            _ => break,
+        }
+    }
+    let mut real = std::fs::canonicalize(&existing).map_err(|e| Error::io(&existing, e))?;
+    real.extend(rest.iter().rev());
+    Ok(real)
+}
+
+/// One scene: both views degraded (noise streams from `seed` and the relative path), the other files copied.
+fn degrade_scene(scene: &Path, dest: &Path, rel: &Path, recipe: &Recipe, seed: u64) -> Result<()> {
+    std::fs::create_dir_all(dest).map_err(|e| Error::io(dest, e))?;
+    // FNV-1a of the relative path: a per-scene stream that does not depend on where the tree lives.
+    let key = rel
+        .to_string_lossy()
+        .bytes()
+        .fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3));
+    for (name, view) in [("im0.png", View::Left), ("im1.png", View::Right)] {
+        let image = crate::io::png::load_rgb(&scene.join(name))?;
+        let out = degrade(&image, recipe, view, seed ^ key)?;
+        let mut rgb = Vec::with_capacity(out.len() * 3);
+        for i in 0..out.len() {
+            rgb.extend(out.rgb(i).map(|v| v as u8));
+        }
+        crate::io::png::write_rgb8_png(&dest.join(name), out.width, out.height, &rgb)?;
+    }
+    for name in COPIED_FILES {
+        let from = scene.join(name);
+        if from.is_file() {
+            let bytes = std::fs::read(&from).map_err(|e| Error::io(&from, e))?;
+            crate::io::write_atomic(&dest.join(name), &bytes)?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A smooth ramp image (no texture), so measured statistics are the degradation's.
+    fn ramp(w: usize, h: usize) -> RgbImage {
+        let mut img = RgbImage::new(w, h);
+        for i in 0..w * h {
+            let v = 40.0 + 150.0 * (i % w) as f32 / w as f32;
+            for c in 0..3 {
+                img.channels[c][i] = v.round();
+            }
+        }
+        img
+    }
+
+    fn std_dev_of_difference(a: &RgbImage, b: &RgbImage) -> f64 {
+        let d: Vec<f64> = a.channels[0].iter().zip(&b.channels[0]).map(|(x, y)| f64::from(x - y)).collect();
+        let mean = d.iter().sum::<f64>() / d.len() as f64;
+        (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt()
+    }
+
+    #[test]
+    fn recipes_parse_print_and_refuse_nonsense() {
+        let r: Recipe = "blur:1.5+noise:4+exposure:0.7:1.3+lowlight:0.2:1".parse().unwrap();
+        assert_eq!(r.0.len(), 4);
+        assert_eq!(r.to_string(), "blur:1.5+noise:4+exposure:0.7:1.3+lowlight:0.2:1");
+        for bad in ["", "noise", "noise:", "noise:x", "noise:4:5", "lowlight:0:1", "lowlight:2:1", "noise:nan", "fog:1"]
+        {
+            assert!(bad.parse::<Recipe>().is_err(), "{bad:?} was accepted");
+        }
+    }
+
+    /// Noise of σ 6 measures as about 6 (the rounding to 8 bits adds 1/12 of a grey level's variance), the two
+    /// views get different noise, and the same seed gives the same image.
+    #[test]
+    fn noise_has_the_requested_sigma_and_is_seeded() {
+        let img = ramp(200, 100);
+        let r: Recipe = "noise:6".parse().unwrap();
+        let left = degrade(&img, &r, View::Left, 7).unwrap();
+        let sigma = std_dev_of_difference(&left, &img);
+        assert!((sigma - 6.0).abs() < 0.2, "measured {sigma}");
+        assert_eq!(left, degrade(&img, &r, View::Left, 7).unwrap());
+        assert_ne!(left, degrade(&img, &r, View::Right, 7).unwrap());
+        assert_ne!(left, degrade(&img, &r, View::Left, 8).unwrap());
+    }
+
+    /// Exposure changes the right view only, monotonically; low light darkens both to about the gain.
+    #[test]
+    fn exposure_is_right_only_and_low_light_darkens() {
+        let img = ramp(64, 8);
+        let r: Recipe = "exposure:0.5:1.5".parse().unwrap();
+        assert_eq!(degrade(&img, &r, View::Left, 1).unwrap(), img);
+        let right = degrade(&img, &r, View::Right, 1).unwrap();
+        assert!(right.channels[1].windows(2).take(63).all(|p| p[0] <= p[1]), "not monotonic");
+        let expected = 255.0 * (0.5f32 * 190.0 / 255.0).powf(1.5);
+        assert!((right.channels[0][63] - expected).abs() <= 1.0);
+        let dark = degrade(&img, &"lowlight:0.2:0".parse().unwrap(), View::Left, 1).unwrap();
+        let mean = |im: &RgbImage| im.channels[0].iter().sum::<f32>() / im.len() as f32;
+        assert!((mean(&dark) / mean(&img) - 0.2).abs() < 0.02, "{} vs {}", mean(&dark), mean(&img));
+    }
+
+    /// Blur keeps a constant image and the mean, and lowers the variance of noise.
+    #[test]
+    fn blur_smooths() {
+        let img = ramp(80, 40);
+        let noisy = degrade(&img, &"noise:10".parse().unwrap(), View::Left, 3).unwrap();
+        let blurred = degrade(&noisy, &"blur:1.5".parse().unwrap(), View::Left, 3).unwrap();
+        assert!(std_dev_of_difference(&blurred, &img) < 0.5 * std_dev_of_difference(&noisy, &img));
+        let mut flat = RgbImage::new(9, 9);
+        flat.channels.iter_mut().for_each(|c| c.fill(77.0));
+        assert_eq!(degrade(&flat, &"blur:2".parse().unwrap(), View::Left, 0).unwrap(), flat);
+    }
+}
