@@ -282,7 +282,7 @@ fn eval_ground_truth_against_itself_on_trainingq_is_zero() {
             assert_eq!(m.values(), [0.0; 8], "{} {mode:?}", s.display());
         }
     }
-    // The paper's "Avg" rows come back from its per-scene numbers with the MiddEval3 weights (SPEC §5).
+    // The paper's "Avg" rows come back from its per-scene numbers with the MiddEval3 weights (PianoL, Playroom, Playtable, Shelves, Vintage count half).
     let paper = PaperResults::load(&data_dir().join("paper-results.tsv")).unwrap();
     for (col, avg) in [("LCM", 7.32), ("FCM", 6.58), ("JEM_LRC", 6.34), ("JEM_SPS", 5.52), ("JEM_ALL", 5.33)] {
         let c = paper.column(col).unwrap();

@@ -1,4 +1,4 @@
-//! Evaluation against ground truth with the semantics of the MiddEval3 SDK's `evaldisp` (SPEC §5).
+//! Evaluation against ground truth with the semantics of the MiddEval3 SDK's `evaldisp` (the Middlebury 2014 evaluation kit's scoring program), as listed below.
 //!
 //! # What is counted
 //! For every pixel whose ground truth is finite (an `inf` GT pixel is unknown and skipped) and that the mask

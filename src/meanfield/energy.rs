@@ -82,7 +82,7 @@ pub(super) struct LocalTerm<'s> {
 }
 
 /// E(d) = `unary_scale`·cost(d) − ω·Q̃(d) − ω̃·(P̃(d) + (1 − β)(P̃(d−1) + P̃(d+1))) into `en`, in one pass, with
-/// either pairwise term optional (SPEC §3; the label-independent constants are left out).
+/// either pairwise term optional (the label-independent constants are left out; see the module doc of [`crate::meanfield`]).
 #[inline(always)]
 pub(super) fn pixel_energies(
     cost: &[f32],

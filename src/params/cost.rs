@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use super::check_nonneg;
 use crate::error::{Error, Result};
 
-/// Matching cost: Census on the grey image plus truncated gradient difference (SPEC §2).
+/// Matching cost: Census on the grey image plus truncated gradient difference (paper §2).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CostParams {

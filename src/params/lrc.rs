@@ -17,7 +17,7 @@ pub enum LrcMode {
     Invalidate,
 }
 
-/// Left-right consistency check (paper §4, SPEC §4).
+/// Left-right consistency check (paper §4).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LrcParams {

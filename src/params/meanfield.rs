@@ -29,7 +29,7 @@ pub enum Schedule {
     Checkerboard,
 }
 
-/// Mean-field inference on the joint MRF (paper §3, Algorithm 1; SPEC §3).
+/// Mean-field inference on the joint MRF (paper §3, Algorithm 1).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MeanFieldParams {

@@ -1,4 +1,4 @@
-//! Occlusion fill (paper §4.1, SPEC §4): every invalid (`inf`) pixel takes the smaller of the nearest valid
+//! Occlusion fill (paper §4.1): every invalid (`inf`) pixel takes the smaller of the nearest valid
 //! disparities to its left and right on the same row; the background is the smaller disparity, and occlusions
 //! are background. A row with no valid pixel is left as it is. O(w·h), row-parallel.
 

@@ -1,4 +1,4 @@
-//! Left-right consistency check (paper §4, SPEC §4).
+//! Left-right consistency check (paper §4).
 //!
 //! Left pixel x with disparity d_L(x) corresponds to right pixel x' = x − round(d_L(x)). It is *consistent* when
 //! x' is inside the image and |d_L(x) − d_R(x')| ≤ `thresh_px`. Two treatments of inconsistent pixels:

@@ -1,4 +1,4 @@
-//! Post-processing after inference (paper §4, SPEC §4), in pipeline order:
+//! Post-processing after inference (paper §4), in pipeline order:
 //! left-right check → occlusion fill → weighted median at the filled pixels → slanted-plane smoothing.
 
 pub mod fill;

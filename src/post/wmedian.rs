@@ -1,4 +1,4 @@
-//! Weighted median filter at the pixels that were invalid (paper §4.2, SPEC §4).
+//! Weighted median filter at the pixels that were invalid (paper §4.2).
 //!
 //! The paper applies the filter after occlusion filling, and only to the pixels the left-right check rejected
 //! (Mozerov & van de Weijer apply it everywhere, which is slower and blurs good pixels). Each target pixel `i`
