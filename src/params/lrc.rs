@@ -37,7 +37,7 @@ impl LrcParams {
     /// Checks every value's range.
     ///
     /// # Errors
-    /// [`Error::InvalidParam`] naming the first offending key, its value and the valid range.
+    /// [`crate::Error::InvalidParam`] naming the first offending key, its value and the valid range.
     pub fn validate(&self) -> Result<()> {
         check_nonneg("post.lrc.thresh_px", self.thresh_px)
     }
