@@ -91,7 +91,7 @@ impl MeanField<'_> {
         );
     }
 
-    /// The same update as [`MeanField::checkerboard_two_pass`] in place, in one buffer: pass 1 writes the even
+    /// The same update as `checkerboard_two_pass` (the test reference) in place, in one buffer: pass 1 writes the even
     /// pixels over their old values (an even pixel reads only odd neighbours and its own old value), pass 2 the
     /// odd ones (reading the new even values). No second N × M buffer, and no copy of the even pixels.
     ///
