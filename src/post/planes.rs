@@ -99,6 +99,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::Result;
 use crate::image::{DisparityMap, Plane, RgbImage};
 use crate::params::{check_nonneg, check_positive};
+use crate::rng::SplitMix64;
 
 /// Slanted-plane smoothing parameters (see the module doc for the energy they weight).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -767,24 +768,6 @@ fn median_of_data(scene: &Scene) -> f64 {
     f64::from(*m)
 }
 
-/// A small deterministic generator (SplitMix64).
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in 0..n (n ≥ 1), by the multiply-shift method.
-    fn below(&mut self, n: usize) -> usize {
-        (((self.next() >> 32) * n as u64) >> 32) as usize
-    }
-}
-
 /// RANSAC plane per `selected` segment (see the module doc); `None` where the data weight is below
 /// [`support_needed`] and for the others.
 fn ransac_planes(
@@ -821,7 +804,7 @@ fn ransac_planes(
                 return None;
             }
             pts.load(scene, &members[start[k]..start[k + 1]]);
-            let mut rng = SplitMix(p.seed ^ (k as u64).wrapping_mul(0xd6e8_feb8_6659_fd93));
+            let mut rng = SplitMix64::new(p.seed ^ (k as u64).wrapping_mul(0xd6e8_feb8_6659_fd93));
             ransac_segment(pts, p, support_needed(p, pixels[k] as f64), &mut rng)
         })
         .collect()
@@ -893,7 +876,7 @@ impl Points {
     }
 }
 
-fn ransac_segment(pts: &Points, p: &SpsParams, min_weight: f64, rng: &mut SplitMix) -> Option<[f64; 3]> {
+fn ransac_segment(pts: &Points, p: &SpsParams, min_weight: f64, rng: &mut SplitMix64) -> Option<[f64; 3]> {
     let total: f64 = pts.w.iter().map(|&w| f64::from(w)).sum();
     if pts.len() == 0 || total < min_weight {
         return None;
@@ -1265,12 +1248,12 @@ mod tests {
         let (w, h) = (37, 29);
         let mut img = RgbImage::new(w, h);
         let mut disp = Plane::new(w, h, 0.0);
-        let mut rng = SplitMix(3);
+        let mut rng = SplitMix64::new(3);
         for i in 0..w * h {
             for c in 0..3 {
-                img.channels[c][i] = (rng.next() % 256) as f32;
+                img.channels[c][i] = (rng.next_u64() % 256) as f32;
             }
-            disp.data[i] = (rng.next() % 1000) as f32 / 50.0;
+            disp.data[i] = (rng.next_u64() % 1000) as f32 / 50.0;
         }
         let trusted = Plane::new(w, h, true);
         for segments in [4, 20, 80] {
