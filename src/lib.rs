@@ -38,6 +38,8 @@ pub mod lattice;
 pub mod meanfield;
 pub mod params;
 pub mod post;
+#[doc(hidden)]
+pub mod rng;
 pub mod scale;
 pub mod synth;
 pub mod table;

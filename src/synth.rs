@@ -27,10 +27,10 @@
 //! `disp0GT.pfm`, `mask0nocc.png` (8-bit grey). All are written atomically.
 //!
 //! # Determinism and cost
-//! One SplitMix64 stream seeded by [`SynthParams::seed`] draws the scene; textures are hashes of integer lattice
-//! coordinates. No clocks, no hash-map iteration, and every pixel is computed independently (rows in parallel),
-//! so the same parameters give byte-identical files whatever the thread count. Cost: O(W·H·S) for S surfaces
-//! (~0.2 s at 320×240 in release, writing included).
+//! One SplitMix64 stream (`crate::rng`) seeded by [`SynthParams::seed`] draws the scene; textures are hashes of
+//! integer lattice coordinates (by the same generator's mixer, `mix64`). No clocks, no hash-map iteration, and
+//! every pixel is computed independently (rows in parallel), so the same parameters give byte-identical files
+//! whatever the thread count. Cost: O(W·H·S) for S surfaces (~0.2 s at 320×240 in release, writing included).
 
 use std::path::Path;
 
@@ -38,6 +38,7 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane, RgbImage};
+use crate::rng::{SplitMix64, mix64};
 
 /// Mask value: the pixel is visible in both views.
 pub const MASK_VISIBLE: u8 = 255;
@@ -337,7 +338,7 @@ impl Scene {
 
     /// Draws a scene from the seed: the background in 6–26 % of ndisp, the objects in 32–92 %, one band each.
     fn draw(p: &SynthParams) -> Scene {
-        let mut rng = SplitMix64(p.seed);
+        let mut rng = SplitMix64::new(p.seed);
         let (w, h, n) = (p.width as f64, p.height as f64, p.ndisp as f64);
         let mut surfaces = Vec::new();
 
@@ -346,17 +347,17 @@ impl Scene {
         let c = 0.16 * n - a * (w - 1.0) / 2.0 - b * (h - 1.0) / 2.0;
         surfaces.push(Surface { shape: Shape::Everywhere, a, b, c, texture: Texture::draw(&mut rng) });
 
-        let count = 3 + rng.below(4);
+        let count = 3 + rng.below_by_remainder(4);
         let (lo, hi) = (0.32 * n, 0.92 * n);
         let band = (hi - lo) / count as f64;
         for k in 0..count {
             let (rx, ry) = (rng.range(0.1, 0.22) * w, rng.range(0.15, 0.32) * h);
             let (cx, cy) = (rng.range(0.1, 0.9) * w, rng.range(0.1, 0.9) * h);
-            let shape = match rng.below(3) {
+            let shape = match rng.below_by_remainder(3) {
                 0 => Shape::Rect { x0: cx - rx, y0: cy - ry, x1: cx + rx, y1: cy + ry },
                 1 => Shape::Disc { cx, cy, r: rx.min(ry) },
                 _ => {
-                    let corners = 3 + rng.below(5);
+                    let corners = 3 + rng.below_by_remainder(5);
                     let turn = rng.range(0.0, std::f64::consts::TAU);
                     let vertices = (0..corners)
                         .map(|i| {
@@ -384,7 +385,7 @@ impl Scene {
 fn slopes(rng: &mut SplitMix64, budget: f64, rx: f64, ry: f64) -> (f64, f64) {
     let share = rng.range(0.2, 0.8);
     let scale = rng.range(0.5, 1.0);
-    let sign = |rng: &mut SplitMix64| if rng.below(2) == 0 { -1.0 } else { 1.0 };
+    let sign = |rng: &mut SplitMix64| if rng.below_by_remainder(2) == 0 { -1.0 } else { 1.0 };
     let a = (sign(rng) * scale * share * budget / rx).clamp(-0.5, 0.5);
     let b = sign(rng) * scale * (1.0 - share) * budget / ry;
     (a, b)
@@ -457,34 +458,6 @@ fn smooth(t: f64) -> f64 {
     t * t * (3.0 - 2.0 * t)
 }
 
-/// SplitMix64's output function: a bijective 64-bit mixer.
-#[inline]
-fn mix64(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
-/// SplitMix64 (Steele, Lea & Flood 2014): a tiny, seedable, well-mixed generator.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        mix64(self.0)
-    }
-
-    /// Uniform in `lo..hi`.
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-
-    /// Uniform in `0..n` (n small; the modulo bias is negligible).
-    fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -535,7 +508,7 @@ mod tests {
     }
 
     fn test_texture(seed: u64) -> Texture {
-        Texture::draw(&mut SplitMix64(seed))
+        Texture::draw(&mut SplitMix64::new(seed))
     }
 
     /// Fronto-parallel surfaces at whole-pixel disparities: the 2×2 samples of left pixel x and right pixel x − d

@@ -7,27 +7,13 @@ use std::path::Path;
 
 use jem::io::calib::Calib;
 use jem::io::pfm::{decode_pfm, encode_pfm};
+use jem::rng::SplitMix64;
 use jem::{Params, Plane};
-
-/// xorshift64*: small, seeded, reproducible.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
 
 /// Mutations of `valid`: truncations, bit flips, byte replacements with interesting values, insertions,
 /// deletions, and pure random buffers.
 fn mutants(valid: &[u8], seed: u64, count: usize) -> Vec<Vec<u8>> {
-    let mut rng = Rng(seed);
+    let mut rng = SplitMix64::new(seed);
     let interesting: &[&[u8]] =
         &[b"0", b"-1", b"4294967296", b"99999999999", b"nan", b"inf", b"\n", b" ", b"=", b"[", b"\xff\xfe", b"\0"];
     let mut out = Vec::with_capacity(count);
@@ -49,7 +35,7 @@ fn mutants(valid: &[u8], seed: u64, count: usize) -> Vec<Vec<u8>> {
             }
             3 => {
                 let i = rng.below(m.len() + 1);
-                let ins: Vec<u8> = (0..1 + rng.below(8)).map(|_| rng.next() as u8).collect();
+                let ins: Vec<u8> = (0..1 + rng.below(8)).map(|_| rng.next_u64() as u8).collect();
                 m.splice(i..i, ins);
             }
             4 => {
@@ -57,7 +43,7 @@ fn mutants(valid: &[u8], seed: u64, count: usize) -> Vec<Vec<u8>> {
                 let end = (i + 1 + rng.below(16)).min(m.len());
                 m.drain(i..end);
             }
-            _ => m = (0..rng.below(64)).map(|_| rng.next() as u8).collect(),
+            _ => m = (0..rng.below(64)).map(|_| rng.next_u64() as u8).collect(),
         }
         out.push(m);
     }
@@ -121,7 +107,7 @@ fn config_parser_survives_mutations() {
     }
     assert!(accepted > 0, "some mutations (e.g. whitespace) must still parse");
     // Overrides too.
-    let mut rng = Rng(5);
+    let mut rng = SplitMix64::new(5);
     for _ in 0..2000 {
         let key = ["model", "meanfield.iterations", "cost.census_width", "post.sps.segments", "x.y", "", "a..b"]
             [rng.below(7)];

@@ -6,27 +6,12 @@ use jem::image::{DisparityMap, Plane, RgbImage};
 use jem::params::WmedianParams;
 use jem::post::planes::{SpsParams, fit_slanted_planes};
 use jem::post::wmedian::weighted_median;
+use jem::rng::SplitMix64;
 
-/// Seeded generator (SplitMix64) with uniform and Gaussian samples.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn gauss(&mut self) -> f64 {
-        let (u, v) = (self.uniform().max(1e-300), self.uniform());
-        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
-    }
+/// A standard normal sample (Box–Muller, cosine branch).
+fn gauss(rng: &mut SplitMix64) -> f64 {
+    let (u, v) = (rng.next_f64().max(1e-300), rng.next_f64());
+    (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
 }
 
 /// A piecewise-planar scene: its image, the true disparity, the region of each pixel, and a degraded map with
@@ -49,7 +34,7 @@ fn synthetic(w: usize, h: usize, noise: f64, seed: u64) -> Synthetic {
 
 /// [`synthetic`] with the given region colours.
 fn synthetic_coloured(w: usize, h: usize, noise: f64, seed: u64, colours: [[f32; 3]; 4]) -> Synthetic {
-    let mut rng = Rng(seed);
+    let mut rng = SplitMix64::new(seed);
     let planes: [[f64; 3]; 4] = [[0.02, 0.01, 10.0], [0.0, 0.15, -3.0], [-0.05, 0.03, 30.0], [0.04, -0.02, 20.0]];
     let (wf, hf) = (w as f64, h as f64);
     let mut image = RgbImage::new(w, h);
@@ -73,18 +58,18 @@ fn synthetic_coloured(w: usize, h: usize, noise: f64, seed: u64, colours: [[f32;
             region[i] = r as u8;
             let pl = planes[r];
             truth[i] = pl[0] * xf + pl[1] * yf + pl[2];
-            let tex = (rng.uniform() as f32 - 0.5) * 30.0;
+            let tex = (rng.next_f64() as f32 - 0.5) * 30.0;
             for (channel, base) in image.channels.iter_mut().zip(colours[r]) {
                 channel[i] = (base + tex).clamp(0.0, 255.0);
             }
             let stripe = x % 37 < 3;
-            disp.data[i] = if stripe || rng.uniform() < 0.1 {
+            disp.data[i] = if stripe || rng.next_f64() < 0.1 {
                 trusted.data[i] = false;
                 f32::INFINITY
-            } else if rng.uniform() < 0.01 {
-                (rng.uniform() * 40.0) as f32
+            } else if rng.next_f64() < 0.01 {
+                (rng.next_f64() * 40.0) as f32
             } else {
-                (truth[i] + noise * rng.gauss()) as f32
+                (truth[i] + noise * gauss(&mut rng)) as f32
             };
         }
     }

@@ -6,6 +6,7 @@ use std::process::{Command, Output};
 
 use jem::Plane;
 use jem::eval::{MaskMode, PaperResults, evaluate_files};
+use jem::rng::SplitMix64;
 use serde_json::Value;
 
 fn jem() -> Command {
@@ -24,22 +25,13 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
-/// A seeded 64-bit LCG (Knuth's MMIX constants); the high byte is the sample.
-struct Lcg(u64);
-
-impl Lcg {
-    fn next_u8(&mut self) -> u8 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (self.0 >> 56) as u8
-    }
-}
-
 /// A synthetic scene: random RGB texture, the right view shifted so every left pixel x matches right pixel x − d.
 fn write_shift_scene(dir: &Path, width: u32, height: u32, d: u32, ndisp: usize, seed: u64) {
     std::fs::create_dir_all(dir).unwrap();
-    let mut rng = Lcg(seed);
+    let mut rng = SplitMix64::new(seed);
     let tex_w = width + d;
-    let tex: Vec<[u8; 3]> = (0..tex_w * height).map(|_| [rng.next_u8(), rng.next_u8(), rng.next_u8()]).collect();
+    let mut byte = || (rng.next_u64() >> 56) as u8;
+    let tex: Vec<[u8; 3]> = (0..tex_w * height).map(|_| [byte(), byte(), byte()]).collect();
     let at = |x: u32, y: u32| image::Rgb(tex[(y * tex_w + x) as usize]);
     // Left x shows texture column x; right x' shows column x' + d, so right x − d shows what left x shows.
     image::RgbImage::from_fn(width, height, at).save(dir.join("im0.png")).unwrap();
