@@ -14,15 +14,18 @@
 //!
 //! Layout `[(y·w + x)·nd + d]` (see [`CostVolume`]). Both volumes are built row-parallel with no per-pixel
 //! allocation; cost O(w·h·nd).
+//!
+//! The row kernel is compiled for AVX2 + FMA + POPCNT as well and picked at run time, with the same results; the
+//! `force-baseline` feature leaves only the baseline version (see [`crate::fastmath`], "SIMD in jem").
 
-use multiversion::multiversion;
 use rayon::prelude::*;
 
 use crate::image::{CostVolume, Plane, RgbImage};
 use crate::params::CostParams;
 
-/// Census codes of a grey image: bit k is set when the k-th window neighbour (row-major, centre skipped) is
-/// darker than the centre. Borders replicate the edge pixels.
+/// Census codes of a grey image: one bit per window neighbour, set when the neighbour is darker than the centre;
+/// the neighbours in row-major order (centre skipped) fill the bits from the highest used one down to bit 0 (of
+/// n = width·height − 1 bits, the k-th neighbour is bit n − 1 − k). Borders replicate the edge pixels.
 ///
 /// The image is padded once with replicated borders, so the inner loop has no clamping and runs over a whole
 /// row per window offset (vectorised across x).
@@ -128,7 +131,7 @@ struct CostRows<'a> {
 
 /// The costs of row `y` (all pixels, `ndisp` labels each) into `row`; `cr_rev` and `gr_rev` are scratch rows.
 /// Compiled for AVX2 + FMA + POPCNT as well, picked at run time (same results).
-#[multiversion(targets("x86_64+avx2+fma+popcnt"))]
+#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma+popcnt")))]
 fn cost_row<'c>(rows: &CostRows<'c>, y: usize, ndisp: usize, cr_rev: &mut [u64], gr_rev: &mut [f32], row: &mut [f32]) {
     let CostRows { cen_l, cen_r, gx_l, gx_r, weights: [a, tc, b, tg], out_of_view } = *rows;
     let w = cen_l.width;
@@ -240,6 +243,177 @@ mod tests {
             }
         }
         (grey_image(w, h, left), grey_image(w, h, right))
+    }
+
+    /// A reference cost, computed entry by entry from the definition in the module doc with plain loops and
+    /// nothing shared with the fast path but the grey conversion ([`RgbImage::to_grey`], the input edge): pixel
+    /// `x` of `this` view against pixel `x + step·d` of `other` (`step` = −1 for the left view, +1 for the
+    /// right), the truncation cost out of view. The Hamming distance of the two Census codes is counted straight
+    /// from the windows (offsets where "the neighbour is darker than the centre" differs between the two pixels),
+    /// without packing codes into bits; borders are replicated by clamping every coordinate.
+    struct NaiveCost {
+        this: Plane<f32>,
+        other: Plane<f32>,
+        step: isize,
+        p: CostParams,
+    }
+
+    impl NaiveCost {
+        /// The grey value at (x, y), coordinates clamped into the image (replicated borders).
+        fn grey(g: &Plane<f32>, x: isize, y: isize) -> f32 {
+            let x = x.clamp(0, g.width as isize - 1) as usize;
+            let y = y.clamp(0, g.height as isize - 1) as usize;
+            g.data[y * g.width + x]
+        }
+
+        /// Sobel x at (x, y): `[-1 0 1; -2 0 2; -1 0 1]`, grouped as (right − left) per row, rows summed top to
+        /// bottom with the middle one doubled.
+        fn sobel(g: &Plane<f32>, x: isize, y: isize) -> f32 {
+            let diff = |yy: isize| Self::grey(g, x + 1, yy) - Self::grey(g, x - 1, yy);
+            diff(y - 1) + 2.0 * diff(y) + diff(y + 1)
+        }
+
+        fn cost(&self, x: usize, y: usize, d: usize) -> f32 {
+            let CostParams {
+                census_width,
+                census_height,
+                census_weight: a,
+                census_trunc: tc,
+                grad_weight: b,
+                grad_trunc: tg,
+            } = self.p;
+            let (x, y) = (x as isize, y as isize);
+            let xo = x + self.step * d as isize;
+            if xo < 0 || xo >= self.this.width as isize {
+                return a * tc + b * tg;
+            }
+            let (rx, ry) = (census_width as isize / 2, census_height as isize / 2);
+            let mut hamming = 0u32;
+            for dy in -ry..=ry {
+                for dx in -rx..=rx {
+                    if (dx, dy) == (0, 0) {
+                        continue;
+                    }
+                    let darker_this = Self::grey(&self.this, x + dx, y + dy) < Self::grey(&self.this, x, y);
+                    let darker_other = Self::grey(&self.other, xo + dx, y + dy) < Self::grey(&self.other, xo, y);
+                    hamming += u32::from(darker_this != darker_other);
+                }
+            }
+            let grad = (Self::sobel(&self.this, x, y) - Self::sobel(&self.other, xo, y)).abs();
+            a * (hamming as f32).min(tc) + b * grad.min(tg)
+        }
+
+        /// The whole volume, layout `[(y·w + x)·nd + d]`.
+        fn volume(&self, ndisp: usize) -> Vec<f32> {
+            let (w, h) = self.this.dims();
+            let mut out = Vec::with_capacity(w * h * ndisp);
+            for y in 0..h {
+                for x in 0..w {
+                    out.extend((0..ndisp).map(|d| self.cost(x, y, d)));
+                }
+            }
+            out
+        }
+    }
+
+    /// A random pair: the right view is the left one shifted by 2 px with every third pixel replaced by noise, so
+    /// costs range from small (near d = 2) to truncated. `levels` quantises the grey values (few levels: many
+    /// equal neighbours, so ties in the Census comparison and flat gradients); with `grey` all channels are equal.
+    fn random_pair(w: usize, h: usize, seed: u64, levels: u64, grey: bool) -> (RgbImage, RgbImage) {
+        let quantise = |v: f32| (v as u64 * levels / 256 * (255 / (levels - 1))) as f32;
+        let channel = |k: u64| noise(w, h, seed * 7 + k).into_iter().map(quantise).collect::<Vec<f32>>();
+        let left_ch: [Vec<f32>; 3] = if grey {
+            let v = channel(0);
+            [v.clone(), v.clone(), v]
+        } else {
+            [channel(0), channel(1), channel(2)]
+        };
+        let fresh = noise(w, h, seed * 7 + 5);
+        let right_ch = left_ch.clone().map(|c| {
+            (0..w * h)
+                .map(|i| {
+                    let (x, y) = (i % w, i / w);
+                    if i % 3 == 0 { quantise(fresh[i]) } else { c[y * w + (x + 2).min(w - 1)] }
+                })
+                .collect()
+        });
+        (RgbImage { width: w, height: h, channels: left_ch }, RgbImage { width: w, height: h, channels: right_ch })
+    }
+
+    /// The fast cost volume ([`cost_row`] through [`build_cost_volume`], and [`derive_right_volume_in`] for the
+    /// right view) equals the naive per-entry cost everywhere: every pixel including the borders and images
+    /// narrower than the Census window, every label including out-of-view ones, ndisp from 1 to above the width.
+    ///
+    /// Tolerance: none, the comparison is bit for bit. The Census comparisons and Hamming counts are integer, and
+    /// every float operation (the Sobel differences and sums, |Δ|, the truncations, the two products and their sum)
+    /// is the same IEEE f32 operation on the same operands in the same order as in the fast path (Rust neither
+    /// contracts `a·b + c` nor reorders float operations, in either SIMD version). The right view's gradient term
+    /// is |gx_R(x) − gx_L(x + d)| here and |gx_L(x + d) − gx_R(x)| in the fast path: equal exactly, since IEEE
+    /// subtraction is antisymmetric under round-to-nearest.
+    #[test]
+    fn cost_volume_matches_the_naive_definition() {
+        let params = [
+            CostParams::default(),
+            CostParams {
+                census_width: 5,
+                census_height: 3,
+                census_weight: 2.0,
+                census_trunc: 5.0,
+                grad_weight: 0.45,
+                grad_trunc: 12.5,
+            },
+            CostParams {
+                census_width: 9,
+                census_height: 7,
+                census_weight: 0.7,
+                census_trunc: 21.0,
+                grad_weight: 1.3,
+                grad_trunc: 90.0,
+            },
+            CostParams {
+                census_width: 1,
+                census_height: 3,
+                census_weight: 1.0,
+                census_trunc: 1.0,
+                grad_weight: 0.1,
+                grad_trunc: 30.0,
+            },
+        ];
+        let mut checked = 0;
+        for (case, &(w, h)) in [(1, 1), (2, 3), (5, 4), (17, 9), (31, 6)].iter().enumerate() {
+            for (levels, grey) in [(256, false), (4, true)] {
+                let (left, right) = random_pair(w, h, case as u64 + levels, levels, grey);
+                let (grey_l, grey_r) = (left.to_grey(), right.to_grey());
+                for p in &params {
+                    let mut ndisps = vec![1, 3, w, w + 5];
+                    ndisps.sort_unstable();
+                    ndisps.dedup();
+                    for ndisp in ndisps {
+                        let what = format!("{w}x{h}, {levels} levels, ndisp {ndisp}, {p:?}");
+                        let vl = build_cost_volume(&left, &right, ndisp, p);
+                        let naive_l = NaiveCost { this: grey_l.clone(), other: grey_r.clone(), step: -1, p: p.clone() };
+                        assert_same_volume(&vl, &naive_l.volume(ndisp), &format!("left view, {what}"));
+                        // The pipeline reuses a stale allocation: start from NaN so an unwritten entry shows.
+                        let vr = derive_right_volume_in(&vl, truncation_cost(p), vec![f32::NAN; w * h * ndisp]);
+                        let naive_r = NaiveCost { this: grey_r.clone(), other: grey_l.clone(), step: 1, p: p.clone() };
+                        assert_same_volume(&vr, &naive_r.volume(ndisp), &format!("right view, {what}"));
+                        checked += 2 * w * h * ndisp;
+                    }
+                }
+            }
+        }
+        assert!(checked > 50_000, "{checked}");
+    }
+
+    /// Bit-for-bit equality of a volume with a reference, naming the first differing entry.
+    fn assert_same_volume(vol: &CostVolume, reference: &[f32], what: &str) {
+        assert_eq!(vol.data.len(), reference.len(), "{what}");
+        let nd = vol.ndisp;
+        for (i, (&got, &want)) in vol.data.iter().zip(reference).enumerate() {
+            let (p, d) = (i / nd, i % nd);
+            let (x, y) = (p % vol.width, p / vol.width);
+            assert_eq!(got.to_bits(), want.to_bits(), "{what}: ({x}, {y}) label {d}: {got} vs naive {want}");
+        }
     }
 
     #[test]

@@ -2,6 +2,20 @@
 //! non-positive arguments (libm's `expf` is a scalar call) and reductions with eight independent lanes (a single
 //! running float sum or minimum is a serial dependency chain). Lanes are combined in a fixed order, so results
 //! do not depend on the thread count. Used by the mean-field softmax and the weighted median's weights.
+//!
+//! # SIMD in jem
+//!
+//! There is no `std::arch`: every kernel is plain Rust that the compiler vectorises. The hottest ones (the cost
+//! row in [`crate::cost`], the splat, blur, slice and embedding of [`crate::lattice`], the mean-field unary and row
+//! updates in [`crate::meanfield`], the row of [`crate::post::wmedian`]) are also compiled for AVX2 + FMA by the
+//! `multiversion` crate, which picks a version at run time. Both versions give bit-identical results: Rust neither
+//! contracts `a·b + c` into a fused multiply-add nor reorders float operations, so the AVX2 clone performs the same
+//! IEEE operations in the same order, only more of them per instruction.
+//!
+//! The cargo feature `force-baseline` compiles those kernels without the AVX2 clone, so that the baseline code also
+//! runs (and is tested) on an AVX2 machine. Each kernel carries
+//! `#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]`; `.ci/run`
+//! builds the binary both ways and checks that they write byte-identical disparity maps.
 
 /// e^x for x ≤ 0, in plain arithmetic that the compiler vectorises (libm's `expf` is a scalar call).
 ///

@@ -26,8 +26,11 @@
 //! lattice (and every filter result) deterministic. Keys are five 16-bit lattice coordinates (the (d+1)-th is
 //! implied by the zero sum; see `Key`); the largest coordinate is ~724 at quarter resolution (SPEC §6), far
 //! from the limit.
+//!
+//! The splat, slice, blur, self-weight and embedding kernels are compiled for AVX2 + FMA as well and picked at run
+//! time, with the same results; the `force-baseline` feature leaves only the baseline versions (see
+//! [`crate::fastmath`], "SIMD in jem").
 
-use multiversion::multiversion;
 use rayon::prelude::*;
 
 use crate::image::RgbImage;
@@ -326,7 +329,7 @@ fn splat_ranges(pix_vertex: &[u32], nvert: usize, count: usize) -> Vec<(usize, u
 /// Splats into the vertices `first..first + acc.len() / nc` by scanning the pixels `pixels` (which include
 /// every pixel contributing to them) in order and adding each one's value to those of its vertices in the range:
 /// every vertex sums its contributions in pixel order. Compiled for AVX2 + FMA as well (same results).
-#[multiversion(targets("x86_64+avx2+fma"))]
+#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 fn splat_scatter(
     lat: &Lattice,
     input: &[f32],
@@ -357,7 +360,7 @@ fn splat_scatter(
 
 /// Slices the pixels `first..` (one `nc`-channel row each in `out`). Compiled for AVX2 + FMA as well (same
 /// results).
-#[multiversion(targets("x86_64+avx2+fma"))]
+#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 fn slice_pixels(lat: &Lattice, vals: &[f32], first: usize, out: &mut [f32], nc: usize) {
     for (p, out) in (first..).zip(out.chunks_exact_mut(nc)) {
         lat.slice(vals, p, out);
@@ -366,7 +369,7 @@ fn slice_pixels(lat: &Lattice, vals: &[f32], first: usize, out: &mut [f32], nc: 
 
 /// One blur pass for the vertices `first..`: `dst = own + ½(down + up)` from `src`, a missing neighbour reading
 /// `zero`. Compiled for AVX2 + FMA as well (same results).
-#[multiversion(targets("x86_64+avx2+fma"))]
+#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 fn blur_vertices(src: &[f32], zero: &[f32], first: usize, nbrs: &[[u32; 2]], dst: &mut [f32], nc: usize) {
     for ((v, dst), &[down, up]) in (first..).zip(dst.chunks_exact_mut(nc)).zip(nbrs) {
         let own = &src[v * nc..][..nc];
@@ -401,7 +404,7 @@ fn self_weight_of(w: &[f32; D1], b: &[f32; D1]) -> f32 {
 /// [`self_weight_of`] × [`OUTPUT_SCALE`] for the pixels whose weights are `weights` (`D1` each), `LANES` pixels
 /// at a time: the same operations in the same order per lane, so the same results, vectorised. Compiled for
 /// AVX2 + FMA as well (same results).
-#[multiversion(targets("x86_64+avx2+fma"))]
+#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 fn self_weights(weights: &[f32], out: &mut [f32]) {
     let b = blur_response();
     let mut groups = weights.chunks_exact(D1 * LANES);
@@ -688,7 +691,7 @@ fn assign_vertex_ids_in_blocks(features: Features<'_>, block: usize) -> (Vec<u32
 /// keys, it grows if there are more; ids below `max_keys`, the whole image's bound, as it may become the global
 /// table), its keys in id order. Compiled for
 /// AVX2 + FMA as well, where the embedding's rounding is one instruction instead of a libm call (same results).
-#[multiversion(targets("x86_64+avx2+fma"))]
+#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 fn number_block<'f>(
     features: Features<'f>,
     first: usize,

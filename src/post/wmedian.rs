@@ -33,8 +33,10 @@
 //!
 //! A target pixel whose window holds no finite disparity keeps its input value (possibly `inf`). Pixels that are
 //! not targets are copied unchanged.
+//!
+//! The row kernel is compiled for AVX2 + FMA as well and picked at run time, with the same results; the
+//! `force-baseline` feature leaves only the baseline version (see [`crate::fastmath`], "SIMD in jem").
 
-use multiversion::multiversion;
 use rayon::prelude::*;
 
 use crate::fastmath::{exp_nonpositive, lane_max, lane_min};
@@ -104,7 +106,7 @@ struct RowContext<'a> {
 
 /// The weighted median at the target pixels of row `y` into `row` (which holds the input there). Compiled for
 /// AVX2 + FMA as well, picked at run time (same results).
-#[multiversion(targets("x86_64+avx2+fma"))]
+#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 fn filter_row<'c>(ctx: &RowContext<'c>, scratch: &mut Scratch, y: usize, row: &mut [f32]) {
     let RowContext { disp, targets, image, spatial, radius: r, inv_rgb } = *ctx;
     let (w, h) = disp.dims();
