@@ -5,8 +5,6 @@
 //! constants left out (they cancel in the softmax), then Q = softmax(−E). Also here, our addition: the floor
 //! under tiny probabilities ([`MIN_RELATIVE_PROBABILITY`]) that keeps subnormal floats out of the lattice.
 
-use multiversion::multiversion;
-
 use crate::fastmath::{exp_nonpositive, lane_min, lane_sum};
 use crate::image::{Plane, RgbImage};
 use crate::params::MeanFieldParams;
@@ -183,7 +181,7 @@ fn normalise(q: &mut [f32]) {
 
 /// Q = softmax(−`scale`·cost) for consecutive pixels of `m` labels. Compiled for AVX2 + FMA as well (same
 /// results).
-#[multiversion(targets("x86_64+avx2+fma"))]
+#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 pub(super) fn unary_marginals(cost: &[f32], scale: f32, m: usize, q: &mut [f32]) {
     for (e, c) in q.chunks_exact_mut(m).zip(cost.chunks_exact(m)) {
         e.iter_mut().zip(c).for_each(|(v, c)| *v = c * scale);

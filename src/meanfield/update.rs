@@ -5,8 +5,6 @@
 //! The update is the only O(N·M) loop of an iteration besides the lattice; it is compiled for AVX2 + FMA as well
 //! and picked at run time, with the same results (Rust never contracts a·b + c into an FMA).
 
-use multiversion::multiversion;
-
 use super::energy::{FullTerm, LocalTerm, pixel_energies, softmax_neg_padded};
 use super::schedule::Pass;
 use super::{MeanField, PairwiseWeights};
@@ -44,7 +42,7 @@ impl RowScratch {
 /// [`Pass::Odd`] and a separate `nbrs.same`, the even pixels are copied from it.
 /// Compiled for AVX2 + FMA as well, picked at run time (same results: no contraction of a·b + c).
 #[allow(clippy::too_many_arguments)]
-#[multiversion(targets("x86_64+avx2+fma"))]
+#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 pub(super) fn update_row<'c, 'r>(
     mf: &MeanField<'c>,
     y: usize,
