@@ -3,8 +3,8 @@
 //! thread count. One `#[ignore]`d test runs both stages on a Middlebury scene for timings.
 
 use jem::image::{DisparityMap, Plane, RgbImage};
-use jem::params::WmedianParams;
-use jem::post::planes::{SpsParams, fit_slanted_planes};
+use jem::params::{SpsParams, WmedianParams};
+use jem::post::planes::fit_slanted_planes;
 use jem::post::wmedian::weighted_median;
 use jem::rng::SplitMix64;
 

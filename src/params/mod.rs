@@ -19,16 +19,16 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-pub use crate::post::planes::SpsParams;
-
 mod cost;
 mod lrc;
 mod meanfield;
+mod sps;
 mod wmedian;
 
 pub use cost::CostParams;
 pub use lrc::{LrcMode, LrcParams};
 pub use meanfield::{MeanFieldParams, Normalization, Schedule};
+pub use sps::SpsParams;
 pub use wmedian::WmedianParams;
 
 /// Which energy the inference minimises.

@@ -12,7 +12,7 @@ use super::{Scene, SpsParams, support_needed};
 use crate::rng::SplitMix64;
 
 /// RANSAC plane per `selected` segment (see the module doc); `None` where the data weight is below
-/// [`support_needed`](super::support_needed) and for the others.
+/// [`support_needed`] and for the others.
 pub(super) fn ransac_planes(
     scene: &Scene,
     labels: &[u32],

@@ -1,0 +1,105 @@
+//! Parameters of slanted-plane smoothing ([`crate::post::planes`]).
+
+use serde::{Deserialize, Serialize};
+
+use super::{check_nonneg, check_positive};
+use crate::error::{Error, Result};
+
+/// Slanted-plane smoothing parameters (see [`crate::post::planes`] for the energy they weight).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SpsParams {
+    /// Run the stage.
+    pub enabled: bool,
+    /// Target number of segments; the initial grid step is √(pixels / segments).
+    pub segments: usize,
+    /// Outer iterations (pixel sweep, labels, planes).
+    pub iterations: usize,
+    /// λ_pos: weight of the squared distance to the segment centre, in grid steps.
+    pub position_weight: f32,
+    /// λ_d: weight of the squared disparity-to-plane residual (px²).
+    pub disparity_weight: f32,
+    /// τ: residuals beyond this (px) are outliers, with the constant cost λ_d·τ², and are left out of the fit.
+    pub inlier_thresh_px: f32,
+    /// λ_bou: cost per 8-neighbour pair in different segments.
+    pub boundary_weight: f32,
+    /// λ_s: weight of the mean squared plane difference of hinge and coplanar boundaries.
+    pub smoothness_weight: f32,
+    /// Constant cost of a hinge boundary.
+    pub hinge_penalty: f32,
+    /// Constant cost of an occlusion boundary.
+    pub occlusion_penalty: f32,
+    /// Cost of an occlusion boundary whose occluder is behind along the whole boundary (scaled by the fraction).
+    pub impossible_penalty: f32,
+    /// Data weight of finite pixels that are not trusted (e.g. filled ones), 0 to 1; trusted pixels weigh 1.
+    pub untrusted_weight: f32,
+    /// A segment needs at least this much data weight to fit a plane without coupled neighbours.
+    pub min_support: f32,
+    /// ... and at least this fraction of its pixel count (0 to 1; 0 = only `min_support` applies). A fraction
+    /// scales with the segment size, which an absolute count does not (cells are 64 px on ArtL Q at 1500
+    /// segments, about 245 px on Motorcycle Q).
+    pub min_support_fraction: f32,
+    /// RANSAC trials per segment at initialisation.
+    pub ransac_iterations: usize,
+    /// Seed of the RANSAC sampling.
+    pub seed: u64,
+}
+
+impl Default for SpsParams {
+    fn default() -> Self {
+        // segments, untrusted_weight, disparity_weight and inlier_thresh_px were tuned on trainingQ with the full pipeline (docs/RESULTS.md);
+        // the rest were set by reasoning about magnitudes.
+        SpsParams {
+            enabled: true,
+            segments: 1500,
+            iterations: 10,
+            position_weight: 300.0,
+            disparity_weight: 100.0,
+            inlier_thresh_px: 3.0,
+            boundary_weight: 30.0,
+            smoothness_weight: 400.0,
+            hinge_penalty: 5.0,
+            occlusion_penalty: 15.0,
+            impossible_penalty: 30.0,
+            untrusted_weight: 0.3,
+            min_support: 10.0,
+            min_support_fraction: 0.0,
+            ransac_iterations: 64,
+            seed: 1,
+        }
+    }
+}
+
+impl SpsParams {
+    /// Checks ranges.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParam`] naming the key.
+    pub fn validate(&self) -> Result<()> {
+        if self.segments == 0 || self.segments > 1 << 24 {
+            return Err(Error::param("post.sps.segments", self.segments, "1 to 16777216"));
+        }
+        if self.iterations > 1000 {
+            return Err(Error::param("post.sps.iterations", self.iterations, "0 to 1000"));
+        }
+        if self.ransac_iterations == 0 || self.ransac_iterations > 100_000 {
+            return Err(Error::param("post.sps.ransac_iterations", self.ransac_iterations, "1 to 100000"));
+        }
+        check_nonneg("post.sps.position_weight", self.position_weight)?;
+        check_nonneg("post.sps.disparity_weight", self.disparity_weight)?;
+        check_positive("post.sps.inlier_thresh_px", self.inlier_thresh_px)?;
+        check_nonneg("post.sps.boundary_weight", self.boundary_weight)?;
+        check_nonneg("post.sps.smoothness_weight", self.smoothness_weight)?;
+        check_nonneg("post.sps.hinge_penalty", self.hinge_penalty)?;
+        check_nonneg("post.sps.occlusion_penalty", self.occlusion_penalty)?;
+        check_nonneg("post.sps.impossible_penalty", self.impossible_penalty)?;
+        check_nonneg("post.sps.min_support", self.min_support)?;
+        if !(0.0..=1.0).contains(&self.min_support_fraction) {
+            return Err(Error::param("post.sps.min_support_fraction", self.min_support_fraction, "0 to 1"));
+        }
+        if !(0.0..=1.0).contains(&self.untrusted_weight) {
+            return Err(Error::param("post.sps.untrusted_weight", self.untrusted_weight, "0 to 1"));
+        }
+        Ok(())
+    }
+}
