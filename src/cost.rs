@@ -1,4 +1,4 @@
-//! Matching cost volume: Census transform + truncated gradient difference (paper §2, SPEC §2).
+//! Matching cost volume: Census transform + truncated gradient difference (paper §2).
 //!
 //! `C_L(x, y, d) = a·min(H(census_L(x, y), census_R(x − d, y)), τc) + b·min(|gx_L(x, y) − gx_R(x − d, y)|, τg)`,
 //! where `H` is the Hamming distance of the Census codes on the grey image (window `census_width ×
