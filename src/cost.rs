@@ -212,17 +212,10 @@ pub fn argmin(values: &[f32]) -> usize {
 mod tests {
     use super::*;
 
-    /// Deterministic pseudo-random texture (xorshift), values 0..255.
+    /// Deterministic pseudo-random texture, integer values 0..255.
     pub(crate) fn noise(w: usize, h: usize, seed: u64) -> Vec<f32> {
-        let mut s = seed.max(1);
-        (0..w * h)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                (s % 256) as f32
-            })
-            .collect()
+        let mut rng = crate::rng::SplitMix64::new(seed);
+        (0..w * h).map(|_| (rng.next_u64() % 256) as f32).collect()
     }
 
     fn grey_image(w: usize, h: usize, v: Vec<f32>) -> RgbImage {

@@ -28,6 +28,7 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::image::RgbImage;
+use crate::rng::SplitMix64;
 
 /// One degradation step (see the module doc for the models).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -263,24 +264,19 @@ fn gaussian_blur(data: &[f32], w: usize, h: usize, sigma: f64) -> Vec<f32> {
     out
 }
 
-/// Standard normal samples (Box–Muller on a SplitMix64 stream).
+/// Standard normal samples (Box–Muller on a [`SplitMix64`] stream).
 struct Gaussian {
-    state: u64,
+    rng: SplitMix64,
     spare: Option<f64>,
 }
 
 impl Gaussian {
     fn new(seed: u64) -> Self {
-        Gaussian { state: seed, spare: None }
+        Gaussian { rng: SplitMix64::new(seed), spare: None }
     }
 
     fn uniform(&mut self) -> f64 {
-        self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
+        self.rng.next_f64()
     }
 
     fn sample(&mut self) -> f64 {

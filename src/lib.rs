@@ -321,17 +321,10 @@ fn estimate_view(
 /// Helpers shared by the unit tests.
 #[cfg(test)]
 pub(crate) mod test_util {
-    /// Seeded xorshift noise in 0..1: reproducible test inputs without a random-number crate.
+    /// Seeded uniform noise in 0..1 ([`crate::rng::SplitMix64`]): reproducible test inputs.
     pub(crate) fn rand_vec(n: usize, seed: u64) -> Vec<f32> {
-        let mut s = seed.max(1);
-        (0..n)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                (s >> 40) as f32 / (1u64 << 24) as f32
-            })
-            .collect()
+        let mut rng = crate::rng::SplitMix64::new(seed);
+        (0..n).map(|_| (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32).collect()
     }
 }
 

@@ -337,14 +337,14 @@ mod tests {
         v[v.len() - 1].0
     }
 
-    /// A small seeded generator (xorshift64*), enough for test data.
-    struct Rng(u64);
+    /// Seeded test data: [`crate::rng::SplitMix64`] with uniform `f32` draws in 0..1.
+    struct Rng(crate::rng::SplitMix64);
     impl Rng {
+        fn new(seed: u64) -> Self {
+            Rng(crate::rng::SplitMix64::new(seed))
+        }
         fn next_f32(&mut self) -> f32 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 40) as f32 / (1u64 << 24) as f32
+            (self.0.next_u64() >> 40) as f32 / (1u64 << 24) as f32
         }
     }
 
@@ -383,7 +383,7 @@ mod tests {
 
     #[test]
     fn quickselect_matches_sorting() {
-        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15);
         for n in 1..60 {
             for _ in 0..20 {
                 // Few distinct values so ties are common; some zero weights.
@@ -422,7 +422,7 @@ mod tests {
 
     #[test]
     fn binned_median_matches_sorting() {
-        let mut rng = Rng(0x1234_5678_9abc_def1);
+        let mut rng = Rng::new(0x1234_5678_9abc_def1);
         for n in [1, 2, 3, 10, 100, 361, 1000] {
             for trial in 0..50 {
                 // Continuous values (most bins hold a few), clustered values (one bin holds most), and outliers
@@ -453,7 +453,7 @@ mod tests {
 
     #[test]
     fn guess_is_accepted_only_when_it_is_the_median() {
-        let mut rng = Rng(77);
+        let mut rng = Rng::new(77);
         for trial in 0..500 {
             let n = 1 + trial % 40;
             let items: Vec<(f32, f32)> =
@@ -566,7 +566,7 @@ mod tests {
     }
 
     fn random_scene(w: usize, h: usize, seed: u64) -> (DisparityMap, RgbImage, Plane<bool>) {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         let mut disp = Plane::new(w, h, 0.0);
         let mut img = RgbImage::new(w, h);
         let mut targets = Plane::new(w, h, false);
