@@ -12,6 +12,16 @@
 //!   ─► post::fill ─► post::wmedian ─► post::planes
 //! ```
 //!
+//! Where things are:
+//! - the stages: [`cost`] (Census + gradient), [`lattice`] (the permutohedral filter), [`meanfield`] (Algorithm 1;
+//!   its files tell the paper's parts from our additions), [`post`] (`lr_check`, `fill`, `wmedian`, and
+//!   `planes/` for slanted-plane smoothing);
+//! - their parameters: [`params`], one file per stage, each struct with its defaults and `validate()`;
+//! - around the pipeline: [`io`] (PFM, PNG, EXR, calib.txt; atomic writes), [`image`] (planes, volumes, pairs),
+//!   [`scale`] (`--downscale`), [`batch`] (scene trees), [`eval`] (MiddEval3 scoring and reports), [`viz`]
+//!   (colour maps), [`synth`] (synthetic scenes with exact ground truth), [`degrade`] (seeded degraded copies for
+//!   robustness measurements), [`table`] and [`fastmath`] (shared helpers).
+//!
 //! With `downscale = N > 1` ([`Params::downscale`]) the pipeline runs on the pair reduced by N
 //! (`scale::downsample_pair`) and the result is brought back to the input size (`scale::upsample_disparity`).
 //!
