@@ -33,6 +33,15 @@ use crate::params::CostParams;
 /// # Panics
 /// If the window is even-sized or has more than 65 pixels (validated in [`crate::Params::validate`]).
 pub fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<u64> {
+    census_transform_banded(grey, win_w, win_h, 0.0)
+}
+
+/// [`census_transform`] with a dead band: bit k is set when the neighbour is darker than the centre by more than
+/// `band` grey levels.
+///
+/// # Panics
+/// As [`census_transform`].
+pub fn census_transform_banded(grey: &Plane<f32>, win_w: usize, win_h: usize, band: f32) -> Plane<u64> {
     assert!(win_w % 2 == 1 && win_h % 2 == 1 && win_w * win_h <= 65, "invalid census window {win_w}x{win_h}");
     let (w, h) = grey.dims();
     let (rx, ry) = (win_w / 2, win_h / 2);
@@ -40,7 +49,7 @@ pub fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<
     let pw = w + 2 * rx;
     let mut out = Plane::new(w, h, 0u64);
     out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, codes)| {
-        let center = &padded[(y + ry) * pw + rx..][..w];
+        let center: Vec<f32> = padded[(y + ry) * pw + rx..][..w].iter().map(|c| c - band).collect();
         for dy in 0..win_h {
             let nrow = &padded[(y + dy) * pw..][..pw];
             for dx in 0..win_w {
@@ -48,7 +57,7 @@ pub fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<
                     continue;
                 }
                 let nbr = &nrow[dx..][..w];
-                for ((code, &n), &c) in codes.iter_mut().zip(nbr).zip(center) {
+                for ((code, &n), &c) in codes.iter_mut().zip(nbr).zip(&center) {
                     *code = (*code << 1) | u64::from(n < c);
                 }
             }
@@ -101,8 +110,8 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
     let (w, h) = left.dims();
     let (grey_l, grey_r) = (left.to_grey(), right.to_grey());
     let (cen_l, cen_r) = rayon::join(
-        || census_transform(&grey_l, p.census_width, p.census_height),
-        || census_transform(&grey_r, p.census_width, p.census_height),
+        || census_transform_banded(&grey_l, p.census_width, p.census_height, p.census_dead_band),
+        || census_transform_banded(&grey_r, p.census_width, p.census_height, p.census_dead_band),
     );
     let (gx_l, gx_r) = (sobel_x(&grey_l), sobel_x(&grey_r));
     let out_of_view = truncation_cost(p);
@@ -270,6 +279,7 @@ mod tests {
             let CostParams {
                 census_width,
                 census_height,
+                census_dead_band: band,
                 census_weight: a,
                 census_trunc: tc,
                 grad_weight: b,
@@ -287,8 +297,8 @@ mod tests {
                     if (dx, dy) == (0, 0) {
                         continue;
                     }
-                    let darker_this = Self::grey(&self.this, x + dx, y + dy) < Self::grey(&self.this, x, y);
-                    let darker_other = Self::grey(&self.other, xo + dx, y + dy) < Self::grey(&self.other, xo, y);
+                    let darker_this = Self::grey(&self.this, x + dx, y + dy) < Self::grey(&self.this, x, y) - band;
+                    let darker_other = Self::grey(&self.other, xo + dx, y + dy) < Self::grey(&self.other, xo, y) - band;
                     hamming += u32::from(darker_this != darker_other);
                 }
             }
@@ -350,6 +360,7 @@ mod tests {
             CostParams {
                 census_width: 5,
                 census_height: 3,
+                census_dead_band: 3.0,
                 census_weight: 2.0,
                 census_trunc: 5.0,
                 grad_weight: 0.45,
@@ -358,6 +369,7 @@ mod tests {
             CostParams {
                 census_width: 9,
                 census_height: 7,
+                census_dead_band: 0.5,
                 census_weight: 0.7,
                 census_trunc: 21.0,
                 grad_weight: 1.3,
@@ -366,6 +378,7 @@ mod tests {
             CostParams {
                 census_width: 1,
                 census_height: 3,
+                census_dead_band: 0.0,
                 census_weight: 1.0,
                 census_trunc: 1.0,
                 grad_weight: 0.1,

@@ -37,6 +37,7 @@
 #![deny(missing_docs)]
 
 pub mod batch;
+pub mod condition;
 pub mod cost;
 pub mod degrade;
 pub mod error;
@@ -56,6 +57,8 @@ pub mod table;
 pub mod viz;
 
 use std::time::{Duration, Instant};
+
+use rayon::prelude::*;
 
 use params::Schedule;
 
@@ -241,11 +244,40 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
             ),
         ));
     }
+    let c = &params.condition;
+    let conditioned;
+    let mut cost_params = params.cost.clone();
+    let mut prior_weight = 0.0f32;
+    let pair = if c.is_active() {
+        let (p, stats) = t.time("condition", || condition::condition_pair(pair, c));
+        prior_weight = c.prior_base + c.prior_per_sigma * stats.noise[0].max(stats.noise[1]);
+        cost_params.census_dead_band += c.census_band * stats.residual_grey_noise;
+        conditioned = p;
+        &conditioned
+    } else {
+        pair
+    };
     let post = &params.post;
     let need_right = post.lrc.mode != LrcMode::Off;
 
     on_stage("cost volume");
-    let cost_left = t.time("cost", || cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &params.cost));
+    let mut cost_left = t.time("cost", || cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &cost_params));
+    if prior_weight > 0.0 && pair.left.width >= 16 && pair.left.height >= 16 {
+        // The same pipeline on the pair reduced 2× (conditioning off: the pair is conditioned already), then a
+        // penalty for labels far from its answer.
+        let mut coarse_params = params.clone();
+        coarse_params.downscale = 2;
+        coarse_params.condition = params::ConditionParams::default();
+        let coarse = t.time("coarse prior", || run_observed(&coarse_params, pair, &|_| {}))?;
+        let (m, margin, trunc) = (cost_left.ndisp, c.prior_margin_px, c.prior_trunc_px);
+        cost_left.data.par_chunks_mut(m).zip(coarse.disparity.data.par_iter()).for_each(|(costs, &dc)| {
+            if dc.is_finite() {
+                for (d, v) in costs.iter_mut().enumerate() {
+                    *v += prior_weight * ((d as f32 - dc).abs() - margin).clamp(0.0, trunc);
+                }
+            }
+        });
+    }
 
     // Left inference first, then the right volume from the left one; the left volume is spent before the right
     // inference: at most one volume plus one view's inference buffers are alive at a time (three N × M buffers

@@ -13,6 +13,9 @@ pub struct CostParams {
     pub census_width: usize,
     /// Census window height in pixels (odd); width × height − 1 ≤ 64 bits.
     pub census_height: usize,
+    /// Census dead band in grey levels: a bit is set only when the neighbour is darker than the centre by more
+    /// than this (0 = the plain Census).
+    pub census_dead_band: f32,
     /// Weight `a` of the Census Hamming distance.
     pub census_weight: f32,
     /// Truncation τc of the Hamming distance, in bits.
@@ -28,6 +31,7 @@ impl Default for CostParams {
         CostParams {
             census_width: 7,
             census_height: 7,
+            census_dead_band: 0.0,
             census_weight: 1.0,
             census_trunc: 48.0,
             grad_weight: 0.3,
@@ -54,6 +58,7 @@ impl CostParams {
                 "at most 65 (the Census code is 64 bits)",
             ));
         }
+        check_nonneg("cost.census_dead_band", self.census_dead_band)?;
         check_nonneg("cost.census_weight", self.census_weight)?;
         check_nonneg("cost.census_trunc", self.census_trunc)?;
         check_nonneg("cost.grad_weight", self.grad_weight)?;

@@ -19,12 +19,14 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+mod condition;
 mod cost;
 mod lrc;
 mod meanfield;
 mod sps;
 mod wmedian;
 
+pub use condition::ConditionParams;
 pub use cost::CostParams;
 pub use lrc::{LrcMode, LrcParams};
 pub use meanfield::{MeanFieldParams, Normalization, Schedule};
@@ -93,6 +95,8 @@ pub struct Params {
     /// the input size (bilinear, × N); 1 = full resolution. About 1/N³ of the memory and time of inference.
     /// See [`crate::scale`].
     pub downscale: usize,
+    /// Input conditioning (photometric alignment, contrast, denoising).
+    pub condition: ConditionParams,
     /// Matching cost.
     pub cost: CostParams,
     /// Mean-field inference.
@@ -106,6 +110,7 @@ impl Default for Params {
         Params {
             model: Model::Jem,
             downscale: 1,
+            condition: Default::default(),
             cost: CostParams::default(),
             meanfield: MeanFieldParams::default(),
             post: PostParams::default(),
@@ -171,6 +176,7 @@ impl Params {
         if self.downscale == 0 {
             return Err(Error::param("downscale", 0, "an integer >= 1; 1 = full resolution"));
         }
+        self.condition.validate()?;
         self.cost.validate()?;
         self.meanfield.validate()?;
         self.post.validate()

@@ -1,0 +1,266 @@
+//! Input conditioning (our addition, not in the paper): measure the pair, then make it look like the clean,
+//! well-exposed images every parameter was tuned on, so that one configuration serves any camera.
+//!
+//! 1. **Photometric alignment.** The right view's channels are mapped onto the left view's by histogram
+//!    specification (a monotonic lookup per channel): a view that is darker, brighter, or has another tone curve
+//!    or white balance gets the left view's. Census is invariant to monotonic maps already; the gradient term, the
+//!    colour weights of the local term and the bilateral kernel are not.
+//! 2. **Contrast.** Both views are stretched by one affine map so that the left view's robust range (the
+//!    0.5th to the 99.5th percentile of grey) spans [`TARGET_RANGE`] grey levels, never compressed: a dark
+//!    image gets the contrast the colour thresholds (μ, σf, the weighted median's and the planes' colour
+//!    weights) assume.
+//! 3. **Noise.** The noise level σn of each view is measured after the stretch ([`estimate_noise`]), and each
+//!    view is smoothed by an edge-preserving bilateral filter whose range scale follows σn
+//!    (`denoise_strength` × σn); a clean image (σn below 1 grey level) is left nearly untouched.
+//!
+//! 4. **Coarse prior** (in [`crate::run`]): with `prior_base` or `prior_per_sigma` > 0 the whole pipeline first
+//!    runs on the conditioned pair reduced 2× (noise halves), and the full-resolution cost of label d gets
+//!    λ·min(max(|d − d_coarse| − margin, 0), trunc), λ = `prior_base` + `prior_per_sigma`·σn: the coarse level
+//!    removes the gross errors that fine-scale noise causes, the fine level keeps the precision.
+//!
+//! Everything is measured on the pair itself; nothing depends on the dataset. All of it is off by default: it is
+//! experimental (issue 15), measured in docs/tuning-log.md ("Robustness: first measurements").
+
+use rayon::prelude::*;
+
+use crate::image::{Plane, RgbImage, StereoPair};
+use crate::params::ConditionParams;
+
+/// The grey-level span the left view's 0.5–99.5 % range is stretched to (when it is smaller).
+pub const TARGET_RANGE: f32 = 230.0;
+
+/// What was measured on a pair, for diagnostics (`jem -v`) and the adaptive stages.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PairStats {
+    /// The contrast gain applied to both views (1 = none).
+    pub gain: f32,
+    /// Noise σ of the left and right view after the stretch, in grey levels (mean of the channels).
+    pub noise: [f32; 2],
+    /// Noise σ of the grey images after denoising (the larger view's).
+    pub residual_grey_noise: f32,
+}
+
+/// Conditions a pair as the module doc says; returns the new pair and what was measured.
+pub fn condition_pair(pair: &StereoPair, p: &ConditionParams) -> (StereoPair, PairStats) {
+    let mut left = pair.left.clone();
+    let mut right = pair.right.clone();
+    if p.match_histograms {
+        right = match_histograms(&right, &left);
+    }
+    let mut gain = 1.0;
+    if p.stretch {
+        let grey = left.to_grey();
+        let (lo, hi) = percentiles(&grey.data, 0.005, 0.995);
+        let range = (hi - lo).max(1.0);
+        if range < TARGET_RANGE {
+            gain = TARGET_RANGE / range;
+            let centre = 0.5 * (lo + hi);
+            for img in [&mut left, &mut right] {
+                for ch in &mut img.channels {
+                    ch.iter_mut().for_each(|v| *v = ((*v - centre) * gain + 127.5).clamp(0.0, 255.0));
+                }
+            }
+        }
+    }
+    let noise = [channel_noise(&left), channel_noise(&right)];
+    if p.denoise_strength > 0.0 {
+        left = bilateral(&left, p.denoise_sigma_xy, p.denoise_strength * noise[0]);
+        right = bilateral(&right, p.denoise_sigma_xy, p.denoise_strength * noise[1]);
+    }
+    let residual_grey_noise = estimate_noise(&left.to_grey()).max(estimate_noise(&right.to_grey()));
+    let out = StereoPair { left, right, ndisp: pair.ndisp };
+    (out, PairStats { gain, noise, residual_grey_noise })
+}
+
+/// The mean of the three channels' noise σ ([`estimate_noise`]).
+pub fn channel_noise(img: &RgbImage) -> f32 {
+    let (w, h) = img.dims();
+    let sum: f32 = img.channels.iter().map(|c| estimate_noise(&Plane::from_vec(w, h, c.clone()))).sum();
+    sum / 3.0
+}
+
+/// The values at fractions `a` and `b` of the sorted data (nearest rank).
+fn percentiles(data: &[f32], a: f64, b: f64) -> (f32, f32) {
+    let mut v: Vec<f32> = data.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return (0.0, 0.0);
+    }
+    v.sort_unstable_by(f32::total_cmp);
+    let at = |f: f64| v[((v.len() - 1) as f64 * f).round() as usize];
+    (at(a), at(b))
+}
+
+/// Noise σ of a grey image in grey levels, robust to texture: the 3 × 3 operator
+/// `[1 −2 1; −2 4 −2; 1 −2 1]` (Immerkær, 1996) cancels planes and smooth ramps, leaving 6σ of white noise; its
+/// absolute response is taken at the pixels whose Sobel gradient is in the lower half (flat regions), and the
+/// median of those, divided by 6 × 0.6745 (the median absolute value of a unit normal), estimates σ.
+pub fn estimate_noise(grey: &Plane<f32>) -> f32 {
+    let (w, h) = grey.dims();
+    if w < 3 || h < 3 {
+        return 0.0;
+    }
+    let mut resp = Vec::with_capacity((w - 2) * (h - 2));
+    let mut grad = Vec::with_capacity((w - 2) * (h - 2));
+    for y in 1..h - 1 {
+        let (u, m, d) = (grey.row(y - 1), grey.row(y), grey.row(y + 1));
+        for x in 1..w - 1 {
+            let l = u[x - 1] - 2.0 * u[x] + u[x + 1] - 2.0 * (m[x - 1] - 2.0 * m[x] + m[x + 1])
+                + (d[x - 1] - 2.0 * d[x] + d[x + 1]);
+            let gx = (u[x + 1] - u[x - 1]) + 2.0 * (m[x + 1] - m[x - 1]) + (d[x + 1] - d[x - 1]);
+            let gy = (d[x - 1] - u[x - 1]) + 2.0 * (d[x] - u[x]) + (d[x + 1] - u[x + 1]);
+            resp.push(l.abs());
+            grad.push(gx.abs() + gy.abs());
+        }
+    }
+    let (_, median_grad) = percentiles(&grad, 0.0, 0.5);
+    let flat: Vec<f32> = resp.iter().zip(&grad).filter(|(_, g)| **g <= median_grad).map(|(r, _)| *r).collect();
+    let (_, med) = percentiles(&flat, 0.0, 0.5);
+    med / (6.0 * 0.6745)
+}
+
+/// Maps each channel of `src` onto the distribution of the same channel of `reference` (histogram
+/// specification on 256 bins: each source level goes to the reference level of the same cumulative frequency,
+/// taken at the middle of the source level's mass).
+fn match_histograms(src: &RgbImage, reference: &RgbImage) -> RgbImage {
+    let mut out = src.clone();
+    for c in 0..3 {
+        let hs = histogram(&src.channels[c]);
+        let hr = histogram(&reference.channels[c]);
+        let (ns, nr) = (src.len() as f64, reference.len() as f64);
+        let mut cum_r = Vec::with_capacity(256);
+        let mut acc = 0.0;
+        for v in hr {
+            acc += v as f64 / nr;
+            cum_r.push(acc);
+        }
+        let mut lut = [0.0f32; 256];
+        let mut acc = 0.0;
+        for (level, &count) in hs.iter().enumerate() {
+            let mid = acc + 0.5 * count as f64 / ns;
+            acc += count as f64 / ns;
+            // The reference level where the cumulative frequency reaches `mid`, interpolated within the bin.
+            let k = cum_r.partition_point(|&c| c < mid).min(255);
+            let below = if k == 0 { 0.0 } else { cum_r[k - 1] };
+            let width = (cum_r[k] - below).max(1e-12);
+            lut[level] = (k as f64 - 0.5 + ((mid - below) / width).clamp(0.0, 1.0)).clamp(0.0, 255.0) as f32;
+        }
+        out.channels[c].iter_mut().for_each(|v| *v = lut[v.round().clamp(0.0, 255.0) as usize]);
+    }
+    out
+}
+
+fn histogram(data: &[f32]) -> [u64; 256] {
+    let mut h = [0u64; 256];
+    for v in data {
+        h[v.round().clamp(0.0, 255.0) as usize] += 1;
+    }
+    h
+}
+
+/// A bilateral filter on RGB (spatial σ `sigma_xy` pixels, radius ⌈2σ⌉; range σ `sigma_range` on the Euclidean
+/// colour distance); the image unchanged if `sigma_range` ≤ 0.
+fn bilateral(img: &RgbImage, sigma_xy: f32, sigma_range: f32) -> RgbImage {
+    if sigma_range <= 0.0 || sigma_xy <= 0.0 {
+        return img.clone();
+    }
+    let (w, h) = img.dims();
+    let r = (2.0 * sigma_xy).ceil() as isize;
+    let spatial: Vec<(isize, isize, f32)> = (-r..=r)
+        .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
+        .map(|(dx, dy)| (dx, dy, -((dx * dx + dy * dy) as f32) / (2.0 * sigma_xy * sigma_xy)))
+        .collect();
+    let inv_range = 1.0 / (2.0 * sigma_range * sigma_range);
+    let mut out = RgbImage::new(w, h);
+    let [r_out, g_out, b_out] = &mut out.channels;
+    r_out.par_chunks_mut(w).zip(g_out.par_chunks_mut(w)).zip(b_out.par_chunks_mut(w)).enumerate().for_each(
+        |(y, ((ro, go), bo))| {
+            for x in 0..w {
+                let c = img.rgb(y * w + x);
+                let (mut acc, mut total) = ([0.0f32; 3], 0.0f32);
+                for &(dx, dy, ls) in &spatial {
+                    let (xx, yy) = (x as isize + dx, y as isize + dy);
+                    if xx < 0 || yy < 0 || xx >= w as isize || yy >= h as isize {
+                        continue;
+                    }
+                    let q = img.rgb(yy as usize * w + xx as usize);
+                    let d2 = (q[0] - c[0]).powi(2) + (q[1] - c[1]).powi(2) + (q[2] - c[2]).powi(2);
+                    let wt = (ls - d2 * inv_range).exp();
+                    total += wt;
+                    acc.iter_mut().zip(q).for_each(|(a, v)| *a += wt * v);
+                }
+                (ro[x], go[x], bo[x]) = (acc[0] / total, acc[1] / total, acc[2] / total);
+            }
+        },
+    );
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    /// A textured image (a sum of ramps and a checker) with Gaussian noise of σ `sigma` per channel.
+    fn textured(w: usize, h: usize, sigma: f64, seed: u64) -> RgbImage {
+        let mut rng = SplitMix64::new(seed);
+        let mut img = RgbImage::new(w, h);
+        for i in 0..w * h {
+            let (x, y) = (i % w, i / w);
+            let base = 60.0 + 0.4 * x as f64 + 0.3 * y as f64 + if (x / 8 + y / 8) % 2 == 0 { 40.0 } else { 0.0 };
+            for c in 0..3 {
+                let (u, v) = (rng.next_f64().max(1e-300), rng.next_f64());
+                let n = (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos();
+                img.channels[c][i] = (base + 10.0 * c as f64 + sigma * n).round().clamp(0.0, 255.0) as f32;
+            }
+        }
+        img
+    }
+
+    /// The estimator finds the noise it is given (within 10 %), and about the rounding noise (0.29) without.
+    #[test]
+    fn noise_estimate_matches_the_added_noise() {
+        for sigma in [2.0, 5.0, 10.0] {
+            let est = channel_noise(&textured(160, 120, sigma, 3));
+            assert!((f64::from(est) / sigma - 1.0).abs() < 0.1, "σ {sigma}: estimated {est}");
+        }
+        assert!(channel_noise(&textured(160, 120, 0.0, 3)) < 0.6);
+    }
+
+    /// A right view with another gain and gamma is mapped back onto the left view's levels.
+    #[test]
+    fn histogram_matching_undoes_a_tone_curve() {
+        let left = textured(120, 80, 2.0, 5);
+        let mut right = left.clone();
+        for ch in &mut right.channels {
+            ch.iter_mut().for_each(|v| *v = (255.0 * (0.6 * *v / 255.0).powf(1.4)).round());
+        }
+        let matched = match_histograms(&right, &left);
+        let mean_abs = |a: &RgbImage| {
+            a.channels[1].iter().zip(&left.channels[1]).map(|(p, q)| (p - q).abs()).sum::<f32>() / a.len() as f32
+        };
+        assert!(mean_abs(&right) > 30.0, "the tone curve changes the image");
+        assert!(mean_abs(&matched) < 2.0, "matched: {}", mean_abs(&matched));
+    }
+
+    /// A dark pair is stretched by one gain for both views; a full-contrast pair is left alone; off is off.
+    #[test]
+    fn stretch_only_for_low_contrast() {
+        // Full contrast: a ramp over the whole 8-bit range.
+        let mut bright = RgbImage::new(64, 48);
+        bright
+            .channels
+            .iter_mut()
+            .for_each(|c| c.iter_mut().enumerate().for_each(|(i, v)| *v = (255 * (i % 64) / 63) as f32));
+        let mut dark = textured(64, 48, 1.0, 7);
+        dark.channels.iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v = (*v * 0.2).round()));
+        let p = ConditionParams { stretch: true, ..ConditionParams::default() };
+        let pair = |img: &RgbImage| StereoPair { left: img.clone(), right: img.clone(), ndisp: 4 };
+        let (out, stats) = condition_pair(&pair(&dark), &p);
+        assert!(stats.gain > 3.0, "gain {}", stats.gain);
+        assert_eq!(out.left, out.right);
+        let (_, stats) = condition_pair(&pair(&bright), &p);
+        assert_eq!(stats.gain, 1.0);
+        let (out, _) = condition_pair(&pair(&dark), &ConditionParams::default());
+        assert_eq!(out.left, dark);
+    }
+}

@@ -1,0 +1,76 @@
+//! Parameters of input conditioning and the coarse prior ([`crate::condition`]).
+
+use serde::{Deserialize, Serialize};
+
+use super::check_nonneg;
+use crate::error::{Error, Result};
+
+/// Input conditioning and the coarse prior ([`crate::condition`]); everything off by default (experimental: see
+/// docs/tuning-log.md, "Robustness").
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ConditionParams {
+    /// Map the right view's histogram onto the left's.
+    pub match_histograms: bool,
+    /// Stretch the contrast of a low-contrast pair.
+    pub stretch: bool,
+    /// Bilateral range scale as a multiple of the measured noise σ; 0 = no denoising.
+    pub denoise_strength: f32,
+    /// Spatial σ of the denoising filter, in pixels.
+    pub denoise_sigma_xy: f32,
+    /// Census dead band as a multiple of the grey noise σ measured after denoising; 0 = none.
+    pub census_band: f32,
+    /// Coarse prior: the pipeline first runs on the pair reduced 2×, and the full-resolution cost gets
+    /// `prior_per_sigma` × σn × min(max(|d − d_coarse| − `prior_margin_px`, 0), `prior_trunc_px`); 0 = off.
+    pub prior_per_sigma: f32,
+    /// A fixed prior weight added to the noise-scaled one.
+    pub prior_base: f32,
+    /// Labels within this distance of the coarse disparity (full-resolution px) are free.
+    pub prior_margin_px: f32,
+    /// The penalty stops growing beyond this distance past the margin.
+    pub prior_trunc_px: f32,
+}
+
+impl Default for ConditionParams {
+    fn default() -> Self {
+        ConditionParams {
+            match_histograms: false,
+            stretch: false,
+            denoise_strength: 0.0,
+            denoise_sigma_xy: 1.5,
+            census_band: 0.0,
+            prior_per_sigma: 0.0,
+            prior_base: 0.0,
+            prior_margin_px: 1.0,
+            prior_trunc_px: 8.0,
+        }
+    }
+}
+
+impl ConditionParams {
+    /// Whether any part is on (when none is, the pair goes to the cost unchanged).
+    pub fn is_active(&self) -> bool {
+        self.match_histograms
+            || self.stretch
+            || self.denoise_strength > 0.0
+            || self.census_band > 0.0
+            || self.prior_per_sigma > 0.0
+            || self.prior_base > 0.0
+    }
+
+    /// Checks every value's range.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParam`] naming the first offending key, its value and the valid range.
+    pub fn validate(&self) -> Result<()> {
+        check_nonneg("condition.denoise_strength", self.denoise_strength)?;
+        if !(self.denoise_sigma_xy.is_finite() && (0.0..=10.0).contains(&self.denoise_sigma_xy)) {
+            return Err(Error::param("condition.denoise_sigma_xy", self.denoise_sigma_xy, "0 to 10"));
+        }
+        check_nonneg("condition.census_band", self.census_band)?;
+        check_nonneg("condition.prior_per_sigma", self.prior_per_sigma)?;
+        check_nonneg("condition.prior_base", self.prior_base)?;
+        check_nonneg("condition.prior_margin_px", self.prior_margin_px)?;
+        check_nonneg("condition.prior_trunc_px", self.prior_trunc_px)
+    }
+}
