@@ -261,16 +261,22 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
     let need_right = post.lrc.mode != LrcMode::Off;
 
     on_stage("cost volume");
-    let mut cost_left = t.time("cost", || cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &cost_params));
-    if prior_weight > 0.0 && pair.left.width >= 16 && pair.left.height >= 16 {
+    // Before the full-resolution volume exists, so the two runs' buffers are never alive together.
+    let coarse = if prior_weight > 0.0 && pair.left.width >= 16 && pair.left.height >= 16 {
         // The same pipeline on the pair reduced 2× (conditioning off: the pair is conditioned already), then a
         // penalty for labels far from its answer.
         let mut coarse_params = params.clone();
         coarse_params.downscale = 2;
-        coarse_params.condition = params::ConditionParams::default();
+        coarse_params.condition = params::ConditionParams::off();
         let coarse = t.time("coarse prior", || run_observed(&coarse_params, pair, &|_| {}))?;
+        Some(coarse.disparity)
+    } else {
+        None
+    };
+    let mut cost_left = t.time("cost", || cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &cost_params));
+    if let Some(coarse) = coarse {
         let (m, margin, trunc) = (cost_left.ndisp, c.prior_margin_px, c.prior_trunc_px);
-        cost_left.data.par_chunks_mut(m).zip(coarse.disparity.data.par_iter()).for_each(|(costs, &dc)| {
+        cost_left.data.par_chunks_mut(m).zip(coarse.data.par_iter()).for_each(|(costs, &dc)| {
             if dc.is_finite() {
                 for (d, v) in costs.iter_mut().enumerate() {
                     *v += prior_weight * ((d as f32 - dc).abs() - margin).clamp(0.0, trunc);

@@ -48,6 +48,11 @@ impl Default for ConditionParams {
 }
 
 impl ConditionParams {
+    /// Everything off (the coarse run of the prior uses this: the pair is conditioned already).
+    pub fn off() -> Self {
+        ConditionParams { prior_per_sigma: 0.0, ..Self::default() }
+    }
+
     /// Whether any part is on (when none is, the pair goes to the cost unchanged).
     pub fn is_active(&self) -> bool {
         self.match_histograms
