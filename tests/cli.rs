@@ -375,3 +375,34 @@ fn degrade_copies_a_tree_and_never_writes_into_its_input() {
     assert_clean_failure(dir.path(), &["degrade", "empty", "deg/c", "--recipe", "noise:2"], &["no scene folder"]);
     assert!(!dir.path().join("deg/c").exists());
 }
+
+/// Issue 19, item 3: a disparity a 16-bit PNG cannot hold is an error that names a format that can, and nothing
+/// is written (before: clipped at 255.996 without a word).
+#[test]
+fn issue19_png_output_refuses_disparities_it_cannot_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    let out =
+        run_in(dir.path(), &["synth", "big", "--width", "1100", "--height", "64", "--ndisp", "540", "--seed", "4"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let scene = dir.path().join("big");
+    let args =
+        ["big/im0.png", "big/im1.png", "-o", "big/d.png", "--set", "model=wta", "--set", "post.sps.enabled=false"];
+    let before = files_in(&scene);
+    let out = run_in(dir.path(), &args);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("16-bit PNG") && err.contains(".pfm"), "{err}");
+    assert_eq!(files_in(&scene), before, "no file written");
+    let ok = run_in(dir.path(), &["big/im0.png", "big/im1.png", "-o", "big/d.pfm", "--set", "model=wta"]);
+    assert!(ok.status.success(), "{}", stderr(&ok));
+}
+
+/// Issue 19, item 5: `--threads` beyond what can help is refused at once, with the range.
+#[test]
+fn issue19_threads_are_capped() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    for n in ["0", "100000", "99999999999"] {
+        assert_clean_failure(dir.path(), &["--threads", n, &l, &r, "-o", "d.pfm"], &["--threads", "1 to"]);
+    }
+}

@@ -180,11 +180,22 @@ enum Command {
     Viz(VizArgs),
 }
 
+/// The `--threads` cap is 4 per core, but never below this.
+const MIN_THREAD_CAP: usize = 16;
+
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> Result<ExitCode> {
     if let Some(n) = cli.global.threads {
-        if n == 0 {
-            return Err(Error::param("--threads", 0, "at least 1"));
+        // More threads than cores only adds switching (1000 threads took 73 s for a 0.4 s run); allow a few per
+        // core for machines that under-report, and refuse the rest before starting any.
+        let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+        let max = (4 * cores).max(MIN_THREAD_CAP);
+        if n == 0 || n > max {
+            return Err(Error::param(
+                "--threads",
+                n,
+                format!("1 to {max} (4 per core on this machine, at least {MIN_THREAD_CAP})"),
+            ));
         }
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)

@@ -82,12 +82,25 @@ pub fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> R
     super::write_atomic(path, &bytes)
 }
 
+/// The largest disparity a 16-bit PNG holds: 65535 / 256.
+pub const PNG16_MAX_DISPARITY: f32 = 65535.0 / 256.0;
+
 /// Writes a disparity map as a 16-bit grey PNG, value = round(d × 256), 0 = invalid (KITTI convention).
-/// Disparities are clamped to the representable range 1/256 ..= 255.99; negative and non-finite ones become 0.
+/// A disparity of 0 is stored as 1/256 (0 means invalid); negative and non-finite ones become 0 (invalid).
 ///
 /// # Errors
-/// [`Error::Image`] or [`Error::Io`] naming the path.
+/// [`Error::Input`] naming the path if a disparity exceeds [`PNG16_MAX_DISPARITY`] (nothing is written: the
+/// format cannot hold it; `.pfm` or `.exr` can); [`Error::Image`] or [`Error::Io`] naming the path.
 pub fn write_disparity_png16(path: &Path, map: &DisparityMap) -> Result<()> {
+    if let Some(max) = map.data.iter().copied().filter(|d| d.is_finite()).reduce(f32::max)
+        && max * 256.0 > 65535.5
+    {
+        return Err(Error::Input(format!(
+            "{}: disparity {max} does not fit a 16-bit PNG (at most {:.3}); write .pfm or .exr instead",
+            path.display(),
+            PNG16_MAX_DISPARITY
+        )));
+    }
     // The encoder takes 16-bit samples in native byte order (it writes them big-endian itself).
     let mut samples = Vec::with_capacity(map.data.len() * 2);
     for &d in &map.data {
