@@ -49,7 +49,7 @@ pub fn census_transform_banded(grey: &Plane<f32>, win_w: usize, win_h: usize, ba
     let pw = w + 2 * rx;
     let mut out = Plane::new(w, h, 0u64);
     out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, codes)| {
-        let center: Vec<f32> = padded[(y + ry) * pw + rx..][..w].iter().map(|c| c - band).collect();
+        let center = &padded[(y + ry) * pw + rx..][..w];
         for dy in 0..win_h {
             let nrow = &padded[(y + dy) * pw..][..pw];
             for dx in 0..win_w {
@@ -57,8 +57,8 @@ pub fn census_transform_banded(grey: &Plane<f32>, win_w: usize, win_h: usize, ba
                     continue;
                 }
                 let nbr = &nrow[dx..][..w];
-                for ((code, &n), &c) in codes.iter_mut().zip(nbr).zip(&center) {
-                    *code = (*code << 1) | u64::from(n < c);
+                for ((code, &n), &c) in codes.iter_mut().zip(nbr).zip(center) {
+                    *code = (*code << 1) | u64::from(n < c - band);
                 }
             }
         }
