@@ -21,6 +21,8 @@
 //! Everything is measured on the pair itself; nothing depends on the dataset. All of it is off by default: it is
 //! experimental (issue 15), measured in docs/tuning-log.md ("Robustness: first measurements").
 
+use std::borrow::Cow;
+
 use rayon::prelude::*;
 
 use crate::image::{Plane, RgbImage, StereoPair};
@@ -36,58 +38,97 @@ pub struct PairStats {
     pub gain: f32,
     /// Noise σ of the left and right view after the stretch, in grey levels (mean of the channels).
     pub noise: [f32; 2],
-    /// Noise σ of the grey images after denoising (the larger view's).
+    /// Noise σ of the grey images the cost sees (after denoising; the larger view's); measured only when the
+    /// Census dead band needs it (`census_band` > 0), else 0.
     pub residual_grey_noise: f32,
 }
 
-/// Conditions a pair as the module doc says; returns the new pair and what was measured.
-pub fn condition_pair(pair: &StereoPair, p: &ConditionParams) -> (StereoPair, PairStats) {
-    let mut left = pair.left.clone();
-    let mut right = pair.right.clone();
+impl PairStats {
+    /// The noisier view's σn: what the adaptive stages scale with.
+    pub fn sigma(&self) -> f32 {
+        self.noise[0].max(self.noise[1])
+    }
+}
+
+/// A conditioned pair: what the guidance sees and, when it differs, what the matching cost sees.
+pub struct Conditioned<'a> {
+    /// Aligned and stretched (the input itself, not a copy, when neither was needed): the colour weights of the
+    /// mean field, the weighted median and the planes use it.
+    pub guide: Cow<'a, StereoPair>,
+    /// The guide pair denoised, for the matching cost only; `None` when nothing was filtered.
+    pub cost: Option<StereoPair>,
+    /// What was measured.
+    pub stats: PairStats,
+}
+
+impl Conditioned<'_> {
+    /// The pair the matching cost is computed from.
+    pub fn cost_pair(&self) -> &StereoPair {
+        self.cost.as_ref().unwrap_or(&self.guide)
+    }
+}
+
+/// Conditions a pair as the module doc says. Only the matching cost sees the denoised images: the guidance
+/// keeps the original edges (denoising it too was measured worse, docs/tuning-log.md).
+pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditioned<'a> {
+    let mut guide = Cow::Borrowed(pair);
     if p.match_histograms {
-        right = match_histograms(&right, &left);
+        let right = match_histograms(&pair.right, &pair.left);
+        guide.to_mut().right = right;
     }
     let mut gain = 1.0;
     if p.stretch {
-        let grey = left.to_grey();
-        let (lo, hi) = percentiles(&grey.data, 0.005, 0.995);
+        let (lo, hi) = percentiles(&guide.left.to_grey().data, 0.005, 0.995);
         let range = (hi - lo).max(1.0);
         if range < TARGET_RANGE {
             gain = TARGET_RANGE / range;
             let centre = 0.5 * (lo + hi);
-            for img in [&mut left, &mut right] {
+            let g = guide.to_mut();
+            for img in [&mut g.left, &mut g.right] {
                 for ch in &mut img.channels {
                     ch.iter_mut().for_each(|v| *v = ((*v - centre) * gain + 127.5).clamp(0.0, 255.0));
                 }
             }
         }
     }
-    let noise = [channel_noise(&left), channel_noise(&right)];
-    if p.denoise_strength > 0.0 {
-        left = bilateral(&left, p.denoise_sigma_xy, p.denoise_strength * noise[0]);
-        right = bilateral(&right, p.denoise_sigma_xy, p.denoise_strength * noise[1]);
-    }
-    let residual_grey_noise = estimate_noise(&left.to_grey()).max(estimate_noise(&right.to_grey()));
-    let out = StereoPair { left, right, ndisp: pair.ndisp };
-    (out, PairStats { gain, noise, residual_grey_noise })
+    let (nl, nr) = rayon::join(|| channel_noise(&guide.left), || channel_noise(&guide.right));
+    let noise = [nl, nr];
+    // Below `denoise_min_sigma` (a clean camera, quantisation noise) a view is not filtered.
+    let range = |n: f32| if n >= p.denoise_min_sigma { p.denoise_strength * n } else { 0.0 };
+    let cost = (range(nl) > 0.0 || range(nr) > 0.0).then(|| StereoPair {
+        left: bilateral(&guide.left, p.denoise_sigma_xy, range(nl)),
+        right: bilateral(&guide.right, p.denoise_sigma_xy, range(nr)),
+        ndisp: pair.ndisp,
+    });
+    let residual_grey_noise = if p.census_band > 0.0 {
+        let c = cost.as_ref().unwrap_or(&guide);
+        estimate_noise(&c.left.to_grey()).max(estimate_noise(&c.right.to_grey()))
+    } else {
+        0.0
+    };
+    Conditioned { guide, cost, stats: PairStats { gain, noise, residual_grey_noise } }
 }
 
 /// The mean of the three channels' noise σ ([`estimate_noise`]).
 pub fn channel_noise(img: &RgbImage) -> f32 {
     let (w, h) = img.dims();
-    let sum: f32 = img.channels.iter().map(|c| estimate_noise(&Plane::from_vec(w, h, c.clone()))).sum();
+    let sum: f32 = img.channels.par_iter().map(|c| noise_of(c, w, h)).sum();
     sum / 3.0
 }
 
-/// The values at fractions `a` and `b` of the sorted data (nearest rank).
+/// The value at fraction `f` of `v` in sorted order (nearest rank), found by selection (`v` is reordered).
+fn rank_value(v: &mut [f32], f: f64) -> f32 {
+    let k = ((v.len() - 1) as f64 * f).round() as usize;
+    *v.select_nth_unstable_by(k, f32::total_cmp).1
+}
+
+/// The values at fractions `a` and `b` of the sorted data (nearest rank), non-finite values left out.
 fn percentiles(data: &[f32], a: f64, b: f64) -> (f32, f32) {
     let mut v: Vec<f32> = data.iter().copied().filter(|x| x.is_finite()).collect();
     if v.is_empty() {
         return (0.0, 0.0);
     }
-    v.sort_unstable_by(f32::total_cmp);
-    let at = |f: f64| v[((v.len() - 1) as f64 * f).round() as usize];
-    (at(a), at(b))
+    (rank_value(&mut v, a), rank_value(&mut v, b))
 }
 
 /// Noise σ of a grey image in grey levels, robust to texture: the 3 × 3 operator
@@ -95,14 +136,19 @@ fn percentiles(data: &[f32], a: f64, b: f64) -> (f32, f32) {
 /// absolute response is taken at the pixels whose Sobel gradient is in the lower half (flat regions), and the
 /// median of those, divided by 6 × 0.6745 (the median absolute value of a unit normal), estimates σ.
 pub fn estimate_noise(grey: &Plane<f32>) -> f32 {
-    let (w, h) = grey.dims();
+    noise_of(&grey.data, grey.width, grey.height)
+}
+
+/// [`estimate_noise`] on a row-major `w` × `h` channel.
+fn noise_of(data: &[f32], w: usize, h: usize) -> f32 {
     if w < 3 || h < 3 {
         return 0.0;
     }
+    let row = |y: usize| &data[y * w..(y + 1) * w];
     let mut resp = Vec::with_capacity((w - 2) * (h - 2));
     let mut grad = Vec::with_capacity((w - 2) * (h - 2));
     for y in 1..h - 1 {
-        let (u, m, d) = (grey.row(y - 1), grey.row(y), grey.row(y + 1));
+        let (u, m, d) = (row(y - 1), row(y), row(y + 1));
         for x in 1..w - 1 {
             let l = u[x - 1] - 2.0 * u[x] + u[x + 1] - 2.0 * (m[x - 1] - 2.0 * m[x] + m[x + 1])
                 + (d[x - 1] - 2.0 * d[x] + d[x + 1]);
@@ -112,10 +158,9 @@ pub fn estimate_noise(grey: &Plane<f32>) -> f32 {
             grad.push(gx.abs() + gy.abs());
         }
     }
-    let (_, median_grad) = percentiles(&grad, 0.0, 0.5);
-    let flat: Vec<f32> = resp.iter().zip(&grad).filter(|(_, g)| **g <= median_grad).map(|(r, _)| *r).collect();
-    let (_, med) = percentiles(&flat, 0.0, 0.5);
-    med / (6.0 * 0.6745)
+    let median_grad = rank_value(&mut grad.clone(), 0.5);
+    let mut flat: Vec<f32> = resp.iter().zip(&grad).filter(|(_, g)| **g <= median_grad).map(|(r, _)| *r).collect();
+    rank_value(&mut flat, 0.5) / (6.0 * 0.6745)
 }
 
 /// Maps each channel of `src` onto the distribution of the same channel of `reference` (histogram
@@ -253,14 +298,37 @@ mod tests {
             .for_each(|c| c.iter_mut().enumerate().for_each(|(i, v)| *v = (255 * (i % 64) / 63) as f32));
         let mut dark = textured(64, 48, 1.0, 7);
         dark.channels.iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v = (*v * 0.2).round()));
-        let p = ConditionParams { stretch: true, ..ConditionParams::default() };
+        let p = ConditionParams { stretch: true, ..ConditionParams::off() };
         let pair = |img: &RgbImage| StereoPair { left: img.clone(), right: img.clone(), ndisp: 4 };
-        let (out, stats) = condition_pair(&pair(&dark), &p);
-        assert!(stats.gain > 3.0, "gain {}", stats.gain);
-        assert_eq!(out.left, out.right);
-        let (_, stats) = condition_pair(&pair(&bright), &p);
-        assert_eq!(stats.gain, 1.0);
-        let (out, _) = condition_pair(&pair(&dark), &ConditionParams::default());
-        assert_eq!(out.left, dark);
+        let dark_pair = pair(&dark);
+        let out = condition_pair(&dark_pair, &p);
+        assert!(out.stats.gain > 3.0, "gain {}", out.stats.gain);
+        assert!(matches!(out.guide, Cow::Owned(_)));
+        assert_eq!(out.guide.left, out.guide.right);
+        assert!(out.cost.is_none(), "nothing denoised");
+        let bright_pair = pair(&bright);
+        let out = condition_pair(&bright_pair, &p);
+        assert_eq!(out.stats.gain, 1.0);
+        assert!(matches!(out.guide, Cow::Borrowed(_)), "a full-contrast pair is not copied");
+        let out = condition_pair(&dark_pair, &ConditionParams::off());
+        assert_eq!(out.guide.left, dark);
+    }
+
+    /// Denoising is gated by the measured noise and reaches the cost pair only.
+    #[test]
+    fn denoising_only_above_the_gate_and_only_for_the_cost() {
+        let noisy = textured(96, 64, 6.0, 11);
+        let clean = textured(96, 64, 0.0, 11);
+        let p = ConditionParams { denoise_strength: 3.0, denoise_min_sigma: 1.5, ..ConditionParams::off() };
+        let pair = StereoPair { left: noisy.clone(), right: noisy.clone(), ndisp: 4 };
+        let out = condition_pair(&pair, &p);
+        assert_eq!(out.guide.left, noisy, "the guidance keeps the original");
+        let err = |a: &RgbImage| {
+            a.channels[0].iter().zip(&clean.channels[0]).map(|(p, q)| (p - q).abs()).sum::<f32>() / a.len() as f32
+        };
+        let denoised = &out.cost.as_ref().expect("σ 6 is above the gate").left;
+        assert!(err(denoised) < 0.6 * err(&noisy), "{} vs {}", err(denoised), err(&noisy));
+        let clean_pair = StereoPair { left: clean.clone(), right: clean, ndisp: 4 };
+        assert!(condition_pair(&clean_pair, &p).cost.is_none(), "a clean pair is below the gate");
     }
 }

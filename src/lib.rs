@@ -245,17 +245,17 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         ));
     }
     let c = &params.condition;
-    let conditioned;
     let mut cost_params = params.cost.clone();
     let mut prior_weight = 0.0f32;
-    let pair = if c.is_active() {
-        let (p, stats) = t.time("condition", || condition::condition_pair(pair, c));
-        prior_weight = c.prior_base + c.prior_per_sigma * stats.noise[0].max(stats.noise[1]);
-        cost_params.census_dead_band += c.census_band * stats.residual_grey_noise;
-        conditioned = p;
-        &conditioned
-    } else {
-        pair
+    let conditioned = c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c)));
+    if let Some(cond) = &conditioned {
+        prior_weight = c.prior_base + c.prior_per_sigma * cond.stats.sigma();
+        cost_params.census_dead_band += c.census_band * cond.stats.residual_grey_noise;
+    }
+    // The guidance pair (colour weights, post-processing) and the pair the matching cost sees.
+    let (pair, cost_pair) = match &conditioned {
+        Some(cond) => (&*cond.guide, cond.cost_pair()),
+        None => (pair, pair),
     };
     let post = &params.post;
     let need_right = post.lrc.mode != LrcMode::Off;
@@ -267,22 +267,38 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         // penalty for labels far from its answer.
         let mut coarse_params = params.clone();
         coarse_params.downscale = 2;
-        coarse_params.condition = params::ConditionParams::off();
+        let sigma = conditioned.as_ref().map_or(0.0, |cond| cond.stats.sigma());
+        // The coarse level measures its own (halved) noise: it is denoised by the same rule, and gets a coarse
+        // prior of its own only while the pair is still noisy enough (`prior_recurse_sigma`). The alignment and
+        // stretch are done already.
+        let recurse = c.prior_recurse_sigma > 0.0 && sigma >= c.prior_recurse_sigma;
+        coarse_params.condition = params::ConditionParams {
+            match_histograms: false,
+            stretch: false,
+            prior_per_sigma: if recurse { c.prior_per_sigma } else { 0.0 },
+            prior_base: if recurse { c.prior_base } else { 0.0 },
+            ..*c
+        };
         let coarse = t.time("coarse prior", || run_observed(&coarse_params, pair, &|_| {}))?;
-        Some(coarse.disparity)
+        Some((coarse.disparity, coarse.confidence))
     } else {
         None
     };
-    let mut cost_left = t.time("cost", || cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &cost_params));
-    if let Some(coarse) = coarse {
+    let mut cost_left =
+        t.time("cost", || cost::build_cost_volume(&cost_pair.left, &cost_pair.right, pair.ndisp, &cost_params));
+    if let Some((coarse, confidence)) = coarse {
         let (m, margin, trunc) = (cost_left.ndisp, c.prior_margin_px, c.prior_trunc_px);
-        cost_left.data.par_chunks_mut(m).zip(coarse.data.par_iter()).for_each(|(costs, &dc)| {
-            if dc.is_finite() {
-                for (d, v) in costs.iter_mut().enumerate() {
-                    *v += prior_weight * ((d as f32 - dc).abs() - margin).clamp(0.0, trunc);
+        let by_confidence = c.prior_confidence;
+        cost_left.data.par_chunks_mut(m).zip(coarse.data.par_iter()).zip(confidence.data.par_iter()).for_each(
+            |((costs, &dc), &conf)| {
+                let lambda = if by_confidence { prior_weight * conf } else { prior_weight };
+                if dc.is_finite() {
+                    for (d, v) in costs.iter_mut().enumerate() {
+                        *v += lambda * ((d as f32 - dc).abs() - margin).clamp(0.0, trunc);
+                    }
                 }
-            }
-        });
+            },
+        );
     }
 
     // Left inference first, then the right volume from the left one; the left volume is spent before the right

@@ -10,6 +10,8 @@ use crate::error::{Error, Result};
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ConditionParams {
+    /// The master switch: false turns every part off (the paper's configs use it).
+    pub enabled: bool,
     /// Map the right view's histogram onto the left's.
     pub match_histograms: bool,
     /// Stretch the contrast of a low-contrast pair.
@@ -18,11 +20,17 @@ pub struct ConditionParams {
     pub denoise_strength: f32,
     /// Spatial σ of the denoising filter, in pixels.
     pub denoise_sigma_xy: f32,
+    /// A view whose measured noise σ (grey levels) is below this is not denoised.
+    pub denoise_min_sigma: f32,
     /// Census dead band as a multiple of the grey noise σ measured after denoising; 0 = none.
     pub census_band: f32,
     /// Coarse prior: the pipeline first runs on the pair reduced 2×, and the full-resolution cost gets
     /// `prior_per_sigma` × σn × min(max(|d − d_coarse| − `prior_margin_px`, 0), `prior_trunc_px`); 0 = off.
     pub prior_per_sigma: f32,
+    /// The coarse run gets a coarse prior of its own (recursively) when the measured σn is at least this; 0 = never.
+    pub prior_recurse_sigma: f32,
+    /// Scale each pixel's prior weight by the coarse run's confidence (its max-marginal, 0..1).
+    pub prior_confidence: bool,
     /// A fixed prior weight added to the noise-scaled one.
     pub prior_base: f32,
     /// Labels within this distance of the coarse disparity (full-resolution px) are free.
@@ -34,13 +42,17 @@ pub struct ConditionParams {
 impl Default for ConditionParams {
     fn default() -> Self {
         ConditionParams {
+            enabled: true,
             match_histograms: false,
             stretch: false,
             denoise_strength: 0.0,
             denoise_sigma_xy: 1.5,
+            denoise_min_sigma: 0.0,
             census_band: 0.0,
             prior_per_sigma: 0.0,
             prior_base: 0.0,
+            prior_recurse_sigma: 0.0,
+            prior_confidence: false,
             prior_margin_px: 1.0,
             prior_trunc_px: 8.0,
         }
@@ -50,17 +62,18 @@ impl Default for ConditionParams {
 impl ConditionParams {
     /// Everything off (the coarse run of the prior uses this: the pair is conditioned already).
     pub fn off() -> Self {
-        ConditionParams { prior_per_sigma: 0.0, ..Self::default() }
+        ConditionParams { enabled: false, ..Self::default() }
     }
 
     /// Whether any part is on (when none is, the pair goes to the cost unchanged).
     pub fn is_active(&self) -> bool {
-        self.match_histograms
-            || self.stretch
-            || self.denoise_strength > 0.0
-            || self.census_band > 0.0
-            || self.prior_per_sigma > 0.0
-            || self.prior_base > 0.0
+        self.enabled
+            && (self.match_histograms
+                || self.stretch
+                || self.denoise_strength > 0.0
+                || self.census_band > 0.0
+                || self.prior_per_sigma > 0.0
+                || self.prior_base > 0.0)
     }
 
     /// Checks every value's range.
@@ -72,9 +85,11 @@ impl ConditionParams {
         if !(self.denoise_sigma_xy.is_finite() && (0.0..=10.0).contains(&self.denoise_sigma_xy)) {
             return Err(Error::param("condition.denoise_sigma_xy", self.denoise_sigma_xy, "0 to 10"));
         }
+        check_nonneg("condition.denoise_min_sigma", self.denoise_min_sigma)?;
         check_nonneg("condition.census_band", self.census_band)?;
         check_nonneg("condition.prior_per_sigma", self.prior_per_sigma)?;
         check_nonneg("condition.prior_base", self.prior_base)?;
+        check_nonneg("condition.prior_recurse_sigma", self.prior_recurse_sigma)?;
         check_nonneg("condition.prior_margin_px", self.prior_margin_px)?;
         check_nonneg("condition.prior_trunc_px", self.prior_trunc_px)
     }
