@@ -50,7 +50,7 @@ runs=(
     "JemFCM fcm-lrc.toml FCM 1"
     "JemLRC jem-lrc.toml JEM_LRC 1"
     "JemSPS jem-sps.toml JEM_SPS 3"
-    "JemALL default.toml JEM_ALL 3"
+    "JemALL jem-all.toml JEM_ALL 3"
 )
 
 # Check everything before spending hours.

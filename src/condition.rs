@@ -1,25 +1,32 @@
-//! Input conditioning (our addition, not in the paper): measure the pair, then make it look like the clean,
-//! well-exposed images every parameter was tuned on, so that one configuration serves any camera.
+//! Input conditioning and the coarse prior (our addition, not in the paper): measure the pair, then adapt to it,
+//! so that one configuration serves clean, noisy, dark and unevenly exposed pairs (issue 15).
 //!
-//! 1. **Photometric alignment.** The right view's channels are mapped onto the left view's by histogram
-//!    specification (a monotonic lookup per channel): a view that is darker, brighter, or has another tone curve
-//!    or white balance gets the left view's. Census is invariant to monotonic maps already; the gradient term, the
-//!    colour weights of the local term and the bilateral kernel are not.
-//! 2. **Contrast.** Both views are stretched by one affine map so that the left view's robust range (the
-//!    0.5th to the 99.5th percentile of grey) spans [`TARGET_RANGE`] grey levels, never compressed: a dark
-//!    image gets the contrast the colour thresholds (μ, σf, the weighted median's and the planes' colour
-//!    weights) assume.
-//! 3. **Noise.** The noise level σn of each view is measured after the stretch ([`estimate_noise`]), and each
-//!    view is smoothed by an edge-preserving bilateral filter whose range scale follows σn
-//!    (`denoise_strength` × σn); a clean image (σn below 1 grey level) is left nearly untouched.
+//! 1. **Photometric alignment** (`match_histograms`, off by default). The right view's channels are mapped onto
+//!    the left view's by histogram specification (a monotonic lookup per channel). Measured worse than without
+//!    once the rest is on (it hurts PianoL, whose views are lit differently on purpose).
+//! 2. **Contrast** (`stretch`). A view whose robust range (the 0.5th to the 99.5th percentile of grey) is below
+//!    [`TARGET_RANGE`] / `stretch_min_gain` is stretched by an affine map to span [`TARGET_RANGE`] grey levels,
+//!    each view by its own range (one gain for both would push a darker right view below 0). A dark image gets
+//!    the contrast the colour thresholds (σf, μ, the weighted median's and the planes' colour weights) assume,
+//!    and its noise is then measured relative to its contrast: what matters for matching is the
+//!    signal-to-noise ratio, not the absolute grey levels.
+//! 3. **Noise** (`denoise_*`). The noise σn of each view is measured after the stretch ([`estimate_noise`]); a
+//!    view noisier than `denoise_min_sigma` is smoothed by an edge-preserving bilateral filter (range scale
+//!    `denoise_strength` × σn) **for the matching cost only**: Census bits of noisy near-flat windows flip at
+//!    random, and no averaging of the cost afterwards recovers a stable code; the guidance (colour weights of the
+//!    mean field, weighted median, planes) keeps the original edges. A clean camera measures 0.5–1.6 grey
+//!    levels (texture counts a little as noise) and is not filtered: filtering it removes the fine texture
+//!    Census relies on.
+//! 4. **Coarse prior** (`prior_*`, in [`crate::run`]): the whole pipeline first runs on the conditioned pair
+//!    reduced 2× (noise halves, the range of labels too; a quarter of the plane segments, so they keep their size
+//!    in the scene), and the full-resolution cost of label d at pixel i
+//!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = (`prior_base` + `prior_per_sigma`·σn) × the
+//!    coarse run's confidence at i (its max-marginal, with `prior_confidence`). The coarse level removes the
+//!    gross errors that fine-scale noise causes, the fine level keeps the precision; the prior also places
+//!    each pixel well enough that three full-resolution iterations do the work of five.
 //!
-//! 4. **Coarse prior** (in [`crate::run`]): with `prior_base` or `prior_per_sigma` > 0 the whole pipeline first
-//!    runs on the conditioned pair reduced 2× (noise halves), and the full-resolution cost of label d gets
-//!    λ·min(max(|d − d_coarse| − margin, 0), trunc), λ = `prior_base` + `prior_per_sigma`·σn: the coarse level
-//!    removes the gross errors that fine-scale noise causes, the fine level keeps the precision.
-//!
-//! Everything is measured on the pair itself; nothing depends on the dataset. All of it is off by default: it is
-//! experimental (issue 15), measured in docs/tuning-log.md ("Robustness: first measurements").
+//! Everything is measured on the pair itself; nothing depends on the dataset. The paper's configs turn all of
+//! it off (`enabled = false`). Measurements: docs/tuning-log.md ("Robustness").
 
 use std::borrow::Cow;
 
@@ -31,11 +38,14 @@ use crate::params::ConditionParams;
 /// The grey-level span the left view's 0.5–99.5 % range is stretched to (when it is smaller).
 pub const TARGET_RANGE: f32 = 230.0;
 
+/// The fraction of pixels, those of lowest gradient, on which [`estimate_noise`] measures.
+const FLAT_FRACTION: f64 = 0.25;
+
 /// What was measured on a pair, for diagnostics (`jem -v`) and the adaptive stages.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PairStats {
-    /// The contrast gain applied to both views (1 = none).
-    pub gain: f32,
+    /// The contrast gain applied to the left and the right view (1 = none).
+    pub gain: [f32; 2],
     /// Noise σ of the left and right view after the stretch, in grey levels (mean of the channels).
     pub noise: [f32; 2],
     /// Noise σ of the grey images the cost sees (after denoising; the larger view's); measured only when the
@@ -76,17 +86,21 @@ pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditio
         let right = match_histograms(&pair.right, &pair.left);
         guide.to_mut().right = right;
     }
-    let mut gain = 1.0;
+    // Each view by its own range: a view darker than the other (exposure, gamma) is not pushed below 0 by the
+    // other's gain, and the two end up with about the same contrast.
+    let mut gain = [1.0f32; 2];
     if p.stretch {
-        let (lo, hi) = percentiles(&guide.left.to_grey().data, 0.005, 0.995);
-        let range = (hi - lo).max(1.0);
-        if range < TARGET_RANGE {
-            gain = TARGET_RANGE / range;
-            let centre = 0.5 * (lo + hi);
-            let g = guide.to_mut();
-            for img in [&mut g.left, &mut g.right] {
+        for (view, g) in gain.iter_mut().enumerate() {
+            let img = if view == 0 { &guide.left } else { &guide.right };
+            let (lo, hi) = percentiles(&img.to_grey().data, 0.005, 0.995);
+            let range = (hi - lo).max(1.0);
+            if TARGET_RANGE / range >= p.stretch_min_gain.max(1.0 + 1e-6) {
+                *g = TARGET_RANGE / range;
+                let (centre, gv) = (0.5 * (lo + hi), *g);
+                let owned = guide.to_mut();
+                let img = if view == 0 { &mut owned.left } else { &mut owned.right };
                 for ch in &mut img.channels {
-                    ch.iter_mut().for_each(|v| *v = ((*v - centre) * gain + 127.5).clamp(0.0, 255.0));
+                    ch.iter_mut().for_each(|v| *v = ((*v - centre) * gv + 127.5).clamp(0.0, 255.0));
                 }
             }
         }
@@ -158,7 +172,7 @@ fn noise_of(data: &[f32], w: usize, h: usize) -> f32 {
             grad.push(gx.abs() + gy.abs());
         }
     }
-    let median_grad = rank_value(&mut grad.clone(), 0.5);
+    let median_grad = rank_value(&mut grad.clone(), FLAT_FRACTION);
     let mut flat: Vec<f32> = resp.iter().zip(&grad).filter(|(_, g)| **g <= median_grad).map(|(r, _)| *r).collect();
     rank_value(&mut flat, 0.5) / (6.0 * 0.6745)
 }
@@ -287,7 +301,7 @@ mod tests {
         assert!(mean_abs(&matched) < 2.0, "matched: {}", mean_abs(&matched));
     }
 
-    /// A dark pair is stretched by one gain for both views; a full-contrast pair is left alone; off is off.
+    /// A dark pair is stretched (each view by its own range); a full-contrast pair is left alone; off is off.
     #[test]
     fn stretch_only_for_low_contrast() {
         // Full contrast: a ramp over the whole 8-bit range.
@@ -302,13 +316,13 @@ mod tests {
         let pair = |img: &RgbImage| StereoPair { left: img.clone(), right: img.clone(), ndisp: 4 };
         let dark_pair = pair(&dark);
         let out = condition_pair(&dark_pair, &p);
-        assert!(out.stats.gain > 3.0, "gain {}", out.stats.gain);
+        assert!(out.stats.gain[0] > 3.0 && out.stats.gain[0] == out.stats.gain[1], "gain {:?}", out.stats.gain);
         assert!(matches!(out.guide, Cow::Owned(_)));
         assert_eq!(out.guide.left, out.guide.right);
         assert!(out.cost.is_none(), "nothing denoised");
         let bright_pair = pair(&bright);
         let out = condition_pair(&bright_pair, &p);
-        assert_eq!(out.stats.gain, 1.0);
+        assert_eq!(out.stats.gain, [1.0, 1.0]);
         assert!(matches!(out.guide, Cow::Borrowed(_)), "a full-contrast pair is not copied");
         let out = condition_pair(&dark_pair, &ConditionParams::off());
         assert_eq!(out.guide.left, dark);

@@ -267,6 +267,8 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         // penalty for labels far from its answer.
         let mut coarse_params = params.clone();
         coarse_params.downscale = 2;
+        // The same segment size in the scene: a quarter of the pixels gets a quarter of the segments.
+        coarse_params.post.sps.segments = params.post.sps.segments.div_ceil(4);
         let sigma = conditioned.as_ref().map_or(0.0, |cond| cond.stats.sigma());
         // The coarse level measures its own (halved) noise: it is denoised by the same rule, and gets a coarse
         // prior of its own only while the pair is still noisy enough (`prior_recurse_sigma`). The alignment and

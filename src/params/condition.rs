@@ -5,8 +5,8 @@ use serde::{Deserialize, Serialize};
 use super::check_nonneg;
 use crate::error::{Error, Result};
 
-/// Input conditioning and the coarse prior ([`crate::condition`]); everything off by default (experimental: see
-/// docs/tuning-log.md, "Robustness").
+/// Input conditioning and the coarse prior ([`crate::condition`]): measured on each pair, so one setting serves
+/// clean, noisy and dark pairs (docs/tuning-log.md, "Robustness").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ConditionParams {
@@ -16,6 +16,9 @@ pub struct ConditionParams {
     pub match_histograms: bool,
     /// Stretch the contrast of a low-contrast pair.
     pub stretch: bool,
+    /// The stretch is applied only when its gain would be at least this (a pair using most of the range is left
+    /// as it is).
+    pub stretch_min_gain: f32,
     /// Bilateral range scale as a multiple of the measured noise σ; 0 = no denoising.
     pub denoise_strength: f32,
     /// Spatial σ of the denoising filter, in pixels.
@@ -40,19 +43,23 @@ pub struct ConditionParams {
 }
 
 impl Default for ConditionParams {
+    /// The default pipeline's conditioning (chosen in docs/tuning-log.md, "Robustness: the adaptive default"):
+    /// stretch only a pair that uses less than 1/1.5 of the range, denoise (for the cost) only a view measured
+    /// noisier than 2 grey levels, and a coarse prior of weight σn scaled by the coarse confidence.
     fn default() -> Self {
         ConditionParams {
             enabled: true,
             match_histograms: false,
-            stretch: false,
-            denoise_strength: 0.0,
-            denoise_sigma_xy: 1.5,
-            denoise_min_sigma: 0.0,
+            stretch: true,
+            stretch_min_gain: 1.5,
+            denoise_strength: 3.0,
+            denoise_sigma_xy: 3.0,
+            denoise_min_sigma: 2.0,
             census_band: 0.0,
-            prior_per_sigma: 0.0,
+            prior_per_sigma: 1.0,
             prior_base: 0.0,
             prior_recurse_sigma: 0.0,
-            prior_confidence: false,
+            prior_confidence: true,
             prior_margin_px: 1.0,
             prior_trunc_px: 8.0,
         }
@@ -60,9 +67,19 @@ impl Default for ConditionParams {
 }
 
 impl ConditionParams {
-    /// Everything off (the coarse run of the prior uses this: the pair is conditioned already).
+    /// Everything off: the pair goes to the cost as it is (the paper's configs: `enabled = false`).
     pub fn off() -> Self {
-        ConditionParams { enabled: false, ..Self::default() }
+        ConditionParams {
+            enabled: false,
+            match_histograms: false,
+            stretch: false,
+            denoise_strength: 0.0,
+            census_band: 0.0,
+            prior_per_sigma: 0.0,
+            prior_base: 0.0,
+            prior_confidence: false,
+            ..Self::default()
+        }
     }
 
     /// Whether any part is on (when none is, the pair goes to the cost unchanged).
@@ -84,6 +101,9 @@ impl ConditionParams {
         check_nonneg("condition.denoise_strength", self.denoise_strength)?;
         if !(self.denoise_sigma_xy.is_finite() && (0.0..=10.0).contains(&self.denoise_sigma_xy)) {
             return Err(Error::param("condition.denoise_sigma_xy", self.denoise_sigma_xy, "0 to 10"));
+        }
+        if !(self.stretch_min_gain.is_finite() && self.stretch_min_gain >= 1.0) {
+            return Err(Error::param("condition.stretch_min_gain", self.stretch_min_gain, "at least 1"));
         }
         check_nonneg("condition.denoise_min_sigma", self.denoise_min_sigma)?;
         check_nonneg("condition.census_band", self.census_band)?;

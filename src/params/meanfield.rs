@@ -90,7 +90,7 @@ pub struct MeanFieldParams {
 impl Default for MeanFieldParams {
     fn default() -> Self {
         MeanFieldParams {
-            iterations: 5,
+            iterations: 3,
             unary_scale: 0.5,
             unary_scale_start: 0.0,
             unary_anneal_iterations: 0,
