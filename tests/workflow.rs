@@ -42,11 +42,12 @@ fn write_shift_scene(dir: &Path, width: u32, height: u32, d: u32, ndisp: usize, 
 /// A TOML config that needs no mean-field inference.
 fn wta_config(dir: &Path) -> PathBuf {
     let p = dir.join("wta.toml");
-    // Plain winner-take-all: no left-right check and no post-processing (the defaults run the full pipeline).
+    // Plain winner-take-all: no conditioning, no left-right check and no post-processing (the defaults run the
+    // full pipeline; the i.i.d. random texture of these scenes would be measured as noise and denoised).
     std::fs::write(
         &p,
-        "model = \"wta\"\n[post]\nfill = false\n[post.lrc]\nmode = \"off\"\n[post.wmedian]\nenabled = false\n\
-         [post.sps]\nenabled = false\n",
+        "model = \"wta\"\n[condition]\nenabled = false\n[post]\nfill = false\n[post.lrc]\nmode = \"off\"\n\
+         [post.wmedian]\nenabled = false\n[post.sps]\nenabled = false\n",
     )
     .unwrap();
     p
