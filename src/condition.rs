@@ -21,7 +21,8 @@
 //!    reduced 2× (noise halves, the range of labels too; a quarter of the plane segments, so they keep their size
 //!    in the scene), and the full-resolution cost of label d at pixel i
 //!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = (`prior_base` + `prior_per_sigma`·σn) × the
-//!    coarse run's confidence at i (its max-marginal, with `prior_confidence`). The coarse level removes the
+//!    coarse run's confidence at i (its max-marginal, with `prior_confidence`) × `prior_untrusted` where the
+//!    coarse left-right check failed (the fill guessed there). The coarse level removes the
 //!    gross errors that fine-scale noise causes, the fine level keeps the precision; the prior also places
 //!    each pixel well enough that three full-resolution iterations do the work of five.
 //!

@@ -96,6 +96,8 @@ pub struct Output {
     /// Per-pixel confidence of the left view before post-processing: the max-marginal (mean-field models) or
     /// 1 (WTA).
     pub confidence: Plane<f32>,
+    /// The pixels that passed the left-right check (all of them when it is off).
+    pub consistent: Plane<bool>,
     /// Time per stage.
     pub timings: Timings,
 }
@@ -224,7 +226,18 @@ pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str))
             || scale::upsample_plane(&low.confidence, factor, w, h),
         )
     });
-    Ok(Output { disparity, confidence, timings: t })
+    // Nearest: each full-size pixel takes the flag of the reduced pixel it falls in.
+    let lw = low.consistent.width;
+    let consistent = Plane::from_vec(
+        w,
+        h,
+        (0..w * h)
+            .map(|i| {
+                low.consistent.at(((i % w) / factor).min(lw - 1), ((i / w) / factor).min(low.consistent.height - 1))
+            })
+            .collect(),
+    );
+    Ok(Output { disparity, confidence, consistent, timings: t })
 }
 
 /// The pipeline at the pair's own resolution, appending its stage times to `t`.
@@ -282,7 +295,15 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
             ..*c
         };
         let coarse = t.time("coarse prior", || run_observed(&coarse_params, pair, &|_| {}))?;
-        Some((coarse.disparity, coarse.confidence))
+        let c_untrusted = c.prior_untrusted;
+        let mut confidence = coarse.confidence;
+        // A pixel the coarse left-right check rejected was filled by a guess: its prior weighs `prior_untrusted`.
+        confidence.data.iter_mut().zip(&coarse.consistent.data).for_each(|(c, ok)| {
+            if !ok {
+                *c *= c_untrusted;
+            }
+        });
+        Some((coarse.disparity, confidence))
     } else {
         None
     };
@@ -344,7 +365,7 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
     if post.sps.enabled {
         disparity = t.time("sps", || post::planes::fit_slanted_planes(&pair.left, &disparity, &trusted, &post.sps));
     }
-    Ok(Output { disparity, confidence: left.confidence, timings: t })
+    Ok(Output { disparity, confidence: left.confidence, consistent: trusted, timings: t })
 }
 
 /// Inference for one view: WTA on the cost, or mean field with the view's own image.
@@ -468,6 +489,12 @@ mod tests {
         let out = run(&p, &pair).unwrap();
         assert_eq!(out.disparity.dims(), (320, 240));
         assert_eq!(out.confidence.dims(), (320, 240));
+        assert_eq!(out.consistent.dims(), (320, 240));
+        let consistent = out.consistent.data.iter().filter(|ok| **ok).count();
+        assert!(
+            consistent > 320 * 240 * 3 / 4 && consistent < 320 * 240,
+            "most, not all, pass the check: {consistent}"
+        );
         let stages: Vec<&str> = out.timings.stages.iter().map(|(name, _)| *name).collect();
         assert_eq!((stages.first(), stages.last()), (Some(&"downsample"), Some(&"upsample")), "{stages:?}");
         assert!(out.disparity.data.iter().all(|d| d.is_finite() && (0.0..48.0).contains(d)), "dense, in range");

@@ -34,6 +34,8 @@ pub struct ConditionParams {
     pub prior_recurse_sigma: f32,
     /// Scale each pixel's prior weight by the coarse run's confidence (its max-marginal, 0..1).
     pub prior_confidence: bool,
+    /// Prior weight factor at pixels the coarse run's left-right check rejected.
+    pub prior_untrusted: f32,
     /// A fixed prior weight added to the noise-scaled one.
     pub prior_base: f32,
     /// Labels within this distance of the coarse disparity (full-resolution px) are free.
@@ -44,8 +46,9 @@ pub struct ConditionParams {
 
 impl Default for ConditionParams {
     /// The default pipeline's conditioning (chosen in docs/tuning-log.md, "Robustness: the adaptive default"):
-    /// stretch only a pair that uses less than 1/1.5 of the range, denoise (for the cost) only a view measured
-    /// noisier than 2 grey levels, and a coarse prior of weight σn scaled by the coarse confidence.
+    /// stretch only a view that uses less than 1/1.5 of the range, denoise (for the cost) only a view measured
+    /// noisier than 2 grey levels, and a coarse prior of weight 0.5·σn scaled by the coarse confidence, halved
+    /// where the coarse left-right check failed.
     fn default() -> Self {
         ConditionParams {
             enabled: true,
@@ -56,10 +59,11 @@ impl Default for ConditionParams {
             denoise_sigma_xy: 3.0,
             denoise_min_sigma: 2.0,
             census_band: 0.0,
-            prior_per_sigma: 1.0,
+            prior_per_sigma: 0.5,
             prior_base: 0.0,
             prior_recurse_sigma: 0.0,
             prior_confidence: true,
+            prior_untrusted: 0.5,
             prior_margin_px: 1.0,
             prior_trunc_px: 8.0,
         }
@@ -109,6 +113,7 @@ impl ConditionParams {
         check_nonneg("condition.census_band", self.census_band)?;
         check_nonneg("condition.prior_per_sigma", self.prior_per_sigma)?;
         check_nonneg("condition.prior_base", self.prior_base)?;
+        check_nonneg("condition.prior_untrusted", self.prior_untrusted)?;
         check_nonneg("condition.prior_recurse_sigma", self.prior_recurse_sigma)?;
         check_nonneg("condition.prior_margin_px", self.prior_margin_px)?;
         check_nonneg("condition.prior_trunc_px", self.prior_trunc_px)
