@@ -32,7 +32,9 @@ use crate::{Params, StereoPair, Timings};
 /// The files that make a folder a scene.
 pub const SCENE_FILES: [&str; 3] = ["im0.png", "im1.png", "calib.txt"];
 
-/// Checks an algorithm name: 1–64 ASCII letters, digits, `_` or `-` (it becomes part of file names).
+/// Checks an algorithm name: 1–64 ASCII letters, digits, `_` or `-` (it becomes part of file names), and not
+/// `GT` in any case: `disp0GT.pfm` is the dataset's ground truth, which a result must never overwrite (on a
+/// case-insensitive file system `disp0gt.pfm` is the same file).
 ///
 /// # Errors
 /// [`Error::InvalidParam`] naming `--alg`.
@@ -40,7 +42,13 @@ pub fn validate_alg_name(name: &str) -> Result<()> {
     let ok = !name.is_empty()
         && name.len() <= 64
         && name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-');
-    if ok { Ok(()) } else { Err(Error::param("--alg", format!("{name:?}"), "1 to 64 letters, digits, _ or -")) }
+    if !ok {
+        return Err(Error::param("--alg", format!("{name:?}"), "1 to 64 letters, digits, _ or -"));
+    }
+    if name.eq_ignore_ascii_case("GT") {
+        return Err(Error::param("--alg", format!("{name:?}"), "any name but GT (disp0GT.pfm is the ground truth)"));
+    }
+    Ok(())
 }
 
 /// Folders under each root (recursively, the roots included) that contain every file in `files`, sorted by path
@@ -254,10 +262,18 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
 
 /// Runs (or skips) one scene, turning errors and panics into a [`SceneStatus`].
 fn process(dir: &Path, params: &Params, opts: &BatchOptions, on_stage: &dyn Fn(&str)) -> SceneStatus {
-    if opts.skip_existing && dir.join(format!("disp0{}.pfm", opts.alg)).exists() {
+    if opts.skip_existing && has_complete_result(dir, &opts.alg) {
         return SceneStatus::Skipped;
     }
     guarded(|| run_scene(dir, params, &opts.alg, opts.max_memory_bytes, on_stage))
+}
+
+/// Whether `dir` holds a finished `disp0<alg>.pfm`: a file that parses as a PFM of the scene's image size (an
+/// empty, truncated or foreign file, or a folder of that name, is not a result; the scene runs again).
+fn has_complete_result(dir: &Path, alg: &str) -> bool {
+    let Ok(result) = crate::io::pfm::read_pfm(&dir.join(format!("disp0{alg}.pfm"))) else { return false };
+    let size = image::image_dimensions(dir.join("im0.png")).ok();
+    size.is_some_and(|(w, h)| (w as usize, h as usize) == result.dims())
 }
 
 /// Runs `f`, turning an error or a panic into [`SceneStatus::Failed`].
@@ -354,6 +370,11 @@ mod tests {
     #[test]
     fn alg_names() {
         assert!(validate_alg_name("JEM_lrc-2").is_ok());
+        assert!(validate_alg_name("GTx").is_ok());
+        for gt in ["GT", "gt", "Gt"] {
+            let e = validate_alg_name(gt).unwrap_err().to_string();
+            assert!(e.contains("ground truth"), "{e}");
+        }
         for bad in ["", "a/b", "a b", "..", "é"] {
             assert!(validate_alg_name(bad).is_err(), "{bad:?}");
         }

@@ -406,3 +406,75 @@ fn issue19_threads_are_capped() {
         assert_clean_failure(dir.path(), &["--threads", n, &l, &r, "-o", "d.pfm"], &["--threads", "1 to"]);
     }
 }
+
+/// Issue 19, item 1: `--alg GT` (any case) would write `disp0GT.pfm` over the ground truth: refused by batch, and
+/// the scene's files are untouched.
+#[test]
+fn issue19_alg_gt_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(dir.path(), &["synth", "data/Scene", "--width", "96", "--height", "64", "--ndisp", "16"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let scene = dir.path().join("data/Scene");
+    let gt = std::fs::read(scene.join("disp0GT.pfm")).unwrap();
+    let before = files_in(&scene);
+    for name in ["GT", "gt"] {
+        let out = run_in(dir.path(), &["batch", "data", "--alg", name]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains("--alg") && err.contains("ground truth"), "{err}");
+    }
+    assert_eq!(files_in(&scene), before);
+    assert_eq!(std::fs::read(scene.join("disp0GT.pfm")).unwrap(), gt);
+}
+
+/// Issue 19, item 4: a PFM whose header has CRLF line ends is read correctly (it was scored as garbage), and one
+/// with bytes after the data is refused by eval, naming the file.
+#[test]
+fn issue19_pfm_headers_are_parsed_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(dir.path(), &["synth", "trainingQ/Scene", "--width", "96", "--height", "64", "--ndisp", "16"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let scene = dir.path().join("trainingQ/Scene");
+    let gt = std::fs::read(scene.join("disp0GT.pfm")).unwrap();
+    let header_len = b"Pf\n96 64\n-1\n".len();
+    assert!(gt.starts_with(b"Pf\n96 64\n-1\n"));
+    let mut crlf = b"Pf\r\n96 64\r\n-1\r\n".to_vec();
+    crlf.extend_from_slice(&gt[header_len..]);
+    std::fs::write(scene.join("disp0CRLF.pfm"), &crlf).unwrap();
+    let out = run_in(dir.path(), &["eval", "trainingQ", "--alg", "CRLF", "--format", "csv"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let csv = String::from_utf8_lossy(&out.stdout).into_owned();
+    let row = csv.lines().find(|l| l.contains(",Scene,")).expect("a row for the scene");
+    assert_eq!(row.split(',').nth(5), Some("0"), "a perfect result scores avgErr 0: {row}");
+    let mut long = gt.clone();
+    long.extend_from_slice(&[0, 0, 0, 0]);
+    std::fs::write(scene.join("disp0LONG.pfm"), &long).unwrap();
+    let out = run_in(dir.path(), &["eval", "trainingQ", "--alg", "LONG"]);
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), stderr(&out));
+    assert_eq!(out.status.code(), Some(2), "{text}");
+    assert!(text.contains("disp0LONG.pfm") && text.contains("data bytes"), "{text}");
+}
+
+/// Issue 19, item 10: `jem viz` refuses an empty or non-finite colour range and an 8-bit photo given as a
+/// disparity map or as --gt (each gave a plausible picture and exit 0); nothing is written.
+#[test]
+fn issue19_viz_refuses_bad_ranges_and_photos() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().join("d.pfm");
+    pfm::write_pfm(&d, &jem::Plane::new(8, 4, 2.0f32)).unwrap();
+    let d = d.to_string_lossy().into_owned();
+    for (lo, hi) in [("10", "0"), ("3", "3"), ("nan", "1"), ("0", "inf")] {
+        assert_clean_failure(dir.path(), &["viz", &d, "--vmin", lo, "--vmax", hi, "-o", "v.png"], &["--v"]);
+    }
+    let photo = dir.path().join("photo.png");
+    image::RgbImage::from_pixel(8, 4, image::Rgb([90, 120, 30])).save(&photo).unwrap();
+    let photo = photo.to_string_lossy().into_owned();
+    assert_clean_failure(dir.path(), &["viz", &photo, "-o", "v.png"], &["photo.png", "not a disparity map"]);
+    assert_clean_failure(
+        dir.path(),
+        &["viz", &d, "--gt", &photo, "-o", "v.png"],
+        &["photo.png", "not a disparity map"],
+    );
+    let ok = run_in(dir.path(), &["viz", &d, "--vmin", "0", "--vmax", "4", "-o", "v.png"]);
+    assert!(ok.status.success(), "{}", stderr(&ok));
+}

@@ -397,19 +397,48 @@ fn batch_skip_existing_leaves_finished_scenes_alone() {
     let root = tmp.path().join("set");
     write_shift_scene(&root.join("A"), 32, 12, 2, 4, 7);
     write_shift_scene(&root.join("B"), 32, 12, 2, 4, 8);
-    std::fs::write(root.join("A/disp0K.pfm"), b"placeholder").unwrap();
+    // A finished result: a PFM of the scene's size (its values are not looked at).
+    let finished = jem::io::pfm::encode_pfm(&jem::image::Plane::new(32, 12, 1.5f32));
+    std::fs::write(root.join("A/disp0K.pfm"), &finished).unwrap();
     let cfg = wta_config(tmp.path());
     let o = run(jem().arg("batch").arg(&root).args(["--alg", "K", "--skip-existing", "--config"]).arg(&cfg));
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("[1/2] A: skipped"), "{}", stderr(&o));
     assert!(stdout(&o).contains("2 scene(s): 1 done, 1 skipped, 0 failed"), "{}", stdout(&o));
-    assert_eq!(std::fs::read(root.join("A/disp0K.pfm")).unwrap(), b"placeholder");
+    assert_eq!(std::fs::read(root.join("A/disp0K.pfm")).unwrap(), finished);
     assert!(!root.join("A/timeK.txt").exists());
     assert!(jem::io::pfm::read_pfm(&root.join("B/disp0K.pfm")).is_ok());
     // Without the flag, the scene is redone.
     let o = run(jem().arg("batch").arg(&root).args(["--alg", "K", "-q", "--config"]).arg(&cfg));
     assert!(o.status.success());
-    assert!(jem::io::pfm::read_pfm(&root.join("A/disp0K.pfm")).is_ok());
+    assert_ne!(std::fs::read(root.join("A/disp0K.pfm")).unwrap(), finished);
+}
+
+/// Issue 19, item 9: only a result that parses and has the scene's size counts as done; an empty, truncated,
+/// foreign or wrongly sized file is redone (it was skipped before).
+#[test]
+fn issue19_skip_existing_needs_a_complete_result() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path().join("set");
+    let full = jem::io::pfm::encode_pfm(&jem::image::Plane::new(32, 12, 1.5f32));
+    let cases: [(&str, Vec<u8>); 4] = [
+        ("Empty", Vec::new()),
+        ("Truncated", full[..full.len() / 2].to_vec()),
+        ("Foreign", b"placeholder".to_vec()),
+        ("WrongSize", jem::io::pfm::encode_pfm(&jem::image::Plane::new(31, 12, 1.5f32))),
+    ];
+    for (i, (name, bytes)) in cases.iter().enumerate() {
+        write_shift_scene(&root.join(name), 32, 12, 2, 4, 20 + i as u64);
+        std::fs::write(root.join(name).join("disp0K.pfm"), bytes).unwrap();
+    }
+    let cfg = wta_config(tmp.path());
+    let o = run(jem().arg("batch").arg(&root).args(["--alg", "K", "--skip-existing", "--config"]).arg(&cfg));
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("4 scene(s): 4 done, 0 skipped, 0 failed"), "{}", stdout(&o));
+    for (name, _) in &cases {
+        let d = jem::io::pfm::read_pfm(&root.join(name).join("disp0K.pfm")).unwrap();
+        assert_eq!(d.dims(), (32, 12), "{name}");
+    }
 }
 
 fn png_dims_and_pixel(path: &Path, x: u32, y: u32) -> ((u32, u32), [u8; 3]) {

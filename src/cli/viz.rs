@@ -72,11 +72,24 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         }
         return Ok(ExitCode::SUCCESS);
     }
+    for (flag, v) in [("--vmin", args.vmin), ("--vmax", args.vmax)] {
+        if v.is_some_and(|v| !v.is_finite()) {
+            return Err(Error::param(flag, v.unwrap(), "a finite number"));
+        }
+    }
+    if let (Some(lo), Some(hi)) = (args.vmin, args.vmax)
+        && lo >= hi
+    {
+        return Err(Error::param("--vmin / --vmax", format!("{lo} / {hi}"), "--vmin below --vmax"));
+    }
     let disp = jem::io::read_disparity(&args.input)?;
     let calib = viz::calib_range(&args.input.parent().unwrap_or(Path::new(".")).join("calib.txt"));
     let data = viz::finite_range(&disp);
     let vmin = args.vmin.or(calib.map(|c| c.0)).or(data.map(|d| d.0)).unwrap_or(0.0);
     let vmax = args.vmax.or(calib.map(|c| c.1)).or(data.map(|d| d.1)).unwrap_or(1.0);
+    if (args.vmin.is_some() || args.vmax.is_some()) && vmin >= vmax {
+        return Err(Error::param("--vmin / --vmax", format!("{vmin} / {vmax}"), "a range with --vmin below --vmax"));
+    }
     let colour = viz::colorize(&disp, vmin, vmax);
     let picture = match &args.gt {
         None => colour,

@@ -3,8 +3,8 @@
 //! Header `Pf\n<width> <height>\n<scale>\n` (`PF` = 3 channels), then float32 samples, **rows bottom-to-top**.
 //! A negative scale means little-endian, a positive one big-endian. `+inf` marks unknown/invalid disparities and
 //! is kept as is. We write greyscale, little-endian, scale −1. Readers accept both byte orders and both channel
-//! counts (taking the first channel of `PF`), and reject malformed headers and short data without allocating
-//! more than the file holds.
+//! counts (taking the first channel of `PF`) and `\r\n` line ends, and reject malformed headers and a body that
+//! is not exactly width × height × channels floats, without allocating more than the file holds.
 
 use std::path::Path;
 
@@ -49,27 +49,34 @@ pub fn read_pfm(path: &Path) -> Result<Plane<f32>> {
     decode(&bytes).map_err(|msg| Error::Pfm { path: path.to_path_buf(), msg })
 }
 
-/// Splits off one whitespace-delimited header token; PFM headers separate fields by any whitespace.
-fn token<'a>(bytes: &'a [u8], pos: &mut usize, what: &str) -> std::result::Result<&'a str, String> {
-    while *pos < bytes.len() && bytes[*pos].is_ascii_whitespace() {
-        *pos += 1;
-    }
-    let start = *pos;
-    while *pos < bytes.len() && !bytes[*pos].is_ascii_whitespace() && *pos - start < 32 {
-        *pos += 1;
-    }
-    if start == *pos {
-        return Err(format!("header ends before the {what}"));
-    }
-    std::str::from_utf8(&bytes[start..*pos]).map_err(|_| format!("the {what} is not text"))
+/// The longest header line accepted (a width, a space and a height fit in 41 bytes).
+const MAX_LINE: usize = 64;
+
+/// The next header line, without its ending: `\n`, or `\r\n` (written by some Windows tools).
+fn line<'a>(bytes: &'a [u8], pos: &mut usize, what: &str) -> std::result::Result<&'a str, String> {
+    let rest = &bytes[*pos..];
+    let end = rest
+        .iter()
+        .take(MAX_LINE + 2)
+        .position(|&b| b == b'\n')
+        .ok_or_else(|| format!("the {what} line is not ended by a newline within {MAX_LINE} bytes"))?;
+    let text = rest[..end].strip_suffix(b"\r").unwrap_or(&rest[..end]);
+    *pos += end + 1;
+    std::str::from_utf8(text).map(|t| t.trim_matches(' ')).map_err(|_| format!("the {what} line is not text"))
 }
 
+/// Parses the three header lines exactly (`Pf`/`PF`; width and height; scale) and requires the body to hold
+/// exactly width × height × channels floats: a misread header shows up as a wrong body length, not as garbage.
 fn decode(bytes: &[u8]) -> std::result::Result<Plane<f32>, String> {
     let mut pos = 0;
-    let channels = match token(bytes, &mut pos, "magic")? {
+    let magic = line(bytes, &mut pos, "magic").map_err(|_| {
+        let start = String::from_utf8_lossy(&bytes[..bytes.len().min(8)]).into_owned();
+        format!("bad magic: the file starts {start:?} (expected a line \"Pf\" or \"PF\")")
+    })?;
+    let channels = match magic {
         "Pf" => 1,
         "PF" => 3,
-        other => return Err(format!("bad magic {other:?} (expected \"Pf\" or \"PF\")")),
+        other => return Err(format!("bad magic {other:?} (expected \"Pf\" or \"PF\" on its own line)")),
     };
     let dim = |s: &str, what: &str| -> std::result::Result<usize, String> {
         match s.parse::<usize>() {
@@ -77,25 +84,24 @@ fn decode(bytes: &[u8]) -> std::result::Result<Plane<f32>, String> {
             _ => Err(format!("bad {what} {s:?} (expected a positive integer)")),
         }
     };
-    let width = dim(token(bytes, &mut pos, "width")?, "width")?;
-    let height = dim(token(bytes, &mut pos, "height")?, "height")?;
-    let scale_text = token(bytes, &mut pos, "scale")?;
+    let dims = line(bytes, &mut pos, "size")?;
+    let fields: Vec<&str> = dims.split_ascii_whitespace().collect();
+    let [w, h] = fields[..] else {
+        return Err(format!("bad size line {dims:?} (expected \"<width> <height>\")"));
+    };
+    let (width, height) = (dim(w, "width")?, dim(h, "height")?);
+    let scale_text = line(bytes, &mut pos, "scale")?;
     let scale: f32 = scale_text.parse().map_err(|_| format!("bad scale {scale_text:?}"))?;
     if scale == 0.0 || !scale.is_finite() {
         return Err(format!("bad scale {scale_text:?} (expected a non-zero number)"));
     }
-    // Exactly one whitespace byte separates the header from the data.
-    if pos >= bytes.len() || !bytes[pos].is_ascii_whitespace() {
-        return Err("header is not terminated by a newline".into());
-    }
-    pos += 1;
     let samples = width
         .checked_mul(height)
         .and_then(|n| n.checked_mul(channels))
         .ok_or_else(|| format!("size {width}x{height} overflows"))?;
     let data = &bytes[pos..];
     let needed = samples.checked_mul(4).ok_or_else(|| format!("size {width}x{height} overflows"))?;
-    if data.len() < needed {
+    if data.len() != needed {
         return Err(format!("{width}x{height}x{channels} needs {needed} data bytes but the file has {}", data.len()));
     }
     let little_endian = scale < 0.0;
@@ -172,6 +178,27 @@ mod tests {
         for cut in [bytes.len() - 1, bytes.len() - 4, 12] {
             let e = decode_pfm(&bytes[..cut]).unwrap_err();
             assert!(e.to_string().contains("needs 24 data bytes"), "{e}");
+        }
+    }
+
+    /// A header with CRLF line ends is read correctly; a body with bytes left over is an error (issue 19, item 4:
+    /// both were read as garbage before).
+    #[test]
+    fn crlf_headers_and_exact_body_length() {
+        let good = encode_pfm(&sample());
+        let body = &good[b"Pf\n3 2\n-1\n".len()..];
+        let mut crlf = b"Pf\r\n3 2\r\n-1\r\n".to_vec();
+        crlf.extend_from_slice(body);
+        assert_eq!(decode_pfm(&crlf).unwrap(), sample());
+        let mut long = good.clone();
+        long.push(0);
+        let e = decode_pfm(&long).unwrap_err().to_string();
+        assert!(e.contains("needs 24 data bytes but the file has 25"), "{e}");
+        // Fields on the wrong lines.
+        for header in [&b"Pf 3 2 -1\n"[..], b"Pf\n3\n2\n-1\n", b"Pf\n3 2 -1\n"] {
+            let mut bytes = header.to_vec();
+            bytes.extend_from_slice(body);
+            assert!(decode_pfm(&bytes).is_err(), "accepted {:?}", String::from_utf8_lossy(header));
         }
     }
 

@@ -122,6 +122,15 @@ pub fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
         .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
+    // A disparity PNG is one 16-bit channel (KITTI convention); an 8-bit or colour image is a picture, and
+    // reading it as disparities would give plausible-looking nonsense.
+    if img.color() != image::ColorType::L16 {
+        return Err(Error::Input(format!(
+            "{}: a {:?} PNG is not a disparity map (expected 16-bit grey, disparity × 256; or use .pfm/.exr)",
+            path.display(),
+            img.color()
+        )));
+    }
     let grey = img.to_luma16();
     let data = grey.pixels().map(|p| if p.0[0] == 0 { f32::INFINITY } else { f32::from(p.0[0]) / 256.0 }).collect();
     Ok(Plane::from_vec(grey.width() as usize, grey.height() as usize, data))
