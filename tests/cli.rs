@@ -478,3 +478,61 @@ fn issue19_viz_refuses_bad_ranges_and_photos() {
     let ok = run_in(dir.path(), &["viz", &d, "--vmin", "0", "--vmax", "4", "-o", "v.png"]);
     assert!(ok.status.success(), "{}", stderr(&ok));
 }
+
+/// Issue 19, item 2: an output that is (or links to) an input of the same command, or another of its outputs,
+/// is refused before any work; every file is left as it was.
+#[test]
+fn issue19_outputs_never_overwrite_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(dir.path(), &["synth", "trainingQ/S", "--width", "96", "--height", "64", "--ndisp", "16"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let ok = run_in(dir.path(), &["trainingQ/S/im0.png", "trainingQ/S/im1.png", "-o", "trainingQ/S/disp0A.pfm"]);
+    assert!(ok.status.success(), "{}", stderr(&ok));
+    ok_png16(dir.path(), "trainingQ/S/disp0A.pfm", "d.png");
+    std::os::unix::fs::symlink(dir.path().join("trainingQ/S/im1.png"), dir.path().join("alias.png")).unwrap();
+    let cases: [&[&str]; 6] = [
+        &["trainingQ/S/im0.png", "trainingQ/S/im1.png", "-o", "trainingQ/S/im0.png"],
+        &["trainingQ/S/im0.png", "trainingQ/S/im1.png", "-o", "alias.png"],
+        &["trainingQ/S/im0.png", "trainingQ/S/im1.png", "-o", "a.pfm", "--confidence", "./a.pfm"],
+        &["viz", "d.png", "-o", "d.png"],
+        &["viz", "trainingQ", "--alg", "A", "-o", "trainingQ/S/im0.png"],
+        &["viz", "trainingQ/S/disp0A.pfm", "--gt", "trainingQ/S/disp0GT.pfm", "-o", "trainingQ/S/mask0nocc.png"],
+    ];
+    let snapshot = || {
+        let mut all: Vec<(String, Vec<u8>)> = Vec::new();
+        for d in [dir.path().to_path_buf(), dir.path().join("trainingQ/S")] {
+            for e in std::fs::read_dir(&d).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_file() {
+                    all.push((p.display().to_string(), std::fs::read(&p).unwrap()));
+                }
+            }
+        }
+        all.sort();
+        all
+    };
+    let before = snapshot();
+    for args in cases {
+        let out = run_in(dir.path(), args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains("overwrite an input") || err.contains("two outputs"), "{args:?}: {err}");
+    }
+    assert_eq!(snapshot(), before, "no file changed");
+}
+
+/// Writes `src` (a PFM under `dir`) as a 16-bit disparity PNG `dst` with the library.
+fn ok_png16(dir: &Path, src: &str, dst: &str) {
+    let map = pfm::read_pfm(&dir.join(src)).unwrap();
+    jem::io::write_disparity(&dir.join(dst), &map).unwrap();
+}
+
+/// Issue 19, item 8: when the confidence cannot be written, the disparity map is not written either.
+#[test]
+fn issue19_all_outputs_or_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    let args = [&l, &r, "-o", "d.pfm", "--confidence", "missing/c.pfm", "--set", "model=wta"];
+    assert_clean_failure(dir.path(), &args, &["missing/c.pfm"]);
+    assert!(!dir.path().join("d.pfm").exists());
+}

@@ -46,6 +46,9 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     if let Some(c) = &args.confidence {
         jem::io::DisparityFormat::from_path(c)?;
     }
+    let calib = left.parent().unwrap_or(Path::new(".")).join("calib.txt");
+    let outputs: Vec<&Path> = std::iter::once(output.as_path()).chain(args.confidence.as_deref()).collect();
+    jem::io::check_outputs(&[left, right, &calib], &outputs)?;
     let params = args.config.params()?;
     let start = Instant::now();
     let pair = load_pair(left, right, args.ndisp)?;
@@ -61,10 +64,13 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     if let Some(s) = spinner {
         s.finish_and_clear();
     }
-    jem::io::write_disparity(output, &out.disparity)?;
+    // Both outputs or neither: encode both, then write them as one.
+    let mut files = vec![(output.as_path(), jem::io::encode_disparity(output, &out.disparity)?)];
     if let Some(c) = &args.confidence {
-        jem::io::write_disparity(c, &out.confidence)?;
+        files.push((c.as_path(), jem::io::encode_disparity(c, &out.confidence)?));
     }
+    let refs: Vec<(&Path, &[u8])> = files.iter().map(|(p, b)| (*p, b.as_slice())).collect();
+    jem::io::write_all_or_none(&refs)?;
     if global.verbose && !global.quiet {
         eprintln!("{:<14} {:>9.1} ms", "load", load_time.as_secs_f64() * 1e3);
         for (name, d) in &out.timings.stages {

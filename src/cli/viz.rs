@@ -61,6 +61,13 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         if args.panel_width < 16 {
             return Err(Error::param("--panel-width", args.panel_width, "at least 16"));
         }
+        // The sheet reads these files of every scene: the output must be none of them.
+        let result = format!("disp0{alg}.pfm");
+        let names = ["im0.png", result.as_str(), "disp0GT.pfm", "mask0nocc.png", "calib.txt"];
+        let scenes = jem::batch::find_dirs_with(std::slice::from_ref(&args.input), &["im0.png", &result])?;
+        let read: Vec<PathBuf> = scenes.iter().flat_map(|s| names.iter().map(move |n| s.join(n))).collect();
+        let read_refs: Vec<&Path> = read.iter().map(PathBuf::as_path).collect();
+        jem::io::check_outputs(&read_refs, &[&args.output])?;
         let sheet = viz::contact_sheet(&args.input, alg, args.scale, args.panel_width)?;
         sheet.canvas.write_png(&args.output)?;
         for (dir, e) in &sheet.skipped {
@@ -82,6 +89,13 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     {
         return Err(Error::param("--vmin / --vmax", format!("{lo} / {hi}"), "--vmin below --vmax"));
     }
+    let dir = args.input.parent().unwrap_or(Path::new("."));
+    let mut read = vec![args.input.clone(), dir.join("calib.txt")];
+    if let Some(gt) = &args.gt {
+        read.extend([gt.clone(), gt.parent().unwrap_or(Path::new(".")).join("mask0nocc.png")]);
+    }
+    let read_refs: Vec<&Path> = read.iter().map(PathBuf::as_path).collect();
+    jem::io::check_outputs(&read_refs, &[&args.output])?;
     let disp = jem::io::read_disparity(&args.input)?;
     let calib = viz::calib_range(&args.input.parent().unwrap_or(Path::new(".")).join("calib.txt"));
     let data = viz::finite_range(&disp);

@@ -49,11 +49,116 @@ impl DisparityFormat {
 /// # Errors
 /// An unknown extension, or any I/O or encoder error (naming the path).
 pub fn write_disparity(path: &Path, map: &DisparityMap) -> Result<()> {
+    write_atomic(path, &encode_disparity(path, map)?)
+}
+
+/// A disparity map encoded in the format given by `path`'s extension (nothing is written).
+///
+/// # Errors
+/// An unknown extension, or an encoder error (naming the path), e.g. a disparity a 16-bit PNG cannot hold.
+pub fn encode_disparity(path: &Path, map: &DisparityMap) -> Result<Vec<u8>> {
     match DisparityFormat::from_path(path)? {
-        DisparityFormat::Pfm => pfm::write_pfm(path, map),
-        DisparityFormat::Exr => exr::write_exr(path, map),
-        DisparityFormat::Png16 => png::write_disparity_png16(path, map),
+        DisparityFormat::Pfm => Ok(pfm::encode_pfm(map)),
+        DisparityFormat::Exr => exr::encode_exr(path, map),
+        DisparityFormat::Png16 => png::encode_disparity_png16(path, map),
     }
+}
+
+/// Writes several files as one: each goes to its temporary file first; only when all of them are written and
+/// flushed are they renamed into place. If any write fails, no destination is touched and the temporary files
+/// are removed. (A rename within one folder does not fail in practice; if one did, the files renamed before it
+/// stay, and the error names the one that failed.)
+///
+/// # Errors
+/// [`Error::Io`] naming the first file that could not be written.
+pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
+    let mut staged: Vec<(PathBuf, &Path)> = Vec::with_capacity(files.len());
+    let stage = |path: &Path, bytes: &[u8]| -> Result<PathBuf> {
+        let tmp = temp_path(path);
+        let written = (|| {
+            let mut file = std::fs::File::create(&tmp).map_err(|e| Error::io(path, e))?;
+            file.write_all(bytes).map_err(|e| Error::io(path, e))?;
+            file.sync_all().map_err(|e| Error::io(path, e))
+        })();
+        match written {
+            Ok(()) => Ok(tmp),
+            Err(e) => {
+                let _ = std::fs::remove_file(&tmp);
+                Err(e)
+            }
+        }
+    };
+    for &(path, bytes) in files {
+        match stage(path, bytes) {
+            Ok(tmp) => staged.push((tmp, path)),
+            Err(e) => {
+                staged.iter().for_each(|(tmp, _)| drop(std::fs::remove_file(tmp)));
+                return Err(e);
+            }
+        }
+    }
+    for (i, (tmp, path)) in staged.iter().enumerate() {
+        if let Err(e) = std::fs::rename(tmp, path) {
+            staged[i..].iter().for_each(|(tmp, _)| drop(std::fs::remove_file(tmp)));
+            return Err(Error::io(path, e));
+        }
+    }
+    Ok(())
+}
+
+/// What a path will name once written: the file itself when it exists (through symbolic links), else its
+/// folder's canonical path joined with its name; `None` when neither can be resolved.
+fn resolved(path: &Path) -> Option<PathBuf> {
+    if let Ok(p) = std::fs::canonicalize(path) {
+        return Some(p);
+    }
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    Some(std::fs::canonicalize(parent).ok()?.join(path.file_name()?))
+}
+
+/// Whether two paths name the same file: equal once resolved, or (both existing) the same inode.
+fn same_file(a: &Path, b: &Path) -> bool {
+    if let (Some(ra), Some(rb)) = (resolved(a), resolved(b))
+        && ra == rb
+    {
+        return true;
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(ma), Ok(mb)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return ma.dev() == mb.dev() && ma.ino() == mb.ino();
+        }
+    }
+    false
+}
+
+/// Checks, before any work, that no output of a command is one of its inputs or another of its outputs (also
+/// through symbolic or hard links).
+///
+/// # Errors
+/// [`Error::Input`] naming both paths.
+pub fn check_outputs(inputs: &[&Path], outputs: &[&Path]) -> Result<()> {
+    for (k, out) in outputs.iter().enumerate() {
+        if let Some(input) = inputs.iter().find(|i| same_file(out, i)) {
+            return Err(Error::Input(format!(
+                "{}: this output would overwrite an input of the same command ({}); choose another name",
+                out.display(),
+                input.display()
+            )));
+        }
+        if let Some(other) = outputs[..k].iter().find(|o| same_file(out, o)) {
+            return Err(Error::Input(format!(
+                "{}: the same file is given for two outputs ({}); choose another name",
+                out.display(),
+                other.display()
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Reads a disparity map from a `.pfm`, `.exr` or 16-bit `.png` (×256, 0 = invalid) file.
@@ -123,6 +228,43 @@ mod tests {
         write_atomic(&p, b"two").unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"two");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn outputs_must_not_be_inputs_or_each_other() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("in.png");
+        std::fs::write(&input, b"x").unwrap();
+        let link = dir.path().join("link.png");
+        std::os::unix::fs::symlink(&input, &link).unwrap();
+        let hard = dir.path().join("hard.png");
+        std::fs::hard_link(&input, &hard).unwrap();
+        let other = dir.path().join("out.pfm");
+        assert!(check_outputs(&[&input], &[&other]).is_ok());
+        let dotted = dir.path().join(".").join("in.png");
+        for bad in [&input, &link, &hard, &dotted] {
+            let e = check_outputs(&[&input], &[bad]).unwrap_err().to_string();
+            assert!(e.contains("overwrite an input"), "{e}");
+        }
+        let e = check_outputs(&[&input], &[&other, &dir.path().join("x/../out.pfm")]);
+        assert!(e.is_err_and(|e| e.to_string().contains("two outputs")));
+    }
+
+    #[test]
+    fn all_or_none_writes_nothing_when_one_fails() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = dir.path().join("a.txt");
+        std::fs::write(&a, b"old").unwrap();
+        let blocked = dir.path().join("sub");
+        std::fs::create_dir(&blocked).unwrap();
+        let bad = blocked.join("missing").join("b.txt");
+        assert!(write_all_or_none(&[(&a, b"new"), (&bad, b"b")]).is_err());
+        assert_eq!(std::fs::read(&a).unwrap(), b"old", "the first file is untouched");
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names.len(), 2, "no temporary file left: {names:?}");
+        let b = dir.path().join("b.txt");
+        write_all_or_none(&[(&a, b"new"), (&b, b"b")]).unwrap();
+        assert_eq!((std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap()), (b"new".to_vec(), b"b".to_vec()));
     }
 
     #[test]

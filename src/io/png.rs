@@ -92,6 +92,14 @@ pub const PNG16_MAX_DISPARITY: f32 = 65535.0 / 256.0;
 /// [`Error::Input`] naming the path if a disparity exceeds [`PNG16_MAX_DISPARITY`] (nothing is written: the
 /// format cannot hold it; `.pfm` or `.exr` can); [`Error::Image`] or [`Error::Io`] naming the path.
 pub fn write_disparity_png16(path: &Path, map: &DisparityMap) -> Result<()> {
+    super::write_atomic(path, &encode_disparity_png16(path, map)?)
+}
+
+/// [`write_disparity_png16`]'s bytes, nothing written (`path` only names the file in errors).
+///
+/// # Errors
+/// As [`write_disparity_png16`], except I/O.
+pub fn encode_disparity_png16(path: &Path, map: &DisparityMap) -> Result<Vec<u8>> {
     if let Some(max) = map.data.iter().copied().filter(|d| d.is_finite()).reduce(f32::max)
         && max * 256.0 > 65535.5
     {
@@ -111,7 +119,7 @@ pub fn write_disparity_png16(path: &Path, map: &DisparityMap) -> Result<()> {
     image::codecs::png::PngEncoder::new(&mut bytes)
         .write_image(&samples, map.width as u32, map.height as u32, image::ExtendedColorType::L16)
         .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
-    super::write_atomic(path, &bytes)
+    Ok(bytes)
 }
 
 /// Reads a 16-bit disparity PNG (value / 256, 0 = invalid → inf).
