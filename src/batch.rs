@@ -21,8 +21,8 @@ use std::collections::BTreeSet;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Condvar, Mutex};
 use std::time::Instant;
 
 use crate::error::{Error, Result};
@@ -214,7 +214,8 @@ pub struct BatchOptions {
     pub jobs: usize,
     /// Skip scenes whose `disp0<alg>.pfm` exists.
     pub skip_existing: bool,
-    /// Memory limit per scene (see [`crate::check_memory`]); with `jobs` > 1 each job may use this much.
+    /// Memory limit of the whole batch (see [`crate::check_memory`]): concurrent scenes share it, a scene
+    /// waits while the ones running hold too much of it, and one that needs more than all of it fails.
     pub max_memory_bytes: u64,
 }
 
@@ -235,11 +236,30 @@ pub fn run_scene(
     max_memory_bytes: u64,
     on_stage: &dyn Fn(&str),
 ) -> Result<SceneRun> {
+    let budget = MemoryBudget::new(max_memory_bytes);
+    run_scene_in(dir, params, alg, &budget, on_stage)
+}
+
+/// [`run_scene`] drawing its memory from `budget`, shared with the scenes running beside it.
+fn run_scene_in(
+    dir: &Path,
+    params: &Params,
+    alg: &str,
+    budget: &MemoryBudget,
+    on_stage: &dyn Fn(&str),
+) -> Result<SceneRun> {
     on_stage("loading");
     let ndisp = calib::read_ndisp(&dir.join("calib.txt"))?;
-    let (left, right) = crate::io::png::load_rgb_pair(&dir.join("im0.png"), &dir.join("im1.png"))?;
+    // The size from the PNG header: a scene too large for the budget is refused before its images are decoded.
+    let im0 = dir.join("im0.png");
+    let (w, h) = image::image_dimensions(&im0).map_err(|source| Error::Image { path: im0.clone(), source })?;
+    crate::check_memory(w as usize, h as usize, ndisp, params, budget.total)?;
+    let need = crate::estimate_memory_bytes(w as usize, h as usize, ndisp, params);
+    on_stage("waiting for memory");
+    let _held = budget.reserve(need);
+    on_stage("loading");
+    let (left, right) = crate::io::png::load_rgb_pair(&im0, &dir.join("im1.png"))?;
     let pair = StereoPair::new(left, right, ndisp)?;
-    crate::check_memory(pair.left.width, pair.left.height, ndisp, params, max_memory_bytes)?;
     let start = Instant::now();
     let out = crate::run_observed(params, &pair, on_stage)?;
     let seconds = start.elapsed().as_secs_f64();
@@ -247,6 +267,51 @@ pub fn run_scene(
     crate::io::pfm::write_pfm(&dir.join(format!("disp0{alg}.pfm")), &out.disparity)?;
     crate::io::write_atomic(&dir.join(format!("time{alg}.txt")), format!("{seconds:.6}\n").as_bytes())?;
     Ok(SceneRun { size: pair.left.dims(), ndisp, seconds, timings: out.timings })
+}
+
+/// The memory the concurrent scenes of a batch share: a scene reserves its estimate before it loads its images
+/// and waits while the scenes running hold so much that its share would not fit. A scene alone always gets
+/// what it asks for (its estimate was checked against the total before).
+pub struct MemoryBudget {
+    total: u64,
+    used: Mutex<u64>,
+    freed: Condvar,
+}
+
+/// Memory held from a [`MemoryBudget`] until dropped.
+pub struct Reservation<'a> {
+    budget: &'a MemoryBudget,
+    bytes: u64,
+}
+
+impl MemoryBudget {
+    /// A budget of `total` bytes.
+    pub fn new(total: u64) -> Self {
+        MemoryBudget { total, used: Mutex::new(0), freed: Condvar::new() }
+    }
+
+    /// Takes `bytes`, waiting until they fit beside what is held (at once when nothing is).
+    pub fn reserve(&self, bytes: u64) -> Reservation<'_> {
+        let mut used = self.used.lock().unwrap_or_else(|p| p.into_inner());
+        while *used > 0 && used.saturating_add(bytes) > self.total {
+            used = self.freed.wait(used).unwrap_or_else(|p| p.into_inner());
+        }
+        *used = used.saturating_add(bytes);
+        Reservation { budget: self, bytes }
+    }
+
+    /// Bytes held now.
+    pub fn in_use(&self) -> u64 {
+        *self.used.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+impl Drop for Reservation<'_> {
+    fn drop(&mut self) {
+        let mut used = self.budget.used.lock().unwrap_or_else(|p| p.into_inner());
+        *used = used.saturating_sub(self.bytes);
+        self.budget.freed.notify_all();
+    }
 }
 
 /// The text of a panic payload.
@@ -261,11 +326,17 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
 }
 
 /// Runs (or skips) one scene, turning errors and panics into a [`SceneStatus`].
-fn process(dir: &Path, params: &Params, opts: &BatchOptions, on_stage: &dyn Fn(&str)) -> SceneStatus {
+fn process(
+    dir: &Path,
+    params: &Params,
+    opts: &BatchOptions,
+    budget: &MemoryBudget,
+    on_stage: &dyn Fn(&str),
+) -> SceneStatus {
     if opts.skip_existing && has_complete_result(dir, &opts.alg) {
         return SceneStatus::Skipped;
     }
-    guarded(|| run_scene(dir, params, &opts.alg, opts.max_memory_bytes, on_stage))
+    guarded(|| run_scene_in(dir, params, &opts.alg, budget, on_stage))
 }
 
 /// Whether `dir` holds a finished `disp0<alg>.pfm`: a file that parses as a PFM of the scene's image size (an
@@ -310,13 +381,14 @@ pub fn run_batch(
 ) -> Vec<SceneReport> {
     let slots: Mutex<Vec<Option<SceneReport>>> = Mutex::new(vec![None; scenes.len()]);
     let next = AtomicUsize::new(0);
+    let budget = MemoryBudget::new(opts.max_memory_bytes);
     let worker = || {
         loop {
             let index = next.fetch_add(1, Ordering::Relaxed);
             let Some(dir) = scenes.get(index) else { break };
             let name = scene_name(dir);
             on_event(Event::Started { index, name: &name });
-            let status = process(dir, params, opts, &|stage| on_event(Event::Stage { index, stage }));
+            let status = process(dir, params, opts, &budget, &|stage| on_event(Event::Stage { index, stage }));
             let report = SceneReport { dir: dir.clone(), name, status };
             on_event(Event::Finished { index, report: &report });
             if let Ok(mut s) = slots.lock() {
@@ -365,6 +437,28 @@ mod tests {
             all.sort();
             assert_eq!(all, items, "N = {n}");
         }
+    }
+
+    /// Issue 19, item 6: six concurrent holders of 40 of 100 bytes never hold more than 100 together; a request
+    /// larger than the total still runs alone.
+    #[test]
+    fn memory_budget_bounds_concurrent_scenes() {
+        let budget = MemoryBudget::new(100);
+        let peak = AtomicUsize::new(0);
+        std::thread::scope(|scope| {
+            for _ in 0..6 {
+                scope.spawn(|| {
+                    let _r = budget.reserve(40);
+                    peak.fetch_max(budget.in_use() as usize, Ordering::SeqCst);
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                });
+            }
+        });
+        assert!(peak.load(Ordering::SeqCst) <= 100 && peak.load(Ordering::SeqCst) >= 40);
+        assert_eq!(budget.in_use(), 0);
+        let alone = budget.reserve(150);
+        assert_eq!(budget.in_use(), 150);
+        drop(alone);
     }
 
     #[test]

@@ -536,3 +536,24 @@ fn issue19_all_outputs_or_none() {
     assert_clean_failure(dir.path(), &args, &["missing/c.pfm"]);
     assert!(!dir.path().join("d.pfm").exists());
 }
+
+/// Issue 19, items 7 and 12: inputs are read with a size cap (a config from /dev/zero was read until the kernel
+/// killed the process); a calib.txt with a UTF-8 byte-order mark is read; a --set value with a newline is
+/// refused (the part after it was dropped silently).
+#[test]
+fn issue19_capped_reads_bom_and_one_line_overrides() {
+    let dir = tempfile::tempdir().unwrap();
+    assert_clean_failure(dir.path(), &["config", "-c", "/dev/zero"], &["/dev/zero", "too large"]);
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    assert_clean_failure(dir.path(), &[&l, &r, "-o", "d.pfm", "--set", "model=wta\nfoo=1"], &["--set", "newline"]);
+    let out = run_in(dir.path(), &["synth", "S", "--width", "96", "--height", "64", "--ndisp", "16"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let calib = dir.path().join("S/calib.txt");
+    let mut text = "\u{feff}".as_bytes().to_vec();
+    text.extend(std::fs::read(&calib).unwrap());
+    std::fs::write(&calib, text).unwrap();
+    let ok = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "d.pfm", "--set", "model=wta"]);
+    assert!(ok.status.success(), "{}", stderr(&ok));
+    std::os::unix::fs::symlink("/dev/zero", dir.path().join("zero.pfm")).unwrap();
+    assert_clean_failure(dir.path(), &["viz", "zero.pfm", "-o", "v.png"], &["zero.pfm"]);
+}

@@ -40,10 +40,12 @@ impl Calib {
     /// # Errors
     /// [`Error::Io`] or [`Error::Calib`] naming the path.
     pub fn load(path: &Path) -> Result<Calib> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = super::read_capped(path, super::MAX_CALIB_BYTES, "calib.txt")?;
         let text = String::from_utf8(bytes)
             .map_err(|_| Error::Calib { path: path.to_path_buf(), msg: "not a text file".into() })?;
-        Calib::parse(&text).map_err(|msg| Error::Calib { path: path.to_path_buf(), msg })
+        // A UTF-8 byte-order mark (some Windows editors write one) is not part of the first key.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+        Calib::parse(text).map_err(|msg| Error::Calib { path: path.to_path_buf(), msg })
     }
 
     /// The raw value of `key`.

@@ -173,6 +173,27 @@ pub fn read_disparity(path: &Path) -> Result<DisparityMap> {
     }
 }
 
+/// Reads a whole file of at most `max` bytes (a config, a calib.txt, a PFM header): a device, a pipe or a huge
+/// file given by mistake is refused after `max` + 1 bytes instead of filling the memory.
+///
+/// # Errors
+/// [`Error::Io`] naming the path, or [`Error::Input`] when the file is larger than `max`.
+pub fn read_capped(path: &Path, max: u64, what: &str) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut bytes = Vec::new();
+    file.take(max + 1).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
+    if bytes.len() as u64 > max {
+        return Err(Error::Input(format!("{}: larger than {max} bytes, too large for a {what}", path.display())));
+    }
+    Ok(bytes)
+}
+
+/// The largest config file read.
+pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
+/// The largest calib.txt read.
+pub const MAX_CALIB_BYTES: u64 = 64 << 10;
+
 /// Writes `bytes` to `path` atomically: a temporary file in the same folder, flushed, then renamed.
 ///
 /// # Errors

@@ -45,8 +45,18 @@ pub fn write_pfm(path: &Path, map: &Plane<f32>) -> Result<()> {
 /// # Errors
 /// [`Error::Io`] if it cannot be read, [`Error::Pfm`] naming the path if it is malformed.
 pub fn read_pfm(path: &Path) -> Result<Plane<f32>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    decode(&bytes).map_err(|msg| Error::Pfm { path: path.to_path_buf(), msg })
+    use std::io::Read;
+    let pfm_error = |msg| Error::Pfm { path: path.to_path_buf(), msg };
+    // The header first (three short lines), then exactly the body it announces plus one byte to detect more:
+    // a device or a huge file is never read whole.
+    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut bytes = Vec::new();
+    file.by_ref().take(3 * (MAX_LINE as u64 + 2)).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
+    let (width, height, channels, _, body_start) = header(&bytes).map_err(pfm_error)?;
+    let needed = (width * height * channels * 4) as u64;
+    let have = (bytes.len() - body_start) as u64;
+    file.take((needed + 1).saturating_sub(have)).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
+    decode(&bytes).map_err(pfm_error)
 }
 
 /// The longest header line accepted (a width, a space and a height fit in 41 bytes).
@@ -68,6 +78,26 @@ fn line<'a>(bytes: &'a [u8], pos: &mut usize, what: &str) -> std::result::Result
 /// Parses the three header lines exactly (`Pf`/`PF`; width and height; scale) and requires the body to hold
 /// exactly width × height × channels floats: a misread header shows up as a wrong body length, not as garbage.
 fn decode(bytes: &[u8]) -> std::result::Result<Plane<f32>, String> {
+    let (width, height, channels, little_endian, pos) = header(bytes)?;
+    let data = &bytes[pos..];
+    let needed = width * height * channels * 4;
+    if data.len() != needed {
+        return Err(format!("{width}x{height}x{channels} needs {needed} data bytes but the file has {}", data.len()));
+    }
+    let mut out = Plane::new(width, height, 0.0f32);
+    for (file_row, chunk) in data.chunks_exact(width * channels * 4).enumerate() {
+        let y = height - 1 - file_row;
+        for (dst, px) in out.row_mut(y).iter_mut().zip(chunk.chunks_exact(channels * 4)) {
+            let b = [px[0], px[1], px[2], px[3]];
+            *dst = if little_endian { f32::from_le_bytes(b) } else { f32::from_be_bytes(b) };
+        }
+    }
+    Ok(out)
+}
+
+/// The header's (width, height, channels, little-endian, where the body starts); width × height × channels × 4
+/// fits a usize.
+fn header(bytes: &[u8]) -> std::result::Result<(usize, usize, usize, bool, usize), String> {
     let mut pos = 0;
     let magic = line(bytes, &mut pos, "magic").map_err(|_| {
         let start = String::from_utf8_lossy(&bytes[..bytes.len().min(8)]).into_owned();
@@ -95,25 +125,12 @@ fn decode(bytes: &[u8]) -> std::result::Result<Plane<f32>, String> {
     if scale == 0.0 || !scale.is_finite() {
         return Err(format!("bad scale {scale_text:?} (expected a non-zero number)"));
     }
-    let samples = width
+    width
         .checked_mul(height)
         .and_then(|n| n.checked_mul(channels))
+        .and_then(|n| n.checked_mul(4))
         .ok_or_else(|| format!("size {width}x{height} overflows"))?;
-    let data = &bytes[pos..];
-    let needed = samples.checked_mul(4).ok_or_else(|| format!("size {width}x{height} overflows"))?;
-    if data.len() != needed {
-        return Err(format!("{width}x{height}x{channels} needs {needed} data bytes but the file has {}", data.len()));
-    }
-    let little_endian = scale < 0.0;
-    let mut out = Plane::new(width, height, 0.0f32);
-    for (file_row, chunk) in data[..needed].chunks_exact(width * channels * 4).enumerate() {
-        let y = height - 1 - file_row;
-        for (dst, px) in out.row_mut(y).iter_mut().zip(chunk.chunks_exact(channels * 4)) {
-            let b = [px[0], px[1], px[2], px[3]];
-            *dst = if little_endian { f32::from_le_bytes(b) } else { f32::from_be_bytes(b) };
-        }
-    }
-    Ok(out)
+    Ok((width, height, channels, scale < 0.0, pos))
 }
 
 #[cfg(test)]

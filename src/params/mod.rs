@@ -136,7 +136,9 @@ impl Params {
     pub fn load(config: Option<&Path>, overrides: &[String]) -> Result<Params> {
         match config {
             Some(path) => {
-                let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+                let bytes = crate::io::read_capped(path, crate::io::MAX_CONFIG_BYTES, "config")?;
+                let text = String::from_utf8(bytes)
+                    .map_err(|_| Error::Input(format!("{}: a config is UTF-8 text; this is not", path.display())))?;
                 Self::merged(Some((&text, path)), overrides)
             }
             None => Self::merged(None, overrides),
@@ -217,6 +219,10 @@ fn one_line(msg: &str) -> String {
 /// quoted strings); anything that does not parse is taken as a bare string, so `--set model=fcm` works.
 fn apply_override(table: &mut toml::Table, item: &str) -> Result<()> {
     let bad = |msg: &str| Error::Toml { path: "--set".into(), msg: format!("{item:?}: {msg}") };
+    if item.chars().any(char::is_control) {
+        // A newline would start another TOML line whose key is silently dropped.
+        return Err(bad("one key=value per --set, without newlines or other control characters"));
+    }
     let (key, value) = item.split_once('=').ok_or_else(|| bad("expected key=value"))?;
     let key = key.trim();
     let parts: Vec<&str> = key.split('.').collect();
