@@ -267,6 +267,7 @@ mod tests {
             let e = check_outputs(&[&input], &[bad]).unwrap_err().to_string();
             assert!(e.contains("overwrite an input"), "{e}");
         }
+        std::fs::create_dir(dir.path().join("x")).unwrap();
         let e = check_outputs(&[&input], &[&other, &dir.path().join("x/../out.pfm")]);
         assert!(e.is_err_and(|e| e.to_string().contains("two outputs")));
     }
