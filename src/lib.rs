@@ -364,6 +364,10 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
     }
     if post.sps.enabled {
         disparity = t.time("sps", || post::planes::fit_slanted_planes(&pair.left, &disparity, &trusted, &post.sps));
+        // A plane extrapolated to a segment's far corner can leave the search range: the answer is never
+        // outside the range that was searched.
+        let top = (pair.ndisp - 1) as f32;
+        disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
     }
     Ok(Output { disparity, confidence: left.confidence, consistent: trusted, timings: t })
 }

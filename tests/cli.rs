@@ -557,3 +557,24 @@ fn issue19_capped_reads_bom_and_one_line_overrides() {
     std::os::unix::fs::symlink("/dev/zero", dir.path().join("zero.pfm")).unwrap();
     assert_clean_failure(dir.path(), &["viz", "zero.pfm", "-o", "v.png"], &["zero.pfm"]);
 }
+
+/// Issue 19, item 11: slanted-plane smoothing extrapolates planes to segment corners; the output stays inside
+/// the searched range 0..ndisp−1 (with a range too short for the shipped example, 16 or 24 labels, the map
+/// reached 18.0 and 26.0).
+#[test]
+fn issue19_disparities_stay_in_the_search_range() {
+    let dir = tempfile::tempdir().unwrap();
+    for config in ["default.toml", "jem-sps.toml"] {
+        let c = repo().join("configs").join(config).to_string_lossy().into_owned();
+        for ndisp in [16, 24] {
+            let n = ndisp.to_string();
+            let args = [&example("im0.png"), &example("im1.png"), "-o", "d.pfm", "-c", &c, "--ndisp", &n];
+            let out = run_in(dir.path(), &args);
+            assert!(out.status.success(), "{}", stderr(&out));
+            let d = pfm::read_pfm(&dir.path().join("d.pfm")).unwrap();
+            let finite = d.data.iter().filter(|v| v.is_finite());
+            let (lo, hi) = finite.fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+            assert!(lo >= 0.0 && hi <= (ndisp - 1) as f32, "{config}, ndisp {ndisp}: range {lo}..{hi}");
+        }
+    }
+}
