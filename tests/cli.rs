@@ -578,3 +578,51 @@ fn issue19_disparities_stay_in_the_search_range() {
         }
     }
 }
+
+/// A PNG that is only a header claiming `w` × `h` RGB pixels (no image data).
+fn png_header_only(w: u32, h: u32) -> Vec<u8> {
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &b in bytes {
+            c ^= u32::from(b);
+            for _ in 0..8 {
+                c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            }
+        }
+        !c
+    }
+    let mut ihdr = b"IHDR".to_vec();
+    ihdr.extend(w.to_be_bytes());
+    ihdr.extend(h.to_be_bytes());
+    ihdr.extend([8, 2, 0, 0, 0]);
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    png.extend(13u32.to_be_bytes());
+    png.extend(&ihdr);
+    png.extend(crc32(&ihdr).to_be_bytes());
+    // An empty IDAT: the decoder reads the header up to the first data chunk.
+    png.extend(0u32.to_be_bytes());
+    png.extend(b"IDAT");
+    png.extend(crc32(b"IDAT").to_be_bytes());
+    png
+}
+
+/// Issue 19, item 7: an image too large for the memory limit is refused from its header, before it is decoded
+/// (the refusal gives the estimate, not a decoding error).
+#[test]
+fn issue19_memory_guard_before_decoding() {
+    let dir = tempfile::tempdir().unwrap();
+    let big = png_header_only(60_000, 40_000);
+    std::fs::write(dir.path().join("l.png"), &big).unwrap();
+    std::fs::write(dir.path().join("r.png"), &big).unwrap();
+    let args = ["--max-memory", "1G", "l.png", "r.png", "--ndisp", "64", "-o", "d.pfm"];
+    assert_clean_failure(dir.path(), &args, &["needs about"]);
+    std::fs::create_dir_all(dir.path().join("set/S")).unwrap();
+    for name in ["im0.png", "im1.png"] {
+        std::fs::write(dir.path().join("set/S").join(name), &big).unwrap();
+    }
+    std::fs::write(dir.path().join("set/S/calib.txt"), "ndisp=64\n").unwrap();
+    let out = run_in(dir.path(), &["--max-memory", "1G", "batch", "set", "--alg", "A"]);
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), stderr(&out));
+    assert_eq!(out.status.code(), Some(2), "{text}");
+    assert!(text.contains("needs about"), "{text}");
+}

@@ -51,7 +51,12 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     jem::io::check_outputs(&[left, right, &calib], &outputs)?;
     let params = args.config.params()?;
     let start = Instant::now();
-    let pair = load_pair(left, right, args.ndisp)?;
+    // The size from the image header: a pair too large for the memory limit is refused before decoding.
+    let ndisp = resolve_ndisp(args.ndisp, left)?;
+    if let Ok((w, h)) = image::image_dimensions(left) {
+        jem::check_memory(w as usize, h as usize, ndisp, &params, global.memory_limit())?;
+    }
+    let pair = load_pair(left, right, Some(ndisp))?;
     jem::check_memory(pair.left.width, pair.left.height, pair.ndisp, &params, global.memory_limit())?;
     let load_time = start.elapsed();
 
