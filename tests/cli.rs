@@ -626,3 +626,21 @@ fn issue19_memory_guard_before_decoding() {
     assert_eq!(out.status.code(), Some(2), "{text}");
     assert!(text.contains("needs about"), "{text}");
 }
+
+/// Issue 19, item 12: under a file-size limit (`ulimit -f`) too small for the output, the run fails with a
+/// clear error before writing; it was killed by SIGXFSZ and left its hidden temporary file.
+#[test]
+fn issue19_file_size_limit_is_an_error_not_a_leftover() {
+    let dir = tempfile::tempdir().unwrap();
+    let bin = env!("CARGO_BIN_EXE_jem");
+    let script = format!(
+        "ulimit -f 16; exec '{bin}' '{}' '{}' -o d.pfm --set model=wta",
+        example("im0.png"),
+        example("im1.png")
+    );
+    let out = std::process::Command::new("sh").arg("-c").arg(&script).current_dir(dir.path()).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("d.pfm") && err.contains("file-size limit"), "{err}");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "nothing left behind");
+}

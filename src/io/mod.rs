@@ -72,6 +72,9 @@ pub fn encode_disparity(path: &Path, map: &DisparityMap) -> Result<Vec<u8>> {
 /// # Errors
 /// [`Error::Io`] naming the first file that could not be written.
 pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
+    for &(path, bytes) in files {
+        check_file_size_limit(path, bytes.len() as u64)?;
+    }
     let mut staged: Vec<(PathBuf, &Path)> = Vec::with_capacity(files.len());
     let stage = |path: &Path, bytes: &[u8]| -> Result<PathBuf> {
         let tmp = temp_path(path);
@@ -199,7 +202,28 @@ pub const MAX_CALIB_BYTES: u64 = 64 << 10;
 /// # Errors
 /// [`Error::Io`] naming `path` (the temporary file is removed on failure).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    check_file_size_limit(path, bytes.len() as u64)?;
     write_atomic_with(path, |file| file.write_all(bytes).map_err(|e| Error::io(path, e)))
+}
+
+/// The soft file-size limit of this process (`ulimit -f`), from `/proc/self/limits` (Linux); `None` when
+/// unlimited or unknown.
+fn file_size_limit() -> Option<u64> {
+    let limits = std::fs::read_to_string("/proc/self/limits").ok()?;
+    let line = limits.lines().find(|l| l.starts_with("Max file size"))?;
+    line["Max file size".len()..].split_whitespace().next()?.parse().ok()
+}
+
+/// Refuses, before writing, a file larger than the file-size limit: the kernel would kill the process in the
+/// middle of the write (SIGXFSZ), leaving the temporary file behind.
+fn check_file_size_limit(path: &Path, bytes: u64) -> Result<()> {
+    match file_size_limit() {
+        Some(limit) if bytes > limit => Err(Error::Input(format!(
+            "{}: needs {bytes} bytes but the file-size limit (ulimit -f) is {limit} bytes",
+            path.display()
+        ))),
+        _ => Ok(()),
+    }
 }
 
 /// Like [`write_atomic`], with a closure that writes into the temporary file.
