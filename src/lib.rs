@@ -43,6 +43,7 @@ pub mod degrade;
 pub mod error;
 pub mod eval;
 pub mod fastmath;
+pub mod geometry;
 pub mod image;
 pub mod io;
 pub mod lattice;

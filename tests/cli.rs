@@ -644,3 +644,49 @@ fn issue19_file_size_limit_is_an_error_not_a_leftover() {
     assert!(err.contains("d.pfm") && err.contains("file-size limit"), "{err}");
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "nothing left behind");
 }
+
+/// Issue 18, item 3: `--depth` and `--cloud` on a synthetic scene whose calib.txt gives f = width, B = 100,
+/// doffs = 0: the depth map is f·B/d of the written disparity map, the PLY holds one point per valid pixel at
+/// (x − cx)·Z/f, (y − cy)·Z/f, Z with the left image's colour; a missing baseline is an error naming --baseline.
+#[test]
+fn issue18_depth_and_point_cloud() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(dir.path(), &["synth", "S", "--width", "96", "--height", "64", "--ndisp", "16", "--seed", "3"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let args = ["S/im0.png", "S/im1.png", "-o", "d.pfm", "--depth", "z.pfm", "--cloud", "c.ply", "--set", "model=wta"];
+    let out = run_in(dir.path(), &args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let disp = pfm::read_pfm(&dir.path().join("d.pfm")).unwrap();
+    let depth = pfm::read_pfm(&dir.path().join("z.pfm")).unwrap();
+    let (f, b, cx, cy) = (96.0f64, 100.0f64, 47.5f64, 31.5f64);
+    let mut valid = Vec::new();
+    for (i, (&d, &z)) in disp.data.iter().zip(&depth.data).enumerate() {
+        if d.is_finite() && d > 0.0 {
+            assert!((f64::from(z) - f * b / f64::from(d)).abs() < 1e-3 * f64::from(z), "pixel {i}: d {d}, z {z}");
+            valid.push((i, f64::from(z)));
+        } else {
+            assert!(z.is_infinite(), "pixel {i}: d {d}, z {z}");
+        }
+    }
+    let ply = std::fs::read(dir.path().join("c.ply")).unwrap();
+    let end = b"end_header\n";
+    let at = ply.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+    let header = String::from_utf8_lossy(&ply[..at]).into_owned();
+    assert!(header.contains(&format!("element vertex {}\n", valid.len())), "{header}");
+    assert_eq!(ply.len() - at, valid.len() * 15);
+    let left = jem::io::png::load_rgb(&dir.path().join("S/im0.png")).unwrap();
+    for (k, &(i, z)) in valid.iter().enumerate().step_by(97) {
+        let p = &ply[at + 15 * k..at + 15 * (k + 1)];
+        let v = |j: usize| f64::from(f32::from_le_bytes(p[4 * j..4 * j + 4].try_into().unwrap()));
+        let (x, y) = ((i % 96) as f64, (i / 96) as f64);
+        assert!((v(0) - (x - cx) * z / f).abs() < 1e-3 * z && (v(1) - (y - cy) * z / f).abs() < 1e-3 * z);
+        assert!((v(2) - z).abs() < 1e-3 * z);
+        assert_eq!(&p[12..15], &left.rgb(i).map(|c| c as u8));
+    }
+    // Without a baseline: an error before any work, nothing written.
+    std::fs::write(dir.path().join("S/calib.txt"), "cam0=[96 0 47.5; 0 96 31.5; 0 0 1]\nndisp=16\n").unwrap();
+    let args = ["S/im0.png", "S/im1.png", "-o", "e.pfm", "--cloud", "e.ply"];
+    assert_clean_failure(dir.path(), &args, &["--baseline"]);
+    let ok = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "e.pfm", "--cloud", "e.ply", "--baseline", "100"]);
+    assert!(ok.status.success(), "{}", stderr(&ok));
+}

@@ -32,6 +32,28 @@ pub(super) struct MatchArgs {
     /// Also write the per-pixel confidence (max-marginal of the left view) to this file (.pfm/.exr).
     #[arg(long, value_name = "FILE")]
     confidence: Option<PathBuf>,
+    /// Also write a point cloud: binary PLY, x y z (float, left camera frame, baseline units) and the left
+    /// image's colour, valid pixels only. Needs cam0 and baseline (calib.txt beside LEFT, or the flags below).
+    #[arg(long, value_name = "OUT.ply")]
+    cloud: Option<PathBuf>,
+    /// Also write metric depth Z = f·B / (d + doffs) (.pfm/.exr; inf where there is none).
+    #[arg(long, value_name = "FILE")]
+    depth: Option<PathBuf>,
+    /// Focal length in pixels (default: cam0 of calib.txt).
+    #[arg(long, value_name = "PX")]
+    focal: Option<f64>,
+    /// Principal point x in pixels (default: cam0).
+    #[arg(long, value_name = "PX")]
+    cx: Option<f64>,
+    /// Principal point y in pixels (default: cam0).
+    #[arg(long, value_name = "PX")]
+    cy: Option<f64>,
+    /// Baseline; depth and points come out in its unit (default: `baseline` of calib.txt).
+    #[arg(long, value_name = "B")]
+    baseline: Option<f64>,
+    /// Principal point offset between the views, pixels (default: `doffs` of calib.txt, else 0).
+    #[arg(long, value_name = "PX")]
+    doffs: Option<f64>,
     #[command(flatten)]
     config: ConfigArgs,
 }
@@ -47,7 +69,35 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         jem::io::DisparityFormat::from_path(c)?;
     }
     let calib = left.parent().unwrap_or(Path::new(".")).join("calib.txt");
-    let outputs: Vec<&Path> = std::iter::once(output.as_path()).chain(args.confidence.as_deref()).collect();
+    if let Some(d) = &args.depth
+        && jem::io::DisparityFormat::from_path(d)? == jem::io::DisparityFormat::Png16
+    {
+        return Err(Error::Input(format!("{}: depth is written as .pfm or .exr (floats)", d.display())));
+    }
+    if let Some(c) = &args.cloud
+        && !c.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
+    {
+        return Err(Error::Input(format!("{}: a point cloud is written as .ply", c.display())));
+    }
+    // The camera is resolved before any work: a missing focal length or baseline is an error at once.
+    let camera = if args.cloud.is_some() || args.depth.is_some() {
+        let from_file = if calib.is_file() { Some(calib::Calib::load(&calib)?) } else { None };
+        let overrides = jem::geometry::CameraOverrides {
+            focal: args.focal,
+            cx: args.cx,
+            cy: args.cy,
+            baseline: args.baseline,
+            doffs: args.doffs,
+        };
+        Some(jem::geometry::Camera::resolve(from_file.as_ref(), &overrides)?)
+    } else {
+        None
+    };
+    let outputs: Vec<&Path> = std::iter::once(output.as_path())
+        .chain(args.confidence.as_deref())
+        .chain(args.cloud.as_deref())
+        .chain(args.depth.as_deref())
+        .collect();
     jem::io::check_outputs(&[left, right, &calib], &outputs)?;
     let params = args.config.params()?;
     let start = Instant::now();
@@ -73,6 +123,15 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let mut files = vec![(output.as_path(), jem::io::encode_disparity(output, &out.disparity)?)];
     if let Some(c) = &args.confidence {
         files.push((c.as_path(), jem::io::encode_disparity(c, &out.confidence)?));
+    }
+    if let Some(camera) = &camera {
+        if let Some(d) = &args.depth {
+            let depth = jem::geometry::depth_map(&out.disparity, camera);
+            files.push((d.as_path(), jem::io::encode_disparity(d, &depth)?));
+        }
+        if let Some(c) = &args.cloud {
+            files.push((c.as_path(), jem::geometry::encode_ply(&out.disparity, &pair.left, camera)));
+        }
     }
     let refs: Vec<(&Path, &[u8])> = files.iter().map(|(p, b)| (*p, b.as_slice())).collect();
     jem::io::write_all_or_none(&refs)?;

@@ -1,0 +1,180 @@
+//! From disparity to geometry: metric depth and a coloured point cloud (binary PLY), with the Middlebury
+//! camera model of `calib.txt`.
+//!
+//! A left pixel (x, y) with disparity d lies at depth Z = f·B / (d + doffs) (f: focal length in pixels, B: the
+//! baseline, doffs: the difference of the two principal points' x), and at X = (x − cx)·Z / f,
+//! Y = (y − cy)·Z / f in the left camera's frame (x right, y down, z forward), in the baseline's units
+//! (millimetres for Middlebury). A pixel without a valid disparity, or with d + doffs ≤ 0 (at or beyond
+//! infinity), has no depth: `inf` in the depth map, no point in the cloud.
+
+use crate::error::{Error, Result};
+use crate::image::{DisparityMap, Plane, RgbImage};
+use crate::io::calib::Calib;
+
+/// The left camera and the rig, as far as depth needs them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Focal length in pixels.
+    pub focal: f64,
+    /// Principal point, pixels.
+    pub cx: f64,
+    /// Principal point, pixels.
+    pub cy: f64,
+    /// Distance between the camera centres (its unit is the output's unit).
+    pub baseline: f64,
+    /// x-difference of the principal points, in pixels (0 for rectified pairs that share it).
+    pub doffs: f64,
+}
+
+/// Values given on the command line, each overriding `calib.txt`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CameraOverrides {
+    /// Focal length in pixels.
+    pub focal: Option<f64>,
+    /// Principal point x.
+    pub cx: Option<f64>,
+    /// Principal point y.
+    pub cy: Option<f64>,
+    /// Baseline.
+    pub baseline: Option<f64>,
+    /// Principal point offset.
+    pub doffs: Option<f64>,
+}
+
+/// The 3 × 3 matrix of a `cam0=[f 0 cx; 0 f cy; 0 0 1]` value, row-major.
+fn matrix(text: &str) -> Option<[f64; 9]> {
+    let inner = text.trim().strip_prefix('[')?.strip_suffix(']')?;
+    let values: Vec<f64> = inner
+        .split([';', ' ', '\t', ','])
+        .filter(|s| !s.is_empty())
+        .map(str::parse)
+        .collect::<std::result::Result<_, _>>()
+        .ok()?;
+    values.try_into().ok()
+}
+
+impl Camera {
+    /// The camera from `calib` (`cam0`, `baseline`, `doffs`; either may be absent) and `overrides`.
+    ///
+    /// # Errors
+    /// [`Error::Input`] naming what is missing or invalid (focal length and baseline must be positive and
+    /// finite) and the flag that gives it.
+    pub fn resolve(calib: Option<&Calib>, overrides: &CameraOverrides) -> Result<Camera> {
+        let cam0 = calib.and_then(|c| c.get("cam0")).and_then(matrix);
+        let key = |k: &str| calib.and_then(|c| c.get(k)).and_then(|v| v.trim().parse::<f64>().ok());
+        let pick = |given: Option<f64>, from_calib: Option<f64>, what: &str, flag: &str| {
+            given.or(from_calib).filter(|v| v.is_finite()).ok_or_else(|| {
+                Error::Input(format!("the {what} is needed for depth: no usable value in calib.txt; give {flag}"))
+            })
+        };
+        let camera = Camera {
+            focal: pick(overrides.focal, cam0.map(|m| m[0]), "focal length (cam0)", "--focal")?,
+            cx: pick(overrides.cx, cam0.map(|m| m[2]), "principal point x (cam0)", "--cx")?,
+            cy: pick(overrides.cy, cam0.map(|m| m[5]), "principal point y (cam0)", "--cy")?,
+            baseline: pick(overrides.baseline, key("baseline"), "baseline", "--baseline")?,
+            doffs: overrides.doffs.or(key("doffs")).unwrap_or(0.0),
+        };
+        if !(camera.focal > 0.0 && camera.baseline > 0.0 && camera.doffs.is_finite()) {
+            return Err(Error::Input(format!(
+                "focal length {} and baseline {} must be positive (doffs {} finite)",
+                camera.focal, camera.baseline, camera.doffs
+            )));
+        }
+        Ok(camera)
+    }
+
+    /// Depth of disparity `d`, or `None` (invalid, or at or beyond infinity).
+    pub fn depth(&self, d: f32) -> Option<f64> {
+        let denom = f64::from(d) + self.doffs;
+        (d.is_finite() && denom > 0.0).then(|| self.focal * self.baseline / denom)
+    }
+}
+
+/// The depth map of a disparity map (`inf` where there is none).
+pub fn depth_map(disparity: &DisparityMap, camera: &Camera) -> Plane<f32> {
+    let data = disparity.data.iter().map(|&d| camera.depth(d).map_or(f32::INFINITY, |z| z as f32)).collect();
+    Plane::from_vec(disparity.width, disparity.height, data)
+}
+
+/// A binary little-endian PLY of the pixels with a depth: `x y z` (float) and `red green blue` (uchar, from
+/// `image`), in row-major pixel order.
+///
+/// # Panics
+/// If `image` and `disparity` differ in size.
+pub fn encode_ply(disparity: &DisparityMap, image: &RgbImage, camera: &Camera) -> Vec<u8> {
+    assert_eq!(disparity.dims(), image.dims(), "image and disparity map differ in size");
+    let w = disparity.width;
+    let points: Vec<(usize, f64)> =
+        disparity.data.iter().enumerate().filter_map(|(i, &d)| camera.depth(d).map(|z| (i, z))).collect();
+    let header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment jem: left camera frame, baseline units\nelement vertex {}\n\
+         property float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n\
+         property uchar blue\nend_header\n",
+        points.len()
+    );
+    let mut out = Vec::with_capacity(header.len() + points.len() * 15);
+    out.extend_from_slice(header.as_bytes());
+    for (i, z) in points {
+        let (x, y) = ((i % w) as f64, (i / w) as f64);
+        for v in [(x - camera.cx) * z / camera.focal, (y - camera.cy) * z / camera.focal, z] {
+            out.extend_from_slice(&(v as f32).to_le_bytes());
+        }
+        out.extend(image.rgb(i).map(|c| c.round().clamp(0.0, 255.0) as u8));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera() -> Camera {
+        Camera { focal: 500.0, cx: 2.0, cy: 1.0, baseline: 100.0, doffs: 5.0 }
+    }
+
+    #[test]
+    fn camera_from_calib_and_overrides() {
+        let calib =
+            Calib::parse("cam0=[1746.24 0 14.88; 0 1746.24 65.5; 0 0 1]\nbaseline=178.089\ndoffs=2.5\n").unwrap();
+        let c = Camera::resolve(Some(&calib), &CameraOverrides::default()).unwrap();
+        assert_eq!((c.focal, c.cx, c.cy, c.baseline, c.doffs), (1746.24, 14.88, 65.5, 178.089, 2.5));
+        let o = CameraOverrides { baseline: Some(50.0), ..Default::default() };
+        assert_eq!(Camera::resolve(Some(&calib), &o).unwrap().baseline, 50.0);
+        let e = Camera::resolve(None, &CameraOverrides::default()).unwrap_err().to_string();
+        assert!(e.contains("--focal"), "{e}");
+        let no_baseline = Calib::parse("cam0=[1 0 0; 0 1 0; 0 0 1]\n").unwrap();
+        let e = Camera::resolve(Some(&no_baseline), &CameraOverrides::default()).unwrap_err().to_string();
+        assert!(e.contains("--baseline"), "{e}");
+        let bad = CameraOverrides { focal: Some(-1.0), cx: Some(0.0), cy: Some(0.0), baseline: Some(1.0), doffs: None };
+        assert!(Camera::resolve(None, &bad).is_err());
+    }
+
+    /// Depth and points follow Z = f·B / (d + doffs), X = (x − cx)·Z / f, Y = (y − cy)·Z / f; invalid pixels and
+    /// d + doffs ≤ 0 give neither.
+    #[test]
+    fn depth_and_points_follow_the_camera_model() {
+        let c = camera();
+        let disp = Plane::from_vec(4, 2, vec![45.0, f32::INFINITY, 95.0, -5.0, 20.0, 45.0, f32::NAN, 0.0]);
+        let depth = depth_map(&disp, &c);
+        assert_eq!(depth.data[0], 1000.0);
+        assert_eq!(depth.data[2], 500.0);
+        assert_eq!(depth.data[7], 10_000.0);
+        for i in [1, 3, 6] {
+            assert!(depth.data[i].is_infinite(), "pixel {i}");
+        }
+        let mut img = RgbImage::new(4, 2);
+        img.channels[0][4] = 200.0;
+        let ply = encode_ply(&disp, &img, &c);
+        let end = b"end_header\n";
+        let at = ply.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+        let header = std::str::from_utf8(&ply[..at]).unwrap();
+        assert!(header.contains("element vertex 5\n") && header.starts_with("ply\nformat binary_little_endian"));
+        let body = &ply[at..];
+        assert_eq!(body.len(), 5 * 15);
+        let f = |k: usize, j: usize| f32::from_le_bytes(body[k * 15 + 4 * j..k * 15 + 4 * j + 4].try_into().unwrap());
+        // Points in pixel order: 0, 2, 4, 5, 7. Pixel 4 = (0, 1), d 20: Z = 2000, X = −2·2000/500, Y = 0.
+        assert_eq!((f(0, 0), f(0, 1), f(0, 2)), (-4.0, -2.0, 1000.0));
+        assert_eq!((f(2, 0), f(2, 1), f(2, 2)), (-8.0, 0.0, 2000.0));
+        assert_eq!(&body[2 * 15 + 12..2 * 15 + 15], &[200, 0, 0]);
+    }
+}
