@@ -690,3 +690,29 @@ fn issue18_depth_and_point_cloud() {
     let ok = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "e.pfm", "--cloud", "e.ply", "--baseline", "100"]);
     assert!(ok.status.success(), "{}", stderr(&ok));
 }
+
+/// Issue 18, item 4: JPEG input (8-bit, the image crate's decoder), also a grey JPEG beside a colour PNG.
+#[test]
+fn issue18_jpeg_input() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, grey) in [("im0.jpg", false), ("im1.jpg", false), ("im1g.jpg", true)] {
+        let src = image::open(example(if name.starts_with("im0") { "im0.png" } else { "im1.png" })).unwrap();
+        let mut bytes = Vec::new();
+        let encoder = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 95);
+        if grey {
+            src.to_luma8().write_with_encoder(encoder).unwrap();
+        } else {
+            src.to_rgb8().write_with_encoder(encoder).unwrap();
+        }
+        std::fs::write(dir.path().join(name), bytes).unwrap();
+    }
+    let gt = pfm::read_pfm(&repo().join("examples/synth/disp0GT.pfm")).unwrap();
+    for right in ["im1.jpg", "im1g.jpg"] {
+        let out = run_in(dir.path(), &["im0.jpg", right, "--ndisp", "48", "-o", "d.pfm"]);
+        assert!(out.status.success(), "{right}: {}", stderr(&out));
+        let d = pfm::read_pfm(&dir.path().join("d.pfm")).unwrap();
+        assert_eq!(d.dims(), gt.dims());
+        let err = d.data.iter().zip(&gt.data).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / d.data.len() as f64;
+        assert!(err < 1.5, "{right}: mean error {err:.3} px");
+    }
+}

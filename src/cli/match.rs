@@ -17,7 +17,7 @@ use super::config::ConfigArgs;
 /// Arguments of `jem match` and of the default command (the help text is on [`Cli`](super::Cli)).
 #[derive(Args, Debug, Clone)]
 pub(super) struct MatchArgs {
-    /// Left (reference) image: PNG or PPM/PGM, 8 or 16 bit.
+    /// Left (reference) image: PNG or PPM/PGM (8 or 16 bit), or JPEG.
     #[arg(required = true)]
     left: Option<PathBuf>,
     /// Right image, same size as the left.

@@ -29,7 +29,7 @@ pub fn load_rgb(path: &Path) -> Result<RgbImage> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let reader = ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| Error::io(path, e))?;
     if reader.format().is_none() {
-        return Err(Error::Input(format!("{}: not a PNG or PNM image", path.display())));
+        return Err(Error::Input(format!("{}: not a PNG, PNM or JPEG image", path.display())));
     }
     let img = reader.decode().map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     Ok(to_rgb(&img))
