@@ -253,12 +253,24 @@ fn run_scene_in(
     // The size from the PNG header: a scene too large for the budget is refused before its images are decoded.
     let im0 = dir.join("im0.png");
     let (w, h) = image::image_dimensions(&im0).map_err(|source| Error::Image { path: im0.clone(), source })?;
+    // A stated range of half the width or more is not a real bound: it is measured on the pair (crate::range),
+    // before the memory is checked and reserved for the measured one.
+    let search = crate::range::needs_search(Some(ndisp), w as usize);
+    let (mut loaded, mut ndisp) = (None, ndisp);
+    if search {
+        let (left, right) = crate::io::png::load_rgb_pair(&im0, &dir.join("im1.png"))?;
+        ndisp = crate::range::find_ndisp(&left, &right, ndisp.min(w as usize), &params.cost);
+        loaded = Some((left, right));
+    }
     crate::check_memory(w as usize, h as usize, ndisp, params, budget.total)?;
     let need = crate::estimate_memory_bytes(w as usize, h as usize, ndisp, params);
     on_stage("waiting for memory");
     let _held = budget.reserve(need);
     on_stage("loading");
-    let (left, right) = crate::io::png::load_rgb_pair(&im0, &dir.join("im1.png"))?;
+    let (left, right) = match loaded {
+        Some(pair) => pair,
+        None => crate::io::png::load_rgb_pair(&im0, &dir.join("im1.png"))?,
+    };
     let pair = StereoPair::new(left, right, ndisp)?;
     let start = Instant::now();
     let out = crate::run_observed(params, &pair, on_stage)?;

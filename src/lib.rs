@@ -50,6 +50,7 @@ pub mod lattice;
 pub mod meanfield;
 pub mod params;
 pub mod post;
+pub mod range;
 #[doc(hidden)]
 pub mod rng;
 pub mod scale;

@@ -68,11 +68,12 @@ fn same_output_bytes_whatever_the_thread_count() {
 #[test]
 fn ndisp_comes_from_calib_or_flag() {
     let dir = tempfile::tempdir().unwrap();
-    // Images copied away from their calib.txt: ndisp must then be given.
+    // Images copied away from their calib.txt: the range is measured on the pair (jem::range), and said so.
     for f in ["im0.png", "im1.png"] {
         std::fs::copy(example(f), dir.path().join(f)).unwrap();
     }
-    assert_clean_failure(dir.path(), &["im0.png", "im1.png", "-o", "d.pfm"], &["ndisp", "calib.txt"]);
+    let out = run_in(dir.path(), &["im0.png", "im1.png", "-o", "m.pfm", "--set", "model=wta"]);
+    assert!(out.status.success() && stderr(&out).contains("measured on the pair"), "{}", stderr(&out));
     let out = run_in(dir.path(), &["im0.png", "im1.png", "-o", "d.pfm", "--ndisp", "32", "--set", "model=wta"]);
     assert!(out.status.success(), "{}", stderr(&out));
     std::fs::write(dir.path().join("calib.txt"), "width=320\nndisp=zero\n").unwrap();
@@ -715,4 +716,29 @@ fn issue18_jpeg_input() {
         let err = d.data.iter().zip(&gt.data).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / d.data.len() as f64;
         assert!(err < 1.5, "{right}: mean error {err:.3} px");
     }
+}
+
+/// Issue 16: a calib.txt whose ndisp is the image width (ETH3D style) is not trusted: the range is measured on
+/// the pair, the run is as accurate as with the true range, and far fewer labels are searched.
+#[test]
+fn issue16_ndisp_equal_to_width_is_measured() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(dir.path(), &["synth", "S", "--width", "320", "--height", "240", "--ndisp", "64", "--seed", "5"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let gt = pfm::read_pfm(&dir.path().join("S/disp0GT.pfm")).unwrap();
+    let mean_err = |name: &str| {
+        let d = pfm::read_pfm(&dir.path().join(name)).unwrap();
+        d.data.iter().zip(&gt.data).map(|(a, b)| f64::from((a - b).abs().min(64.0))).sum::<f64>() / d.data.len() as f64
+    };
+    let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "true.pfm"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let calib = std::fs::read_to_string(dir.path().join("S/calib.txt")).unwrap().replace("ndisp=64", "ndisp=320");
+    std::fs::write(dir.path().join("S/calib.txt"), calib).unwrap();
+    let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "auto.pfm"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    let n: usize = err.split("ndisp ").nth(1).and_then(|t| t.split(',').next()).and_then(|t| t.parse().ok()).unwrap();
+    assert!(n <= 128 && err.contains("calib.txt says 320"), "{err}");
+    let (t, a) = (mean_err("true.pfm"), mean_err("auto.pfm"));
+    assert!(a <= t + 0.1, "mean error with the measured range {a:.3}, with the true one {t:.3}");
 }

@@ -102,11 +102,28 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let params = args.config.params()?;
     let start = Instant::now();
     // The size from the image header: a pair too large for the memory limit is refused before decoding.
-    let ndisp = resolve_ndisp(args.ndisp, left)?;
-    if let Ok((w, h)) = image::image_dimensions(left) {
-        jem::check_memory(w as usize, h as usize, ndisp, &params, global.memory_limit())?;
+    // The range: --ndisp, else calib.txt's ndisp unless it is missing or not a real bound (≥ half the width),
+    // in which case it is measured on the pair (jem::range).
+    let stated = stated_ndisp(args.ndisp, left)?;
+    let header = image::image_dimensions(left).ok();
+    let search = args.ndisp.is_none() && header.is_some_and(|(w, _)| jem::range::needs_search(stated, w as usize));
+    if let (Some((w, h)), Some(n), false) = (header, stated, search) {
+        jem::check_memory(w as usize, h as usize, n, &params, global.memory_limit())?;
     }
-    let pair = load_pair(left, right, Some(ndisp))?;
+    let (l, r) = jem::io::png::load_rgb_pair(left, right)?;
+    let ndisp = match stated {
+        Some(n) if !search => n,
+        _ => {
+            let max = stated.unwrap_or(l.width / 2).clamp(2, l.width.max(2));
+            let n = jem::range::find_ndisp(&l, &r, max, &params.cost);
+            if !global.quiet {
+                let was = stated.map_or("no range given".to_string(), |s| format!("calib.txt says {s}"));
+                eprintln!("ndisp {n}, measured on the pair ({was}; --ndisp N sets it)");
+            }
+            n
+        }
+    };
+    let pair = StereoPair::new(l, r, ndisp)?;
     jem::check_memory(pair.left.width, pair.left.height, pair.ndisp, &params, global.memory_limit())?;
     let load_time = start.elapsed();
 
@@ -145,26 +162,16 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// ndisp from the flag, else from calib.txt beside the left image.
-fn resolve_ndisp(flag: Option<usize>, left: &Path) -> Result<usize> {
-    if let Some(n) = flag {
-        return Ok(n);
+/// ndisp from the flag, else from calib.txt beside the left image (`None` when there is no calib.txt).
+fn stated_ndisp(flag: Option<usize>, left: &Path) -> Result<Option<usize>> {
+    if flag.is_some() {
+        return Ok(flag);
     }
     let calib_path = left.parent().unwrap_or(Path::new(".")).join("calib.txt");
     if !calib_path.exists() {
-        return Err(Error::Input(format!(
-            "no --ndisp given and no calib.txt beside {} to read it from",
-            left.display()
-        )));
+        return Ok(None);
     }
-    calib::read_ndisp(&calib_path)
-}
-
-/// Loads a pair and checks sizes and ndisp.
-fn load_pair(left: &Path, right: &Path, ndisp: Option<usize>) -> Result<StereoPair> {
-    let (l, r) = jem::io::png::load_rgb_pair(left, right)?;
-    let ndisp = resolve_ndisp(ndisp, left)?;
-    StereoPair::new(l, r, ndisp)
+    calib::read_ndisp(&calib_path).map(Some)
 }
 
 /// A spinner on stderr showing the current stage, only on a terminal and without --quiet.

@@ -1,0 +1,99 @@
+//! The disparity range of a pair when none is given, or when the given one is not a real bound (issue 16).
+//!
+//! Some data sets state no range, and some state one that is not a bound at all: ETH3D's calib.txt says
+//! ndisp = the image width, where the real disparities stay below a few dozen. Inference costs time and memory
+//! in proportion to the number of labels, so a range that is 20 times too wide makes a run 20 times slower for
+//! nothing. [`find_ndisp`] measures the range instead: the matching cost at 1/4 resolution over the whole
+//! candidate range, winner-take-all in both views, the left-right consistent pixels only, and the 99.5th
+//! percentile of their disparities plus a margin. The policy ([`needs_search`]): search when no range is given,
+//! or when the given one is at least half the image width.
+
+use crate::cost;
+use crate::image::RgbImage;
+use crate::params::CostParams;
+use crate::scale::downsample_rgb;
+
+/// A match counts when its cost is below this fraction of the best cost more than one label away.
+const DISTINCT_RATIO: f32 = 0.8;
+
+/// A stated range at least this fraction of the width is treated as "not a real bound".
+pub const SUSPECT_FRACTION: f64 = 0.5;
+
+/// Whether the range of a `width`-pixel-wide pair should be measured: none given, or `stated` ≥ half the width.
+pub fn needs_search(stated: Option<usize>, width: usize) -> bool {
+    stated.is_none_or(|n| n as f64 >= SUSPECT_FRACTION * width as f64)
+}
+
+/// The search range 0..N−1 for the pair, at most `max_ndisp` (and at least 16): see the module doc. Falls back
+/// to `max_ndisp` when fewer than 1 % of the pixels are consistent (no reliable measurement).
+pub fn find_ndisp(left: &RgbImage, right: &RgbImage, max_ndisp: usize, p: &CostParams) -> usize {
+    let (w, h) = left.dims();
+    // 1/4 resolution, but at least 32 × 16 pixels left to match.
+    let factor = (1..=4).rev().find(|f| w / f >= 32 && h / f >= 16).unwrap_or(1);
+    let (l, r) = (downsample_rgb(left, factor), downsample_rgb(right, factor));
+    let labels = max_ndisp.div_ceil(factor).clamp(2, l.width.max(2));
+    let vol = cost::build_cost_volume(&l, &r, labels, p);
+    let dl = cost::winner_take_all(&vol);
+    let dr = cost::winner_take_all(&cost::derive_right_volume(&vol, cost::truncation_cost(p)));
+    // Distinct: the best cost clearly below the best one away from it (a flat or repetitive region matches
+    // anywhere, and such chance matches would stretch the range).
+    let distinct = |i: usize, d: usize| {
+        let c = vol.pixel(i);
+        let second = c.iter().enumerate().filter(|(k, _)| k.abs_diff(d) > 1).map(|(_, v)| *v).fold(f32::MAX, f32::min);
+        c[d] < DISTINCT_RATIO * second
+    };
+    let lw = l.width;
+    let consistent: Vec<f32> = dl
+        .data
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &d)| {
+            let (x, y) = (i % lw, i / lw);
+            let xr = x.checked_sub(d.round() as usize)?;
+            ((dr.data[y * lw + xr] - d).abs() <= 1.0 && distinct(i, d.round() as usize)).then_some(d)
+        })
+        .collect();
+    drop(vol);
+    let dl_len = dl.data.len();
+    if consistent.len() * 100 < dl_len {
+        return max_ndisp;
+    }
+    // The largest disparity still held by a real surface: chance matches that pass both tests scatter thinly
+    // over the whole range (a few pixels per label), a surface fills neighbouring labels densely. `top` is the
+    // largest label whose three-label neighbourhood holds at least 0.5 % of the consistent pixels (and 8): a
+    // surface smaller than that at the far end of the range is lost (the price of not trusting the range).
+    let mut hist = vec![0usize; labels + 2];
+    for &d in &consistent {
+        hist[(d.round() as usize).min(labels - 1) + 1] += 1;
+    }
+    let need = (consistent.len() / 200).max(8);
+    let top = (0..labels).rev().find(|&d| hist[d] + hist[d + 1] + hist[d + 2] >= need).unwrap_or(labels - 1) as f32;
+    // Two coarse labels and 8 px of margin, in full-resolution pixels.
+    let n = ((f64::from(top) + 2.0) * factor as f64).ceil() as usize + 8;
+    n.clamp(16.min(max_ndisp), max_ndisp)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{SynthParams, render_scene};
+
+    #[test]
+    fn policy() {
+        assert!(needs_search(None, 100));
+        assert!(needs_search(Some(50), 100));
+        assert!(!needs_search(Some(49), 100));
+    }
+
+    /// A rendered scene with a range stated as the whole width: the measured range covers every true disparity
+    /// and is far smaller than the stated one.
+    #[test]
+    fn finds_a_range_that_covers_the_scene() {
+        for seed in [1, 2, 3] {
+            let s = render_scene(&SynthParams { width: 320, height: 240, ndisp: 64, seed }).unwrap();
+            let n = find_ndisp(&s.left, &s.right, 320, &CostParams::default());
+            let true_max = s.gt.data.iter().copied().fold(0.0f32, f32::max);
+            assert!(n as f32 > true_max + 1.0 && n <= 100, "seed {seed}: found {n}, true max {true_max}");
+        }
+    }
+}
