@@ -277,7 +277,10 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
 
     on_stage("cost volume");
     // Before the full-resolution volume exists, so the two runs' buffers are never alive together.
-    let coarse = if prior_weight > 0.0 && pair.left.width >= 16 && pair.left.height >= 16 {
+    // The coarse run needs a pair of at least 8 × 8 at half size whose halved range stays below its width.
+    let coarse_fits =
+        pair.left.width >= 16 && pair.left.height >= 16 && pair.ndisp.div_ceil(2) < pair.left.width.div_ceil(2);
+    let coarse = if prior_weight > 0.0 && coarse_fits {
         // The same pipeline on the pair reduced 2× (conditioning off: the pair is conditioned already), then a
         // penalty for labels far from its answer.
         let mut coarse_params = params.clone();

@@ -742,3 +742,14 @@ fn issue16_ndisp_equal_to_width_is_measured() {
     let (t, a) = (mean_err("true.pfm"), mean_err("auto.pfm"));
     assert!(a <= t + 0.1, "mean error with the measured range {a:.3}, with the true one {t:.3}");
 }
+
+/// A range of nearly the image width (given with --ndisp) runs with the default config: the coarse prior is
+/// skipped when its half-size run could not hold the range (it made the whole run fail).
+#[test]
+fn ndisp_near_the_width_runs_with_the_defaults() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(dir.path(), &["synth", "S", "--width", "96", "--height", "64", "--ndisp", "16"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "d.pfm", "--ndisp", "95"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
