@@ -228,17 +228,7 @@ pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str))
             || scale::upsample_plane(&low.confidence, factor, w, h),
         )
     });
-    // Nearest: each full-size pixel takes the flag of the reduced pixel it falls in.
-    let lw = low.consistent.width;
-    let consistent = Plane::from_vec(
-        w,
-        h,
-        (0..w * h)
-            .map(|i| {
-                low.consistent.at(((i % w) / factor).min(lw - 1), ((i / w) / factor).min(low.consistent.height - 1))
-            })
-            .collect(),
-    );
+    let consistent = scale::upsample_mask(&low.consistent, factor, w, h);
     Ok(Output { disparity, confidence, consistent, timings: t })
 }
 

@@ -169,6 +169,19 @@ pub fn upsample_disparity(low: &DisparityMap, factor: usize, width: usize, heigh
     resample_up(low, factor, width, height, factor as f32)
 }
 
+/// Brings a low-resolution mask back to `width × height`: each pixel takes the flag of the reduced pixel it
+/// falls in (nearest; a flag has nothing to interpolate).
+///
+/// # Panics
+/// If `factor` is 0 or `low` is empty.
+pub fn upsample_mask(low: &Plane<bool>, factor: usize, width: usize, height: usize) -> Plane<bool> {
+    let (lw, lh) = low.dims();
+    let data = (0..width * height)
+        .map(|i| low.at(((i % width) / factor).min(lw - 1), ((i / width) / factor).min(lh - 1)))
+        .collect();
+    Plane::from_vec(width, height, data)
+}
+
 fn resample_up(low: &Plane<f32>, factor: usize, width: usize, height: usize, value_scale: f32) -> Plane<f32> {
     let (lw, lh) = (reduced_len(width, factor), reduced_len(height, factor));
     assert_eq!(low.dims(), (lw, lh), "low-resolution map is not the {width}x{height} size reduced by {factor}");

@@ -24,6 +24,12 @@ fn assert_clean_failure(dir: &Path, args: &[&str], needles: &[&str]) {
     assert_eq!(files_in(dir), before, "args {args:?} left files behind");
 }
 
+/// Renders a scene with `jem synth ARGS` in `dir` (the output folder first, then the options).
+fn synth_scene(dir: &Path, args: &[&str]) {
+    let out = run_in(dir, &[&["synth"], args].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
 #[test]
 fn readme_example_writes_a_valid_pfm() {
     let dir = tempfile::tempdir().unwrap();
@@ -382,9 +388,7 @@ fn degrade_copies_a_tree_and_never_writes_into_its_input() {
 #[test]
 fn issue19_png_output_refuses_disparities_it_cannot_hold() {
     let dir = tempfile::tempdir().unwrap();
-    let out =
-        run_in(dir.path(), &["synth", "big", "--width", "1100", "--height", "64", "--ndisp", "540", "--seed", "4"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    synth_scene(dir.path(), &["big", "--width", "1100", "--height", "64", "--ndisp", "540", "--seed", "4"]);
     let scene = dir.path().join("big");
     let args =
         ["big/im0.png", "big/im1.png", "-o", "big/d.png", "--set", "model=wta", "--set", "post.sps.enabled=false"];
@@ -413,8 +417,7 @@ fn issue19_threads_are_capped() {
 #[test]
 fn issue19_alg_gt_is_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run_in(dir.path(), &["synth", "data/Scene", "--width", "96", "--height", "64", "--ndisp", "16"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    synth_scene(dir.path(), &["data/Scene", "--width", "96", "--height", "64", "--ndisp", "16"]);
     let scene = dir.path().join("data/Scene");
     let gt = std::fs::read(scene.join("disp0GT.pfm")).unwrap();
     let before = files_in(&scene);
@@ -433,8 +436,7 @@ fn issue19_alg_gt_is_refused() {
 #[test]
 fn issue19_pfm_headers_are_parsed_exactly() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run_in(dir.path(), &["synth", "trainingQ/Scene", "--width", "96", "--height", "64", "--ndisp", "16"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    synth_scene(dir.path(), &["trainingQ/Scene", "--width", "96", "--height", "64", "--ndisp", "16"]);
     let scene = dir.path().join("trainingQ/Scene");
     let gt = std::fs::read(scene.join("disp0GT.pfm")).unwrap();
     let header_len = b"Pf\n96 64\n-1\n".len();
@@ -485,8 +487,7 @@ fn issue19_viz_refuses_bad_ranges_and_photos() {
 #[test]
 fn issue19_outputs_never_overwrite_inputs() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run_in(dir.path(), &["synth", "trainingQ/S", "--width", "96", "--height", "64", "--ndisp", "16"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    synth_scene(dir.path(), &["trainingQ/S", "--width", "96", "--height", "64", "--ndisp", "16"]);
     let ok = run_in(dir.path(), &["trainingQ/S/im0.png", "trainingQ/S/im1.png", "-o", "trainingQ/S/disp0A.pfm"]);
     assert!(ok.status.success(), "{}", stderr(&ok));
     ok_png16(dir.path(), "trainingQ/S/disp0A.pfm", "d.png");
@@ -547,8 +548,7 @@ fn issue19_capped_reads_bom_and_one_line_overrides() {
     assert_clean_failure(dir.path(), &["config", "-c", "/dev/zero"], &["/dev/zero", "too large"]);
     let (l, r) = (example("im0.png"), example("im1.png"));
     assert_clean_failure(dir.path(), &[&l, &r, "-o", "d.pfm", "--set", "model=wta\nfoo=1"], &["--set", "newline"]);
-    let out = run_in(dir.path(), &["synth", "S", "--width", "96", "--height", "64", "--ndisp", "16"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    synth_scene(dir.path(), &["S", "--width", "96", "--height", "64", "--ndisp", "16"]);
     let calib = dir.path().join("S/calib.txt");
     let mut text = "\u{feff}".as_bytes().to_vec();
     text.extend(std::fs::read(&calib).unwrap());
@@ -652,8 +652,7 @@ fn issue19_file_size_limit_is_an_error_not_a_leftover() {
 #[test]
 fn issue18_depth_and_point_cloud() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run_in(dir.path(), &["synth", "S", "--width", "96", "--height", "64", "--ndisp", "16", "--seed", "3"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    synth_scene(dir.path(), &["S", "--width", "96", "--height", "64", "--ndisp", "16", "--seed", "3"]);
     let args = ["S/im0.png", "S/im1.png", "-o", "d.pfm", "--depth", "z.pfm", "--cloud", "c.ply", "--set", "model=wta"];
     let out = run_in(dir.path(), &args);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -723,8 +722,7 @@ fn issue18_jpeg_input() {
 #[test]
 fn issue16_ndisp_equal_to_width_is_measured() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run_in(dir.path(), &["synth", "S", "--width", "320", "--height", "240", "--ndisp", "64", "--seed", "5"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    synth_scene(dir.path(), &["S", "--width", "320", "--height", "240", "--ndisp", "64", "--seed", "5"]);
     let gt = pfm::read_pfm(&dir.path().join("S/disp0GT.pfm")).unwrap();
     let mean_err = |name: &str| {
         let d = pfm::read_pfm(&dir.path().join(name)).unwrap();
@@ -748,8 +746,7 @@ fn issue16_ndisp_equal_to_width_is_measured() {
 #[test]
 fn ndisp_near_the_width_runs_with_the_defaults() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run_in(dir.path(), &["synth", "S", "--width", "96", "--height", "64", "--ndisp", "16"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    synth_scene(dir.path(), &["S", "--width", "96", "--height", "64", "--ndisp", "16"]);
     let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "d.pfm", "--ndisp", "95"]);
     assert!(out.status.success(), "{}", stderr(&out));
 }

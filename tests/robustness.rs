@@ -3,19 +3,16 @@
 //! (`configs/jem-all.toml`: no input conditioning, no coarse prior). Each test fails without the adaptive front
 //! end of `[condition]`.
 
-use std::path::PathBuf;
+mod common;
 
+use common::repo;
 use jem::degrade::{Recipe, View, degrade};
 use jem::synth::{MASK_VISIBLE, SynthParams, SynthScene, render_scene};
 use jem::{Params, RgbImage, StereoPair};
 
-fn repo_file(parts: &[&str]) -> PathBuf {
-    parts.iter().fold(PathBuf::from(env!("CARGO_MANIFEST_DIR")), |p, s| p.join(s))
-}
-
 /// The paper's full pipeline, as shipped.
 fn paper() -> Params {
-    Params::load(Some(&repo_file(&["configs", "jem-all.toml"])), &[]).unwrap()
+    Params::load(Some(&repo().join("configs/jem-all.toml")), &[]).unwrap()
 }
 
 /// Mean absolute error over the visible pixels of `scene`, matching `pair`.
@@ -93,9 +90,10 @@ fn exposure_mismatch_costs_little() {
 /// cut to 15 % around mid-grey).
 #[test]
 fn weak_texture_and_noise() {
-    let load = |name: &str| jem::io::png::load_rgb(&repo_file(&["examples", "synth", name])).unwrap();
-    let gt = jem::io::pfm::read_pfm(&repo_file(&["examples", "synth", "disp0GT.pfm"])).unwrap();
-    let mask = jem::io::png::load_grey8(&repo_file(&["examples", "synth", "mask0nocc.png"])).unwrap();
+    let dir = repo().join("examples/synth");
+    let load = |name: &str| jem::io::png::load_rgb(&dir.join(name)).unwrap();
+    let gt = jem::io::pfm::read_pfm(&dir.join("disp0GT.pfm")).unwrap();
+    let mask = jem::io::png::load_grey8(&dir.join("mask0nocc.png")).unwrap();
     let (left, right) = (flatten(load("im0.png"), 0.15), flatten(load("im1.png"), 0.15));
     let example = SynthScene { left, right, gt, mask, ndisp: 48, vmin: 0.0, vmax: 47.0 };
     let (paper, default) = both(&example, Some("noise:6"));

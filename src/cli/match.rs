@@ -79,9 +79,15 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     {
         return Err(Error::Input(format!("{}: a point cloud is written as .ply", c.display())));
     }
+    // calib.txt, read once when something needs it (the range, or the camera).
+    let wants_camera = args.cloud.is_some() || args.depth.is_some();
+    let calib_file = if (args.ndisp.is_none() || wants_camera) && calib.is_file() {
+        Some(calib::Calib::load(&calib)?)
+    } else {
+        None
+    };
     // The camera is resolved before any work: a missing focal length or baseline is an error at once.
-    let camera = if args.cloud.is_some() || args.depth.is_some() {
-        let from_file = if calib.is_file() { Some(calib::Calib::load(&calib)?) } else { None };
+    let camera = if wants_camera {
         let overrides = jem::geometry::CameraOverrides {
             focal: args.focal,
             cx: args.cx,
@@ -89,7 +95,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
             baseline: args.baseline,
             doffs: args.doffs,
         };
-        Some(jem::geometry::Camera::resolve(from_file.as_ref(), &overrides)?)
+        Some(jem::geometry::Camera::resolve(calib_file.as_ref(), &overrides)?)
     } else {
         None
     };
@@ -104,7 +110,11 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     // The size from the image header: a pair too large for the memory limit is refused before decoding.
     // The range: --ndisp, else calib.txt's ndisp unless it is missing or not a real bound (≥ half the width),
     // in which case it is measured on the pair (jem::range).
-    let stated = stated_ndisp(args.ndisp, left)?;
+    let stated = match (args.ndisp, &calib_file) {
+        (Some(n), _) => Some(n),
+        (None, Some(c)) => Some(c.ndisp().map_err(|msg| Error::Calib { path: calib.clone(), msg })?),
+        (None, None) => None,
+    };
     let header = image::image_dimensions(left).ok();
     let search = args.ndisp.is_none() && header.is_some_and(|(w, _)| jem::range::needs_search(stated, w as usize));
     if let (Some((w, h)), Some(n), false) = (header, stated, search) {
@@ -160,18 +170,6 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         eprintln!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// ndisp from the flag, else from calib.txt beside the left image (`None` when there is no calib.txt).
-fn stated_ndisp(flag: Option<usize>, left: &Path) -> Result<Option<usize>> {
-    if flag.is_some() {
-        return Ok(flag);
-    }
-    let calib_path = left.parent().unwrap_or(Path::new(".")).join("calib.txt");
-    if !calib_path.exists() {
-        return Ok(None);
-    }
-    calib::read_ndisp(&calib_path).map(Some)
 }
 
 /// A spinner on stderr showing the current stage, only on a terminal and without --quiet.

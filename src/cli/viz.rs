@@ -84,11 +84,6 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
             return Err(Error::param(flag, v.unwrap(), "a finite number"));
         }
     }
-    if let (Some(lo), Some(hi)) = (args.vmin, args.vmax)
-        && lo >= hi
-    {
-        return Err(Error::param("--vmin / --vmax", format!("{lo} / {hi}"), "--vmin below --vmax"));
-    }
     let dir = args.input.parent().unwrap_or(Path::new("."));
     let mut read = vec![args.input.clone(), dir.join("calib.txt")];
     if let Some(gt) = &args.gt {

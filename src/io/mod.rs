@@ -76,23 +76,8 @@ pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
         check_file_size_limit(path, bytes.len() as u64)?;
     }
     let mut staged: Vec<(PathBuf, &Path)> = Vec::with_capacity(files.len());
-    let stage = |path: &Path, bytes: &[u8]| -> Result<PathBuf> {
-        let tmp = temp_path(path);
-        let written = (|| {
-            let mut file = std::fs::File::create(&tmp).map_err(|e| Error::io(path, e))?;
-            file.write_all(bytes).map_err(|e| Error::io(path, e))?;
-            file.sync_all().map_err(|e| Error::io(path, e))
-        })();
-        match written {
-            Ok(()) => Ok(tmp),
-            Err(e) => {
-                let _ = std::fs::remove_file(&tmp);
-                Err(e)
-            }
-        }
-    };
     for &(path, bytes) in files {
-        match stage(path, bytes) {
+        match stage(path, |file| file.write_all(bytes).map_err(|e| Error::io(path, e))) {
             Ok(tmp) => staged.push((tmp, path)),
             Err(e) => {
                 staged.iter().for_each(|(tmp, _)| drop(std::fs::remove_file(tmp)));
@@ -231,18 +216,29 @@ fn check_file_size_limit(path: &Path, bytes: u64) -> Result<()> {
 /// # Errors
 /// Whatever `write` returns, or [`Error::Io`] naming `path`.
 pub fn write_atomic_with(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<()> {
+    let tmp = stage(path, write)?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        Error::io(path, e)
+    })
+}
+
+/// Writes `path`'s temporary file ([`temp_path`]) with `write` and flushes it to disk; returns its name. On any
+/// error the temporary file is removed.
+fn stage(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<PathBuf> {
     let tmp = temp_path(path);
-    let result = (|| {
+    let written = (|| {
         let mut file = std::fs::File::create(&tmp).map_err(|e| Error::io(path, e))?;
         write(&mut file)?;
-        file.sync_all().map_err(|e| Error::io(path, e))?;
-        drop(file);
-        std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+        file.sync_all().map_err(|e| Error::io(path, e))
     })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
+    match written {
+        Ok(()) => Ok(tmp),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
     }
-    result
 }
 
 /// `dir/.name.jem-tmp-<pid>`: hidden, in the destination's folder (so the rename stays on one file system), and
