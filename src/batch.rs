@@ -1,18 +1,20 @@
-//! Batch runs over folders of MiddEval3-style scenes (what `jem batch` does).
+//! Batch runs over data sets (what `jem batch` does).
 //!
-//! A *scene* is a folder holding `im0.png`, `im1.png` and `calib.txt` ([`find_scenes`] walks the given folders
-//! recursively and sorts the scenes by path). [`run_scene`] runs the pipeline on one scene with `ndisp` from its
-//! `calib.txt` and writes, atomically, `disp0<ALG>.pfm` and `time<ALG>.txt` (the seconds spent in the pipeline
-//! for that pair — image loading and file writing are not counted — as one number with six decimals) into the
-//! scene folder, the MiddEval3 submission layout.
+//! The pairs come from [`crate::dataset::discover`]: MiddEval3 scene folders (`im0.png`, `im1.png`,
+//! `calib.txt`), KITTI 2012/2015 frames and ETH3D scenes, each with its layout. [`run_pair`] runs the pipeline on
+//! one pair, with `ndisp` from `--ndisp`, else its `calib.txt`, else the layout's default (KITTI: 192), and a
+//! range measured on the pair when none is given or the stated one is not a real bound ([`crate::range`]); it
+//! writes, all or none, the disparity map and the run time (the seconds spent in the pipeline for that pair —
+//! image loading and file writing are not counted) where the layout's submission form puts them
+//! ([`crate::dataset::Pair::result_files`]: MiddEval3 `disp0<ALG>.pfm` and `time<ALG>.txt` in the scene folder;
+//! KITTI and ETH3D in a results folder beside the data set).
 //!
-//! [`run_batch`] runs a list of scenes, `jobs` at a time (each pipeline is itself multi-threaded on the global
-//! rayon pool). A failing scene — unreadable image, malformed calib, unequal sizes, or even a panic inside the
+//! [`run_batch`] runs a list of pairs, `jobs` at a time (each pipeline is itself multi-threaded on the global
+//! rayon pool). A failing pair — unreadable image, malformed calib, unequal sizes, or even a panic inside the
 //! pipeline (caught with `catch_unwind`) — is reported in its [`SceneReport`] and the others still run.
 //!
-//! [`Shard`] splits a sorted scene list into N deterministic parts (scene k goes to part `k mod N`), so a job
-//! array (Slurm, GNU parallel) can process a data set with no coordination; `--skip-existing` makes reruns
-//! resume.
+//! [`Shard`] splits a sorted list into N deterministic parts (item k goes to part `k mod N`), so a job array
+//! (Slurm, GNU parallel) can process a data set with no coordination; `--skip-existing` makes reruns resume.
 //!
 //! Complexity: the folder walk is linear in the number of directory entries; symlinked folders are followed
 //! once (cycles are cut by canonical path).
@@ -25,12 +27,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Condvar, Mutex};
 use std::time::Instant;
 
+use crate::dataset::Pair;
+pub use crate::dataset::SCENE_FILES;
 use crate::error::{Error, Result};
 use crate::io::calib;
 use crate::{Params, StereoPair, Timings};
-
-/// The files that make a folder a scene.
-pub const SCENE_FILES: [&str; 3] = ["im0.png", "im1.png", "calib.txt"];
 
 /// Checks an algorithm name: 1–64 ASCII letters, digits, `_` or `-` (it becomes part of file names), and not
 /// `GT` in any case: `disp0GT.pfm` is the dataset's ground truth, which a result must never overwrite (on a
@@ -104,7 +105,7 @@ fn walk(
     Ok(())
 }
 
-/// Every scene folder (with `im0.png`, `im1.png`, `calib.txt`) under the roots, sorted by path.
+/// Every MiddEval3-style scene folder (with `im0.png`, `im1.png`, `calib.txt`) under the roots, sorted by path.
 ///
 /// # Errors
 /// As [`find_dirs_with`].
@@ -149,7 +150,7 @@ impl FromStr for Shard {
 pub struct SceneRun {
     /// Image size (width, height).
     pub size: (usize, usize),
-    /// Disparity search range from `calib.txt`.
+    /// Disparity search range used.
     pub ndisp: usize,
     /// Seconds spent in the pipeline (what `time<ALG>.txt` holds).
     pub seconds: f64,
@@ -162,18 +163,18 @@ pub struct SceneRun {
 pub enum SceneStatus {
     /// The pipeline ran and both files were written.
     Done(SceneRun),
-    /// `--skip-existing` and `disp0<ALG>.pfm` was already there.
+    /// `--skip-existing` and a complete result was already there.
     Skipped,
     /// The error (or panic message), on one line.
     Failed(String),
 }
 
-/// One scene's outcome.
+/// One pair's outcome.
 #[derive(Clone, Debug)]
 pub struct SceneReport {
-    /// Scene folder.
+    /// Where the pair is: its scene folder, or a KITTI frame's left image.
     pub dir: PathBuf,
-    /// Display name: the folder name.
+    /// Display name: the scene folder's name or the frame.
     pub name: String,
     /// What happened.
     pub status: SceneStatus,
@@ -208,11 +209,15 @@ pub enum Event<'a> {
 /// Options of [`run_batch`].
 #[derive(Clone, Debug)]
 pub struct BatchOptions {
-    /// Algorithm name: outputs are `disp0<alg>.pfm` and `time<alg>.txt`.
+    /// Algorithm name: it names the outputs ([`crate::dataset::Pair::result_files`]).
     pub alg: String,
+    /// The results base of KITTI and ETH3D data sets (`None`: `results/` beside each data set).
+    pub results: Option<PathBuf>,
+    /// The search range for every pair, instead of its calib.txt, the layout's default or a measured one.
+    pub ndisp: Option<usize>,
     /// Scenes processed at the same time (≥ 1).
     pub jobs: usize,
-    /// Skip scenes whose `disp0<alg>.pfm` exists.
+    /// Skip pairs whose result exists and is complete.
     pub skip_existing: bool,
     /// Memory limit of the whole batch (see [`crate::check_memory`]): concurrent scenes share it, a scene
     /// waits while the ones running hold too much of it, and one that needs more than all of it fails.
@@ -224,41 +229,44 @@ pub fn scene_name(dir: &Path) -> String {
     dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
 
-/// Runs the pipeline on one scene folder and writes `disp0<alg>.pfm` and `time<alg>.txt` into it.
+/// Runs the pipeline on one pair and writes its result and run time (see the module doc).
 ///
 /// # Errors
-/// Unreadable images, a missing or malformed `calib.txt`, unequal sizes, invalid parameters, or a failed
-/// write. (A panic is not caught here; [`run_batch`] catches it.)
-pub fn run_scene(
-    dir: &Path,
-    params: &Params,
-    alg: &str,
-    max_memory_bytes: u64,
-    on_stage: &dyn Fn(&str),
-) -> Result<SceneRun> {
-    let budget = MemoryBudget::new(max_memory_bytes);
-    run_scene_in(dir, params, alg, &budget, on_stage)
+/// Unreadable images, a missing or malformed `calib.txt`, unequal sizes, invalid parameters, a result the
+/// output format cannot hold, or a failed write. (A panic is not caught here; [`run_batch`] catches it.)
+pub fn run_pair(pair: &Pair, params: &Params, opts: &BatchOptions, on_stage: &dyn Fn(&str)) -> Result<SceneRun> {
+    let budget = MemoryBudget::new(opts.max_memory_bytes);
+    run_pair_in(pair, params, opts, &budget, on_stage)
 }
 
-/// [`run_scene`] drawing its memory from `budget`, shared with the scenes running beside it.
-fn run_scene_in(
-    dir: &Path,
+/// [`run_pair`] drawing its memory from `budget`, shared with the pairs running beside it.
+fn run_pair_in(
+    pair: &Pair,
     params: &Params,
-    alg: &str,
+    opts: &BatchOptions,
     budget: &MemoryBudget,
     on_stage: &dyn Fn(&str),
 ) -> Result<SceneRun> {
     on_stage("loading");
-    let ndisp = calib::read_ndisp(&dir.join("calib.txt"))?;
-    // The size from the PNG header: a scene too large for the budget is refused before its images are decoded.
-    let im0 = dir.join("im0.png");
-    let (w, h) = image::image_dimensions(&im0).map_err(|source| Error::Image { path: im0.clone(), source })?;
-    // A stated range of half the width or more is not a real bound: it is measured on the pair (crate::range),
-    // before the memory is checked and reserved for the measured one.
-    let search = crate::range::needs_search(Some(ndisp), w as usize);
-    let (mut loaded, mut ndisp) = (None, ndisp);
+    let files = pair.result_files(&opts.alg, opts.results.as_deref());
+    let inputs: Vec<&Path> =
+        [Some(pair.left.as_path()), Some(pair.right.as_path()), pair.calib.as_deref()].into_iter().flatten().collect();
+    crate::io::check_outputs(&inputs, &[&files.disparity, &files.time])?;
+    let stated = match (opts.ndisp, &pair.calib) {
+        (Some(n), _) => Some(n),
+        (None, Some(c)) => Some(calib::read_ndisp(c)?),
+        (None, None) => pair.default_ndisp(),
+    };
+    // The size from the image header: a pair too large for the budget is refused before it is decoded.
+    let (w, h) =
+        image::image_dimensions(&pair.left).map_err(|source| Error::Image { path: pair.left.clone(), source })?;
+    // No range, or a stated one of half the width or more, is no real bound: it is measured on the pair
+    // (crate::range), before the memory is checked and reserved for the measured one. --ndisp always wins.
+    let search = opts.ndisp.is_none() && crate::range::needs_search(stated, w as usize);
+    let mut ndisp = stated.unwrap_or(w as usize);
+    let mut loaded = None;
     if search {
-        let (left, right) = crate::io::png::load_rgb_pair(&im0, &dir.join("im1.png"))?;
+        let (left, right) = crate::io::png::load_rgb_pair(&pair.left, &pair.right)?;
         ndisp = crate::range::find_ndisp(&left, &right, ndisp.min(w as usize), &params.cost);
         loaded = Some((left, right));
     }
@@ -268,17 +276,23 @@ fn run_scene_in(
     let _held = budget.reserve(need);
     on_stage("loading");
     let (left, right) = match loaded {
-        Some(pair) => pair,
-        None => crate::io::png::load_rgb_pair(&im0, &dir.join("im1.png"))?,
+        Some(images) => images,
+        None => crate::io::png::load_rgb_pair(&pair.left, &pair.right)?,
     };
-    let pair = StereoPair::new(left, right, ndisp)?;
+    let stereo = StereoPair::new(left, right, ndisp)?;
     let start = Instant::now();
-    let out = crate::run_observed(params, &pair, on_stage)?;
+    let out = crate::run_observed(params, &stereo, on_stage)?;
     let seconds = start.elapsed().as_secs_f64();
     on_stage("writing");
-    crate::io::pfm::write_pfm(&dir.join(format!("disp0{alg}.pfm")), &out.disparity)?;
-    crate::io::write_atomic(&dir.join(format!("time{alg}.txt")), format!("{seconds:.6}\n").as_bytes())?;
-    Ok(SceneRun { size: pair.left.dims(), ndisp, seconds, timings: out.timings })
+    let disparity = crate::io::encode_disparity(&files.disparity, &out.disparity)?;
+    for dir in [files.disparity.parent(), files.time.parent()].into_iter().flatten() {
+        if !dir.as_os_str().is_empty() {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        }
+    }
+    let time = pair.time_text(seconds);
+    crate::io::write_all_or_none(&[(&files.disparity, &disparity), (&files.time, time.as_bytes())])?;
+    Ok(SceneRun { size: stereo.left.dims(), ndisp, seconds, timings: out.timings })
 }
 
 /// The memory the concurrent scenes of a batch share: a scene reserves its estimate before it loads its images
@@ -337,25 +351,26 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
     }
 }
 
-/// Runs (or skips) one scene, turning errors and panics into a [`SceneStatus`].
+/// Runs (or skips) one pair, turning errors and panics into a [`SceneStatus`].
 fn process(
-    dir: &Path,
+    pair: &Pair,
     params: &Params,
     opts: &BatchOptions,
     budget: &MemoryBudget,
     on_stage: &dyn Fn(&str),
 ) -> SceneStatus {
-    if opts.skip_existing && has_complete_result(dir, &opts.alg) {
+    if opts.skip_existing && has_complete_result(pair, opts) {
         return SceneStatus::Skipped;
     }
-    guarded(|| run_scene_in(dir, params, &opts.alg, budget, on_stage))
+    guarded(|| run_pair_in(pair, params, opts, budget, on_stage))
 }
 
-/// Whether `dir` holds a finished `disp0<alg>.pfm`: a file that parses as a PFM of the scene's image size (an
-/// empty, truncated or foreign file, or a folder of that name, is not a result; the scene runs again).
-fn has_complete_result(dir: &Path, alg: &str) -> bool {
-    let Ok(result) = crate::io::pfm::read_pfm(&dir.join(format!("disp0{alg}.pfm"))) else { return false };
-    let size = image::image_dimensions(dir.join("im0.png")).ok();
+/// Whether the pair's result is there and finished: a file that parses as a disparity map of the pair's image
+/// size (an empty, truncated or foreign file, or a folder of that name, is not a result; the pair runs again).
+fn has_complete_result(pair: &Pair, opts: &BatchOptions) -> bool {
+    let files = pair.result_files(&opts.alg, opts.results.as_deref());
+    let Ok(result) = crate::io::read_disparity(&files.disparity) else { return false };
+    let size = image::image_dimensions(&pair.left).ok();
     size.is_some_and(|(w, h)| (w as usize, h as usize) == result.dims())
 }
 
@@ -386,7 +401,7 @@ fn error_chain(e: &Error) -> String {
 /// Panics inside the pipeline are caught and reported; note that the process's panic hook still runs (the
 /// `jem` binary installs a quiet one).
 pub fn run_batch(
-    scenes: &[PathBuf],
+    scenes: &[Pair],
     params: &Params,
     opts: &BatchOptions,
     on_event: &(dyn Fn(Event<'_>) + Sync),
@@ -397,11 +412,11 @@ pub fn run_batch(
     let worker = || {
         loop {
             let index = next.fetch_add(1, Ordering::Relaxed);
-            let Some(dir) = scenes.get(index) else { break };
-            let name = scene_name(dir);
+            let Some(pair) = scenes.get(index) else { break };
+            let name = pair.name.clone();
             on_event(Event::Started { index, name: &name });
-            let status = process(dir, params, opts, &budget, &|stage| on_event(Event::Stage { index, stage }));
-            let report = SceneReport { dir: dir.clone(), name, status };
+            let status = process(pair, params, opts, &budget, &|stage| on_event(Event::Stage { index, stage }));
+            let report = SceneReport { dir: pair.location(), name, status };
             on_event(Event::Finished { index, report: &report });
             if let Ok(mut s) = slots.lock() {
                 s[index] = Some(report);
@@ -422,10 +437,10 @@ pub fn run_batch(
     slots
         .into_iter()
         .zip(scenes)
-        .map(|(r, dir)| {
+        .map(|(r, pair)| {
             r.unwrap_or_else(|| SceneReport {
-                dir: dir.clone(),
-                name: scene_name(dir),
+                dir: pair.location(),
+                name: pair.name.clone(),
                 status: SceneStatus::Failed("not run (a worker thread stopped)".into()),
             })
         })

@@ -39,6 +39,7 @@
 pub mod batch;
 pub mod condition;
 pub mod cost;
+pub mod dataset;
 pub mod degrade;
 pub mod error;
 pub mod eval;

@@ -15,12 +15,26 @@ use super::config::ConfigArgs;
 /// Arguments of `jem batch` (the help text is on [`Command::Batch`](super::Command::Batch)).
 #[derive(Args, Debug, Clone)]
 pub(super) struct BatchArgs {
-    /// Folders to search, recursively, for scene folders.
+    /// Folders to search, recursively, for data sets: MiddEval3 scene folders, KITTI 2012/2015 trees (image_2/ +
+    /// image_3/, colored_0/ + colored_1/, image_0/ + image_1/), ETH3D two_view_* trees.
     #[arg(required = true, value_name = "DIR")]
     dirs: Vec<PathBuf>,
-    /// Algorithm name: the outputs are disp0NAME.pfm and timeNAME.txt (letters, digits, _ and - only).
+    /// Algorithm name (letters, digits, _ and - only): MiddEval3 results are disp0NAME.pfm and timeNAME.txt in
+    /// each scene; KITTI and ETH3D results go to RESULTS/NAME/ (KITTI disp_0/FRAME.png, ETH3D
+    /// low_res_two_view/SCENE.pfm + SCENE.txt).
     #[arg(long, value_name = "NAME")]
     alg: String,
+    /// Where KITTI and ETH3D results go: RESULTS/NAME/ (default: the folder results/ beside each data set, e.g.
+    /// kitti/results/ for kitti/training/). Never inside a data set.
+    #[arg(long, value_name = "RESULTS")]
+    results: Option<PathBuf>,
+    /// Read the scenes as this layout (middlebury, eth3d, kitti2012, kitti2015) instead of recognising it; only
+    /// needed to tell an ETH3D tree from MiddEval3 scenes when its folder is not named two_view_*.
+    #[arg(long, value_name = "LAYOUT")]
+    layout: Option<jem::dataset::Layout>,
+    /// Search range 0..N-1 for every pair, instead of calib.txt (or KITTI's 192, or one measured on the pair).
+    #[arg(long, value_name = "N")]
+    ndisp: Option<usize>,
     #[command(flatten)]
     config: ConfigArgs,
     /// Scenes processed at the same time (each run is multi-threaded already; more jobs need more memory).
@@ -30,7 +44,7 @@ pub(super) struct BatchArgs {
     /// k mod N + 1. Over I = 1..N every scene is processed exactly once, e.g. one part per job of a job array.
     #[arg(long, value_name = "I/N")]
     shard: Option<jem::batch::Shard>,
-    /// Skip scenes that already have disp0NAME.pfm (to resume an interrupted run).
+    /// Skip pairs whose result is already there and complete (to resume an interrupted run).
     #[arg(long)]
     skip_existing: bool,
 }
@@ -121,26 +135,53 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     if args.jobs == 0 {
         return Err(Error::param("--jobs", 0, "at least 1"));
     }
+    if args.ndisp == Some(0) {
+        return Err(Error::param("--ndisp", 0, "at least 1"));
+    }
     let params = args.config.params()?;
-    let all = jem::batch::find_scenes(&args.dirs)?;
+    let how = jem::dataset::Discovery { layout: args.layout, gt: None };
+    let all = jem::dataset::discover(&args.dirs, jem::dataset::Purpose::Run, &how)?;
     if all.is_empty() {
         let dirs: Vec<String> = args.dirs.iter().map(|d| d.display().to_string()).collect();
         return Err(Error::Input(format!(
-            "no scene folder (with im0.png, im1.png and calib.txt) under {}",
+            "no scene folder (with im0.png, im1.png and calib.txt) or KITTI frame (image_2/ + image_3/, \
+             colored_0/ + colored_1/) under {}",
             dirs.join(", ")
         )));
+    }
+    if args.results.is_some() && all.iter().all(|p| p.layout == jem::dataset::Layout::Middlebury) {
+        return Err(Error::Input(
+            "--results is for KITTI and ETH3D data sets; MiddEval3 results go into each scene folder".into(),
+        ));
     }
     let scenes = match args.shard {
         Some(shard) => shard.select(&all),
         None => all.clone(),
     };
+    // Every results folder is checked for the whole data set (another shard may claim it), then claimed for
+    // this shard's pairs, before any work.
+    jem::dataset::check_results_dirs(&all, &args.alg, args.results.as_deref(), false)?;
+    jem::dataset::check_results_dirs(&scenes, &args.alg, args.results.as_deref(), true)?;
     if !global.quiet {
         let shard =
             args.shard.map(|s| format!(" (shard {}/{} of {})", s.index, s.count, all.len())).unwrap_or_default();
-        eprintln!("{} scene(s){shard}, alg {}, {} job(s)", scenes.len(), args.alg, args.jobs);
+        eprintln!("{} pair(s){shard}, alg {}, {} job(s)", scenes.len(), args.alg, args.jobs);
+        let dirs: std::collections::BTreeSet<(&str, PathBuf)> = scenes
+            .iter()
+            .filter(|p| p.layout != jem::dataset::Layout::Middlebury)
+            .filter_map(|p| {
+                let files = p.result_files(&args.alg, args.results.as_deref());
+                Some((p.layout.name(), files.disparity.parent()?.to_path_buf()))
+            })
+            .collect();
+        for (layout, dir) in dirs {
+            eprintln!("{layout} results: {}", dir.display());
+        }
     }
     let opts = BatchOptions {
         alg: args.alg.clone(),
+        results: args.results.clone(),
+        ndisp: args.ndisp,
         jobs: args.jobs,
         skip_existing: args.skip_existing,
         max_memory_bytes: global.memory_limit(),

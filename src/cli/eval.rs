@@ -28,12 +28,22 @@ impl std::str::FromStr for ScaleArg {
 /// Arguments of `jem eval` (the help text is on [`Command::Eval`](super::Command::Eval)).
 #[derive(Args, Debug, Clone)]
 pub(super) struct EvalArgs {
-    /// Folder searched recursively for scene folders with disp0GT.pfm (e.g. MiddEval3/trainingQ, or one scene).
+    /// Folder searched recursively for pairs with ground truth (e.g. MiddEval3/trainingQ or one scene, a KITTI
+    /// training/ tree, an ETH3D two_view_training/ tree).
     #[arg(value_name = "DIR")]
     dir: PathBuf,
-    /// Result to score: disp0NAME.pfm in each scene folder (repeatable).
+    /// Result to score, as `jem batch --alg NAME` wrote it (repeatable).
     #[arg(long = "alg", required = true, value_name = "NAME")]
     algs: Vec<String>,
+    /// Where KITTI and ETH3D results are: RESULTS/NAME/ (default: results/ beside the data set, as batch).
+    #[arg(long, value_name = "RESULTS")]
+    results: Option<PathBuf>,
+    /// ETH3D ground truth: the tree with SCENE/disp0GT.pfm and mask0nocc.png (default: DIR's sibling DIR_gt/).
+    #[arg(long, value_name = "DIR")]
+    gt: Option<PathBuf>,
+    /// Read the scenes as this layout (middlebury, eth3d, kitti2012, kitti2015) instead of recognising it.
+    #[arg(long, value_name = "LAYOUT")]
+    layout: Option<jem::dataset::Layout>,
     /// Pixels to evaluate: nonocc (mask0nocc.png == 255) or all (mask > 0).
     #[arg(long, value_name = "nonocc|all", default_value = "nonocc")]
     mask: jem::eval::MaskMode,
@@ -90,12 +100,29 @@ pub(super) fn run(args: &EvalArgs) -> Result<ExitCode> {
         let columns = args.algs.iter().enumerate().map(|(i, _)| &args.paper[if args.paper.len() == 1 { 0 } else { i }]);
         columns.map(|c| table.column(c).map(Some)).collect::<Result<Vec<_>>>()?
     };
+    // An ETH3D ground-truth tree given as DIR: score its image tree (the sibling without `_gt`) against it.
+    let (dir, gt) = match (&args.gt, eth3d_image_tree(&args.dir)) {
+        (None, Some(images)) => (images, Some(args.dir.clone())),
+        _ => (args.dir.clone(), args.gt.clone()),
+    };
+    let sources = jem::eval::Sources { layout: args.layout, gt, results: args.results.clone() };
     let reports = args
         .algs
         .iter()
-        .map(|alg| evaluate_dir(&args.dir, alg, args.mask, args.scale.0))
+        .map(|alg| evaluate_dir(&dir, alg, args.mask, args.scale.0, &sources))
         .collect::<Result<Vec<_>>>()?;
     print!("{}", render(&reports, &papers, args.format));
     let excluded = reports.iter().any(|r| r.excluded().next().is_some());
     Ok(if excluded { ExitCode::from(2) } else { ExitCode::SUCCESS })
+}
+
+/// The image tree of an ETH3D ground-truth tree: `X` for a folder `X_gt` without images of its own, when `X`
+/// exists beside it.
+fn eth3d_image_tree(dir: &Path) -> Option<PathBuf> {
+    let name = dir.file_name()?.to_str()?;
+    let images = dir.with_file_name(name.strip_suffix("_gt")?);
+    let has_scenes =
+        jem::dataset::discover(&[dir.to_path_buf()], jem::dataset::Purpose::Run, &jem::dataset::Discovery::default())
+            .is_ok_and(|pairs| !pairs.is_empty());
+    (images.is_dir() && !has_scenes).then_some(images)
 }

@@ -138,17 +138,27 @@ enum Command {
     /// OUT is written as a whole or not at all; it must not exist (or be empty) and must be outside SRC.
     #[command(verbatim_doc_comment)]
     Degrade(DegradeArgs),
-    /// Run the pipeline on every scene under DIR... (MiddEval3 layout): disp0NAME.pfm + timeNAME.txt.
+    /// Run the pipeline on every stereo pair under DIR... (MiddEval3, KITTI 2012/2015, ETH3D, as distributed).
     ///
-    /// A scene is a folder with im0.png, im1.png and calib.txt (ndisp is read from it); every scene under each DIR is
-    /// found recursively and processed in path order. Each gets disp0NAME.pfm and timeNAME.txt (seconds spent in the
-    /// pipeline for that pair, loading and writing excluded), written atomically. A failing scene is reported and the
-    /// others still run; the exit code is 2 if any scene failed.
+    /// The layout is recognised from the folders (--layout forces it):
+    ///   MiddEval3   a scene folder with im0.png, im1.png, calib.txt -> disp0NAME.pfm + timeNAME.txt in it
+    ///   KITTI 2015  image_2/ + image_3/ (frames *_10.png)          -> RES/NAME/disp_0/FRAME.png (16-bit, ×256, 0 = invalid)
+    ///   KITTI 2012  colored_0/ + colored_1/ (or image_0/ + image_1/) -> as 2015
+    ///   ETH3D       scene folders in two_view_*/ (or with a sibling *_gt/) -> RES/NAME/low_res_two_view/SCENE.pfm + SCENE.txt
+    /// RES is --results, else results/ beside the data set's folder (kitti/training -> kitti/results); it is never
+    /// inside a data set, and a results folder holding another data set's results (source.txt) is refused.
+    /// ndisp: --ndisp, else calib.txt, else 192 for KITTI; a missing range, or one of half the width or more (ETH3D
+    /// states the width), is measured on the pair. Run times (seconds in the pipeline, loading and writing
+    /// excluded) go beside each result (KITTI: RES/NAME/time/FRAME.txt). Each pair's files are written all or none.
+    /// Pairs run in path order; a failing pair is reported and the others still run; the exit code is 2 if any
+    /// failed.
     #[command(verbatim_doc_comment)]
     Batch(BatchArgs),
-    /// Score disp0NAME.pfm results against the ground truth, MiddEval3 `evaldisp` style.
+    /// Score results against the ground truth: MiddEval3 `evaldisp` style, KITTI devkit D1, ETH3D.
     ///
-    /// Every scene folder under DIR with a disp0GT.pfm is scored.
+    /// Every pair under DIR with ground truth is scored, in the layout `jem batch` wrote it (one data set layout
+    /// per call): MiddEval3 scenes with disp0GT.pfm; KITTI trees with disp_noc*/ (nonocc) and disp_occ*/ (all);
+    /// ETH3D trees with their *_gt/ sibling (or --gt). --results as for batch.
     ///
     /// Ground-truth pixels that are inf are skipped; the mask selects mask0nocc.png == 255 (nonocc) or > 0 (all).
     /// Invalid (inf/NaN) result pixels count in `invalid` and `totbad2` but not in avgErr/rms; valid ones are
@@ -157,10 +167,14 @@ enum Command {
     /// valid pixels; totbad2 = bad2 + invalid). "weighted" is the MiddEval3 average (PianoL, Playroom, Playtable,
     /// Shelves, Vintage weigh 0.5, other scenes 1), "mean" the plain one. Scenes whose result is missing or
     /// unreadable are listed, left out of both averages, and make the exit code 2.
+    /// KITTI and ETH3D: native pixels, no clipping, every scene weighs 1. KITTI as its devkit: invalid result
+    /// pixels are filled (background interpolation) before scoring, `invalid` is the share before the fill, and
+    /// D1 = % of GT pixels with error > 3 px and > 5 % of the true disparity. ETH3D --mask all: every GT pixel.
     ///
-    /// JSON: one object per --alg (an array when several): {"alg", "mask", "scale", "scenes": {SCENE: {"avgerr",
-    /// "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2"}}, "weighted": {...}, "mean": {...}}, plus
-    /// "excluded": {SCENE: reason} when scenes were left out and "paper": {...} with --paper; NaN is null.
+    /// JSON: one object per --alg (an array when several): {"alg", "layout", "mask", "scale", "scenes": {SCENE:
+    /// {"avgerr", "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2"}}, "weighted": {...}, "mean":
+    /// {...}}, plus "excluded": {SCENE: reason} when scenes were left out and "paper": {...} with --paper; NaN is
+    /// null. KITTI: the keys are "d1", "avgerr", "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid".
     ///
     /// Environment: JEM_DATA, if set, is the folder holding paper-results.tsv (used for --paper when --paper-file
     /// is not given; otherwise ../shared/middlebury/paper-results.tsv relative to the current folder).

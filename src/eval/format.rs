@@ -37,8 +37,8 @@ impl FromStr for Format {
 
 /// Renders reports; `papers[i]` (if any) is printed beside `reports[i]`'s avgerr.
 ///
-/// JSON: `{"alg", "mask", "scale", "scenes": {NAME: {metrics}}, "weighted": {metrics}|null, "mean": ...}` with
-/// the keys of [`Metrics::NAMES`]; scenes that could not be evaluated are left out of `scenes`, and then an
+/// JSON: `{"alg", "layout", "mask", "scale", "scenes": {NAME: {metrics}}, "weighted": {metrics}|null, "mean": ...}`
+/// with the keys of [`AlgReport::columns`] ([`Metrics::NAMES`], or [`Metrics::KITTI_NAMES`] with `d1`); scenes that could not be evaluated are left out of `scenes`, and then an
 /// `"excluded": {NAME: "reason"}` key is added; with a paper column, `"paper": {"column", "scenes", "weighted"}`.
 ///
 /// # Panics
@@ -79,15 +79,12 @@ fn json_num(v: f64) -> String {
     if v.is_finite() { format!("{v}") } else { "null".into() }
 }
 
-fn json_metrics(m: Option<&Metrics>) -> String {
+fn json_metrics(m: Option<&Metrics>, columns: &[&str]) -> String {
     match m {
         None => "null".into(),
         Some(m) => {
-            let fields: Vec<String> = Metrics::NAMES
-                .iter()
-                .zip(m.values())
-                .map(|(k, v)| format!("{}: {}", json_str(k), json_num(v)))
-                .collect();
+            let fields: Vec<String> =
+                columns.iter().map(|k| format!("{}: {}", json_str(k), json_num(m.get(k)))).collect();
             format!("{{{}}}", fields.join(", "))
         }
     }
@@ -98,22 +95,27 @@ fn render_json(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String 
         .iter()
         .enumerate()
         .map(|(i, r)| {
+            let cols = r.columns();
             let scenes: Vec<String> = r
                 .scenes
                 .iter()
                 .filter_map(|s| {
-                    s.metrics.as_ref().ok().map(|m| format!("    {}: {}", json_str(&s.name), json_metrics(Some(m))))
+                    s.metrics
+                        .as_ref()
+                        .ok()
+                        .map(|m| format!("    {}: {}", json_str(&s.name), json_metrics(Some(m), cols)))
                 })
                 .collect();
             let mut o = format!(
-                "{{\n  \"alg\": {},\n  \"mask\": {},\n  \"scale\": {},\n  \"scenes\": {{{}}},\n  \"weighted\": {},\n  \
-                 \"mean\": {}",
+                "{{\n  \"alg\": {},\n  \"layout\": {},\n  \"mask\": {},\n  \"scale\": {},\n  \"scenes\": {{{}}},\n  \
+                 \"weighted\": {},\n  \"mean\": {}",
                 json_str(&r.alg),
+                json_str(r.layout.name()),
                 json_str(r.mask.name()),
                 r.scale,
                 if scenes.is_empty() { String::new() } else { format!("\n{}\n  ", scenes.join(",\n")) },
-                json_metrics(r.weighted().as_ref()),
-                json_metrics(r.mean().as_ref()),
+                json_metrics(r.weighted().as_ref(), cols),
+                json_metrics(r.mean().as_ref(), cols),
             );
             let excluded: Vec<String> =
                 r.excluded().map(|(n, e)| format!("{}: {}", json_str(n), json_str(e))).collect();
@@ -151,15 +153,17 @@ fn csv_num(v: Option<f64>) -> String {
 }
 
 fn render_csv(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String {
-    let mut out = format!("alg,mask,scale,scene,weight,{},time_s,paper,error\n", Metrics::NAMES.join(","));
+    // One header for all reports (they come from one data set): the first report's columns.
+    let cols = reports.first().map_or(&Metrics::NAMES[..], AlgReport::columns);
+    let mut out = format!("alg,mask,scale,scene,weight,{},time_s,paper,error\n", cols.join(","));
     for (i, r) in reports.iter().enumerate() {
         let p = paper[i];
         let prefix = format!("{},{},{}", csv_field(&r.alg), r.mask.name(), r.scale);
         let mut row =
             |scene: &str, weight: Option<f64>, m: Option<&Metrics>, t: Option<f64>, pv: Option<f64>, e: &str| {
                 let values: Vec<String> = match m {
-                    Some(m) => m.values().iter().map(|v| csv_num(Some(*v))).collect(),
-                    None => vec![String::new(); 8],
+                    Some(m) => cols.iter().map(|k| csv_num(Some(m.get(k)))).collect(),
+                    None => vec![String::new(); cols.len()],
                 };
                 let _ = writeln!(
                     out,
@@ -208,11 +212,15 @@ fn render_text(reports: &[AlgReport], paper: &[Option<&PaperColumn>], md: bool) 
     }
     for (i, r) in reports.iter().enumerate() {
         let p = paper[i];
+        let units = if r.layout == crate::dataset::Layout::Middlebury {
+            format!("errors ×{} (full-resolution px)", r.scale)
+        } else {
+            format!("{}, errors in native px", r.layout.name())
+        };
         let title = format!(
-            "{} — mask {}, errors ×{} (full-resolution px){}",
+            "{} — mask {}, {units}{}",
             r.alg,
             r.mask.name(),
-            r.scale,
             p.map(|p| format!(", paper column {}", p.name)).unwrap_or_default()
         );
         if md {
@@ -220,20 +228,26 @@ fn render_text(reports: &[AlgReport], paper: &[Option<&PaperColumn>], md: bool) 
         } else {
             let _ = writeln!(out, "{title}");
         }
-        let mut header: Vec<String> = vec!["scene".into(), "weight".into(), "avgErr".into()];
-        if p.is_some() {
-            header.push("paper".into());
+        // The paper's avgErr goes right after ours.
+        let cols = r.columns();
+        let mut header: Vec<String> = vec!["scene".into(), "weight".into()];
+        for k in cols {
+            header.push(label(k).into());
+            if p.is_some() && *k == "avgerr" {
+                header.push("paper".into());
+            }
         }
-        header.extend(["rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2", "time s"].map(String::from));
+        header.push("time s".into());
         let ncol = header.len();
         let mut rows = vec![header];
         let mut push = |name: String, weight: String, m: Option<&Metrics>, pv: Option<f64>, t: Option<f64>| {
-            let v = m.map(Metrics::values);
-            let mut r = vec![name, weight, fixed(v.map(|v| v[0]))];
-            if p.is_some() {
-                r.push(fixed(pv));
+            let mut r = vec![name, weight];
+            for k in cols {
+                r.push(fixed(m.map(|m| m.get(k))));
+                if p.is_some() && *k == "avgerr" {
+                    r.push(fixed(pv));
+                }
             }
-            r.extend((1..8).map(|k| fixed(v.map(|v| v[k]))));
             r.push(t.map_or("-".into(), |t| format!("{t:.3}")));
             rows.push(r);
         };
@@ -271,10 +285,25 @@ fn render_text(reports: &[AlgReport], paper: &[Option<&PaperColumn>], md: bool) 
     out
 }
 
-/// One row per algorithm: weighted and mean avgErr (and the paper's), weighted bad2 and invalid, mean time.
+/// A metric's column heading in text tables.
+fn label(key: &str) -> &str {
+    match key {
+        "avgerr" => "avgErr",
+        "d1" => "D1",
+        k => k,
+    }
+}
+
+/// One row per algorithm: (mean D1 for KITTI,) weighted and mean avgErr (and the paper's), weighted bad2 and
+/// invalid, mean time.
 fn summary_table(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> Table {
     let has_paper = paper.iter().any(Option::is_some);
-    let mut header: Vec<String> = vec!["alg".into(), "weighted avgErr".into()];
+    let kitti = reports.iter().any(|r| r.layout.is_kitti());
+    let mut header: Vec<String> = vec!["alg".into()];
+    if kitti {
+        header.push("mean D1".into());
+    }
+    header.push("weighted avgErr".into());
     if has_paper {
         header.extend(["paper".into(), "paper column".into()]);
     }
@@ -282,7 +311,11 @@ fn summary_table(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> Table
     let mut rows = vec![header];
     for (i, r) in reports.iter().enumerate() {
         let w = r.weighted();
-        let mut row = vec![r.alg.clone(), fixed(w.map(|m| m.avgerr))];
+        let mut row = vec![r.alg.clone()];
+        if kitti {
+            row.push(fixed(r.mean().map(|m| m.d1)));
+        }
+        row.push(fixed(w.map(|m| m.avgerr)));
         if has_paper {
             let p = paper[i];
             row.push(fixed(p.and_then(|p| p.weighted)));
@@ -296,7 +329,8 @@ fn summary_table(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> Table
         rows.push(row);
     }
     let ncol = rows[0].len();
-    let right_aligned = (0..ncol).map(|c| !(c == 0 || (has_paper && c == 3))).collect();
+    let paper_name_col = 3 + usize::from(kitti);
+    let right_aligned = (0..ncol).map(|c| !(c == 0 || (has_paper && c == paper_name_col))).collect();
     Table { rows, right_aligned }
 }
 
@@ -310,6 +344,7 @@ mod tests {
     fn json_shape_and_nan() {
         let mut r = AlgReport {
             alg: "A\"B".into(),
+            layout: crate::dataset::Layout::Middlebury,
             mask: MaskMode::All,
             scale: 2,
             scenes: vec![scene("Teddy", 1.5, true), scene("Pipes", 0.0, false)],
@@ -318,7 +353,12 @@ mod tests {
             m.rms = f64::NAN;
         }
         let json = render(&[r], &[], Format::Json);
-        assert!(json.starts_with("{\n  \"alg\": \"A\\\"B\",\n  \"mask\": \"all\",\n  \"scale\": 2,\n"), "{json}");
+        assert!(
+            json.starts_with(
+                "{\n  \"alg\": \"A\\\"B\",\n  \"layout\": \"middlebury\",\n  \"mask\": \"all\",\n  \"scale\": 2,\n"
+            ),
+            "{json}"
+        );
         assert!(json.contains("\"Teddy\": {\"avgerr\": 1.5, \"rms\": null, \"bad0.5\": 0, \"bad1\": 0, \"bad2\": 10,"));
         assert!(json.contains("\"excluded\": {\"Pipes\": \"no result\"}"));
         assert!(!json.contains("\"paper\""));

@@ -15,6 +15,11 @@ use crate::io::calib::Calib;
 /// The bad-pixel thresholds, in full-resolution pixels.
 pub const BAD_THRESHOLDS_PX: [f64; 4] = [0.5, 1.0, 2.0, 4.0];
 
+/// KITTI's D1 outlier: an error above this many pixels ...
+pub const D1_THRESHOLD_PX: f64 = 3.0;
+/// ... and above this fraction of the true disparity.
+pub const D1_RELATIVE: f64 = 0.05;
+
 /// Which pixels of `mask0nocc.png` are evaluated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MaskMode {
@@ -74,21 +79,36 @@ pub struct Metrics {
     pub invalid: f64,
     /// `bad2 + invalid`.
     pub totbad2: f64,
+    /// KITTI's D1: % of pixels whose result is invalid or off by more than 3 px *and* more than 5 % of the
+    /// true disparity.
+    pub d1: f64,
     /// Number of pixels evaluated (masked and GT-valid); for an average, the total over its scenes.
     pub pixels: u64,
 }
 
 impl Metrics {
-    /// The metric names, in the order of [`Metrics::values`] (also the JSON and CSV keys).
+    /// Every metric's name, in the order of [`Metrics::values`] (also the JSON and CSV keys).
+    pub const KEYS: [&'static str; 9] = ["avgerr", "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2", "d1"];
+
+    /// The metrics a MiddEval3 (and ETH3D) report shows: all but `d1`.
     pub const NAMES: [&'static str; 8] = ["avgerr", "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2"];
 
-    /// The eight metrics in the order of [`Metrics::NAMES`].
-    pub fn values(&self) -> [f64; 8] {
-        [self.avgerr, self.rms, self.bad0_5, self.bad1, self.bad2, self.bad4, self.invalid, self.totbad2]
+    /// The metrics a KITTI report shows: D1 first; `totbad2` is left out because the result is interpolated
+    /// before scoring (so `invalid` there is the share before interpolation).
+    pub const KITTI_NAMES: [&'static str; 8] = ["d1", "avgerr", "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid"];
+
+    /// The metrics in the order of [`Metrics::KEYS`].
+    pub fn values(&self) -> [f64; 9] {
+        [self.avgerr, self.rms, self.bad0_5, self.bad1, self.bad2, self.bad4, self.invalid, self.totbad2, self.d1]
     }
 
-    /// Builds metrics from values in the order of [`Metrics::NAMES`].
-    pub fn from_values(v: [f64; 8], pixels: u64) -> Self {
+    /// The metric named `key` (one of [`Metrics::KEYS`]); NaN for an unknown name.
+    pub fn get(&self, key: &str) -> f64 {
+        Metrics::KEYS.iter().position(|k| *k == key).map_or(f64::NAN, |i| self.values()[i])
+    }
+
+    /// Builds metrics from values in the order of [`Metrics::KEYS`].
+    pub fn from_values(v: [f64; 9], pixels: u64) -> Self {
         Metrics {
             avgerr: v[0],
             rms: v[1],
@@ -98,6 +118,7 @@ impl Metrics {
             bad4: v[5],
             invalid: v[6],
             totbad2: v[7],
+            d1: v[8],
             pixels,
         }
     }
@@ -137,6 +158,7 @@ pub fn evaluate(
     let mut n = 0u64;
     let mut invalid = 0u64;
     let mut bad = [0u64; 4];
+    let mut d1 = 0u64;
     let mut sum = 0.0f64;
     let mut sum_sq = 0.0f64;
     for (i, (&d, &g)) in result.data.iter().zip(&gt.data).enumerate() {
@@ -159,6 +181,7 @@ pub fn evaluate(
         for (count, &t) in bad.iter_mut().zip(&BAD_THRESHOLDS_PX) {
             *count += u64::from(err > t);
         }
+        d1 += u64::from(err > D1_THRESHOLD_PX && err > D1_RELATIVE * s * f64::from(g).abs());
     }
     let pct = |k: u64| {
         if n == 0 { f64::NAN } else { 100.0 * k as f64 / n as f64 }
@@ -175,6 +198,7 @@ pub fn evaluate(
         bad4: pct(bad[3]),
         invalid: pct(invalid),
         totbad2: pct(bad[2] + invalid),
+        d1: pct(d1 + invalid),
         pixels: n,
     }
 }

@@ -15,6 +15,7 @@
 //! | `badT`     | 100 · #{valid pixels with err > T} / n, T ∈ {0.5, 1, 2, 4} (strict `>`) |
 //! | `invalid`  | 100 · #{invalid pixels} / n                                            |
 //! | `totbad2`  | `bad2 + invalid` = 100 · (#{err > 2} + #{invalid}) / n                 |
+//! | `d1`       | 100 · (#{err > 3 and err > 5 % of s·gt} + #{invalid}) / n (KITTI's D1)  |
 //!
 //! So the bad percentages count bad *valid* pixels among *all* `n` masked GT-valid pixels, exactly as
 //! `evaldisp` does (its `badpercent = 100·bad/n`, `totalbadpercent = 100·(bad + invalid)/n`, and since 2014
@@ -28,9 +29,20 @@
 //!   and let a NaN poison its sums). GT pixels that are NaN are skipped like `inf` ones.
 //! - Sums are `f64` (not `f32`), accumulated in raster order, so results are deterministic.
 //!
+//! # KITTI and ETH3D
+//! The same rules with `s = 1` (native pixels) and no clipping, ground truth and results where the
+//! [`dataset`](crate::dataset) layout puts them. ETH3D: `mask0nocc.png == 255` for `nonocc`, every GT pixel for
+//! `all` (its mask does not mark "no ground truth"). KITTI, as its development kit: `nonocc` scores against
+//! `disp_noc*`, `all` against `disp_occ*` (16-bit PNG, 0 = unknown); the result's invalid pixels are first
+//! filled by [`interpolate_background`](crate::dataset::interpolate_background), so every error column counts
+//! them with their filled value, and `invalid` reports the share that was invalid before the fill. The KITTI
+//! table leads with `d1`; the MiddEval3 and ETH3D tables do not show it (the JSON and CSV of a KITTI report
+//! have it).
+//!
 //! # Averages
 //! [`AlgReport::weighted`] is the MiddEval3 weighted mean over the scenes that were evaluated: PianoL, Playroom,
-//! Playtable, Shelves and Vintage weigh 0.5, every other scene 1 ([`scene_weight`]); [`AlgReport::mean`] is the
+//! Playtable, Shelves and Vintage weigh 0.5, every other scene 1 ([`scene_weight`]; KITTI and ETH3D scenes all
+//! weigh 1); [`AlgReport::mean`] is the
 //! plain mean. Each metric is averaged separately. Scenes whose result is missing or unreadable are listed and
 //! left out of both.
 //!
@@ -51,4 +63,4 @@ pub use format::{Format, render};
 pub(crate) use metrics::check_size;
 pub use metrics::{BAD_THRESHOLDS_PX, MaskMode, Metrics, evaluate, evaluate_files, evaluate_scene};
 pub use paper::{PaperColumn, PaperResults};
-pub use report::{AlgReport, SceneResult, evaluate_dir, find_gt_scenes, scale_from_path, scene_weight};
+pub use report::{AlgReport, SceneResult, Sources, evaluate_dir, find_gt_scenes, scale_from_path, scene_weight};

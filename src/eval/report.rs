@@ -1,14 +1,16 @@
-//! One algorithm over a folder of scenes: [`find_gt_scenes`] finds the scene folders with ground truth,
-//! [`scale_from_path`] their resolution and [`scene_weight`] their MiddEval3 weight; [`evaluate_dir`] scores them
-//! in parallel with [`evaluate_scene`] into an [`AlgReport`], whose weighted and plain means are the "Averages"
-//! of the [`eval`](crate::eval) module doc. Per-scene failures are recorded, not returned.
+//! One algorithm over a data set: [`evaluate_dir`] finds the pairs with ground truth ([`crate::dataset::discover`]),
+//! their resolution ([`scale_from_path`], MiddEval3) and weight ([`scene_weight`]), scores them in parallel into an
+//! [`AlgReport`], whose weighted and plain means are the "Averages" of the [`eval`](crate::eval) module doc.
+//! Per-scene failures are recorded, not returned. [`find_gt_scenes`] lists MiddEval3 scene folders with ground
+//! truth.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use super::metrics::{MaskMode, Metrics, evaluate_scene};
+use super::metrics::{MaskMode, Metrics, check_size, evaluate, evaluate_files, evaluate_scene};
+use crate::dataset::{Discovery, Layout, Pair, Purpose};
 use crate::error::{Error, Result};
 
 /// The MiddEval3 weight of a training scene: 0.5 for PianoL, Playroom, Playtable, Shelves and Vintage, 1 for
@@ -38,11 +40,12 @@ pub fn scale_from_path(path: &Path) -> Option<u32> {
 /// One scene's evaluation.
 #[derive(Clone, Debug)]
 pub struct SceneResult {
-    /// Scene name (the folder name; the path relative to the evaluated folder when names repeat).
+    /// Scene name (the folder name, or the KITTI frame; the path relative to the evaluated folder when names
+    /// repeat).
     pub name: String,
-    /// Scene folder.
+    /// Scene folder (a KITTI frame: its left image).
     pub dir: PathBuf,
-    /// MiddEval3 weight ([`scene_weight`]).
+    /// MiddEval3 weight ([`scene_weight`]); 1 for KITTI and ETH3D.
     pub weight: f64,
     /// The scores, or why the scene could not be evaluated.
     pub metrics: std::result::Result<Metrics, String>,
@@ -55,6 +58,8 @@ pub struct SceneResult {
 pub struct AlgReport {
     /// Algorithm name (`disp0<alg>.pfm`).
     pub alg: String,
+    /// The data set's layout.
+    pub layout: Layout,
     /// Which pixels were evaluated.
     pub mask: MaskMode,
     /// Factor to full-resolution pixels.
@@ -64,6 +69,11 @@ pub struct AlgReport {
 }
 
 impl AlgReport {
+    /// The metrics the report shows, in order ([`Metrics::KITTI_NAMES`] for KITTI, else [`Metrics::NAMES`]).
+    pub fn columns(&self) -> &'static [&'static str] {
+        if self.layout.is_kitti() { &Metrics::KITTI_NAMES } else { &Metrics::NAMES }
+    }
+
     /// The MiddEval3 weighted mean over the evaluated scenes (`None` if none was).
     pub fn weighted(&self) -> Option<Metrics> {
         self.average(|s| s.weight)
@@ -92,7 +102,7 @@ impl AlgReport {
         if ok.is_empty() || total <= 0.0 {
             return None;
         }
-        let mut sums = [0.0f64; 8];
+        let mut sums = [0.0f64; 9];
         for (w, m) in &ok {
             for (s, v) in sums.iter_mut().zip(m.values()) {
                 *s += w * v;
@@ -114,32 +124,107 @@ pub fn find_gt_scenes(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(scenes)
 }
 
-/// Evaluates `disp0<alg>.pfm` in every scene folder under `dir` that has ground truth (scenes in parallel).
+/// Where [`evaluate_dir`] finds what it scores, beyond the folder it is given.
+#[derive(Clone, Debug, Default)]
+pub struct Sources {
+    /// Read every scene as this layout instead of recognising it (see [`crate::dataset::Discovery`]).
+    pub layout: Option<Layout>,
+    /// ETH3D's ground-truth tree (default: the sibling `<name>_gt/` of the image tree).
+    pub gt: Option<PathBuf>,
+    /// The results base for KITTI and ETH3D (default: `results/` beside the data set; see [`crate::dataset`]).
+    pub results: Option<PathBuf>,
+}
+
+/// Evaluates `alg`'s results for every pair under `dir` that has ground truth (pairs in parallel): MiddEval3
+/// scenes (`disp0<alg>.pfm` beside `disp0GT.pfm`), KITTI frames and ETH3D scenes (results and truth where
+/// [`crate::dataset`] puts them). One layout per call.
 ///
-/// `scale = None` infers the factor from each scene's path ([`scale_from_path`], after resolving `.`/symlinks).
+/// `scale = None` infers the factor of MiddEval3 scenes from each scene's path ([`scale_from_path`], after
+/// resolving `.`/symlinks); KITTI and ETH3D are scored in native pixels (1).
 ///
 /// # Errors
-/// No scene with ground truth, an unreadable folder, or (with `scale = None`) a path that implies no resolution
-/// or scenes at different resolutions. Per-scene problems are not errors: they are recorded in the report.
-pub fn evaluate_dir(dir: &Path, alg: &str, mask_mode: MaskMode, scale: Option<u32>) -> Result<AlgReport> {
-    let dirs = find_gt_scenes(dir)?;
-    let scale = match scale {
-        Some(s) => s,
-        None => infer_common_scale(&dirs)?,
+/// No scene with ground truth, an unreadable folder, data sets of two layouts, a results folder that holds
+/// another data set's results, or (MiddEval3, with `scale = None`) a path that implies no resolution or scenes at
+/// different resolutions. Per-scene problems are not errors: they are recorded in the report.
+pub fn evaluate_dir(
+    dir: &Path,
+    alg: &str,
+    mask_mode: MaskMode,
+    scale: Option<u32>,
+    src: &Sources,
+) -> Result<AlgReport> {
+    let how = Discovery { layout: src.layout, gt: src.gt.clone() };
+    let pairs = crate::dataset::discover(&[dir.to_path_buf()], Purpose::Score, &how)?;
+    let Some(layout) = pairs.first().map(|p| p.layout) else {
+        return Err(Error::Input(format!(
+            "no scene with ground truth under {} (MiddEval3 disp0GT.pfm, KITTI disp_noc*/, ETH3D *_gt/)",
+            dir.display()
+        )));
     };
-    let names = scene_names(dir, &dirs);
-    let scenes = dirs
+    if let Some(other) = pairs.iter().find(|p| p.layout != layout) {
+        return Err(Error::Input(format!(
+            "{} holds {} and {} data ({} and {}); evaluate one data set at a time",
+            dir.display(),
+            layout.name(),
+            other.layout.name(),
+            pairs[0].root.display(),
+            other.root.display()
+        )));
+    }
+    crate::dataset::check_results_dirs(&pairs, alg, src.results.as_deref(), false)?;
+    let locations: Vec<PathBuf> = pairs.iter().map(Pair::location).collect();
+    let scale = match (scale, layout) {
+        (Some(s), _) => s,
+        (None, Layout::Middlebury) => infer_common_scale(&locations)?,
+        (None, _) => 1,
+    };
+    let names = scene_names(dir, &pairs, &locations);
+    let scenes = pairs
         .par_iter()
+        .zip(locations)
         .zip(names)
-        .map(|(d, name)| SceneResult {
-            weight: scene_weight(&name),
-            metrics: evaluate_scene(d, alg, scale, mask_mode).map_err(|e| error_chain(&e)),
-            seconds: read_seconds(&d.join(format!("time{alg}.txt"))),
+        .map(|((pair, dir), name)| SceneResult {
+            weight: if layout == Layout::Middlebury { scene_weight(&name) } else { 1.0 },
+            metrics: score_pair(pair, alg, scale, mask_mode, src).map_err(|e| error_chain(&e)),
+            seconds: read_seconds(&pair.result_files(alg, src.results.as_deref()).time),
             name,
-            dir: d.clone(),
+            dir,
         })
         .collect();
-    Ok(AlgReport { alg: alg.to_string(), mask: mask_mode, scale, scenes })
+    Ok(AlgReport { alg: alg.to_string(), layout, mask: mask_mode, scale, scenes })
+}
+
+/// Scores one pair's result (see the [`eval`](crate::eval) module doc for each layout's rules).
+fn score_pair(pair: &Pair, alg: &str, scale: u32, mask_mode: MaskMode, src: &Sources) -> Result<Metrics> {
+    if pair.layout == Layout::Middlebury {
+        return evaluate_scene(&pair.root, alg, scale, mask_mode);
+    }
+    let result = pair.result_files(alg, src.results.as_deref()).disparity;
+    if !result.is_file() {
+        return Err(Error::Input(format!("no result file {}", result.display())));
+    }
+    let truth = pair.truth(mask_mode == MaskMode::All, src.gt.as_deref());
+    // No clipping: neither benchmark clips a result to a search range.
+    let unbounded = usize::MAX;
+    if pair.layout == Layout::Eth3d {
+        let mask = truth.mask.filter(|_| mask_mode == MaskMode::Nonocc);
+        if let Some(m) = mask.as_ref().filter(|m| !m.is_file()) {
+            return Err(Error::Input(format!("no {} (needed for the nonocc mask)", m.display())));
+        }
+        return evaluate_files(&result, &truth.disparity, mask.as_deref(), unbounded, scale, mask_mode);
+    }
+    let gt = crate::io::read_disparity(&truth.disparity)?;
+    let mut map = crate::io::read_disparity(&result)?;
+    check_size(&result, "result", map.dims(), &format!("the ground truth {}", truth.disparity.display()), gt.dims())?;
+    let known = gt.data.iter().filter(|g| g.is_finite()).count();
+    let invalid_before = gt.data.iter().zip(&map.data).filter(|(g, d)| g.is_finite() && !d.is_finite()).count();
+    crate::dataset::interpolate_background(&mut map);
+    let mut metrics = evaluate(&map, &gt, None, unbounded, scale, mask_mode);
+    if metrics.pixels == 0 {
+        return Err(Error::Input(format!("{}: no pixel with ground truth", truth.disparity.display())));
+    }
+    metrics.invalid = 100.0 * invalid_before as f64 / known as f64;
+    Ok(metrics)
 }
 
 /// The one scale all `dirs` imply.
@@ -168,26 +253,28 @@ fn infer_common_scale(dirs: &[PathBuf]) -> Result<u32> {
     found.map(|(s, _)| s).ok_or_else(|| Error::Input("no scenes".into()))
 }
 
-/// Folder names, or paths relative to `root` where two folders share a name.
-fn scene_names(root: &Path, dirs: &[PathBuf]) -> Vec<String> {
-    let base: Vec<String> =
-        dirs.iter().map(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()).collect();
-    base.iter()
-        .zip(dirs)
-        .map(|(name, d)| {
-            if name.is_empty() || base.iter().filter(|b| *b == name).count() > 1 {
-                d.strip_prefix(root).unwrap_or(d).display().to_string()
+/// Pair names, or the path of their location relative to `root` where two pairs share a name.
+fn scene_names(root: &Path, pairs: &[Pair], locations: &[PathBuf]) -> Vec<String> {
+    pairs
+        .iter()
+        .zip(locations)
+        .map(|(p, loc)| {
+            if p.name.is_empty() || pairs.iter().filter(|q| q.name == p.name).count() > 1 {
+                loc.strip_prefix(root).unwrap_or(loc).display().to_string()
             } else {
-                name.clone()
+                p.name.clone()
             }
         })
         .collect()
 }
 
-/// The number in a `time<alg>.txt`, if the file exists and holds one finite non-negative number.
+/// The number in a run-time file, if the file exists and holds one finite non-negative number (alone, or after
+/// `runtime` as in ETH3D's files).
 fn read_seconds(path: &Path) -> Option<f64> {
     let text = std::fs::read_to_string(path).ok()?;
-    text.trim().parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0)
+    let text = text.trim();
+    let number = text.strip_prefix("runtime").map_or(text, str::trim_start);
+    number.parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0)
 }
 
 /// The error and its sources on one line.
@@ -217,7 +304,7 @@ pub(super) mod tests {
 
     /// A scene with made-up metrics (avgerr, rms = 2·avgerr, bad2 10, invalid 1) and run time `avgerr` s.
     pub(in crate::eval) fn scene(name: &str, avgerr: f64, ok: bool) -> SceneResult {
-        let m = Metrics::from_values([avgerr, 2.0 * avgerr, 0.0, 0.0, 10.0, 0.0, 1.0, 11.0], 100);
+        let m = Metrics::from_values([avgerr, 2.0 * avgerr, 0.0, 0.0, 10.0, 0.0, 1.0, 11.0, 5.0], 100);
         SceneResult {
             name: name.into(),
             dir: PathBuf::from(name),
@@ -231,6 +318,7 @@ pub(super) mod tests {
     fn weighted_and_plain_means() {
         let r = AlgReport {
             alg: "X".into(),
+            layout: Layout::Middlebury,
             mask: MaskMode::Nonocc,
             scale: 4,
             scenes: vec![

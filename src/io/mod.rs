@@ -241,11 +241,15 @@ fn stage(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> R
     }
 }
 
-/// `dir/.name.jem-tmp-<pid>`: hidden, in the destination's folder (so the rename stays on one file system), and
-/// unique per process.
+/// `dir/.name.jem-tmp-<pid>-<nanoseconds>-<n>`: hidden, in the destination's folder (so the rename stays on one
+/// file system), and unique per write — also between processes on different machines of a cluster that share
+/// the folder (their process ids may coincide; the clock and the counter keep them apart).
 fn temp_path(path: &Path) -> PathBuf {
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-    path.with_file_name(format!(".{name}.jem-tmp-{}", std::process::id()))
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    path.with_file_name(format!(".{name}.jem-tmp-{}-{nanos}-{n}", std::process::id()))
 }
 
 #[cfg(test)]

@@ -1,0 +1,410 @@
+//! Benchmark folder layouts: where a data set keeps its pairs and ground truth, and where jem puts its results.
+//!
+//! `jem batch` and `jem eval` take any folder and find the data sets in it ([`discover`]); each stereo pair
+//! becomes a [`Pair`] that knows its [`Layout`]. Four layouts, recognised by their folder names:
+//!
+//! | layout | a folder holding | pairs | ground truth | results of `--alg NAME` |
+//! |---|---|---|---|---|
+//! | MiddEval3 | `im0.png`, `im1.png`, `calib.txt` (one scene) | the scene | `disp0GT.pfm`, `mask0nocc.png` in the scene | `disp0NAME.pfm`, `timeNAME.txt` in the scene (the MiddEval3 submission layout) |
+//! | KITTI 2015 | `image_2/`, `image_3/` | `image_2/NNNNNN_10.png` + `image_3/…` | `disp_noc_0/`, `disp_occ_0/` | `RES/NAME/disp_0/NNNNNN_10.png` |
+//! | KITTI 2012 | `colored_0/`, `colored_1/` (or grey `image_0/`, `image_1/`) | `*_10.png` | `disp_noc/`, `disp_occ/` | as 2015 |
+//! | ETH3D two-view | scene folders as MiddEval3, in a folder named `two_view_*` or with a sibling `<name>_gt/` | each scene | `<name>_gt/SCENE/disp0GT.pfm`, `mask0nocc.png` | `RES/NAME/low_res_two_view/SCENE.pfm` and `SCENE.txt` (`runtime <s>`) |
+//!
+//! `RES` is `--results DIR` when given, else the folder `results/` beside the data set's folder (for
+//! `kitti/training/`, `kitti/results/`). KITTI and ETH3D results are in the benchmarks' submission forms (KITTI:
+//! 16-bit PNG, disparity × 256, 0 = invalid; its per-frame run times go to `RES/NAME/time/FRAME.txt`), and are
+//! never written inside the data set's folder. Because a training and a test split share frame names, a
+//! results folder records which data set it holds ([`SOURCE_FILE`]); results of another data set under the
+//! same name are refused instead of mixed.
+//!
+//! A MiddEval3 scene and an ETH3D scene look the same; the folder around it decides, or `--layout`.
+
+mod kitti;
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use crate::error::{Error, Result};
+
+pub use kitti::interpolate_background;
+
+/// The search range of a KITTI frame when nothing else gives one (0..191, the usual choice for KITTI).
+pub const KITTI_NDISP: usize = 192;
+
+/// The file in a results folder that names the data set whose results it holds.
+pub const SOURCE_FILE: &str = "source.txt";
+
+/// The files that make a folder a MiddEval3 or ETH3D scene.
+pub const SCENE_FILES: [&str; 3] = ["im0.png", "im1.png", "calib.txt"];
+
+/// A benchmark's folder layout (see the module doc).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Layout {
+    /// Middlebury 2014 (MiddEval3): one folder per scene.
+    Middlebury,
+    /// KITTI 2015 stereo: `image_2/`, `image_3/`, `disp_noc_0/`, `disp_occ_0/`.
+    Kitti2015,
+    /// KITTI 2012 stereo: `colored_0/`, `colored_1/` (or `image_0/`, `image_1/`), `disp_noc/`, `disp_occ/`.
+    Kitti2012,
+    /// ETH3D two-view: MiddEval3-like scene folders, ground truth in a parallel `*_gt` tree.
+    Eth3d,
+}
+
+impl Layout {
+    /// The name `--layout` takes and reports print.
+    pub fn name(self) -> &'static str {
+        match self {
+            Layout::Middlebury => "middlebury",
+            Layout::Kitti2015 => "kitti2015",
+            Layout::Kitti2012 => "kitti2012",
+            Layout::Eth3d => "eth3d",
+        }
+    }
+
+    /// Whether this is one of the KITTI layouts.
+    pub fn is_kitti(self) -> bool {
+        matches!(self, Layout::Kitti2015 | Layout::Kitti2012)
+    }
+}
+
+impl FromStr for Layout {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "middlebury" | "middeval3" => Ok(Layout::Middlebury),
+            "kitti2015" => Ok(Layout::Kitti2015),
+            "kitti2012" => Ok(Layout::Kitti2012),
+            "eth3d" => Ok(Layout::Eth3d),
+            _ => Err(format!("unknown layout {s:?} (expected middlebury, kitti2015, kitti2012 or eth3d)")),
+        }
+    }
+}
+
+/// One stereo pair of a data set, with the paths of its inputs.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Pair {
+    /// The data set's layout.
+    pub layout: Layout,
+    /// The scene folder's name (MiddEval3, ETH3D) or the frame's file stem (KITTI: `000000_10`).
+    pub name: String,
+    /// The data set's folder: the folder holding `image_2/` (KITTI) or the scene folders (ETH3D); for MiddEval3
+    /// the scene folder itself.
+    pub root: PathBuf,
+    /// Left image.
+    pub left: PathBuf,
+    /// Right image.
+    pub right: PathBuf,
+    /// `calib.txt` (MiddEval3, ETH3D); KITTI frames have none.
+    pub calib: Option<PathBuf>,
+}
+
+/// Where a pair's ground truth is.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Truth {
+    /// The ground-truth disparity map (`.pfm`, or KITTI's 16-bit `.png`).
+    pub disparity: PathBuf,
+    /// The occlusion mask (MiddEval3, ETH3D: `mask0nocc.png`); KITTI has separate maps instead.
+    pub mask: Option<PathBuf>,
+}
+
+/// Where an algorithm's result for a pair goes.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ResultFiles {
+    /// The disparity map.
+    pub disparity: PathBuf,
+    /// The run time file.
+    pub time: PathBuf,
+}
+
+impl Pair {
+    /// Where the pair is shown in reports: its scene folder, or a KITTI frame's left image.
+    pub fn location(&self) -> PathBuf {
+        match self.layout {
+            Layout::Middlebury => self.root.clone(),
+            Layout::Eth3d => self.root.join(&self.name),
+            Layout::Kitti2015 | Layout::Kitti2012 => self.left.clone(),
+        }
+    }
+
+    /// The search range when neither `--ndisp` nor a calib.txt gives one (KITTI: [`KITTI_NDISP`]; `None`:
+    /// measure it).
+    pub fn default_ndisp(&self) -> Option<usize> {
+        self.layout.is_kitti().then_some(KITTI_NDISP)
+    }
+
+    /// The results folder of `alg` for this pair's data set (`base/alg`, `base` = `results` or the folder
+    /// `results/` beside the data set); `None` for MiddEval3, whose results go into the scene folder.
+    pub fn results_dir(&self, alg: &str, results: Option<&Path>) -> Option<PathBuf> {
+        if self.layout == Layout::Middlebury {
+            return None;
+        }
+        let base = match results {
+            Some(r) => r.to_path_buf(),
+            None => match self.root.parent() {
+                Some(p) if !p.as_os_str().is_empty() => p.join("results"),
+                _ => PathBuf::from("results"),
+            },
+        };
+        Some(base.join(alg))
+    }
+
+    /// The files `alg`'s result for this pair is written to (see the module doc).
+    pub fn result_files(&self, alg: &str, results: Option<&Path>) -> ResultFiles {
+        match self.results_dir(alg, results) {
+            None => ResultFiles {
+                disparity: self.root.join(format!("disp0{alg}.pfm")),
+                time: self.root.join(format!("time{alg}.txt")),
+            },
+            Some(dir) if self.layout == Layout::Eth3d => ResultFiles {
+                disparity: dir.join("low_res_two_view").join(format!("{}.pfm", self.name)),
+                time: dir.join("low_res_two_view").join(format!("{}.txt", self.name)),
+            },
+            Some(dir) => ResultFiles {
+                disparity: dir.join("disp_0").join(format!("{}.png", self.name)),
+                time: dir.join("time").join(format!("{}.txt", self.name)),
+            },
+        }
+    }
+
+    /// The text of the run-time file for `seconds` (ETH3D: `runtime <s>`, the benchmark's form; else the number).
+    pub fn time_text(&self, seconds: f64) -> String {
+        match self.layout {
+            Layout::Eth3d => format!("runtime {seconds:.6}\n"),
+            _ => format!("{seconds:.6}\n"),
+        }
+    }
+
+    /// Where the ground truth of this pair is, for the non-occluded pixels (`all = false`) or all of them.
+    /// ETH3D's truth is in the tree `gt` (default: the sibling `<root name>_gt/`).
+    pub fn truth(&self, all: bool, gt: Option<&Path>) -> Truth {
+        match self.layout {
+            Layout::Middlebury => {
+                Truth { disparity: self.root.join("disp0GT.pfm"), mask: Some(self.root.join("mask0nocc.png")) }
+            }
+            Layout::Eth3d => {
+                let tree = gt.map_or_else(|| eth3d_gt_tree(&self.root), Path::to_path_buf);
+                let scene = tree.join(&self.name);
+                Truth { disparity: scene.join("disp0GT.pfm"), mask: Some(scene.join("mask0nocc.png")) }
+            }
+            Layout::Kitti2015 | Layout::Kitti2012 => {
+                let (noc, occ) = kitti::truth_folders(self.layout);
+                let folder = if all { occ } else { noc };
+                Truth { disparity: self.root.join(folder).join(format!("{}.png", self.name)), mask: None }
+            }
+        }
+    }
+}
+
+/// The sibling `<name>_gt` of an ETH3D image tree.
+fn eth3d_gt_tree(root: &Path) -> PathBuf {
+    let name = root.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    root.with_file_name(format!("{name}_gt"))
+}
+
+/// Whether the folder holding scene folders looks like an ETH3D tree: named `two_view_*`, or with a sibling
+/// `<name>_gt/`.
+fn is_eth3d_tree(dir: &Path) -> bool {
+    let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    name.starts_with("two_view_") || (!name.is_empty() && eth3d_gt_tree(dir).is_dir())
+}
+
+/// What [`discover`] looks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Purpose {
+    /// Pairs to run: a MiddEval3/ETH3D scene needs `im0.png`, `im1.png` and `calib.txt`; every KITTI frame.
+    Run,
+    /// Pairs to score: a MiddEval3 scene needs `disp0GT.pfm` (nothing else), an ETH3D scene its truth in the
+    /// `_gt` tree, a KITTI frame its data set's truth folders.
+    Score,
+}
+
+/// How [`discover`] reads a tree.
+#[derive(Clone, Debug, Default)]
+pub struct Discovery {
+    /// Take every scene as this layout instead of recognising it (MiddEval3 and ETH3D scenes look alike; the
+    /// KITTI layouts are always recognised, and `Some(kitti…)` keeps only those frames).
+    pub layout: Option<Layout>,
+    /// ETH3D's ground-truth tree (default: the sibling `<name>_gt/` of the image tree).
+    pub gt: Option<PathBuf>,
+}
+
+/// Every pair under the roots (recursively, the roots included), sorted by data set and name, without
+/// duplicates. A folder recognised as a data set or a scene is not searched further; hidden folders (`.name`)
+/// are skipped; a folder reached twice (symbolic links) is read once.
+///
+/// # Errors
+/// [`Error::Io`] if a root cannot be read, [`Error::Input`] if one is not a folder. Unreadable sub-folders are
+/// skipped.
+pub fn discover(roots: &[PathBuf], purpose: Purpose, how: &Discovery) -> Result<Vec<Pair>> {
+    let mut found = Vec::new();
+    let mut seen = BTreeSet::new();
+    for root in roots {
+        let meta = std::fs::metadata(root).map_err(|e| Error::io(root, e))?;
+        if !meta.is_dir() {
+            return Err(Error::Input(format!("{} is not a folder", root.display())));
+        }
+        walk(root, purpose, how, &mut seen, &mut found, true)?;
+    }
+    found.sort_by(|a, b| (&a.root, &a.name).cmp(&(&b.root, &b.name)));
+    found.dedup();
+    if let Some(forced) = how.layout {
+        found.retain(|p| p.layout == forced);
+    }
+    Ok(found)
+}
+
+fn walk(
+    dir: &Path,
+    purpose: Purpose,
+    how: &Discovery,
+    seen: &mut BTreeSet<PathBuf>,
+    found: &mut Vec<Pair>,
+    is_root: bool,
+) -> Result<()> {
+    let key = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+    if !seen.insert(key) {
+        return Ok(());
+    }
+    if let Some(layout) = kitti::recognise(dir) {
+        found.extend(kitti::frames(dir, layout, purpose));
+        return Ok(());
+    }
+    if let Some(pair) = scene(dir, purpose, how) {
+        found.extend(pair);
+        return Ok(());
+    }
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if is_root => return Err(Error::io(dir, e)),
+        Err(_) => return Ok(()),
+    };
+    let mut subdirs: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok())
+        .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
+        .map(|e| e.path())
+        .filter(|p| p.is_dir())
+        .collect();
+    subdirs.sort();
+    for sub in subdirs {
+        walk(&sub, purpose, how, seen, found, false)?;
+    }
+    Ok(())
+}
+
+/// `Some(pair)` if `dir` is a scene folder for this purpose (`Some(None)`: a scene folder, but without what the
+/// purpose needs, so not searched further and not listed); `None` if it is no scene folder.
+fn scene(dir: &Path, purpose: Purpose, how: &Discovery) -> Option<Option<Pair>> {
+    let has = |f: &str| dir.join(f).is_file();
+    let inputs = SCENE_FILES.iter().all(|f| has(f));
+    let truth_here = purpose == Purpose::Score && has("disp0GT.pfm");
+    if !(inputs || truth_here) {
+        return None;
+    }
+    let parent = dir.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let layout = match how.layout {
+        Some(l @ (Layout::Middlebury | Layout::Eth3d)) => l,
+        _ if how.gt.is_some() || is_eth3d_tree(parent) => Layout::Eth3d,
+        _ => Layout::Middlebury,
+    };
+    let name = dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+    let mut pair = Pair {
+        layout,
+        name,
+        root: dir.to_path_buf(),
+        left: dir.join("im0.png"),
+        right: dir.join("im1.png"),
+        calib: Some(dir.join("calib.txt")),
+    };
+    if layout == Layout::Eth3d {
+        pair.root = parent.to_path_buf();
+    }
+    let usable = match purpose {
+        Purpose::Run => inputs,
+        Purpose::Score => pair.truth(false, how.gt.as_deref()).disparity.is_file(),
+    };
+    Some(usable.then_some(pair))
+}
+
+/// What a results folder's [`SOURCE_FILE`] says: the layout and the data set's folder (canonical).
+fn source_text(pair: &Pair) -> String {
+    let root = std::fs::canonicalize(&pair.root).unwrap_or_else(|_| pair.root.clone());
+    format!("layout {}\nroot {}\n", pair.layout.name(), root.display())
+}
+
+/// Checks that the results folders of `alg` for these pairs are free for them: no folder is claimed by two data
+/// sets, none holds another data set's results (its [`SOURCE_FILE`] names another), none lies inside a data
+/// set's folder. With `claim`, creates the folders and writes the missing source files.
+///
+/// # Errors
+/// [`Error::Input`] naming the folder and the data sets; [`Error::Io`] if a folder or file cannot be made.
+pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, claim: bool) -> Result<()> {
+    let mut claimed: std::collections::BTreeMap<PathBuf, &Pair> = Default::default();
+    for pair in pairs {
+        let Some(dir) = pair.results_dir(alg, results) else { continue };
+        match claimed.get(&dir) {
+            Some(other) if other.root != pair.root => {
+                return Err(Error::Input(format!(
+                    "{}: the results of {} and of {} would share this folder (same frame names); run them one at a \
+                     time with different --alg or --results",
+                    dir.display(),
+                    other.root.display(),
+                    pair.root.display()
+                )));
+            }
+            Some(_) => continue,
+            None => {}
+        }
+        claimed.insert(dir.clone(), pair);
+        if let (Ok(d), Ok(r)) = (resolve_to_existing(&dir), std::fs::canonicalize(&pair.root))
+            && d.starts_with(&r)
+        {
+            return Err(Error::Input(format!(
+                "{}: results would go inside the data set {} (never written to); choose another --results",
+                dir.display(),
+                pair.root.display()
+            )));
+        }
+        if let Ok(have) = std::fs::read(dir.join(SOURCE_FILE))
+            && have != source_text(pair).as_bytes()
+        {
+            let have = String::from_utf8_lossy(&have);
+            let other = have.lines().find_map(|l| l.strip_prefix("root ")).unwrap_or("another data set");
+            return Err(Error::Input(format!(
+                "{}: holds the results of {other}, not of {} (see {SOURCE_FILE}); choose another --alg or --results",
+                dir.display(),
+                pair.root.display()
+            )));
+        }
+    }
+    // Everything checked: only now is anything made.
+    for (dir, pair) in claimed.iter().filter(|_| claim) {
+        let source = dir.join(SOURCE_FILE);
+        if !source.is_file() {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            crate::io::write_atomic(&source, source_text(pair).as_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+/// The canonical form of `path`, or of its nearest existing ancestor joined with the rest.
+fn resolve_to_existing(path: &Path) -> std::io::Result<PathBuf> {
+    let mut rest = Vec::new();
+    let mut cur = path.to_path_buf();
+    loop {
+        if let Ok(c) = std::fs::canonicalize(&cur) {
+            return Ok(rest.iter().rev().fold(c, |acc: PathBuf, part: &std::ffi::OsString| acc.join(part)));
+        }
+        match (cur.file_name().map(|n| n.to_os_string()), cur.parent()) {
+            (Some(name), Some(parent)) => {
+                rest.push(name);
+                cur = if parent.as_os_str().is_empty() { PathBuf::from(".") } else { parent.to_path_buf() };
+            }
+            _ => return std::fs::canonicalize(path),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;
