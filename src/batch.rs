@@ -270,8 +270,9 @@ fn run_pair_in(
         ndisp = crate::range::find_ndisp(&left, &right, ndisp.min(w as usize), &params.cost);
         loaded = Some((left, right));
     }
-    crate::check_memory(w as usize, h as usize, ndisp, params, budget.total)?;
-    let need = crate::estimate_memory_bytes(w as usize, h as usize, ndisp, params);
+    let (w, h) = (w as usize, h as usize);
+    let strategy = crate::tile::Strategy::choose(w, h, ndisp, params, budget.total)?;
+    let need = strategy.memory_bytes(w, h, ndisp, params);
     on_stage("waiting for memory");
     let _held = budget.reserve(need);
     on_stage("loading");
@@ -281,7 +282,7 @@ fn run_pair_in(
     };
     let stereo = StereoPair::new(left, right, ndisp)?;
     let start = Instant::now();
-    let out = crate::run_observed(params, &stereo, on_stage)?;
+    let out = strategy.run(params, &stereo, on_stage)?;
     let seconds = start.elapsed().as_secs_f64();
     on_stage("writing");
     let disparity = crate::io::encode_disparity(&files.disparity, &out.disparity)?;

@@ -24,7 +24,11 @@
 //!    coarse run's confidence at i (its max-marginal, with `prior_confidence`) × `prior_untrusted` where the
 //!    coarse left-right check failed (the fill guessed there). The coarse level removes the
 //!    gross errors that fine-scale noise causes, the fine level keeps the precision; the prior also places
-//!    each pixel well enough that three full-resolution iterations do the work of five.
+//!    each pixel well enough that three full-resolution iterations do the work of five. With `prior_levels` L
+//!    the coarse run has a coarse prior of its own, L − 1 levels deep (default 2: the half-resolution run is
+//!    guided by a quarter-resolution one). With `prior_window` the full resolution searches only the labels
+//!    the coarse run found, widened by two coarse labels (off by default: as accurate, and on MiddEval3's
+//!    ranges hardly faster).
 //!
 //! Everything is measured on the pair itself; nothing depends on the dataset. The paper's configs turn all of
 //! it off (`enabled = false`). Measurements: docs/tuning-log.md ("Robustness").

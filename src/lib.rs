@@ -18,9 +18,12 @@
 //!   `planes/` for slanted-plane smoothing);
 //! - their parameters: [`params`], one file per stage, each struct with its defaults and `validate()`;
 //! - around the pipeline: [`io`] (PFM, PNG, EXR, calib.txt; atomic writes), [`image`] (planes, volumes, pairs),
-//!   [`scale`] (`--downscale`), [`batch`] (scene trees), [`eval`] (MiddEval3 scoring and reports), [`viz`]
+//!   [`scale`] (`--downscale`), [`tile`] (pairs too large for one volume: a coarse level, then tiles with label
+//!   windows), [`range`] (the search range when none is given), [`dataset`] (MiddEval3, KITTI and ETH3D
+//!   layouts), [`batch`] (runs over data sets), [`eval`] (scoring and reports), [`viz`]
 //!   (colour maps), [`synth`] (synthetic scenes with exact ground truth), [`degrade`] (seeded degraded copies for
-//!   robustness measurements), [`table`] and [`fastmath`] (shared helpers).
+//!   robustness measurements), [`condition`] (measuring and conditioning the pair, the coarse prior),
+//!   [`geometry`] (depth and point clouds), [`table`] and [`fastmath`] (shared helpers).
 //!
 //! With `downscale = N > 1` ([`Params::downscale`]) the pipeline runs on the pair reduced by N
 //! (`scale::downsample_pair`) and the result is brought back to the input size (`scale::upsample_disparity`).
@@ -57,6 +60,7 @@ pub mod rng;
 pub mod scale;
 pub mod synth;
 pub mod table;
+pub mod tile;
 pub mod viz;
 
 use std::time::{Duration, Instant};
@@ -263,9 +267,6 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         Some(cond) => (&*cond.guide, cond.cost_pair()),
         None => (pair, pair),
     };
-    let post = &params.post;
-    let need_right = post.lrc.mode != LrcMode::Off;
-
     on_stage("cost volume");
     // Before the full-resolution volume exists, so the two runs' buffers are never alive together.
     // The coarse run needs a pair of at least 8 × 8 at half size whose halved range stays below its width.
@@ -282,12 +283,15 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         // The coarse level measures its own (halved) noise: it is denoised by the same rule, and gets a coarse
         // prior of its own only while the pair is still noisy enough (`prior_recurse_sigma`). The alignment and
         // stretch are done already.
-        let recurse = c.prior_recurse_sigma > 0.0 && sigma >= c.prior_recurse_sigma;
+        // With `prior_levels` > 1 the coarse run has a prior of its own, one level fewer.
+        let deeper = c.prior_levels > 1;
+        let recurse = deeper || (c.prior_recurse_sigma > 0.0 && sigma >= c.prior_recurse_sigma);
         coarse_params.condition = params::ConditionParams {
             match_histograms: false,
             stretch: false,
             prior_per_sigma: if recurse { c.prior_per_sigma } else { 0.0 },
             prior_base: if recurse { c.prior_base } else { 0.0 },
+            prior_levels: if deeper { c.prior_levels - 1 } else { 1 },
             ..*c
         };
         let coarse = t.time("coarse prior", || run_observed(&coarse_params, pair, &|_| {}))?;
@@ -299,18 +303,66 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
                 *c *= c_untrusted;
             }
         });
-        Some((coarse.disparity, confidence))
+        Some(Prior { disparity: coarse.disparity, confidence, weight: prior_weight })
     } else {
         None
     };
+    // The label window: only the disparities the coarse run found, widened by two coarse labels.
+    let window = match &coarse {
+        Some(prior) if c.prior_window => tile::label_window(&prior.disparity, pair.ndisp, 4),
+        _ => None,
+    };
+    let Some((lo, labels)) = window else {
+        return fine_pass(params, pair, cost_pair, &cost_params, coarse.as_ref(), on_stage, t);
+    };
+    // Label d' of the shifted pair is disparity lo + d'.
+    let shifted = |p: &StereoPair| tile::shift_right_view(p, lo, labels);
+    let guide = shifted(pair)?;
+    let cost_shifted = if std::ptr::eq(pair, cost_pair) { None } else { Some(shifted(cost_pair)?) };
+    let prior = coarse.map(|mut p| {
+        p.disparity.data.iter_mut().for_each(|d| *d -= lo as f32);
+        p
+    });
+    let mut out =
+        fine_pass(params, &guide, cost_shifted.as_ref().unwrap_or(&guide), &cost_params, prior.as_ref(), on_stage, t)?;
+    out.disparity.data.iter_mut().for_each(|d| *d += lo as f32);
+    Ok(out)
+}
+
+/// What the full-resolution cost is pulled towards: a coarse run's disparities, in the labels of the pair it
+/// is added to (see [`condition`], "Coarse prior").
+pub(crate) struct Prior {
+    /// The coarse disparities (`inf`: no prior at that pixel).
+    pub disparity: DisparityMap,
+    /// Per-pixel factor of the weight (the coarse confidence, lowered where its left-right check failed).
+    pub confidence: Plane<f32>,
+    /// λ before the per-pixel factor.
+    pub weight: f32,
+}
+
+/// The pipeline from the cost volume on: `pair` is the guidance (colour weights, post-processing), `cost_pair`
+/// what the matching cost sees, `prior` an optional coarse prior.
+pub(crate) fn fine_pass(
+    params: &Params,
+    pair: &StereoPair,
+    cost_pair: &StereoPair,
+    cost_params: &params::CostParams,
+    prior: Option<&Prior>,
+    on_stage: &dyn Fn(&str),
+    mut t: Timings,
+) -> Result<Output> {
+    let c = &params.condition;
+    let post = &params.post;
+    let need_right = post.lrc.mode != LrcMode::Off;
     let mut cost_left =
-        t.time("cost", || cost::build_cost_volume(&cost_pair.left, &cost_pair.right, pair.ndisp, &cost_params));
-    if let Some((coarse, confidence)) = coarse {
+        t.time("cost", || cost::build_cost_volume(&cost_pair.left, &cost_pair.right, pair.ndisp, cost_params));
+    if let Some(prior) = prior {
         let (m, margin, trunc) = (cost_left.ndisp, c.prior_margin_px, c.prior_trunc_px);
-        let by_confidence = c.prior_confidence;
+        let (by_confidence, weight) = (c.prior_confidence, prior.weight);
+        let (coarse, confidence) = (&prior.disparity, &prior.confidence);
         cost_left.data.par_chunks_mut(m).zip(coarse.data.par_iter()).zip(confidence.data.par_iter()).for_each(
             |((costs, &dc), &conf)| {
-                let lambda = if by_confidence { prior_weight * conf } else { prior_weight };
+                let lambda = if by_confidence { weight * conf } else { weight };
                 if dc.is_finite() {
                     for (d, v) in costs.iter_mut().enumerate() {
                         *v += lambda * ((d as f32 - dc).abs() - margin).clamp(0.0, trunc);

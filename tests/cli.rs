@@ -205,6 +205,23 @@ fn memory_guard_fails_fast_with_the_estimate() {
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
+/// Issue 16: a pair too large for the memory limit, but whose coarse level and smallest tile fit, runs in tiles
+/// (jem::tile) instead of being refused, and is still matched.
+#[test]
+fn memory_limit_runs_in_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    // 320x240, ndisp 48: ~97 MB in one piece; 60 MB leaves room for a coarse level at 1/2 and 64-px tiles.
+    let out = run_in(dir.path(), &["--max-memory", "60M", &l, &r, "-o", "t.pfm"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("running in tiles"), "{}", stderr(&out));
+    let d = pfm::read_pfm(&dir.path().join("t.pfm")).unwrap();
+    let gt = pfm::read_pfm(&repo().join("examples/synth/disp0GT.pfm")).unwrap();
+    let err: f64 =
+        d.data.iter().zip(&gt.data).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / gt.data.len() as f64;
+    assert!(err < 1.0, "mean error {err:.3} px");
+}
+
 /// Killing a run (SIGINT or SIGKILL) leaves neither the output nor a temporary file: the output is only ever
 /// created by renaming a finished temporary file. The run is made long (many iterations) so the signal lands
 /// while it computes.

@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use clap::Args;
 use jem::io::calib;
+use jem::tile::Strategy;
 use jem::{Error, Result, StereoPair};
 
 use super::GlobalArgs;
@@ -118,7 +119,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let header = image::image_dimensions(left).ok();
     let search = args.ndisp.is_none() && header.is_some_and(|(w, _)| jem::range::needs_search(stated, w as usize));
     if let (Some((w, h)), Some(n), false) = (header, stated, search) {
-        jem::check_memory(w as usize, h as usize, n, &params, global.memory_limit())?;
+        Strategy::choose(w as usize, h as usize, n, &params, global.memory_limit())?;
     }
     let (l, r) = jem::io::png::load_rgb_pair(left, right)?;
     let ndisp = match stated {
@@ -134,11 +135,18 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         }
     };
     let pair = StereoPair::new(l, r, ndisp)?;
-    jem::check_memory(pair.left.width, pair.left.height, pair.ndisp, &params, global.memory_limit())?;
+    // In one piece, or in tiles when that would need more than the memory limit (jem::tile).
+    let strategy = Strategy::choose(pair.left.width, pair.left.height, pair.ndisp, &params, global.memory_limit())?;
+    if let (Strategy::Tiled(plan), false) = (strategy, global.quiet) {
+        eprintln!(
+            "running in tiles of {} px after a coarse level at 1/{} (bounded memory)",
+            plan.core_px, plan.coarse_factor
+        );
+    }
     let load_time = start.elapsed();
 
     let spinner = stage_spinner(global.quiet);
-    let out = jem::run_observed(&params, &pair, &|stage| {
+    let out = strategy.run(&params, &pair, &|stage| {
         if let Some(s) = &spinner {
             s.set_message(stage.to_string());
         }

@@ -32,6 +32,12 @@ pub struct ConditionParams {
     pub prior_per_sigma: f32,
     /// The coarse run gets a coarse prior of its own (recursively) when the measured σn is at least this; 0 = never.
     pub prior_recurse_sigma: f32,
+    /// Levels of coarse priors below the full resolution: 1 = the coarse run (at 1/2) has none of its own, 2 = it
+    /// has one (at 1/4), and so on (1 to 4).
+    pub prior_levels: usize,
+    /// Search only the labels the coarse run found (its smallest and largest disparity, widened by two coarse
+    /// labels) at full resolution.
+    pub prior_window: bool,
     /// Scale each pixel's prior weight by the coarse run's confidence (its max-marginal, 0..1).
     pub prior_confidence: bool,
     /// Prior weight factor at pixels the coarse run's left-right check rejected.
@@ -48,7 +54,8 @@ impl Default for ConditionParams {
     /// The default pipeline's conditioning (chosen in docs/tuning-log.md, "Robustness: the adaptive default"):
     /// stretch only a view that uses less than 1/1.5 of the range, denoise (for the cost) only a view measured
     /// noisier than 2 grey levels, and a coarse prior of weight 0.5·σn scaled by the coarse confidence, halved
-    /// where the coarse left-right check failed.
+    /// where the coarse left-right check failed, from a half-resolution run that has such a prior of its own
+    /// (`prior_levels` 2, docs/tuning-log.md "Coarse priors of their own").
     fn default() -> Self {
         ConditionParams {
             enabled: true,
@@ -62,6 +69,8 @@ impl Default for ConditionParams {
             prior_per_sigma: 0.5,
             prior_base: 0.0,
             prior_recurse_sigma: 0.0,
+            prior_levels: 2,
+            prior_window: false,
             prior_confidence: true,
             prior_untrusted: 0.5,
             prior_margin_px: 1.0,
@@ -115,6 +124,9 @@ impl ConditionParams {
         check_nonneg("condition.prior_base", self.prior_base)?;
         check_nonneg("condition.prior_untrusted", self.prior_untrusted)?;
         check_nonneg("condition.prior_recurse_sigma", self.prior_recurse_sigma)?;
+        if !(1..=4).contains(&self.prior_levels) {
+            return Err(Error::param("condition.prior_levels", self.prior_levels, "1 to 4"));
+        }
         check_nonneg("condition.prior_margin_px", self.prior_margin_px)?;
         check_nonneg("condition.prior_trunc_px", self.prior_trunc_px)
     }
