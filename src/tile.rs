@@ -77,7 +77,7 @@ pub const TILED_BUDGET_BYTES: u64 = 2 << 30;
 pub const TILED_PRIOR_FLOOR: f32 = 2.0;
 
 /// Chooses a plan for a `width × height` pair with `ndisp` labels within `limit_bytes`: after the full-size
-/// maps, the smallest coarse factor (a power of two) whose untiled run fits what is left, and cores of 512
+/// maps, the smallest coarse factor (a power of two) whose untiled run fits what is left, and cores of 1024
 /// pixels, split while a tile would not fit either. `None` when even the coarsest level does not fit.
 pub fn plan(width: usize, height: usize, ndisp: usize, params: &Params, limit_bytes: u64) -> Option<TilePlan> {
     let beside = FULL_SIZE_BYTES_PER_PX * (width * height) as u64;
@@ -93,7 +93,7 @@ pub fn plan(width: usize, height: usize, ndisp: usize, params: &Params, limit_by
         crate::scale::factor_fits(width, ndisp, f)
             && crate::estimate_memory_bytes(width, height, ndisp, &coarse) <= budget
     })?;
-    Some(TilePlan { coarse_factor: factor, core_px: 512, tile_budget_bytes: budget })
+    Some(TilePlan { coarse_factor: factor, core_px: 1024, tile_budget_bytes: budget })
 }
 
 /// How a run is carried out within a memory limit.

@@ -222,6 +222,28 @@ fn memory_limit_runs_in_tiles() {
     assert!(err < 1.0, "mean error {err:.3} px");
 }
 
+/// Issue 16: the memory a run plans for (the estimate in one piece; the budget when tiled) bounds its measured
+/// peak (`-v` prints both; Linux's VmHWM).
+#[test]
+fn memory_plan_bounds_the_measured_peak() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    for extra in [&[][..], &["--max-memory", "60M"][..]] {
+        let out = run_in(dir.path(), &[&[&l[..], &r, "-o", "m.pfm", "-v"][..], extra].concat());
+        assert!(out.status.success(), "{}", stderr(&out));
+        let text = stderr(&out);
+        let Some(line) = text.lines().find(|l| l.starts_with("memory: peak ")) else {
+            eprintln!("note: skipping: no peak memory reading on this system");
+            return;
+        };
+        let mib = |after: &str| -> f64 {
+            line.split(after).nth(1).unwrap().split_whitespace().next().unwrap().parse().unwrap()
+        };
+        let (peak, planned) = (mib("peak "), mib("planned "));
+        assert!(peak <= planned, "{extra:?}: {line}");
+    }
+}
+
 /// Killing a run (SIGINT or SIGKILL) leaves neither the output nor a temporary file: the output is only ever
 /// created by renaming a finished temporary file. The run is made long (many iterations) so the signal lands
 /// while it computes.

@@ -176,8 +176,26 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
             eprintln!("{name:<14} {:>9.1} ms", d.as_secs_f64() * 1e3);
         }
         eprintln!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
+        let (w, h) = pair.left.dims();
+        let planned = strategy.memory_bytes(w, h, pair.ndisp, &params);
+        if let Some(peak) = peak_rss_bytes() {
+            eprintln!("memory: peak {} (planned {})", human(peak), human(planned));
+        }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Bytes as MiB with one decimal.
+fn human(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / f64::from(1u32 << 20))
+}
+
+/// This process's peak resident set size (`VmHWM` of /proc/self/status; `None` where there is none).
+fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
 }
 
 /// A spinner on stderr showing the current stage, only on a terminal and without --quiet.
