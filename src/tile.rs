@@ -485,6 +485,24 @@ mod tests {
         assert_eq!(label_window(&coarse, 16, 12), None, "no narrower than the range");
     }
 
+    /// Same input, same plan: byte-identical output whatever the thread count.
+    #[test]
+    fn tiled_output_does_not_depend_on_threads() {
+        let scene = render_scene(&SynthParams { width: 200, height: 120, ndisp: 32, seed: 9 }).unwrap();
+        let pair = StereoPair::new(scene.left, scene.right, scene.ndisp).unwrap();
+        let plan = TilePlan { coarse_factor: 2, core_px: 64, tile_budget_bytes: u64::MAX };
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| run_tiled(&Params::default(), &pair, &plan, &|_| {}).unwrap().disparity)
+        };
+        let one = run(1);
+        assert!(one.data.iter().all(|d| d.is_finite()));
+        assert_eq!(
+            one.data.iter().map(|d| d.to_bits()).collect::<Vec<_>>(),
+            run(3).data.iter().map(|d| d.to_bits()).collect::<Vec<_>>()
+        );
+    }
+
     #[test]
     fn split_covers_the_core() {
         let r = Rect { x0: 10, y0: 0, x1: 15, y1: 1 };
