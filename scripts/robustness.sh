@@ -52,6 +52,7 @@ variants=(
     "dark12|lowlight:0.12:1.5|low light, severe: 12 % of the light, shot noise, read noise σ 1.5"
     "exposure|exposure:0.6:1.4|right view darker (× 0.6) with gamma 1.4"
     "blur|blur:1.2|defocus: Gaussian blur σ 1.2 px on both views"
+    "jpeg|jpeg:40|JPEG compression at quality 40, both views"
 )
 
 # WORK is removed and rebuilt: only if it is one this script made (it holds the marker file).

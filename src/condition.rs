@@ -16,7 +16,9 @@
 //!    random, and no averaging of the cost afterwards recovers a stable code; the guidance (colour weights of the
 //!    mean field, weighted median, planes) keeps the original edges. A clean camera measures 0.5–1.6 grey
 //!    levels (texture counts a little as noise) and is not filtered: filtering it removes the fine texture
-//!    Census relies on.
+//!    Census relies on. JPEG compression flattens the flat regions (σn ≈ 0) but leaves block steps on the
+//!    same image grid in both views; [`blockiness`] measures them, and a view's noise is taken as
+//!    max(σn, blockiness·√π/2) (the mean step between two blocks with independent errors of σ is 2σ/√π).
 //! 4. **Coarse prior** (`prior_*`, in [`crate::run`]): the whole pipeline first runs on the conditioned pair
 //!    reduced 2× (noise halves, the range of labels too; a quarter of the plane segments, so they keep their size
 //!    in the scene), and the full-resolution cost of label d at pixel i
@@ -110,7 +112,12 @@ pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditio
             }
         }
     }
-    let (nl, nr) = rayon::join(|| channel_noise(&guide.left), || channel_noise(&guide.right));
+    // Compression artifacts count as noise of their measured size: JPEG flattens the flat regions the noise is
+    // measured on (σn ≈ 0) while its block steps sit on the same image grid in both views and pull matches to
+    // it. A step between two blocks with independent errors of σ has mean 2σ/√π, hence the factor.
+    let view_noise =
+        |img: &RgbImage| channel_noise(img).max(blockiness(&img.to_grey()) * std::f32::consts::PI.sqrt() / 2.0);
+    let (nl, nr) = rayon::join(|| view_noise(&guide.left), || view_noise(&guide.right));
     let noise = [nl, nr];
     // Below `denoise_min_sigma` (a clean camera, quantisation noise) a view is not filtered.
     let range = |n: f32| if n >= p.denoise_min_sigma { p.denoise_strength * n } else { 0.0 };
@@ -126,6 +133,50 @@ pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditio
         0.0
     };
     Conditioned { guide, cost, stats: PairStats { gain, noise, residual_grey_noise } }
+}
+
+/// Block artifacts of JPEG-like compression: the mean absolute step between neighbours across the columns (and
+/// rows) of an 8-pixel grid, at the grid's strongest phase, above the median step over the eight phases, less
+/// three standard errors of that phase's mean (so a strong random texture, whose phases differ by chance, reads
+/// as 0); 0 for an image without a block grid. Grey levels; the mean over both directions.
+pub fn blockiness(grey: &Plane<f32>) -> f32 {
+    let (w, h) = grey.dims();
+    if w < 16 || h < 16 {
+        return 0.0;
+    }
+    // Per phase: the sum of the steps, of their squares, and their number.
+    let mut cols = [(0.0f64, 0.0f64, 0u64); 8];
+    let mut rows = [(0.0f64, 0.0f64, 0u64); 8];
+    let add = |acc: &mut (f64, f64, u64), step: f32| {
+        let s = f64::from(step.abs());
+        *acc = (acc.0 + s, acc.1 + s * s, acc.2 + 1);
+    };
+    for y in 0..h {
+        let row = grey.row(y);
+        for x in 0..w - 1 {
+            add(&mut cols[x % 8], row[x + 1] - row[x]);
+        }
+        if y + 1 < h {
+            for (a, b) in row.iter().zip(grey.row(y + 1)) {
+                add(&mut rows[y % 8], b - a);
+            }
+        }
+    }
+    let excess = |phases: [(f64, f64, u64); 8]| {
+        let stats: Vec<(f64, f64)> = phases
+            .iter()
+            .map(|&(sum, sq, n)| {
+                let n = n.max(1) as f64;
+                let mean = sum / n;
+                (mean, ((sq / n - mean * mean).max(0.0) / n).sqrt())
+            })
+            .collect();
+        let (max, std_err) = stats.iter().copied().fold((f64::MIN, 0.0), |a, b| if b.0 > a.0 { b } else { a });
+        let mut means: Vec<f64> = stats.iter().map(|s| s.0).collect();
+        means.sort_by(f64::total_cmp);
+        (max - 0.5 * (means[3] + means[4]) - 3.0 * std_err).max(0.0)
+    };
+    (0.5 * (excess(cols) + excess(rows))) as f32
 }
 
 /// The mean of the three channels' noise σ ([`estimate_noise`]).
@@ -270,7 +321,8 @@ mod tests {
         let mut img = RgbImage::new(w, h);
         for i in 0..w * h {
             let (x, y) = (i % w, i / w);
-            let base = 60.0 + 0.4 * x as f64 + 0.3 * y as f64 + if (x / 8 + y / 8) % 2 == 0 { 40.0 } else { 0.0 };
+            // Squares of 7 px: a grid of 8 would read as JPEG blocking (`blockiness`).
+            let base = 60.0 + 0.4 * x as f64 + 0.3 * y as f64 + if (x / 7 + y / 7) % 2 == 0 { 40.0 } else { 0.0 };
             for c in 0..3 {
                 let (u, v) = (rng.next_f64().max(1e-300), rng.next_f64());
                 let n = (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos();
@@ -281,6 +333,30 @@ mod tests {
     }
 
     /// The estimator finds the noise it is given (within 10 %), and about the rounding noise (0.29) without.
+    /// An image of 8 × 8 blocks with independent offsets has a block step at its grid and none elsewhere; a smooth
+    /// ramp and a random texture have none; a shifted grid is found at its own phase.
+    #[test]
+    fn blockiness_sees_a_block_grid_only() {
+        let (w, h) = (96, 64);
+        let offsets = crate::test_util::rand_vec((w / 8) * (h / 8), 5);
+        let blocks = |phase: usize| {
+            let data = (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w + phase) / 8 % (w / 8), i / w / 8);
+                    100.0 + 20.0 * offsets[y * (w / 8) + x] + 0.1 * (i % w) as f32
+                })
+                .collect();
+            Plane::from_vec(w, h, data)
+        };
+        let b = blockiness(&blocks(0));
+        assert!(b > 2.0, "block grid: {b}");
+        assert!((blockiness(&blocks(3)) - b).abs() < 0.6 * b, "shifted grid: {}", blockiness(&blocks(3)));
+        let ramp = Plane::from_vec(w, h, (0..w * h).map(|i| (i % w) as f32).collect());
+        assert!(blockiness(&ramp) < 1e-3);
+        let texture = Plane::from_vec(w, h, crate::test_util::rand_vec(w * h, 9).iter().map(|v| 255.0 * v).collect());
+        assert!(blockiness(&texture) < 0.1 * b, "texture: {}", blockiness(&texture));
+    }
+
     #[test]
     fn noise_estimate_matches_the_added_noise() {
         for sigma in [2.0, 5.0, 10.0] {

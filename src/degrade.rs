@@ -14,6 +14,7 @@
 //! - `exposure:G:P` — the right view only: v ↦ 255·(G·v/255)^P (a darker or brighter view with another tone
 //!   curve); Census is invariant to it, the gradient term and colour weights are not;
 //! - `blur:S` — a Gaussian blur of standard deviation S pixels on both views (defocus);
+//! - `jpeg:Q` — JPEG compression of both views at quality Q (1–100; the `image` crate's baseline encoder);
 //! - several degradations separated by `+` apply in order (e.g. `blur:1+noise:4`).
 //!
 //! [`degrade_tree`] makes a degraded copy of a whole MiddEval3-style tree (every scene folder with `im0.png`,
@@ -56,6 +57,11 @@ pub enum Degradation {
     Blur {
         /// Standard deviation in pixels.
         sigma: f64,
+    },
+    /// JPEG compression of both views (encoded with the `image` crate's baseline encoder and decoded again).
+    Jpeg {
+        /// Quality, 1 (worst) to 100.
+        quality: u8,
     },
 }
 
@@ -100,7 +106,17 @@ impl FromStr for Degradation {
                 arity(1)?;
                 Degradation::Blur { sigma: num(0, "sigma")? }
             }
-            _ => return Err(format!("unknown degradation `{kind}` (expected noise, lowlight, exposure or blur)")),
+            "jpeg" => {
+                arity(1)?;
+                let q = num(0, "quality")?;
+                if q.fract() != 0.0 || !(1.0..=100.0).contains(&q) {
+                    return Err(format!("`{text}`: quality must be a whole number 1 to 100"));
+                }
+                Degradation::Jpeg { quality: q as u8 }
+            }
+            _ => {
+                return Err(format!("unknown degradation `{kind}` (expected noise, lowlight, exposure, blur or jpeg)"));
+            }
         };
         step.validate().map_err(|e| format!("`{text}`: {e}"))?;
         Ok(step)
@@ -114,7 +130,8 @@ fn usage(kind: &str) -> &'static str {
         "lowlight" => "lowlight:GAIN:READ_SIGMA",
         "exposure" => "exposure:GAIN:GAMMA",
         "blur" => "blur:SIGMA",
-        _ => "noise:S, lowlight:G:R, exposure:G:P or blur:S",
+        "jpeg" => "jpeg:QUALITY",
+        _ => "noise:S, lowlight:G:R, exposure:G:P, blur:S or jpeg:Q",
     }
 }
 
@@ -126,6 +143,7 @@ impl Degradation {
                 gain > 0.0 && gain <= 1.0 && (0.0..=100.0).contains(&read_sigma)
             }
             Degradation::Exposure { gain, gamma } => gain > 0.0 && gain <= 10.0 && gamma > 0.0 && gamma <= 10.0,
+            Degradation::Jpeg { quality } => (1..=100).contains(&quality),
         };
         if ok {
             Ok(())
@@ -143,6 +161,7 @@ impl fmt::Display for Degradation {
             Degradation::LowLight { gain, read_sigma } => write!(f, "lowlight:{gain}:{read_sigma}"),
             Degradation::Exposure { gain, gamma } => write!(f, "exposure:{gain}:{gamma}"),
             Degradation::Blur { sigma } => write!(f, "blur:{sigma}"),
+            Degradation::Jpeg { quality } => write!(f, "jpeg:{quality}"),
         }
     }
 }
@@ -228,8 +247,29 @@ fn apply(image: &RgbImage, step: Degradation, view: View, seed: u64) -> RgbImage
                 *ch = gaussian_blur(ch, image.width, image.height, sigma);
             }
         }
+        Degradation::Jpeg { quality } => out = jpeg_round_trip(image, quality),
     }
     out
+}
+
+/// The image encoded as a baseline JPEG of `quality` and decoded again (deterministic: a pure function of the
+/// pixels).
+fn jpeg_round_trip(image: &RgbImage, quality: u8) -> RgbImage {
+    let (w, h) = image.dims();
+    let mut rgb = Vec::with_capacity(w * h * 3);
+    for i in 0..w * h {
+        rgb.extend(image.rgb(i).map(|v| v.round().clamp(0.0, 255.0) as u8));
+    }
+    let mut bytes = Vec::new();
+    let encoded = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality).encode(
+        &rgb,
+        w as u32,
+        h as u32,
+        image::ExtendedColorType::Rgb8,
+    );
+    let decoded = encoded.ok().and_then(|()| image::load_from_memory(&bytes).ok());
+    // An encoder failure (impossible for a valid 8-bit RGB buffer) leaves the image as it is.
+    decoded.map_or_else(|| image.clone(), |d| crate::io::png::to_rgb(&d))
 }
 
 /// Rounds to the nearest 8-bit level, clamped to 0..=255.
@@ -443,6 +483,23 @@ mod tests {
         {
             assert!(bad.parse::<Recipe>().is_err(), "{bad:?} was accepted");
         }
+        assert_eq!("jpeg:40".parse::<Recipe>().unwrap().to_string(), "jpeg:40");
+        for bad in ["jpeg:0", "jpeg:101", "jpeg:50.5", "jpeg"] {
+            assert!(bad.parse::<Recipe>().is_err(), "{bad:?} was accepted");
+        }
+    }
+
+    /// JPEG changes a textured image a little at high quality and more at low quality, deterministically.
+    #[test]
+    fn jpeg_loses_more_at_lower_quality() {
+        let mut img = ramp(64, 48);
+        for (i, v) in img.channels[1].iter_mut().enumerate() {
+            *v = if (i / 3 + i / 64) % 2 == 0 { 40.0 } else { 200.0 };
+        }
+        let at = |q: &str| degrade(&img, &q.parse().unwrap(), View::Left, 1).unwrap();
+        let (fine, coarse) = (std_dev_of_difference(&at("jpeg:95"), &img), std_dev_of_difference(&at("jpeg:10"), &img));
+        assert!(fine > 0.0 && fine < coarse, "q95 {fine}, q10 {coarse}");
+        assert_eq!(at("jpeg:10"), at("jpeg:10"));
     }
 
     /// Noise of σ 6 measures as about 6 (the rounding to 8 bits adds 1/12 of a grey level's variance), the two

@@ -134,6 +134,7 @@ enum Command {
     ///   lowlight:G:R   light × G (values taken as linear), photon shot noise, read noise σ R, no gain after
     ///   exposure:G:P   right view only: v -> 255 (G v / 255)^P
     ///   blur:S         Gaussian blur of σ S pixels, both views
+    ///   jpeg:Q         JPEG compression at quality Q (1-100), both views
     ///   A+B            A, then B
     /// OUT is written as a whole or not at all; it must not exist (or be empty) and must be outside SRC.
     #[command(verbatim_doc_comment)]
