@@ -59,32 +59,40 @@ pub fn validate_alg_name(name: &str) -> Result<()> {
 /// [`Error::Io`] if a root cannot be read (unreadable sub-folders are skipped).
 pub fn find_dirs_with(roots: &[PathBuf], files: &[&str]) -> Result<Vec<PathBuf>> {
     let mut found = Vec::new();
+    walk_folders(roots, &mut |dir| {
+        let matches = files.iter().all(|f| dir.join(f).is_file());
+        if matches {
+            found.push(dir.to_path_buf());
+        }
+        matches
+    })?;
+    found.sort();
+    found.dedup();
+    Ok(found)
+}
+
+/// Calls `visit` on every folder under the roots (recursively, the roots included, each sub-folder list in path
+/// order); a folder for which it returns true is not searched further. Hidden folders (`.name`) are skipped, and
+/// a folder reached twice (symbolic links, cycles) is visited once (by canonical path).
+///
+/// # Errors
+/// [`Error::Io`] if a root cannot be read, [`Error::Input`] if one is not a folder (unreadable sub-folders are
+/// skipped).
+pub(crate) fn walk_folders(roots: &[PathBuf], visit: &mut dyn FnMut(&Path) -> bool) -> Result<()> {
     let mut seen = BTreeSet::new();
     for root in roots {
         let meta = std::fs::metadata(root).map_err(|e| Error::io(root, e))?;
         if !meta.is_dir() {
             return Err(Error::Input(format!("{} is not a folder", root.display())));
         }
-        walk(root, files, &mut seen, &mut found, true)?;
+        walk(root, visit, &mut seen, true)?;
     }
-    found.sort();
-    found.dedup();
-    Ok(found)
+    Ok(())
 }
 
-fn walk(
-    dir: &Path,
-    files: &[&str],
-    seen: &mut BTreeSet<PathBuf>,
-    found: &mut Vec<PathBuf>,
-    is_root: bool,
-) -> Result<()> {
+fn walk(dir: &Path, visit: &mut dyn FnMut(&Path) -> bool, seen: &mut BTreeSet<PathBuf>, is_root: bool) -> Result<()> {
     let key = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
-    if !seen.insert(key) {
-        return Ok(());
-    }
-    if files.iter().all(|f| dir.join(f).is_file()) {
-        found.push(dir.to_path_buf());
+    if !seen.insert(key) || visit(dir) {
         return Ok(());
     }
     let entries = match std::fs::read_dir(dir) {
@@ -100,7 +108,7 @@ fn walk(
         .collect();
     subdirs.sort();
     for sub in subdirs {
-        walk(&sub, files, seen, found, false)?;
+        walk(&sub, visit, seen, false)?;
     }
     Ok(())
 }

@@ -255,18 +255,10 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         ));
     }
     let c = &params.condition;
-    let mut cost_params = params.cost.clone();
-    let mut prior_weight = 0.0f32;
-    let conditioned = c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c)));
-    if let Some(cond) = &conditioned {
-        prior_weight = c.prior_base + c.prior_per_sigma * cond.stats.sigma();
-        cost_params.census_dead_band += c.census_band * cond.stats.residual_grey_noise;
-    }
+    let input = Prepared::of(params, pair, &mut t);
+    let (cost_params, prior_weight) = (&input.cost_params, input.prior_weight);
     // The guidance pair (colour weights, post-processing) and the pair the matching cost sees.
-    let (pair, cost_pair) = match &conditioned {
-        Some(cond) => (&*cond.guide, cond.cost_pair()),
-        None => (pair, pair),
-    };
+    let (pair, cost_pair) = input.pairs(pair);
     on_stage("cost volume");
     // Before the full-resolution volume exists, so the two runs' buffers are never alive together.
     // The coarse run needs a pair of at least 8 × 8 at half size whose halved range stays below its width.
@@ -279,7 +271,7 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         coarse_params.downscale = 2;
         // The same segment size in the scene: a quarter of the pixels gets a quarter of the segments.
         coarse_params.post.sps.segments = params.post.sps.segments.div_ceil(4);
-        let sigma = conditioned.as_ref().map_or(0.0, |cond| cond.stats.sigma());
+        let sigma = input.sigma();
         // The coarse level measures its own (halved) noise: it is denoised by the same rule, and gets a coarse
         // prior of its own only while the pair is still noisy enough (`prior_recurse_sigma`). The alignment and
         // stretch are done already.
@@ -295,15 +287,7 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
             ..*c
         };
         let coarse = t.time("coarse prior", || run_observed(&coarse_params, pair, &|_| {}))?;
-        let c_untrusted = c.prior_untrusted;
-        let mut confidence = coarse.confidence;
-        // A pixel the coarse left-right check rejected was filled by a guess: its prior weighs `prior_untrusted`.
-        confidence.data.iter_mut().zip(&coarse.consistent.data).for_each(|(c, ok)| {
-            if !ok {
-                *c *= c_untrusted;
-            }
-        });
-        Some(Prior { disparity: coarse.disparity, confidence, weight: prior_weight })
+        Some(Prior::from_coarse(coarse, prior_weight, c.prior_untrusted))
     } else {
         None
     };
@@ -313,18 +297,16 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         _ => None,
     };
     let Some((lo, labels)) = window else {
-        return fine_pass(params, pair, cost_pair, &cost_params, coarse.as_ref(), on_stage, t);
+        return fine_pass(params, pair, cost_pair, cost_params, coarse.as_ref(), on_stage, t);
     };
     // Label d' of the shifted pair is disparity lo + d'.
-    let shifted = |p: &StereoPair| tile::shift_right_view(p, lo, labels);
-    let guide = shifted(pair)?;
-    let cost_shifted = if std::ptr::eq(pair, cost_pair) { None } else { Some(shifted(cost_pair)?) };
+    let (guide, cost_shifted) = tile::shift_right_views(pair, cost_pair, lo, labels)?;
     let prior = coarse.map(|mut p| {
         p.disparity.data.iter_mut().for_each(|d| *d -= lo as f32);
         p
     });
     let mut out =
-        fine_pass(params, &guide, cost_shifted.as_ref().unwrap_or(&guide), &cost_params, prior.as_ref(), on_stage, t)?;
+        fine_pass(params, &guide, cost_shifted.as_ref().unwrap_or(&guide), cost_params, prior.as_ref(), on_stage, t)?;
     out.disparity.data.iter_mut().for_each(|d| *d += lo as f32);
     Ok(out)
 }
@@ -338,6 +320,58 @@ pub(crate) struct Prior {
     pub confidence: Plane<f32>,
     /// λ before the per-pixel factor.
     pub weight: f32,
+}
+
+impl Prior {
+    /// The prior of a coarse run's output (brought to the fine size) with weight λ = `weight`: a pixel the coarse
+    /// left-right check rejected was filled by a guess, so its factor is its confidence × `untrusted`.
+    pub(crate) fn from_coarse(coarse: Output, weight: f32, untrusted: f32) -> Prior {
+        let mut confidence = coarse.confidence;
+        confidence.data.iter_mut().zip(&coarse.consistent.data).filter(|(_, ok)| !**ok).for_each(|(c, _)| {
+            *c *= untrusted;
+        });
+        Prior { disparity: coarse.disparity, confidence, weight }
+    }
+}
+
+/// A pair after [`condition::condition_pair`] (when `[condition]` is active), with what follows from its
+/// measurements: the cost parameters (the Census dead band grows with the residual noise) and the coarse prior's
+/// weight λ = `prior_base` + `prior_per_sigma`·σn (0 when conditioning is off).
+pub(crate) struct Prepared<'a> {
+    conditioned: Option<condition::Conditioned<'a>>,
+    /// The cost parameters for this pair.
+    pub cost_params: params::CostParams,
+    /// λ of the coarse prior before the per-pixel factor.
+    pub prior_weight: f32,
+}
+
+impl<'a> Prepared<'a> {
+    /// Conditions `pair` as `params.condition` says (stage `condition`).
+    pub(crate) fn of(params: &Params, pair: &'a StereoPair, t: &mut Timings) -> Self {
+        let c = &params.condition;
+        let mut cost_params = params.cost.clone();
+        let mut prior_weight = 0.0f32;
+        let conditioned = c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c)));
+        if let Some(cond) = &conditioned {
+            prior_weight = c.prior_base + c.prior_per_sigma * cond.stats.sigma();
+            cost_params.census_dead_band += c.census_band * cond.stats.residual_grey_noise;
+        }
+        Prepared { conditioned, cost_params, prior_weight }
+    }
+
+    /// The measured noise σn that the adaptive stages scale with (0 when conditioning is off).
+    pub(crate) fn sigma(&self) -> f32 {
+        self.conditioned.as_ref().map_or(0.0, |cond| cond.stats.sigma())
+    }
+
+    /// The guidance pair (colour weights, post-processing) and the pair the matching cost sees; `pair` itself
+    /// for both when conditioning is off.
+    pub(crate) fn pairs<'b>(&'b self, pair: &'b StereoPair) -> (&'b StereoPair, &'b StereoPair) {
+        match &self.conditioned {
+            Some(cond) => (&*cond.guide, cond.cost_pair()),
+            None => (pair, pair),
+        }
+    }
 }
 
 /// The pipeline from the cost volume on: `pair` is the guidance (colour weights, post-processing), `cost_pair`

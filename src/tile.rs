@@ -34,7 +34,7 @@
 use crate::error::Result;
 use crate::image::{DisparityMap, Plane, RgbImage, StereoPair};
 use crate::params::Params;
-use crate::{Output, Prior, Timings, condition};
+use crate::{Output, Prepared, Prior, Timings};
 
 /// Pixels added on every side of a core (3σx of the default kernel is 15, the weighted median's radius 9, plus
 /// room for the planes).
@@ -160,24 +160,11 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     // base answer, as good as a run at that resolution can be).
     let coarse = t.time("coarse level", || crate::run_observed(&coarse_params, pair, &|_| {}))?;
 
-    let c = &params.condition;
-    let conditioned = c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c)));
-    let mut cost_params = params.cost.clone();
-    let mut weight = 0.0;
-    if let Some(cond) = &conditioned {
-        weight = c.prior_base + c.prior_per_sigma * cond.stats.sigma();
-        cost_params.census_dead_band += c.census_band * cond.stats.residual_grey_noise;
-    }
-    let (guide, cost_pair) = match &conditioned {
-        Some(cond) => (&*cond.guide, cond.cost_pair()),
-        None => (pair, pair),
-    };
+    let input = Prepared::of(params, pair, &mut t);
+    let (guide, cost_pair) = input.pairs(pair);
     // The coarse answer is the base of a tiled run: its weight never falls below TILED_PRIOR_FLOOR.
-    weight = weight.max(TILED_PRIOR_FLOOR);
-    let mut confidence = coarse.confidence.clone();
-    confidence.data.iter_mut().zip(&coarse.consistent.data).filter(|(_, ok)| !**ok).for_each(|(v, _)| {
-        *v *= c.prior_untrusted;
-    });
+    let weight = input.prior_weight.max(TILED_PRIOR_FLOOR);
+    let prior = Prior::from_coarse(coarse, weight, params.condition.prior_untrusted);
 
     on_stage("tiles");
     let mut out = Output {
@@ -194,16 +181,7 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
             cores.push(Rect { x0, y0, x1: (x0 + step).min(w), y1: (y0 + step).min(h) });
         }
     }
-    let job = TileJob {
-        params,
-        guide,
-        cost_pair,
-        cost_params: &cost_params,
-        coarse: &coarse.disparity,
-        confidence: &confidence,
-        weight,
-        margin,
-    };
+    let job = TileJob { params, guide, cost_pair, cost_params: &input.cost_params, prior: &prior, margin };
     t.time("tiles", || -> Result<()> {
         // Depth first, in a fixed order: the output does not depend on the thread count.
         while let Some(core) = cores.pop() {
@@ -247,9 +225,7 @@ struct TileJob<'a> {
     guide: &'a StereoPair,
     cost_pair: &'a StereoPair,
     cost_params: &'a crate::params::CostParams,
-    coarse: &'a DisparityMap,
-    confidence: &'a Plane<f32>,
-    weight: f32,
+    prior: &'a Prior,
     margin: usize,
 }
 
@@ -275,7 +251,7 @@ impl TileJob<'_> {
         };
         let (mut dmin, mut dmax) = (f32::INFINITY, f32::NEG_INFINITY);
         for y in around.y0..around.y1 {
-            for &d in &self.coarse.row(y)[around.x0..around.x1] {
+            for &d in &self.prior.disparity.row(y)[around.x0..around.x1] {
                 if d.is_finite() {
                     dmin = dmin.min(d);
                     dmax = dmax.max(d);
@@ -307,32 +283,22 @@ impl TileJob<'_> {
     /// Runs one tile and writes its core into `out`.
     fn run(&self, tile: &Tile, out: &mut Output) -> Result<()> {
         let (crop, lo) = (tile.crop, tile.lo);
-        let guide = StereoPair::new(cut(&self.guide.left, crop, 0), cut(&self.guide.right, crop, lo), tile.labels)?;
-        let cost_pair = if std::ptr::eq(self.guide, self.cost_pair) {
-            None
-        } else {
-            Some(StereoPair::new(
-                cut(&self.cost_pair.left, crop, 0),
-                cut(&self.cost_pair.right, crop, lo),
-                tile.labels,
-            )?)
-        };
+        let (guide, cost_pair) = cut_pairs(self.guide, self.cost_pair, crop, lo, tile.labels)?;
         let prior = Prior {
-            disparity: cut_plane(self.coarse, crop, |d| d - lo as f32),
-            confidence: cut_plane(self.confidence, crop, |v| v),
-            weight: self.weight,
+            disparity: cut_plane(&self.prior.disparity, crop, |d| d - lo as f32),
+            confidence: cut_plane(&self.prior.confidence, crop, |v| v),
+            weight: self.prior.weight,
         };
         let (w, h) = self.guide.left.dims();
         let mut params = self.params.clone();
         let area = ((crop.x1 - crop.x0) * (crop.y1 - crop.y0)) as f64 / (w * h) as f64;
         params.post.sps.segments = ((self.params.post.sps.segments as f64 * area).ceil() as usize).max(1);
-        let use_prior = self.weight > 0.0;
         let result = crate::fine_pass(
             &params,
             &guide,
             cost_pair.as_ref().unwrap_or(&guide),
             self.cost_params,
-            use_prior.then_some(&prior),
+            Some(&prior),
             &|_| {},
             Timings::default(),
         )?;
@@ -369,15 +335,34 @@ pub(crate) fn label_window(coarse: &DisparityMap, ndisp: usize, margin: usize) -
     (labels < ndisp).then_some((lo, labels))
 }
 
-/// The pair with its right view shifted right by `lo` columns (column x shows column x − lo; the first column
-/// repeats where that is left of the image) and `labels` labels: its label d' is disparity `lo + d'`.
+/// The guidance and the cost pair (`None` when the cost pair is the guidance itself) with their right views
+/// shifted right by `lo` columns (column x shows column x − lo; the first column repeats where that is left of
+/// the image) and `labels` labels: label d' of the result is disparity `lo + d'`.
 ///
 /// # Errors
 /// As [`StereoPair::new`].
-pub(crate) fn shift_right_view(pair: &StereoPair, lo: usize, labels: usize) -> Result<StereoPair> {
-    let (w, h) = pair.left.dims();
-    let all = Rect { x0: 0, y0: 0, x1: w, y1: h };
-    StereoPair::new(pair.left.clone(), cut(&pair.right, all, lo), labels)
+pub(crate) fn shift_right_views(
+    guide: &StereoPair,
+    cost: &StereoPair,
+    lo: usize,
+    labels: usize,
+) -> Result<(StereoPair, Option<StereoPair>)> {
+    let (w, h) = guide.left.dims();
+    cut_pairs(guide, cost, Rect { x0: 0, y0: 0, x1: w, y1: h }, lo, labels)
+}
+
+/// The crop `r` of the guidance and the cost pair, right views shifted by `lo` columns ([`cut`]), with `labels`
+/// labels; the cost pair is `None` when it is the guidance pair itself.
+fn cut_pairs(
+    guide: &StereoPair,
+    cost: &StereoPair,
+    r: Rect,
+    lo: usize,
+    labels: usize,
+) -> Result<(StereoPair, Option<StereoPair>)> {
+    let pair = |p: &StereoPair| StereoPair::new(cut(&p.left, r, 0), cut(&p.right, r, lo), labels);
+    let cost = if std::ptr::eq(guide, cost) { None } else { Some(pair(cost)?) };
+    Ok((pair(guide)?, cost))
 }
 
 /// The crop `r` of `img`, shifted left by `shift` columns (column x of the crop is column `r.x0 + x − shift` of

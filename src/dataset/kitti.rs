@@ -62,25 +62,13 @@ pub(super) fn frames(dir: &Path, layout: Layout, purpose: Purpose) -> Vec<Pair> 
 
 /// Fills the invalid (non-finite) pixels of a result the way the KITTI development kit does before it scores
 /// one: along each row, a run of invalid pixels between two valid ones takes the smaller (farther) of their
-/// disparities; runs touching a row's ends take the nearest valid value of the row; then rows with no valid
-/// pixel at all take, column by column, the nearest valid value above or below. A map with no valid pixel is
-/// left as it is.
+/// disparities and runs touching a row's ends take the nearest valid value of the row — the paper's occlusion fill
+/// ([`crate::post::fill::fill_occlusions_in_place`]) — then the rows above the first and below the last row with
+/// a valid pixel copy that row (rows without one between two such rows stay invalid, as in the devkit). A map
+/// with no valid pixel is left as it is.
 pub fn interpolate_background(map: &mut DisparityMap) {
     let (w, h) = map.dims();
-    for row in map.data.chunks_exact_mut(w) {
-        let valid: Vec<usize> = (0..w).filter(|&x| row[x].is_finite()).collect();
-        let (Some(&first), Some(&last)) = (valid.first(), valid.last()) else { continue };
-        for pair in valid.windows(2) {
-            let (a, b) = (pair[0], pair[1]);
-            if b > a + 1 {
-                let fill = row[a].min(row[b]);
-                row[a + 1..b].fill(fill);
-            }
-        }
-        let (lead, trail) = (row[first], row[last]);
-        row[..first].fill(lead);
-        row[last + 1..].fill(trail);
-    }
+    crate::post::fill::fill_occlusions_in_place(map);
     // Rows are now either all valid or all invalid; the invalid ones copy the nearest valid row (above first,
     // as the devkit extrapolates upwards from the first valid pixel of each column, then downwards).
     let valid_rows: Vec<usize> = (0..h).filter(|&y| map.data[y * w].is_finite()).collect();
@@ -89,8 +77,6 @@ pub fn interpolate_background(map: &mut DisparityMap) {
         let src = if y < top { top } else { bottom };
         map.data.copy_within(src * w..(src + 1) * w, y * w);
     }
-    // A row of invalid pixels between two valid rows stays invalid in the devkit too (it only extrapolates
-    // beyond the first and last valid pixel of a column).
 }
 
 #[cfg(test)]
@@ -104,36 +90,9 @@ mod tests {
     fn background_interpolation_by_hand() {
         // Rows 0 and 3: gaps between valid pixels take the smaller neighbour, the ends the nearest value.
         // Rows 1 and 2 have no valid pixel and lie between valid rows: they stay invalid, as in the devkit.
-        let mut m = Plane::from_vec(
-            6,
-            4,
-            vec![
-                INF,
-                5.0,
-                INF,
-                INF,
-                2.0,
-                INF, //
-                INF,
-                INF,
-                INF,
-                INF,
-                INF,
-                INF, //
-                INF,
-                INF,
-                INF,
-                INF,
-                INF,
-                INF, //
-                1.0,
-                INF,
-                3.0,
-                f32::NAN,
-                7.0,
-                8.0,
-            ],
-        );
+        let rows: [[f32; 6]; 4] =
+            [[INF, 5.0, INF, INF, 2.0, INF], [INF; 6], [INF; 6], [1.0, INF, 3.0, f32::NAN, 7.0, 8.0]];
+        let mut m = Plane::from_vec(6, 4, rows.concat());
         interpolate_background(&mut m);
         assert_eq!(&m.data[..6], &[5.0, 5.0, 2.0, 2.0, 2.0, 2.0]);
         assert!(m.data[6..18].iter().all(|d| d.is_infinite()), "{:?}", &m.data[6..18]);

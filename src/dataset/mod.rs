@@ -21,7 +21,6 @@
 
 mod kitti;
 
-use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
@@ -238,58 +237,25 @@ pub struct Discovery {
 /// skipped.
 pub fn discover(roots: &[PathBuf], purpose: Purpose, how: &Discovery) -> Result<Vec<Pair>> {
     let mut found = Vec::new();
-    let mut seen = BTreeSet::new();
-    for root in roots {
-        let meta = std::fs::metadata(root).map_err(|e| Error::io(root, e))?;
-        if !meta.is_dir() {
-            return Err(Error::Input(format!("{} is not a folder", root.display())));
+    crate::batch::walk_folders(roots, &mut |dir| {
+        if let Some(layout) = kitti::recognise(dir) {
+            found.extend(kitti::frames(dir, layout, purpose));
+            return true;
         }
-        walk(root, purpose, how, &mut seen, &mut found, true)?;
-    }
+        match scene(dir, purpose, how) {
+            Some(pair) => {
+                found.extend(pair);
+                true
+            }
+            None => false,
+        }
+    })?;
     found.sort_by(|a, b| (&a.root, &a.name).cmp(&(&b.root, &b.name)));
     found.dedup();
     if let Some(forced) = how.layout {
         found.retain(|p| p.layout == forced);
     }
     Ok(found)
-}
-
-fn walk(
-    dir: &Path,
-    purpose: Purpose,
-    how: &Discovery,
-    seen: &mut BTreeSet<PathBuf>,
-    found: &mut Vec<Pair>,
-    is_root: bool,
-) -> Result<()> {
-    let key = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
-    if !seen.insert(key) {
-        return Ok(());
-    }
-    if let Some(layout) = kitti::recognise(dir) {
-        found.extend(kitti::frames(dir, layout, purpose));
-        return Ok(());
-    }
-    if let Some(pair) = scene(dir, purpose, how) {
-        found.extend(pair);
-        return Ok(());
-    }
-    let entries = match std::fs::read_dir(dir) {
-        Ok(e) => e,
-        Err(e) if is_root => return Err(Error::io(dir, e)),
-        Err(_) => return Ok(()),
-    };
-    let mut subdirs: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok())
-        .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
-        .map(|e| e.path())
-        .filter(|p| p.is_dir())
-        .collect();
-    subdirs.sort();
-    for sub in subdirs {
-        walk(&sub, purpose, how, seen, found, false)?;
-    }
-    Ok(())
 }
 
 /// `Some(pair)` if `dir` is a scene folder for this purpose (`Some(None)`: a scene folder, but without what the
