@@ -64,6 +64,9 @@ fn stages(c: &mut Criterion) {
         g.bench_function(BenchmarkId::new(format!("filter {channels} channels"), &name), |b| {
             b.iter(|| lattice.filter(black_box(&input), &mut output, channels, &mut scratch))
         });
+        g.bench_function(BenchmarkId::new(format!("splat + blur {channels} channels"), &name), |b| {
+            b.iter(|| black_box(lattice.splat_blur(black_box(&input), None, channels, &mut scratch).len()))
+        });
     }
     g.finish();
 

@@ -122,7 +122,8 @@ pub struct Output {
 /// - coarse-to-fine (`meanfield.pyramid_levels` = L > 1): each coarse level k < L adds its volume and marginals
 ///   (and next Q with Jacobi) at 4^−k of the size, at most 2/3 (1) of a volume more;
 /// - WTA: one volume, two with the left-right check (both views' cost volumes);
-/// - plus ~300 bytes per pixel: the images, the lattice's per-pixel tables, the maps of the post-processing.
+/// - plus ~300 bytes per pixel: the images, the lattice's per-pixel tables, the maps of the post-processing;
+/// - plus the process itself, [`PROCESS_BYTES`].
 ///
 /// With a downscale factor > 1, the full-size input pair and output maps (~32 bytes per input pixel) are added.
 pub fn estimate_memory_bytes(width: usize, height: usize, ndisp: usize, params: &Params) -> u64 {
@@ -148,8 +149,12 @@ fn estimate_at_factor(width: usize, height: usize, ndisp: usize, params: &Params
         _ => (1..params.meanfield.pyramid_levels as u32).map(|k| (2 + next_q) * volume.div_ceil(4u64.pow(k))).sum(),
     };
     let full_size = if factor > 1 { 32 * width as u64 * height as u64 } else { 0 };
-    volumes * volume + pyramid + 300 * n + full_size
+    volumes * volume + pyramid + 300 * n + full_size + PROCESS_BYTES
 }
+
+/// The memory of the process before it holds any image: code, libraries, thread stacks (a 64 × 32 pair peaks at
+/// 8.9 MiB with 2 threads), counted with room to spare in [`estimate_memory_bytes`].
+pub const PROCESS_BYTES: u64 = 16 << 20;
 
 /// Fails fast, before anything large is allocated, when a run would need more than `limit_bytes`.
 ///
@@ -510,9 +515,10 @@ mod tests {
         let p = Params::default();
         // Vintage at quarter resolution: 720x480 (about), ndisp 190: 4 volumes of 263 MB plus 300 B/px = 1.15 GB.
         let vintage = estimate_memory_bytes(720, 480, 190, &p);
-        assert_eq!(vintage, 4 * 4 * 720 * 480 * 190 + 300 * 720 * 480);
+        assert_eq!(vintage, 4 * 4 * 720 * 480 * 190 + 300 * 720 * 480 + PROCESS_BYTES);
         assert!(vintage > 1 << 30 && vintage < 2 << 30, "{vintage}");
-        assert_eq!(estimate_memory_bytes(200, 100, 10, &p) * 4, estimate_memory_bytes(400, 200, 10, &p));
+        let data = |w, h| estimate_memory_bytes(w, h, 10, &p) - PROCESS_BYTES;
+        assert_eq!(data(200, 100) * 4, data(400, 200));
         let volume = 4 * 720 * 480 * 190;
         let wta = Params { model: Model::Wta, ..Params::default() };
         assert_eq!(vintage - estimate_memory_bytes(720, 480, 190, &wta), 2 * volume);
@@ -537,7 +543,7 @@ mod tests {
         let p = Params { downscale: 2, ..Params::default() };
         // 722x480 at 1/2: 361x240 with 95 labels, plus the full-size images and maps (32 B per input pixel).
         let n = 361 * 240;
-        assert_eq!(estimate_memory_bytes(722, 480, 190, &p), 4 * 4 * n * 95 + 300 * n + 32 * 722 * 480);
+        assert_eq!(estimate_memory_bytes(722, 480, 190, &p), 4 * 4 * n * 95 + 300 * n + 32 * 722 * 480 + PROCESS_BYTES);
         let full = estimate_memory_bytes(722, 480, 190, &Params::default());
         assert!(estimate_memory_bytes(722, 480, 190, &p) * 6 < full, "about 1/8 of the memory");
     }

@@ -244,6 +244,40 @@ fn memory_plan_bounds_the_measured_peak() {
     }
 }
 
+/// Issue 16: a large synthetic scene (1280×960, 160 labels: 3.3 GiB in one piece) under a 300 MB limit runs in
+/// tiles, stays within the limit, and recovers its disparity: measured mean error 0.49 px, 0.65 % of the visible
+/// pixels over 1 px (the same as in one piece). The bounds leave room for tuning and fail on a misplaced tile or
+/// label window (errors of several px over whole tiles).
+#[test]
+fn large_synthetic_scene_runs_tiled_within_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let synth =
+        run_in(dir.path(), &["synth", "s", "--width", "1280", "--height", "960", "--ndisp", "160", "--seed", "3"]);
+    assert!(synth.status.success(), "{}", stderr(&synth));
+    let out = run_in(dir.path(), &["s/im0.png", "s/im1.png", "-o", "d.pfm", "--max-memory", "300M", "-v"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stderr(&out);
+    assert!(text.contains("running in tiles"), "{text}");
+    if let Some(line) = text.lines().find(|l| l.starts_with("memory: peak ")) {
+        let peak: f64 = line.split("peak ").nth(1).unwrap().split_whitespace().next().unwrap().parse().unwrap();
+        assert!(peak <= 300.0 * 1e6 / f64::from(1u32 << 20), "{line}");
+    }
+    let d = pfm::read_pfm(&dir.path().join("d.pfm")).unwrap();
+    let gt = pfm::read_pfm(&dir.path().join("s/disp0GT.pfm")).unwrap();
+    let mask = jem::io::png::load_grey8(&dir.path().join("s/mask0nocc.png")).unwrap();
+    let (mut n, mut sum, mut bad) = (0usize, 0.0f64, 0usize);
+    for ((a, b), m) in d.data.iter().zip(&gt.data).zip(&mask.data) {
+        if *m == 255 {
+            let e = f64::from((a - b).abs());
+            n += 1;
+            sum += e;
+            bad += usize::from(e > 1.0);
+        }
+    }
+    let (mean, bad_pct) = (sum / n as f64, 100.0 * bad as f64 / n as f64);
+    assert!(mean < 1.0 && bad_pct < 2.0, "mean error {mean:.3} px, {bad_pct:.2} % over 1 px");
+}
+
 /// Killing a run (SIGINT or SIGKILL) leaves neither the output nor a temporary file: the output is only ever
 /// created by renaming a finished temporary file. The run is made long (many iterations) so the signal lands
 /// while it computes.
@@ -356,13 +390,14 @@ fn bad_downscale_fails_cleanly() {
 fn memory_guard_suggests_a_downscale() {
     let dir = tempfile::tempdir().unwrap();
     let (l, r) = (example("im0.png"), example("im1.png"));
-    // 320x240, ndisp 48: ~97 MB at full size, ~17 MB at 1/2.
+    // 320x240, ndisp 48: ~94 MiB at full size, ~32 MiB at 1/2 (each with the process's own 16 MiB); at 40 MiB
+    // not even the smallest tile fits.
     assert_clean_failure(
         dir.path(),
-        &["--max-memory", "20M", &l, &r, "-o", "x.pfm"],
-        &["needs about", "20.0 MiB", "--downscale 2 ", "--max-memory"],
+        &["--max-memory", "40M", &l, &r, "-o", "x.pfm"],
+        &["needs about", "40.0 MiB", "--downscale 2 ", "--max-memory"],
     );
-    let out = run_in(dir.path(), &["--threads", "1", "--max-memory", "20M", &l, &r, "-o", "x.pfm", "--downscale", "2"]);
+    let out = run_in(dir.path(), &["--threads", "1", "--max-memory", "40M", &l, &r, "-o", "x.pfm", "--downscale", "2"]);
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
