@@ -24,8 +24,9 @@
 //! (tests: `tiled_matches_untiled`).
 //!
 //! **Memory.** One tile at a time is alive (its pipeline is parallel inside), each needing
-//! [`crate::estimate_memory_bytes`] for its crop and window; a core whose tile would exceed the budget is split
-//! in four until it fits (or reaches [`MIN_CORE_PX`]). The coarse run needs the untiled estimate at 1/F. On top:
+//! [`crate::estimate_memory_bytes`] for its crop and window; a core whose tile would exceed nine tenths of the
+//! budget (the rest is left for what the allocator keeps between tiles) is split in four until it fits (or
+//! reaches [`MIN_CORE_PX`]). The coarse run needs the untiled estimate at 1/F. On top:
 //! the full-size pair and its conditioned copies and the full-size maps, [`FULL_SIZE_BYTES_PER_PX`] per pixel.
 //!
 //! Parameters measured in pixels keep their meaning; the plane segments keep their size (a tile gets the share
