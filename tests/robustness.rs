@@ -17,10 +17,15 @@ fn paper() -> Params {
 
 /// Mean absolute error over the visible pixels of `scene`, matching `pair`.
 fn mean_error(params: &Params, pair: &StereoPair, scene: &SynthScene) -> f64 {
+    mean_error_where(params, pair, scene, |_| true)
+}
+
+/// [`mean_error`] over the visible pixels i with `keep(i)` only.
+fn mean_error_where(params: &Params, pair: &StereoPair, scene: &SynthScene, keep: impl Fn(usize) -> bool) -> f64 {
     let out = jem::run(params, pair).unwrap();
     let (mut sum, mut n) = (0.0, 0usize);
-    for ((d, g), m) in out.disparity.data.iter().zip(&scene.gt.data).zip(&scene.mask.data) {
-        if *m == MASK_VISIBLE {
+    for (i, ((d, g), m)) in out.disparity.data.iter().zip(&scene.gt.data).zip(&scene.mask.data).enumerate() {
+        if *m == MASK_VISIBLE && keep(i) {
             sum += f64::from((d - g).abs());
             n += 1;
         }
@@ -149,17 +154,7 @@ fn untextured_surface() {
     assert!((0.05..0.3).contains(&share), "one object: {:.1} % of the image", 100.0 * share);
     let pair = degraded(&flat, None, 7);
     // Mean error inside the painted object (visible pixels).
-    let inside = |params: &Params| {
-        let out = jem::run(params, &pair).unwrap();
-        let (mut sum, mut n) = (0.0, 0usize);
-        for (i, ((d, g), m)) in out.disparity.data.iter().zip(&flat.gt.data).zip(&flat.mask.data).enumerate() {
-            if *m == MASK_VISIBLE && region[i] {
-                sum += f64::from((d - g).abs());
-                n += 1;
-            }
-        }
-        sum / n as f64
-    };
+    let inside = |params: &Params| mean_error_where(params, &pair, &flat, |i| region[i]);
     let (paper, default) = (inside(&paper()), inside(&Params::default()));
     eprintln!("untextured surface ({:.1} % of the image): paper {paper:.3}, default {default:.3}", 100.0 * share);
     assert!(paper > 3.0, "the flat surface should defeat the paper's pipeline: {paper:.3}");
