@@ -122,7 +122,8 @@ fn stages(c: &mut Criterion) {
     });
     // The tiled path of large pairs (jem::tile) on the same pair: a coarse level at 1/4 and 256-px cores, to
     // compare with the run in one piece.
-    let plan = jem::tile::TilePlan { coarse_factor: 4, core_px: 256, tile_budget_bytes: u64::MAX };
+    let plan =
+        jem::tile::TilePlan { coarse_factor: 4, core_px: 256, tile_budget_bytes: u64::MAX, split_for_work: false };
     g.bench_function(BenchmarkId::new("default.toml in 256-px tiles", &name), |b| {
         b.iter(|| black_box(jem::tile::run_tiled(&params, &pair, &plan, &|_| {}).expect("tiled pipeline")))
     });

@@ -12,8 +12,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err("usage: tiled DIR ALG COARSE_FACTOR CORE_PX [key=value ...]".into());
     }
     let (dir, alg) = (PathBuf::from(&args[0]), &args[1]);
-    let plan =
-        jem::tile::TilePlan { coarse_factor: args[2].parse()?, core_px: args[3].parse()?, tile_budget_bytes: u64::MAX };
+    let plan = jem::tile::TilePlan {
+        coarse_factor: args[2].parse()?,
+        core_px: args[3].parse()?,
+        tile_budget_bytes: u64::MAX,
+        split_for_work: false,
+    };
     let params = jem::Params::load(None, &args[4..])?;
     for scene in jem::batch::find_scenes(std::slice::from_ref(&dir))? {
         let ndisp = jem::io::calib::read_ndisp(&scene.join("calib.txt"))?;
