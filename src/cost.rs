@@ -66,6 +66,53 @@ pub fn census_transform_banded(grey: &Plane<f32>, win_w: usize, win_h: usize, ba
     out
 }
 
+/// The mask of the low `n` bits (all the bits of an `n`-bit Census code).
+fn census_bits_mask(n: usize) -> u64 {
+    if n == 0 { 0 } else { u64::MAX >> (64 - n) }
+}
+
+/// Census support masks, in the bit order of [`census_transform`]: bit k is set when neighbour k is within `tau`
+/// grey levels of the centre. A neighbour across a strong edge (most often another surface) tells nothing about
+/// the centre's disparity and pulls the match towards its own: the foreground fattening of window costs.
+pub fn support_mask(grey: &Plane<f32>, win_w: usize, win_h: usize, tau: f32) -> Plane<u64> {
+    census_and_support(grey, win_w, win_h, 0.0, Some(tau)).1.expect("masks are made when a support is given")
+}
+
+/// [`census_transform_banded`] and, with `tau`, the [`support_mask`] too, in one pass over one padded copy.
+fn census_and_support(
+    grey: &Plane<f32>,
+    win_w: usize,
+    win_h: usize,
+    band: f32,
+    tau: Option<f32>,
+) -> (Plane<u64>, Option<Plane<u64>>) {
+    let Some(tau) = tau else { return (census_transform_banded(grey, win_w, win_h, band), None) };
+    assert!(win_w % 2 == 1 && win_h % 2 == 1 && win_w * win_h <= 65, "invalid census window {win_w}x{win_h}");
+    let (w, h) = grey.dims();
+    let (rx, ry) = (win_w / 2, win_h / 2);
+    let padded = pad_replicate(grey, rx, ry);
+    let pw = w + 2 * rx;
+    let (mut codes, mut masks) = (Plane::new(w, h, 0u64), Plane::new(w, h, 0u64));
+    let rows = codes.data.par_chunks_mut(w.max(1)).zip(masks.data.par_chunks_mut(w.max(1)));
+    rows.enumerate().for_each(|(y, (codes, masks))| {
+        let center = &padded[(y + ry) * pw + rx..][..w];
+        for dy in 0..win_h {
+            let nrow = &padded[(y + dy) * pw..][..pw];
+            for dx in 0..win_w {
+                if dx == rx && dy == ry {
+                    continue;
+                }
+                let nbr = &nrow[dx..][..w];
+                for (((code, mask), &n), &c) in codes.iter_mut().zip(masks.iter_mut()).zip(nbr).zip(center) {
+                    *code = (*code << 1) | u64::from(n < c - band);
+                    *mask = (*mask << 1) | u64::from((n - c).abs() <= tau);
+                }
+            }
+        }
+    });
+    (codes, Some(masks))
+}
+
 /// The plane with `px` columns and `py` rows of replicated border on each side, row-major, width `w + 2·px`.
 fn pad_replicate(p: &Plane<f32>, px: usize, py: usize) -> Vec<f32> {
     let (w, h) = p.dims();
@@ -109,57 +156,88 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
     assert_eq!(left.dims(), right.dims(), "left and right images differ in size");
     let (w, h) = left.dims();
     let (grey_l, grey_r) = (left.to_grey(), right.to_grey());
-    let (cen_l, cen_r) = rayon::join(
-        || census_transform_banded(&grey_l, p.census_width, p.census_height, p.census_dead_band),
-        || census_transform_banded(&grey_r, p.census_width, p.census_height, p.census_dead_band),
-    );
+    // Census support (both views): a bit is compared only where its neighbour is within `census_support` of the
+    // centre in both windows; a bit outside the support counts ½, the expected distance of a bit that says nothing
+    // (a constant count of 1 would favour the labels whose two masks overlap least).
+    let tau = (p.census_support > 0.0).then_some(p.census_support);
+    let census = |g: &Plane<f32>| census_and_support(g, p.census_width, p.census_height, p.census_dead_band, tau);
+    let ((cen_l, mask_l), (cen_r, mask_r)) = (census(&grey_l), census(&grey_r));
     let (gx_l, gx_r) = (sobel_x(&grey_l), sobel_x(&grey_r));
     let out_of_view = truncation_cost(p);
     let (a, tc, b, tg) = (p.census_weight, p.census_trunc, p.grad_weight, p.grad_trunc);
     // Zeroed (fresh pages from the OS, no fill pass); every entry is written below, rows in parallel.
     let mut vol = CostVolume::new(w, h, ndisp, 0.0);
-    let rows =
-        CostRows { cen_l: &cen_l, cen_r: &cen_r, gx_l: &gx_l, gx_r: &gx_r, weights: [a, tc, b, tg], out_of_view };
+    let rows = CostRows {
+        cen_l: &cen_l,
+        cen_r: &cen_r,
+        mask_l: mask_l.as_ref(),
+        mask_r: mask_r.as_ref(),
+        gx_l: &gx_l,
+        gx_r: &gx_r,
+        weights: [a, tc, b, tg],
+        out_of_view,
+        bits: (p.census_width * p.census_height - 1) as u32,
+    };
     vol.data.par_chunks_mut(w * ndisp).enumerate().for_each_init(
-        || (vec![0u64; w], vec![0.0f32; w]),
-        |(cr_rev, gr_rev), (y, row)| cost_row(&rows, y, ndisp, cr_rev, gr_rev, row),
+        || (vec![0u64; w], vec![0.0f32; w], vec![0u64; w]),
+        |(cr_rev, gr_rev, mr_rev), (y, row)| cost_row(&rows, y, ndisp, cr_rev, gr_rev, mr_rev, row),
     );
     vol
 }
 
-/// What [`cost_row`] reads: both views' census codes and gradients, the weights and truncations
+/// What [`cost_row`] reads: both views' census codes, support masks and gradients, the weights and truncations
 /// `[census_weight, census_trunc, grad_weight, grad_trunc]`, and the out-of-view cost.
 struct CostRows<'a> {
     cen_l: &'a Plane<u64>,
     cen_r: &'a Plane<u64>,
+    /// The support masks (`None`: every bit is compared).
+    mask_l: Option<&'a Plane<u64>>,
+    mask_r: Option<&'a Plane<u64>>,
     gx_l: &'a Plane<f32>,
     gx_r: &'a Plane<f32>,
     weights: [f32; 4],
     out_of_view: f32,
+    /// Bits per Census code.
+    bits: u32,
 }
 
-/// The costs of row `y` (all pixels, `ndisp` labels each) into `row`; `cr_rev` and `gr_rev` are scratch rows.
+/// The costs of row `y` (all pixels, `ndisp` labels each) into `row`; `cr_rev`, `gr_rev` and `mr_rev` are scratch
+/// rows. The Hamming distance counts the bits inside both pixels' support.
 /// Compiled for AVX2 + FMA + POPCNT as well, picked at run time (same results).
 #[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma+popcnt")))]
-fn cost_row<'c>(rows: &CostRows<'c>, y: usize, ndisp: usize, cr_rev: &mut [u64], gr_rev: &mut [f32], row: &mut [f32]) {
-    let CostRows { cen_l, cen_r, gx_l, gx_r, weights: [a, tc, b, tg], out_of_view } = *rows;
+fn cost_row<'c>(
+    rows: &CostRows<'c>,
+    y: usize,
+    ndisp: usize,
+    cr_rev: &mut [u64],
+    gr_rev: &mut [f32],
+    mr_rev: &mut [u64],
+    row: &mut [f32],
+) {
+    let CostRows { cen_l, cen_r, mask_l, mask_r, gx_l, gx_r, weights: [a, tc, b, tg], out_of_view, bits } = *rows;
     let w = cen_l.width;
+    let all = census_bits_mask(bits as usize);
     // The right row reversed: label d of left pixel x reads right pixel x − d = w−1−k with
     // k = w−1−x+d, so consecutive labels are consecutive k and the label loop runs forwards.
-    for (k, (c, g)) in cr_rev.iter_mut().zip(gr_rev.iter_mut()).enumerate() {
+    for (k, ((c, g), m)) in cr_rev.iter_mut().zip(gr_rev.iter_mut()).zip(mr_rev.iter_mut()).enumerate() {
         *c = cen_r.data[y * w + w - 1 - k];
         *g = gx_r.data[y * w + w - 1 - k];
+        *m = mask_r.map_or(all, |mr| mr.data[y * w + w - 1 - k]);
     }
-    let (cl_row, gl_row) = (cen_l.row(y), gx_l.row(y));
+    let (cl_row, gl_row, ml_row) = (cen_l.row(y), gx_l.row(y), mask_l.map(|m| m.row(y)));
     for (x, costs) in row.chunks_exact_mut(ndisp).enumerate() {
-        let (cl, gl) = (cl_row[x], gl_row[x]);
+        let (cl, gl, ml) = (cl_row[x], gl_row[x], ml_row.map_or(all, |m| m[x]));
         let in_view = ndisp.min(x + 1);
         let k0 = w - 1 - x;
         let cr = &cr_rev[k0..][..in_view];
         let gr = &gr_rev[k0..][..in_view];
+        let mr = &mr_rev[k0..][..in_view];
         let (inside, outside) = costs.split_at_mut(in_view);
-        for ((c, &cr), &gr) in inside.iter_mut().zip(cr).zip(gr) {
-            let ham = (cl ^ cr).count_ones() as f32;
+        for (((c, &cr), &gr), &mr) in inside.iter_mut().zip(cr).zip(gr).zip(mr) {
+            // Twice the distance: 2 per differing bit inside the support, 1 per bit outside it.
+            let m = ml & mr;
+            let twice = 2 * ((cl ^ cr) & m).count_ones() + bits - m.count_ones();
+            let ham = twice as f32 * 0.5;
             *c = a * ham.min(tc) + b * (gl - gr).abs().min(tg);
         }
         outside.fill(out_of_view);
@@ -280,6 +358,7 @@ mod tests {
                 census_width,
                 census_height,
                 census_dead_band: band,
+                census_support: tau,
                 census_weight: a,
                 census_trunc: tc,
                 grad_weight: b,
@@ -291,19 +370,22 @@ mod tests {
                 return a * tc + b * tg;
             }
             let (rx, ry) = (census_width as isize / 2, census_height as isize / 2);
-            let mut hamming = 0u32;
+            let mut twice = 0u32;
             for dy in -ry..=ry {
                 for dx in -rx..=rx {
                     if (dx, dy) == (0, 0) {
                         continue;
                     }
-                    let darker_this = Self::grey(&self.this, x + dx, y + dy) < Self::grey(&self.this, x, y) - band;
-                    let darker_other = Self::grey(&self.other, xo + dx, y + dy) < Self::grey(&self.other, xo, y) - band;
-                    hamming += u32::from(darker_this != darker_other);
+                    let (n_this, c_this) = (Self::grey(&self.this, x + dx, y + dy), Self::grey(&self.this, x, y));
+                    let (n_other, c_other) = (Self::grey(&self.other, xo + dx, y + dy), Self::grey(&self.other, xo, y));
+                    // Support: the neighbour counts when it is within τ of the centre in both windows (τ = 0: off).
+                    let inside = tau == 0.0 || ((n_this - c_this).abs() <= tau && (n_other - c_other).abs() <= tau);
+                    let differ = (n_this < c_this - band) != (n_other < c_other - band);
+                    twice += if inside { 2 * u32::from(differ) } else { 1 };
                 }
             }
             let grad = (Self::sobel(&self.this, x, y) - Self::sobel(&self.other, xo, y)).abs();
-            a * (hamming as f32).min(tc) + b * grad.min(tg)
+            a * (twice as f32 * 0.5).min(tc) + b * grad.min(tg)
         }
 
         /// The whole volume, layout `[(y·w + x)·nd + d]`.
@@ -361,6 +443,7 @@ mod tests {
                 census_width: 5,
                 census_height: 3,
                 census_dead_band: 3.0,
+                census_support: 0.0,
                 census_weight: 2.0,
                 census_trunc: 5.0,
                 grad_weight: 0.45,
@@ -370,6 +453,7 @@ mod tests {
                 census_width: 9,
                 census_height: 7,
                 census_dead_band: 0.5,
+                census_support: 90.0,
                 census_weight: 0.7,
                 census_trunc: 21.0,
                 grad_weight: 1.3,
@@ -379,6 +463,7 @@ mod tests {
                 census_width: 1,
                 census_height: 3,
                 census_dead_band: 0.0,
+                census_support: 85.0,
                 census_weight: 1.0,
                 census_trunc: 1.0,
                 grad_weight: 0.1,
@@ -520,5 +605,59 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A bit is in a pixel's support where its neighbour is within `tau` of the centre (bit order as the Census).
+    #[test]
+    fn support_mask_marks_the_similar_neighbours() {
+        let g = Plane::from_vec(3, 3, vec![0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0]);
+        let m = support_mask(&g, 3, 3, 15.0);
+        // Centre (1, 1) = 40: neighbours 0 10 20 30 | 50 60 70 80 (bits 7 … 0); within 15: 30 and 50.
+        assert_eq!(m.data[4], 0b0001_1000);
+        assert_eq!(support_mask(&g, 3, 3, 100.0).data[4], 0xff);
+        // Masks of all ones are the plain Census.
+        let (l, r) = shifted_pair(64, 16, |_, _| 5);
+        let mut p = CostParams { census_support: 0.0, ..CostParams::default() };
+        let plain = build_cost_volume(&l, &r, 16, &p);
+        p.census_support = 1000.0;
+        assert_eq!(plain.data, build_cost_volume(&l, &r, 16, &p).data);
+    }
+
+    /// Foreground fattening: a high-contrast foreground strip (disparity 12) over a faint background texture
+    /// (disparity 4). Beside the strip's right edge the background is visible in both views, but the plain Census
+    /// windows there are dominated by the strip's strong edges and pick its disparity; with the support only the
+    /// background's own bits count.
+    #[test]
+    fn census_support_stops_foreground_fattening() {
+        let (w, h, (f0, f1), (d_bg, d_fg)) = (160, 60, (60, 100), (4, 12));
+        let bg = noise(w + 16, h, 3).into_iter().map(|v| 100.0 + v / 16.0).collect::<Vec<_>>();
+        let fg = noise(w + 16, h, 4).into_iter().map(|v| if v < 128.0 { 30.0 } else { 220.0 }).collect::<Vec<_>>();
+        // Layers in scene coordinates: the left view sees scene column x, the right view x + d at disparity d.
+        let (mut left, mut right) = (vec![0.0; w * h], vec![0.0; w * h]);
+        for y in 0..h {
+            for x in 0..w {
+                left[y * w + x] = if (f0..f1).contains(&x) { fg[y * (w + 16) + x] } else { bg[y * (w + 16) + x] };
+                // Right pixel x shows the foreground where x + d_fg is inside the strip, else the background.
+                right[y * w + x] = if (f0..f1).contains(&(x + d_fg)) {
+                    fg[y * (w + 16) + x + d_fg]
+                } else {
+                    bg[y * (w + 16) + x + d_bg]
+                };
+            }
+        }
+        let (l, r) = (grey_image(w, h, left), grey_image(w, h, right));
+        let fattened = |support: f32| {
+            let p = CostParams { census_support: support, grad_weight: 0.0, ..CostParams::default() };
+            let wta = winner_take_all(&build_cost_volume(&l, &r, 24, &p));
+            // The three background columns right of the strip (their windows reach into it).
+            (3..h - 3)
+                .flat_map(|y| (f1..f1 + 3).map(move |x| (x, y)))
+                .filter(|&(x, y)| (wta.data[y * w + x] - d_fg as f32).abs() <= 1.0)
+                .count()
+        };
+        let (plain, supported) = (fattened(0.0), fattened(50.0));
+        eprintln!("fattened pixels: plain Census {plain}, with support {supported} (of {})", 3 * (h - 6));
+        assert!(plain >= 15, "the plain Census fattens here: {plain}");
+        assert!(supported * 4 <= plain, "support {supported} vs plain {plain}");
     }
 }

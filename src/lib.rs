@@ -360,6 +360,9 @@ impl<'a> Prepared<'a> {
         if let Some(cond) = &conditioned {
             prior_weight = c.prior_base + c.prior_per_sigma * cond.stats.sigma();
             cost_params.census_dead_band += c.census_band * cond.stats.residual_grey_noise;
+            if cost_params.census_support > 0.0 {
+                cost_params.census_support += c.support_per_sigma * cond.stats.sigma();
+            }
         }
         Prepared { conditioned, cost_params, prior_weight }
     }

@@ -27,6 +27,9 @@ pub struct ConditionParams {
     pub denoise_min_sigma: f32,
     /// Census dead band as a multiple of the grey noise σ measured after denoising; 0 = none.
     pub census_band: f32,
+    /// Widens `cost.census_support` by this multiple of the measured noise σn (when the support is on): under
+    /// noise the bits of strong contrast are the ones noise does not flip.
+    pub support_per_sigma: f32,
     /// Coarse prior: the pipeline first runs on the pair reduced 2×, and the full-resolution cost gets
     /// `prior_per_sigma` × σn × min(max(|d − d_coarse| − `prior_margin_px`, 0), `prior_trunc_px`); 0 = off.
     pub prior_per_sigma: f32,
@@ -66,6 +69,7 @@ impl Default for ConditionParams {
             denoise_sigma_xy: 3.0,
             denoise_min_sigma: 2.0,
             census_band: 0.0,
+            support_per_sigma: 2.5,
             prior_per_sigma: 0.5,
             prior_base: 0.0,
             prior_recurse_sigma: 0.0,
@@ -88,6 +92,7 @@ impl ConditionParams {
             stretch: false,
             denoise_strength: 0.0,
             census_band: 0.0,
+            support_per_sigma: 0.0,
             prior_per_sigma: 0.0,
             prior_base: 0.0,
             prior_confidence: false,
@@ -120,6 +125,7 @@ impl ConditionParams {
         }
         check_nonneg("condition.denoise_min_sigma", self.denoise_min_sigma)?;
         check_nonneg("condition.census_band", self.census_band)?;
+        check_nonneg("condition.support_per_sigma", self.support_per_sigma)?;
         check_nonneg("condition.prior_per_sigma", self.prior_per_sigma)?;
         check_nonneg("condition.prior_base", self.prior_base)?;
         check_nonneg("condition.prior_untrusted", self.prior_untrusted)?;

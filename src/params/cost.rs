@@ -16,6 +16,10 @@ pub struct CostParams {
     /// Census dead band in grey levels: a bit is set only when the neighbour is darker than the centre by more
     /// than this (0 = the plain Census).
     pub census_dead_band: f32,
+    /// Census support in grey levels: a bit is compared only where its neighbour is within this of the centre in
+    /// both views' windows, and counts ½ elsewhere (the neighbours of another surface, across a strong edge, say
+    /// nothing about the centre's disparity and pull it to theirs); 0 = every bit is compared (the paper's Census).
+    pub census_support: f32,
     /// Weight `a` of the Census Hamming distance.
     pub census_weight: f32,
     /// Truncation τc of the Hamming distance, in bits.
@@ -32,6 +36,7 @@ impl Default for CostParams {
             census_width: 7,
             census_height: 7,
             census_dead_band: 0.0,
+            census_support: 40.0,
             census_weight: 1.0,
             census_trunc: 48.0,
             grad_weight: 0.3,
@@ -59,6 +64,7 @@ impl CostParams {
             ));
         }
         check_nonneg("cost.census_dead_band", self.census_dead_band)?;
+        check_nonneg("cost.census_support", self.census_support)?;
         check_nonneg("cost.census_weight", self.census_weight)?;
         check_nonneg("cost.census_trunc", self.census_trunc)?;
         check_nonneg("cost.grad_weight", self.grad_weight)?;
