@@ -5,6 +5,12 @@
 //! census_height`, bit set where the neighbour is darker than the centre, borders replicated) and `gx` is the
 //! Sobel-x gradient of the grey image.
 //!
+//! **Census support** (our addition, `census_support` τ > 0): bit k is compared only where neighbour k is within
+//! τ grey levels of its centre in both windows, and counts ½ elsewhere (the expected distance of a bit that says
+//! nothing): `H = Σ_k [k in both supports]·[bits differ] + ½·[k outside]`. Neighbours across a strong edge,
+//! usually another surface, otherwise pull the match to their disparity (foreground fattening). τ = 0 is the
+//! paper's Census.
+//!
 //! Out of view (`x − d < 0`) the true match is not in the other image; those entries get the *truncation cost*
 //! `a·τc + b·τg`, the largest value an in-view entry can take, so the inference never prefers a label that looks
 //! outside the image. (They are not left at 0, which would attract every border pixel to impossible labels.)
