@@ -48,6 +48,22 @@ pub fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<
 /// # Panics
 /// As [`census_transform`].
 pub fn census_transform_banded(grey: &Plane<f32>, win_w: usize, win_h: usize, band: f32) -> Plane<u64> {
+    window_codes(grey, win_w, win_h, |n, c| n < c - band)
+}
+
+/// Census support masks, in the bit order of [`census_transform`]: bit k is set when neighbour k is within `tau`
+/// grey levels of the centre. A neighbour across a strong edge (most often another surface) tells nothing about
+/// the centre's disparity and pulls the match towards its own: the foreground fattening of window costs.
+///
+/// # Panics
+/// As [`census_transform`].
+pub fn support_mask(grey: &Plane<f32>, win_w: usize, win_h: usize, tau: f32) -> Plane<u64> {
+    window_codes(grey, win_w, win_h, |n, c| (n - c).abs() <= tau)
+}
+
+/// One bit per window neighbour, `bit(neighbour, centre)`, in the order of [`census_transform`] (borders
+/// replicated; the image padded once, so the inner loop runs clamp-free over a whole row per window offset).
+fn window_codes(grey: &Plane<f32>, win_w: usize, win_h: usize, bit: impl Fn(f32, f32) -> bool + Sync) -> Plane<u64> {
     assert!(win_w % 2 == 1 && win_h % 2 == 1 && win_w * win_h <= 65, "invalid census window {win_w}x{win_h}");
     let (w, h) = grey.dims();
     let (rx, ry) = (win_w / 2, win_h / 2);
@@ -64,7 +80,7 @@ pub fn census_transform_banded(grey: &Plane<f32>, win_w: usize, win_h: usize, ba
                 }
                 let nbr = &nrow[dx..][..w];
                 for ((code, &n), &c) in codes.iter_mut().zip(nbr).zip(center) {
-                    *code = (*code << 1) | u64::from(n < c - band);
+                    *code = (*code << 1) | u64::from(bit(n, c));
                 }
             }
         }
@@ -75,48 +91,6 @@ pub fn census_transform_banded(grey: &Plane<f32>, win_w: usize, win_h: usize, ba
 /// The mask of the low `n` bits (all the bits of an `n`-bit Census code).
 fn census_bits_mask(n: usize) -> u64 {
     if n == 0 { 0 } else { u64::MAX >> (64 - n) }
-}
-
-/// Census support masks, in the bit order of [`census_transform`]: bit k is set when neighbour k is within `tau`
-/// grey levels of the centre. A neighbour across a strong edge (most often another surface) tells nothing about
-/// the centre's disparity and pulls the match towards its own: the foreground fattening of window costs.
-pub fn support_mask(grey: &Plane<f32>, win_w: usize, win_h: usize, tau: f32) -> Plane<u64> {
-    census_and_support(grey, win_w, win_h, 0.0, Some(tau)).1.expect("masks are made when a support is given")
-}
-
-/// [`census_transform_banded`] and, with `tau`, the [`support_mask`] too, in one pass over one padded copy.
-fn census_and_support(
-    grey: &Plane<f32>,
-    win_w: usize,
-    win_h: usize,
-    band: f32,
-    tau: Option<f32>,
-) -> (Plane<u64>, Option<Plane<u64>>) {
-    let Some(tau) = tau else { return (census_transform_banded(grey, win_w, win_h, band), None) };
-    assert!(win_w % 2 == 1 && win_h % 2 == 1 && win_w * win_h <= 65, "invalid census window {win_w}x{win_h}");
-    let (w, h) = grey.dims();
-    let (rx, ry) = (win_w / 2, win_h / 2);
-    let padded = pad_replicate(grey, rx, ry);
-    let pw = w + 2 * rx;
-    let (mut codes, mut masks) = (Plane::new(w, h, 0u64), Plane::new(w, h, 0u64));
-    let rows = codes.data.par_chunks_mut(w.max(1)).zip(masks.data.par_chunks_mut(w.max(1)));
-    rows.enumerate().for_each(|(y, (codes, masks))| {
-        let center = &padded[(y + ry) * pw + rx..][..w];
-        for dy in 0..win_h {
-            let nrow = &padded[(y + dy) * pw..][..pw];
-            for dx in 0..win_w {
-                if dx == rx && dy == ry {
-                    continue;
-                }
-                let nbr = &nrow[dx..][..w];
-                for (((code, mask), &n), &c) in codes.iter_mut().zip(masks.iter_mut()).zip(nbr).zip(center) {
-                    *code = (*code << 1) | u64::from(n < c - band);
-                    *mask = (*mask << 1) | u64::from((n - c).abs() <= tau);
-                }
-            }
-        }
-    });
-    (codes, Some(masks))
 }
 
 /// The plane with `px` columns and `py` rows of replicated border on each side, row-major, width `w + 2·px`.
@@ -165,9 +139,12 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
     // Census support (both views): a bit is compared only where its neighbour is within `census_support` of the
     // centre in both windows; a bit outside the support counts ½, the expected distance of a bit that says nothing
     // (a constant count of 1 would favour the labels whose two masks overlap least).
-    let tau = (p.census_support > 0.0).then_some(p.census_support);
-    let census = |g: &Plane<f32>| census_and_support(g, p.census_width, p.census_height, p.census_dead_band, tau);
-    let ((cen_l, mask_l), (cen_r, mask_r)) = (census(&grey_l), census(&grey_r));
+    let (cw, ch) = (p.census_width, p.census_height);
+    let census = |g: &Plane<f32>| {
+        let mask = (p.census_support > 0.0).then(|| support_mask(g, cw, ch, p.census_support));
+        (census_transform_banded(g, cw, ch, p.census_dead_band), mask)
+    };
+    let ((cen_l, mask_l), (cen_r, mask_r)) = rayon::join(|| census(&grey_l), || census(&grey_r));
     let (gx_l, gx_r) = (sobel_x(&grey_l), sobel_x(&grey_r));
     let out_of_view = truncation_cost(p);
     let (a, tc, b, tg) = (p.census_weight, p.census_trunc, p.grad_weight, p.grad_trunc);
