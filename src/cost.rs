@@ -11,6 +11,14 @@
 //! usually another surface, otherwise pull the match to their disparity (foreground fattening). τ = 0 is the
 //! paper's Census.
 //!
+//! **Gradient normalisation** (our addition, `grad_norm_radius` r > 0): each view's `gx` is multiplied by
+//! `(ḡ + ε) / (s + ε)`, where `s` is the mean |gx| over the (2r + 1)² window around the pixel and ḡ the mean of `s`
+//! over the left view (for a whole pair, measured once on the full-resolution left view, so tiles share it). A
+//! gain between the views, or a gamma (a gain that varies with brightness), scales `gx` and `s` alike, so it
+//! cancels where `s ≫ ε`; the raw term charges `(1 − gain)·|gx|` at the true disparity. ε (Sobel units) keeps flat
+//! regions, where `s` is noise, from being amplified; the adaptive front end widens it with the measured noise.
+//! r = 0 is the paper's raw gradient.
+//!
 //! Out of view (`x − d < 0`) the true match is not in the other image; those entries get the *truncation cost*
 //! `a·τc + b·τg`, the largest value an in-view entry can take, so the inference never prefers a label that looks
 //! outside the image. (They are not left at 0, which would attract every border pixel to impossible labels.)
@@ -123,6 +131,45 @@ pub fn sobel_x(grey: &Plane<f32>) -> Plane<f32> {
     out
 }
 
+/// The mean over the image of [`local_mean_abs`] of its Sobel x: ḡ of the gradient normalisation.
+pub fn mean_local_contrast(grey: &Plane<f32>, radius: usize) -> f32 {
+    plane_mean(&local_mean_abs(&sobel_x(grey), radius))
+}
+
+/// The mean of a plane (summed in `f64`, row-major: the same value whatever the thread count).
+fn plane_mean(p: &Plane<f32>) -> f32 {
+    (p.data.iter().map(|&v| f64::from(v)).sum::<f64>() / p.data.len().max(1) as f64) as f32
+}
+
+/// The mean of |v| over the (2r + 1)² window around each pixel, borders replicated: a row sum over dx = −r..r,
+/// then the sum of those over dy = −r..r, each in that order, divided by (2r + 1)².
+fn local_mean_abs(p: &Plane<f32>, r: usize) -> Plane<f32> {
+    let (w, h) = p.dims();
+    let mut rows = Plane::new(w, h, 0.0f32);
+    rows.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, out)| {
+        let src = p.row(y);
+        for (x, o) in out.iter_mut().enumerate() {
+            *o = (0..=2 * r).map(|k| src[(x + k).saturating_sub(r).min(w - 1)].abs()).fold(0.0, |acc, v| acc + v);
+        }
+    });
+    let norm = 1.0 / ((2 * r + 1) * (2 * r + 1)) as f32;
+    let mut out = Plane::new(w, h, 0.0f32);
+    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, o)| {
+        o.fill(0.0);
+        for k in 0..=2 * r {
+            let src = rows.row((y + k).saturating_sub(r).min(h - 1));
+            o.iter_mut().zip(src).for_each(|(a, &v)| *a += v);
+        }
+        o.iter_mut().for_each(|a| *a *= norm);
+    });
+    out
+}
+
+/// Scales each gradient by (`mean` + ε) / (s + ε), `s` its local mean |∇x|.
+fn normalise_gradient(g: &mut Plane<f32>, s: &Plane<f32>, mean: f32, eps: f32) {
+    g.data.iter_mut().zip(&s.data).for_each(|(g, &s)| *g *= (mean + eps) / (s + eps));
+}
+
 /// The cost given to out-of-view entries: the largest in-view cost, `a·τc + b·τg`.
 pub fn truncation_cost(p: &CostParams) -> f32 {
     p.census_weight * p.census_trunc + p.grad_weight * p.grad_trunc
@@ -145,7 +192,14 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
         (census_transform_banded(g, cw, ch, p.census_dead_band), mask)
     };
     let ((cen_l, mask_l), (cen_r, mask_r)) = rayon::join(|| census(&grey_l), || census(&grey_r));
-    let (gx_l, gx_r) = (sobel_x(&grey_l), sobel_x(&grey_r));
+    let (mut gx_l, mut gx_r) = (sobel_x(&grey_l), sobel_x(&grey_r));
+    if p.grad_norm_radius > 0 {
+        let r = p.grad_norm_radius;
+        let (sl, sr) = rayon::join(|| local_mean_abs(&gx_l, r), || local_mean_abs(&gx_r, r));
+        let mean = p.grad_norm_mean.unwrap_or_else(|| plane_mean(&sl));
+        normalise_gradient(&mut gx_l, &sl, mean, p.grad_norm_eps);
+        normalise_gradient(&mut gx_r, &sr, mean, p.grad_norm_eps);
+    }
     let out_of_view = truncation_cost(p);
     let (a, tc, b, tg) = (p.census_weight, p.census_trunc, p.grad_weight, p.grad_trunc);
     // Zeroed (fresh pages from the OS, no fill pass); every entry is written below, rows in parallel.
@@ -319,9 +373,27 @@ mod tests {
         other: Plane<f32>,
         step: isize,
         p: CostParams,
+        /// ḡ of the gradient normalisation (see [`NaiveCost::new`]).
+        mean: f32,
     }
 
     impl NaiveCost {
+        /// `this` against `other`; ḡ from the parameters, else the mean local contrast of the left view (summed
+        /// in f64, row-major).
+        fn new(this: &Plane<f32>, other: &Plane<f32>, step: isize, p: &CostParams) -> NaiveCost {
+            let left = if step < 0 { this } else { other };
+            let r = p.grad_norm_radius as isize;
+            let mean = p.grad_norm_mean.unwrap_or_else(|| {
+                let (w, h) = (left.width as isize, left.height as isize);
+                let sum: f64 = (0..h)
+                    .flat_map(|y| (0..w).map(move |x| (x, y)))
+                    .map(|(x, y)| f64::from(Self::local_contrast(left, x, y, r)))
+                    .sum();
+                (sum / (w * h) as f64) as f32
+            });
+            NaiveCost { this: this.clone(), other: other.clone(), step, p: p.clone(), mean }
+        }
+
         /// The grey value at (x, y), coordinates clamped into the image (replicated borders).
         fn grey(g: &Plane<f32>, x: isize, y: isize) -> f32 {
             let x = x.clamp(0, g.width as isize - 1) as usize;
@@ -336,6 +408,32 @@ mod tests {
             diff(y - 1) + 2.0 * diff(y) + diff(y + 1)
         }
 
+        /// The mean |Sobel x| over the (2r + 1)² window at (x, y), window coordinates clamped: row sums over dx,
+        /// added over dy, each from −r up, times 1/(2r + 1)².
+        fn local_contrast(g: &Plane<f32>, x: isize, y: isize, r: isize) -> f32 {
+            let mut acc = 0.0f32;
+            for dy in -r..=r {
+                let mut row = 0.0f32;
+                for dx in -r..=r {
+                    let xx = (x + dx).clamp(0, g.width as isize - 1);
+                    let yy = (y + dy).clamp(0, g.height as isize - 1);
+                    row += Self::sobel(g, xx, yy).abs();
+                }
+                acc += row;
+            }
+            acc * (1.0 / ((2 * r + 1) * (2 * r + 1)) as f32)
+        }
+
+        /// Sobel x, normalised when `grad_norm_radius` > 0: × (ḡ + ε) / (s + ε).
+        fn gradient(&self, g: &Plane<f32>, x: isize, y: isize) -> f32 {
+            let r = self.p.grad_norm_radius as isize;
+            if r == 0 {
+                return Self::sobel(g, x, y);
+            }
+            let eps = self.p.grad_norm_eps;
+            Self::sobel(g, x, y) * ((self.mean + eps) / (Self::local_contrast(g, x, y, r) + eps))
+        }
+
         fn cost(&self, x: usize, y: usize, d: usize) -> f32 {
             let CostParams {
                 census_width,
@@ -346,6 +444,7 @@ mod tests {
                 census_trunc: tc,
                 grad_weight: b,
                 grad_trunc: tg,
+                ..
             } = self.p;
             let (x, y) = (x as isize, y as isize);
             let xo = x + self.step * d as isize;
@@ -367,7 +466,7 @@ mod tests {
                     twice += if inside { 2 * u32::from(differ) } else { 1 };
                 }
             }
-            let grad = (Self::sobel(&self.this, x, y) - Self::sobel(&self.other, xo, y)).abs();
+            let grad = (self.gradient(&self.this, x, y) - self.gradient(&self.other, xo, y)).abs();
             a * (twice as f32 * 0.5).min(tc) + b * grad.min(tg)
         }
 
@@ -431,6 +530,9 @@ mod tests {
                 census_trunc: 5.0,
                 grad_weight: 0.45,
                 grad_trunc: 12.5,
+                grad_norm_radius: 0,
+                grad_norm_eps: 4.0,
+                grad_norm_mean: None,
             },
             CostParams {
                 census_width: 9,
@@ -441,6 +543,9 @@ mod tests {
                 census_trunc: 21.0,
                 grad_weight: 1.3,
                 grad_trunc: 90.0,
+                grad_norm_radius: 1,
+                grad_norm_eps: 2.5,
+                grad_norm_mean: None,
             },
             CostParams {
                 census_width: 1,
@@ -451,6 +556,9 @@ mod tests {
                 census_trunc: 1.0,
                 grad_weight: 0.1,
                 grad_trunc: 30.0,
+                grad_norm_radius: 3,
+                grad_norm_eps: 40.0,
+                grad_norm_mean: Some(17.5),
             },
         ];
         let mut checked = 0;
@@ -465,11 +573,11 @@ mod tests {
                     for ndisp in ndisps {
                         let what = format!("{w}x{h}, {levels} levels, ndisp {ndisp}, {p:?}");
                         let vl = build_cost_volume(&left, &right, ndisp, p);
-                        let naive_l = NaiveCost { this: grey_l.clone(), other: grey_r.clone(), step: -1, p: p.clone() };
+                        let naive_l = NaiveCost::new(&grey_l, &grey_r, -1, p);
                         assert_same_volume(&vl, &naive_l.volume(ndisp), &format!("left view, {what}"));
                         // The pipeline reuses a stale allocation: start from NaN so an unwritten entry shows.
                         let vr = derive_right_volume_in(&vl, truncation_cost(p), vec![f32::NAN; w * h * ndisp]);
-                        let naive_r = NaiveCost { this: grey_r.clone(), other: grey_l.clone(), step: 1, p: p.clone() };
+                        let naive_r = NaiveCost::new(&grey_r, &grey_l, 1, p);
                         assert_same_volume(&vr, &naive_r.volume(ndisp), &format!("right view, {what}"));
                         checked += 2 * w * h * ndisp;
                     }
@@ -563,7 +671,9 @@ mod tests {
     #[test]
     fn right_volume_is_the_left_volume_resampled() {
         let (left, right) = shifted_pair(40, 9, |x, _| x % 5);
-        let p = CostParams::default();
+        // ḡ of the gradient normalisation is the left view's unless given: given, so that the mirrored pair (whose
+        // left view is this right view) uses the same.
+        let p = CostParams { grad_norm_mean: Some(60.0), ..CostParams::default() };
         let vl = build_cost_volume(&left, &right, 12, &p);
         let vr = derive_right_volume(&vl, truncation_cost(&p));
         for y in 0..9 {
@@ -642,5 +752,43 @@ mod tests {
         eprintln!("fattened pixels: plain Census {plain}, with support {supported} (of {})", 3 * (h - 6));
         assert!(plain >= 15, "the plain Census fattens here: {plain}");
         assert!(supported * 4 <= plain, "support {supported} vs plain {plain}");
+    }
+
+    /// A gain between the views (the right view at half the contrast, the exposure mismatch of two cameras)
+    /// leaves the raw gradient term large at the true disparity; normalised by the local contrast it cancels
+    /// wherever the contrast is well above ε. Gradient term only, untruncated; a random texture shifted by 3 px.
+    #[test]
+    fn normalised_gradient_cancels_a_gain_between_the_views() {
+        let (w, h, d) = (48, 12, 3);
+        let (left, right) = shifted_pair(w, h, |_, _| d);
+        let mut dark = right.clone();
+        dark.channels.iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v *= 0.5));
+        let gradient_only = |radius| CostParams {
+            census_weight: 0.0,
+            grad_trunc: 1e9,
+            grad_norm_radius: radius,
+            ..CostParams::default()
+        };
+        // Mean cost at the true label, over pixels whose windows (Sobel and normalisation) see only shifted content.
+        let at_truth = |p: &CostParams, right: &RgbImage| {
+            let vol = build_cost_volume(&left, right, 8, p);
+            let (mut sum, mut n) = (0.0f64, 0);
+            for y in 0..h {
+                for x in d + 2 + p.grad_norm_radius..w - 2 - p.grad_norm_radius {
+                    sum += f64::from(vol.pixel(y * w + x)[d]);
+                    n += 1;
+                }
+            }
+            sum / n as f64
+        };
+        let (raw, normalised) = (gradient_only(0), gradient_only(2));
+        let (raw_same, raw_gain) = (at_truth(&raw, &right), at_truth(&raw, &dark));
+        let (norm_same, norm_gain) = (at_truth(&normalised, &right), at_truth(&normalised, &dark));
+        eprintln!(
+            "true-label gradient cost: raw {raw_same:.2} -> {raw_gain:.2} with the gain, normalised {norm_same:.2} -> {norm_gain:.2}"
+        );
+        assert!(raw_same < 1e-3 && norm_same < 1e-3, "same views: {raw_same} {norm_same}");
+        assert!(raw_gain > 20.0, "the raw term sees the gain: {raw_gain}");
+        assert!(norm_gain < 0.05 * raw_gain, "normalised {norm_gain} vs raw {raw_gain}");
     }
 }

@@ -363,6 +363,11 @@ impl<'a> Prepared<'a> {
             if cost_params.census_support > 0.0 {
                 cost_params.census_support += c.support_per_sigma * cond.stats.sigma();
             }
+            if cost_params.grad_norm_radius > 0 {
+                cost_params.grad_norm_eps += c.grad_eps_per_sigma * cond.stats.sigma();
+                let grey = cond.cost_pair().left.to_grey();
+                cost_params.grad_norm_mean = Some(cost::mean_local_contrast(&grey, cost_params.grad_norm_radius));
+            }
         }
         Prepared { conditioned, cost_params, prior_weight }
     }

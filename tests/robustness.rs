@@ -120,9 +120,9 @@ fn jpeg_pair_default_beats_the_paper_pipeline() {
 
 /// A surface with no texture at all (the nearest object of a rendered scene, a slanted disc on 12 % of the image,
 /// painted one flat colour in both views): its matching cost is flat inside, so only its outline and the
-/// pairwise terms place it. Measured inside the disc: the paper's pipeline 6.82 px, the default 2.24 px (1.64 before
-/// the Census support of session 9; the coarse prior sees the outline over a larger share of the disc),
-/// winner-take-all 34.7 px.
+/// pairwise terms place it. Measured inside the disc: the paper's pipeline 6.82 px, the default 1.92 px (1.64 before
+/// the Census support of session 9, 2.24 with it, 1.92 since the gradient normalisation of session 10; the coarse
+/// prior sees the outline over a larger share of the disc), winner-take-all 34.7 px.
 #[test]
 fn untextured_surface() {
     let s = render_scene(&SynthParams { width: 360, height: 240, ndisp: 48, seed: 25 }).unwrap();

@@ -30,6 +30,9 @@ pub struct ConditionParams {
     /// Widens `cost.census_support` by this multiple of the measured noise σn (when the support is on): under
     /// noise the bits of strong contrast are the ones noise does not flip.
     pub support_per_sigma: f32,
+    /// Widens `cost.grad_norm_eps` by this multiple of the measured noise σn (when the normalisation is on): the
+    /// gradient term is normalised only where the local contrast stands well above the noise.
+    pub grad_eps_per_sigma: f32,
     /// Coarse prior: the pipeline first runs on the pair reduced 2×, and the full-resolution cost gets
     /// `prior_per_sigma` × σn × min(max(|d − d_coarse| − `prior_margin_px`, 0), `prior_trunc_px`); 0 = off.
     pub prior_per_sigma: f32,
@@ -70,6 +73,7 @@ impl Default for ConditionParams {
             denoise_min_sigma: 2.0,
             census_band: 0.0,
             support_per_sigma: 2.5,
+            grad_eps_per_sigma: 30.0,
             prior_per_sigma: 0.5,
             prior_base: 0.0,
             prior_recurse_sigma: 0.0,
@@ -93,6 +97,7 @@ impl ConditionParams {
             denoise_strength: 0.0,
             census_band: 0.0,
             support_per_sigma: 0.0,
+            grad_eps_per_sigma: 0.0,
             prior_per_sigma: 0.0,
             prior_base: 0.0,
             prior_confidence: false,
@@ -126,6 +131,7 @@ impl ConditionParams {
         check_nonneg("condition.denoise_min_sigma", self.denoise_min_sigma)?;
         check_nonneg("condition.census_band", self.census_band)?;
         check_nonneg("condition.support_per_sigma", self.support_per_sigma)?;
+        check_nonneg("condition.grad_eps_per_sigma", self.grad_eps_per_sigma)?;
         check_nonneg("condition.prior_per_sigma", self.prior_per_sigma)?;
         check_nonneg("condition.prior_base", self.prior_base)?;
         check_nonneg("condition.prior_untrusted", self.prior_untrusted)?;

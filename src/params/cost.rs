@@ -28,6 +28,18 @@ pub struct CostParams {
     pub grad_weight: f32,
     /// Truncation τg of |∇xL − ∇xR| (Sobel x on 0..255 grey).
     pub grad_trunc: f32,
+    /// Local contrast normalisation of the gradient term: each view's Sobel x is scaled by (ḡ + ε) / (s + ε), s
+    /// the mean |∇x| over the (2r + 1)² window around the pixel, ḡ the left view's mean s; this is r (0 = off, the
+    /// paper's raw gradient). A gain or gamma difference between the views then cancels wherever the local
+    /// contrast is well above ε.
+    pub grad_norm_radius: usize,
+    /// ε of the normalisation, in Sobel units (4 = the response to a one-grey-level step); widened with the
+    /// measured noise by `condition.grad_eps_per_sigma`.
+    pub grad_norm_eps: f32,
+    /// ḡ measured once for the whole pair (so tiles and the full image share it); `None`: measured on the left
+    /// view each volume is built from. Set at run time, never read from a config.
+    #[serde(skip)]
+    pub grad_norm_mean: Option<f32>,
 }
 
 impl Default for CostParams {
@@ -41,6 +53,9 @@ impl Default for CostParams {
             census_trunc: 48.0,
             grad_weight: 0.3,
             grad_trunc: 60.0,
+            grad_norm_radius: 2,
+            grad_norm_eps: 4.0,
+            grad_norm_mean: None,
         }
     }
 }
@@ -69,6 +84,12 @@ impl CostParams {
         check_nonneg("cost.census_trunc", self.census_trunc)?;
         check_nonneg("cost.grad_weight", self.grad_weight)?;
         check_nonneg("cost.grad_trunc", self.grad_trunc)?;
+        if self.grad_norm_radius > 32 {
+            return Err(Error::param("cost.grad_norm_radius", self.grad_norm_radius, "0 to 32 pixels"));
+        }
+        if !(self.grad_norm_eps > 0.0 && self.grad_norm_eps.is_finite()) {
+            return Err(Error::param("cost.grad_norm_eps", self.grad_norm_eps, "> 0 (Sobel units)"));
+        }
         if self.census_weight == 0.0 && self.grad_weight == 0.0 {
             return Err(Error::param("cost.census_weight", 0, "> 0 when cost.grad_weight is 0"));
         }
