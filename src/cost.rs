@@ -131,7 +131,8 @@ pub fn sobel_x(grey: &Plane<f32>) -> Plane<f32> {
     out
 }
 
-/// The mean over the image of [`local_mean_abs`] of its Sobel x: ḡ of the gradient normalisation.
+/// The mean over the image of its local contrast (the mean |Sobel x| over the (2r + 1)² window around each
+/// pixel): ḡ of the gradient normalisation.
 pub fn mean_local_contrast(grey: &Plane<f32>, radius: usize) -> f32 {
     plane_mean(&local_mean_abs(&sobel_x(grey), radius))
 }
