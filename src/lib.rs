@@ -107,6 +107,22 @@ pub struct Output {
     pub consistent: Plane<bool>,
     /// Time per stage.
     pub timings: Timings,
+    /// What the adaptive front end measured on the (full-resolution) pair and set from it; `None` when
+    /// `[condition]` is off.
+    pub measured: Option<Measured>,
+}
+
+/// What the adaptive front end ([`condition`]) measured on a pair and the values it derived (`jem -v` prints it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measured {
+    /// Contrast gains and noise σn of both views.
+    pub stats: condition::PairStats,
+    /// λ of the coarse prior before its per-pixel factor (0: no prior).
+    pub prior_weight: f32,
+    /// The Census support τ in grey levels (0: every bit compared).
+    pub census_support: f32,
+    /// ḡ and ε of the gradient normalisation (`None`: the raw gradient).
+    pub gradient: Option<(f32, f32)>,
 }
 
 /// Estimated peak memory of [`run`] in bytes for a `width × height` pair with `ndisp` labels and `params`
@@ -239,7 +255,7 @@ pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str))
         )
     });
     let consistent = scale::upsample_mask(&low.consistent, factor, w, h);
-    Ok(Output { disparity, confidence, consistent, timings: t })
+    Ok(Output { disparity, confidence, consistent, timings: t, measured: low.measured })
 }
 
 /// The pipeline at the pair's own resolution, appending its stage times to `t`.
@@ -301,8 +317,11 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         Some(prior) if c.prior_window => tile::label_window(&prior.disparity, pair.ndisp, 4),
         _ => None,
     };
+    let measured = input.measured();
     let Some((lo, labels)) = window else {
-        return fine_pass(params, pair, cost_pair, cost_params, coarse.as_ref(), on_stage, t);
+        let mut out = fine_pass(params, pair, cost_pair, cost_params, coarse.as_ref(), on_stage, t)?;
+        out.measured = measured;
+        return Ok(out);
     };
     // Label d' of the shifted pair is disparity lo + d'.
     let (guide, cost_shifted) = tile::shift_right_views(pair, cost_pair, lo, labels)?;
@@ -313,6 +332,7 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
     let mut out =
         fine_pass(params, &guide, cost_shifted.as_ref().unwrap_or(&guide), cost_params, prior.as_ref(), on_stage, t)?;
     out.disparity.data.iter_mut().for_each(|d| *d += lo as f32);
+    out.measured = measured;
     Ok(out)
 }
 
@@ -370,6 +390,18 @@ impl<'a> Prepared<'a> {
             }
         }
         Prepared { conditioned, cost_params, prior_weight }
+    }
+
+    /// What was measured and derived, for [`Output::measured`] (`None` when conditioning is off).
+    pub(crate) fn measured(&self) -> Option<Measured> {
+        self.conditioned.as_ref().map(|cond| Measured {
+            stats: cond.stats,
+            prior_weight: self.prior_weight,
+            census_support: self.cost_params.census_support,
+            gradient: (self.cost_params.grad_norm_radius > 0)
+                .then(|| self.cost_params.grad_norm_mean.map(|m| (m, self.cost_params.grad_norm_eps)))
+                .flatten(),
+        })
     }
 
     /// The measured noise σn that the adaptive stages scale with (0 when conditioning is off).
@@ -464,7 +496,7 @@ pub(crate) fn fine_pass(
         let top = (pair.ndisp - 1) as f32;
         disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
     }
-    Ok(Output { disparity, confidence: left.confidence, consistent: trusted, timings: t })
+    Ok(Output { disparity, confidence: left.confidence, consistent: trusted, timings: t, measured: None })
 }
 
 /// Inference for one view: WTA on the cost, or mean field with the view's own image.

@@ -190,6 +190,7 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
         confidence: Plane::new(w, h, 0.0),
         consistent: Plane::new(w, h, false),
         timings: Timings::default(),
+        measured: input.measured(),
     };
     let margin = f + 2;
     let step = plan.core_px.max(MIN_CORE_PX);

@@ -222,6 +222,25 @@ fn memory_limit_runs_in_tiles() {
     assert!(err < 1.0, "mean error {err:.3} px");
 }
 
+/// `-v` reports what the adaptive front end measured (noise, gains) and set from it; the paper's pipeline, with
+/// `[condition]` off, has nothing to report.
+#[test]
+fn verbose_prints_what_was_measured() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    let out = run_in(dir.path(), &[&l[..], &r, "-o", "m.pfm", "-v"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let line = stderr(&out).lines().find(|l| l.starts_with("measured: ")).map(str::to_string);
+    let line = line.unwrap_or_else(|| panic!("no measured line in:\n{}", stderr(&out)));
+    for part in ["noise σ ", "contrast gain ", "prior λ ", "Census support ", "gradient local contrast "] {
+        assert!(line.contains(part), "{part:?} missing from {line:?}");
+    }
+    let paper = repo().join("configs/jem-all.toml");
+    let out = run_in(dir.path(), &[&l[..], &r, "-o", "p.pfm", "-v", "-c", paper.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("measured: "), "{}", stderr(&out));
+}
+
 /// Issue 16: the memory a run plans for (the estimate in one piece; the budget when tiled) bounds its measured
 /// peak (`-v` prints both; Linux's VmHWM).
 #[test]

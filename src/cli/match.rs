@@ -176,6 +176,9 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
             eprintln!("{name:<14} {:>9.1} ms", d.as_secs_f64() * 1e3);
         }
         eprintln!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
+        if let Some(m) = &out.measured {
+            eprintln!("{}", describe_measured(m));
+        }
         let (w, h) = pair.left.dims();
         let planned = strategy.memory_bytes(w, h, pair.ndisp, &params);
         if let Some(peak) = peak_rss_bytes() {
@@ -183,6 +186,17 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// One line: what the adaptive front end measured on the pair and set from it.
+fn describe_measured(m: &jem::Measured) -> String {
+    let [nl, nr] = m.stats.noise;
+    let [gl, gr] = m.stats.gain;
+    let gradient = m.gradient.map_or("raw".to_string(), |(mean, eps)| format!("local contrast {mean:.1}, ε {eps:.1}"));
+    format!(
+        "measured: noise σ {nl:.2} / {nr:.2}, contrast gain {gl:.2} / {gr:.2} (left / right); prior λ {:.2}, Census support {:.1}, gradient {gradient}",
+        m.prior_weight, m.census_support
+    )
 }
 
 /// Bytes as MiB with one decimal.
