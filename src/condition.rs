@@ -135,6 +135,36 @@ pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditio
     Conditioned { guide, cost, stats: PairStats { gain, noise, residual_grey_noise } }
 }
 
+/// How much of each pixel's neighbourhood a coarse level `factor` times smaller cannot hold, as a factor for the
+/// coarse prior's weight: `1 / (1 + D / (k·D̄))`, where D is the 3 × 3 mean of |G − the mean of G over the
+/// `factor` × `factor` block holding the pixel| and D̄ its mean over the image (so the factor does not depend on the
+/// image's contrast). Thin structures and edges, where the coarse answer is least reliable, get a weaker prior; flat
+/// regions keep it. All ones when `k` ≤ 0 or the image has no detail at all.
+pub fn detail_factor(grey: &Plane<f32>, factor: usize, k: f32) -> Plane<f32> {
+    let (w, h) = grey.dims();
+    let f = factor.max(1);
+    let mut lost = Plane::new(w, h, 0.0f32);
+    lost.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        let (y0, y1) = (y / f * f, (y / f * f + f).min(h));
+        for (x, v) in row.iter_mut().enumerate() {
+            let (x0, x1) = (x / f * f, (x / f * f + f).min(w));
+            let mut sum = 0.0f32;
+            for yy in y0..y1 {
+                sum += grey.row(yy)[x0..x1].iter().fold(0.0f32, |a, &g| a + g);
+            }
+            *v = grey.row(y)[x] - sum / ((y1 - y0) * (x1 - x0)) as f32;
+        }
+    });
+    let mut out = crate::cost::local_mean_abs(&lost, 1);
+    let scale = k * crate::cost::plane_mean(&out);
+    if scale > 0.0 && scale.is_finite() {
+        out.data.iter_mut().for_each(|d| *d = 1.0 / (1.0 + *d / scale));
+    } else {
+        out.data.fill(1.0);
+    }
+    out
+}
+
 /// Block artifacts of JPEG-like compression: the mean absolute step between neighbours across the columns (and
 /// rows) of an 8-pixel grid, at the grid's strongest phase, above the median step over the eight phases, less
 /// three standard errors of that phase's mean (so a strong random texture, whose phases differ by chance, reads
@@ -335,6 +365,29 @@ mod tests {
     /// The estimator finds the noise it is given (within 10 %), and about the rounding noise (0.29) without.
     /// An image of 8 × 8 blocks with independent offsets has a block step at its grid and none elsewhere; a smooth
     /// ramp and a random texture have none; a shifted grid is found at its own phase.
+    /// A one-pixel line on a flat background: the 2 × 2 block average cannot hold it, so the prior is weakest on
+    /// and beside it and untouched far from it; the factor ignores the image's contrast, and a flat image keeps
+    /// the whole prior.
+    #[test]
+    fn detail_factor_weakens_the_prior_at_thin_structures_only() {
+        let (w, h) = (24, 12);
+        let line = |contrast: f32| Plane {
+            width: w,
+            height: h,
+            data: (0..w * h).map(|i| if i % w == 11 { 100.0 + contrast } else { 100.0 }).collect(),
+        };
+        let f = detail_factor(&line(60.0), 2, 3.0);
+        let at = |x: usize| f.data[6 * w + x];
+        assert!(at(11) < 0.5 && at(10) < 0.8, "on the line {} beside it {}", at(11), at(10));
+        assert_eq!(at(2), 1.0);
+        assert_eq!(at(20), 1.0);
+        let weaker = detail_factor(&line(6.0), 2, 3.0);
+        assert!(f.data.iter().zip(&weaker.data).all(|(a, b)| (a - b).abs() < 1e-6), "contrast changed the factor");
+        let flat = detail_factor(&line(0.0), 2, 3.0);
+        assert!(flat.data.iter().all(|&v| v == 1.0));
+        assert!(detail_factor(&line(60.0), 2, 0.0).data.iter().all(|&v| v == 1.0));
+    }
+
     #[test]
     fn blockiness_sees_a_block_grid_only() {
         let (w, h) = (96, 64);

@@ -138,13 +138,13 @@ pub fn mean_local_contrast(grey: &Plane<f32>, radius: usize) -> f32 {
 }
 
 /// The mean of a plane (summed in `f64`, row-major: the same value whatever the thread count).
-fn plane_mean(p: &Plane<f32>) -> f32 {
+pub(crate) fn plane_mean(p: &Plane<f32>) -> f32 {
     (p.data.iter().map(|&v| f64::from(v)).sum::<f64>() / p.data.len().max(1) as f64) as f32
 }
 
 /// The mean of |v| over the (2r + 1)² window around each pixel, borders replicated: a row sum over dx = −r..r,
 /// then the sum of those over dy = −r..r, each in that order, divided by (2r + 1)².
-fn local_mean_abs(p: &Plane<f32>, r: usize) -> Plane<f32> {
+pub(crate) fn local_mean_abs(p: &Plane<f32>, r: usize) -> Plane<f32> {
     let (w, h) = p.dims();
     let mut rows = Plane::new(w, h, 0.0f32);
     rows.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, out)| {

@@ -308,7 +308,9 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
             ..*c
         };
         let coarse = t.time("coarse prior", || run_observed(&coarse_params, pair, &|_| {}))?;
-        Some(Prior::from_coarse(coarse, prior_weight, c.prior_untrusted))
+        let mut prior = Prior::from_coarse(coarse, prior_weight, c.prior_untrusted);
+        prior.weaken_at_detail(&cost_pair.left.to_grey(), 2, c.prior_detail);
+        Some(prior)
     } else {
         None
     };
@@ -356,6 +358,15 @@ impl Prior {
             *c *= untrusted;
         });
         Prior { disparity: coarse.disparity, confidence, weight }
+    }
+
+    /// Weakens the prior where `grey` (the full-resolution cost image) has detail a level `factor` times coarser
+    /// cannot hold ([`condition::detail_factor`] with `k`; nothing when `k` is 0).
+    pub(crate) fn weaken_at_detail(&mut self, grey: &Plane<f32>, factor: usize, k: f32) {
+        if k > 0.0 {
+            let f = condition::detail_factor(grey, factor, k);
+            self.confidence.data.iter_mut().zip(&f.data).for_each(|(c, f)| *c *= f);
+        }
     }
 }
 

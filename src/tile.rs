@@ -182,7 +182,8 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     let (guide, cost_pair) = input.pairs(pair);
     // The coarse answer is the base of a tiled run: its weight never falls below TILED_PRIOR_FLOOR.
     let weight = input.prior_weight.max(TILED_PRIOR_FLOOR);
-    let prior = Prior::from_coarse(coarse, weight, params.condition.prior_untrusted);
+    let mut prior = Prior::from_coarse(coarse, weight, params.condition.prior_untrusted);
+    prior.weaken_at_detail(&cost_pair.left.to_grey(), f, params.condition.prior_detail);
 
     on_stage("tiles");
     let mut out = Output {

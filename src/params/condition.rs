@@ -48,6 +48,10 @@ pub struct ConditionParams {
     pub prior_confidence: bool,
     /// Prior weight factor at pixels the coarse run's left-right check rejected.
     pub prior_untrusted: f32,
+    /// Weakens the prior where the image has detail the coarse run cannot hold: × 1 / (1 + D / (k·D̄)), D the
+    /// local mean of what an F × F block average removes from the cost image (F the coarse factor), D̄ its image
+    /// mean; this is k (0 = off).
+    pub prior_detail: f32,
     /// A fixed prior weight added to the noise-scaled one.
     pub prior_base: f32,
     /// Labels within this distance of the coarse disparity (full-resolution px) are free.
@@ -81,6 +85,7 @@ impl Default for ConditionParams {
             prior_window: false,
             prior_confidence: true,
             prior_untrusted: 0.5,
+            prior_detail: 3.0,
             prior_margin_px: 1.0,
             prior_trunc_px: 8.0,
         }
@@ -101,6 +106,7 @@ impl ConditionParams {
             prior_per_sigma: 0.0,
             prior_base: 0.0,
             prior_confidence: false,
+            prior_detail: 0.0,
             ..Self::default()
         }
     }
@@ -135,6 +141,7 @@ impl ConditionParams {
         check_nonneg("condition.prior_per_sigma", self.prior_per_sigma)?;
         check_nonneg("condition.prior_base", self.prior_base)?;
         check_nonneg("condition.prior_untrusted", self.prior_untrusted)?;
+        check_nonneg("condition.prior_detail", self.prior_detail)?;
         check_nonneg("condition.prior_recurse_sigma", self.prior_recurse_sigma)?;
         if !(1..=4).contains(&self.prior_levels) {
             return Err(Error::param("condition.prior_levels", self.prior_levels, "1 to 4"));
