@@ -362,9 +362,6 @@ mod tests {
         img
     }
 
-    /// The estimator finds the noise it is given (within 10 %), and about the rounding noise (0.29) without.
-    /// An image of 8 × 8 blocks with independent offsets has a block step at its grid and none elsewhere; a smooth
-    /// ramp and a random texture have none; a shifted grid is found at its own phase.
     /// A one-pixel line on a flat background: the 2 × 2 block average cannot hold it, so the prior is weakest on
     /// and beside it and untouched far from it; the factor ignores the image's contrast, and a flat image keeps
     /// the whole prior.
@@ -388,6 +385,9 @@ mod tests {
         assert!(detail_factor(&line(60.0), 2, 0.0).data.iter().all(|&v| v == 1.0));
     }
 
+    /// The estimator finds the noise it is given (within 10 %), and about the rounding noise (0.29) without.
+    /// An image of 8 × 8 blocks with independent offsets has a block step at its grid and none elsewhere; a smooth
+    /// ramp and a random texture have none; a shifted grid is found at its own phase.
     #[test]
     fn blockiness_sees_a_block_grid_only() {
         let (w, h) = (96, 64);
