@@ -165,6 +165,44 @@ pub fn detail_factor(grey: &Plane<f32>, factor: usize, k: f32) -> Plane<f32> {
     out
 }
 
+/// The range of disparities a coarse prior accepts at each pixel: `(low, high)`, both the pixel's own value
+/// except beside a depth edge, where the values within `radius` pixels (a square window) differ by more than
+/// `min_jump`; there they are the window's smallest and largest. Non-finite values (no prior) are skipped, and
+/// stay non-finite. `radius` 0 returns two copies.
+pub fn edge_range(coarse: &Plane<f32>, radius: usize, min_jump: f32) -> (Plane<f32>, Plane<f32>) {
+    let (w, h) = coarse.dims();
+    if radius == 0 || w == 0 || h == 0 {
+        return (coarse.clone(), coarse.clone());
+    }
+    // Separable: the smallest and largest finite value along each row's window, then down each column's.
+    let mut across = vec![(f32::INFINITY, f32::NEG_INFINITY); w * h];
+    across.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+        let row = coarse.row(y);
+        for (x, o) in out.iter_mut().enumerate() {
+            let window = &row[x.saturating_sub(radius)..(x + radius + 1).min(w)];
+            *o = window.iter().filter(|d| d.is_finite()).fold(*o, |(lo, hi), &d| (lo.min(d), hi.max(d)));
+        }
+    });
+    let mut low = coarse.clone();
+    let mut high = coarse.clone();
+    low.data.par_chunks_mut(w).zip(high.data.par_chunks_mut(w)).enumerate().for_each(|(y, (lo_row, hi_row))| {
+        let (y0, y1) = (y.saturating_sub(radius), (y + radius + 1).min(h));
+        for x in 0..w {
+            if !coarse.row(y)[x].is_finite() {
+                continue;
+            }
+            let (lo, hi) = (y0..y1)
+                .map(|yy| across[yy * w + x])
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), (a, b)| (lo.min(a), hi.max(b)));
+            if hi - lo > min_jump {
+                lo_row[x] = lo;
+                hi_row[x] = hi;
+            }
+        }
+    });
+    (low, high)
+}
+
 /// Block artifacts of JPEG-like compression: the mean absolute step between neighbours across the columns (and
 /// rows) of an 8-pixel grid, at the grid's strongest phase, above the median step over the eight phases, less
 /// three standard errors of that phase's mean (so a strong random texture, whose phases differ by chance, reads
@@ -433,6 +471,41 @@ mod tests {
         };
         assert!(mean_abs(&right) > 30.0, "the tone curve changes the image");
         assert!(mean_abs(&matched) < 2.0, "matched: {}", mean_abs(&matched));
+    }
+
+    /// The prior's free range: widened to the whole step within `radius` of a coarse depth edge, on both sides;
+    /// a slope whose window spans less than `min_jump` keeps the point; a pixel without a prior keeps none.
+    #[test]
+    fn edge_range_frees_the_step_only_beside_depth_edges() {
+        let (w, h) = (20, 5);
+        // A step from 10 to 30 at x = 10, a gentle slope (0.1 px per px) on top, and one pixel without a prior.
+        let mut coarse = Plane::from_vec(
+            w,
+            h,
+            (0..w * h).map(|i| 0.1 * (i % w) as f32 + if i % w >= 10 { 20.0 } else { 10.0 }).collect(),
+        );
+        coarse.data[2 * w + 3] = f32::INFINITY;
+        let (low, high) = edge_range(&coarse, 2, 8.0);
+        for y in 0..h {
+            for x in 0..w {
+                let (c, lo, hi) = (coarse.row(y)[x], low.row(y)[x], high.row(y)[x]);
+                if !c.is_finite() {
+                    assert!(!lo.is_finite() && !hi.is_finite(), "no prior at ({x}, {y})");
+                } else if (8..12).contains(&x) {
+                    assert_eq!(
+                        (lo, hi),
+                        (0.1 * (x.saturating_sub(2)) as f32 + 10.0, 0.1 * (x + 2) as f32 + 20.0),
+                        "({x}, {y})"
+                    );
+                } else {
+                    assert_eq!((lo, hi), (c, c), "away from the step, ({x}, {y})");
+                }
+            }
+        }
+        // Radius 0: two copies.
+        let (low, high) = edge_range(&coarse, 0, 8.0);
+        assert!(low.data.iter().zip(&coarse.data).all(|(a, b)| a == b || (!a.is_finite() && !b.is_finite())));
+        assert!(high.data.iter().zip(&coarse.data).all(|(a, b)| a == b || (!a.is_finite() && !b.is_finite())));
     }
 
     /// A dark pair is stretched (each view by its own range); a full-contrast pair is left alone; off is off.

@@ -310,6 +310,7 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         let coarse = t.time("coarse prior", || run_observed(&coarse_params, pair, &|_| {}))?;
         let mut prior = Prior::from_coarse(coarse, prior_weight, c.prior_untrusted);
         prior.weaken_at_detail(&cost_pair.left.to_grey(), 2, c.prior_detail);
+        prior.spread_at_edges(2, c.prior_spread, c.prior_trunc_px);
         Some(prior)
     } else {
         None
@@ -328,7 +329,9 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
     // Label d' of the shifted pair is disparity lo + d'.
     let (guide, cost_shifted) = tile::shift_right_views(pair, cost_pair, lo, labels)?;
     let prior = coarse.map(|mut p| {
-        p.disparity.data.iter_mut().for_each(|d| *d -= lo as f32);
+        for plane in [&mut p.disparity, &mut p.low, &mut p.high] {
+            plane.data.iter_mut().for_each(|d| *d -= lo as f32);
+        }
         p
     });
     let mut out =
@@ -343,6 +346,11 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
 pub(crate) struct Prior {
     /// The coarse disparities (`inf`: no prior at that pixel).
     pub disparity: DisparityMap,
+    /// The labels the prior leaves free (up to its margin) run from `low` to `high`: the coarse disparity itself,
+    /// or beside a coarse depth edge the whole step ([`Prior::spread_at_edges`]).
+    pub low: DisparityMap,
+    /// See `low`.
+    pub high: DisparityMap,
     /// Per-pixel factor of the weight (the coarse confidence, lowered where its left-right check failed).
     pub confidence: Plane<f32>,
     /// λ before the per-pixel factor.
@@ -357,7 +365,17 @@ impl Prior {
         confidence.data.iter_mut().zip(&coarse.consistent.data).filter(|(_, ok)| !**ok).for_each(|(c, _)| {
             *c *= untrusted;
         });
-        Prior { disparity: coarse.disparity, confidence, weight }
+        let (low, high) = (coarse.disparity.clone(), coarse.disparity.clone());
+        Prior { disparity: coarse.disparity, low, high, confidence, weight }
+    }
+
+    /// Beside a depth edge of the coarse answer (a level `factor` times coarser), leaves the whole step free: the
+    /// range of the coarse disparities within `spread` coarse pixels where they differ by more than `min_jump`
+    /// ([`condition::edge_range`]; nothing when `spread` is 0).
+    pub(crate) fn spread_at_edges(&mut self, factor: usize, spread: usize, min_jump: f32) {
+        if spread > 0 {
+            (self.low, self.high) = condition::edge_range(&self.disparity, spread * factor, min_jump);
+        }
     }
 
     /// Weakens the prior where `grey` (the full-resolution cost image) has detail a level `factor` times coarser
@@ -449,13 +467,16 @@ pub(crate) fn fine_pass(
     if let Some(prior) = prior {
         let (m, margin, trunc) = (cost_left.ndisp, c.prior_margin_px, c.prior_trunc_px);
         let (by_confidence, weight) = (c.prior_confidence, prior.weight);
-        let (coarse, confidence) = (&prior.disparity, &prior.confidence);
-        cost_left.data.par_chunks_mut(m).zip(coarse.data.par_iter()).zip(confidence.data.par_iter()).for_each(
-            |((costs, &dc), &conf)| {
+        let free = prior.low.data.par_iter().zip(prior.high.data.par_iter());
+        cost_left.data.par_chunks_mut(m).zip(free).zip(prior.confidence.data.par_iter()).for_each(
+            |((costs, (&low, &high)), &conf)| {
                 let lambda = if by_confidence { weight * conf } else { weight };
-                if dc.is_finite() {
+                if low.is_finite() {
                     for (d, v) in costs.iter_mut().enumerate() {
-                        *v += lambda * ((d as f32 - dc).abs() - margin).clamp(0.0, trunc);
+                        // The distance from [low, high]: |d − d_coarse| where the two are one.
+                        let d = d as f32;
+                        let off = if d < low { low - d } else { (d - high).max(0.0) };
+                        *v += lambda * (off - margin).clamp(0.0, trunc);
                     }
                 }
             },

@@ -51,8 +51,9 @@ pub const HALO_PX: usize = 32;
 pub const MIN_CORE_PX: usize = 64;
 
 /// Memory per full-resolution pixel beside the tiles: the pair and its conditioned copies (4 RGB `f32` images),
-/// the coarse result at full size, the prior made of it and the stitched maps.
-pub const FULL_SIZE_BYTES_PER_PX: u64 = 4 * 12 + 6 * 4 + 2;
+/// the coarse result at full size, the prior made of it (its disparities, their free range and its weights) and
+/// the stitched maps.
+pub const FULL_SIZE_BYTES_PER_PX: u64 = 4 * 12 + 8 * 4 + 2;
 
 /// How [`run_tiled`] cuts the problem.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -184,6 +185,7 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     let weight = input.prior_weight.max(TILED_PRIOR_FLOOR);
     let mut prior = Prior::from_coarse(coarse, weight, params.condition.prior_untrusted);
     prior.weaken_at_detail(&cost_pair.left.to_grey(), f, params.condition.prior_detail);
+    prior.spread_at_edges(f, params.condition.prior_spread, params.condition.prior_trunc_px);
 
     on_stage("tiles");
     let mut out = Output {
@@ -330,6 +332,8 @@ impl TileJob<'_> {
         let (guide, cost_pair) = cut_pairs(self.guide, self.cost_pair, crop, lo, tile.labels)?;
         let prior = Prior {
             disparity: cut_plane(&self.prior.disparity, crop, |d| d - lo as f32),
+            low: cut_plane(&self.prior.low, crop, |d| d - lo as f32),
+            high: cut_plane(&self.prior.high, crop, |d| d - lo as f32),
             confidence: cut_plane(&self.prior.confidence, crop, |v| v),
             weight: self.prior.weight,
         };
@@ -555,10 +559,10 @@ mod tests {
             };
             check(&job);
         };
-        let prior_of = |f: &dyn Fn(usize, usize) -> f32| Prior {
-            disparity: Plane::from_vec(w, h, (0..w * h).map(|i| f(i % w, i / w)).collect()),
-            confidence: Plane::new(w, h, 1.0),
-            weight: 1.0,
+        let prior_of = |f: &dyn Fn(usize, usize) -> f32| {
+            let disparity = Plane::from_vec(w, h, (0..w * h).map(|i| f(i % w, i / w)).collect());
+            let (low, high) = (disparity.clone(), disparity.clone());
+            Prior { disparity, low, high, confidence: Plane::new(w, h, 1.0), weight: 1.0 }
         };
         let core = Rect { x0: 0, y0: 0, x1: w, y1: h };
         job_for(&prior_of(&|x, y| if x < 200 && y < 80 { 150.0 } else { 10.0 }), &|job| {

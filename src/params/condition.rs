@@ -52,6 +52,11 @@ pub struct ConditionParams {
     /// local mean of what an F × F block average removes from the cost image (F the coarse factor), D̄ its image
     /// mean; this is k (0 = off).
     pub prior_detail: f32,
+    /// Beside a depth edge of the coarse answer the prior accepts the whole step: where the coarse disparities
+    /// within this many coarse pixels of a pixel differ by more than `prior_trunc_px`, labels between their
+    /// smallest and largest are free (the coarse level places an edge only to within its own pixels, and under
+    /// noise its edges fatten); 0 = off.
+    pub prior_spread: usize,
     /// A fixed prior weight added to the noise-scaled one.
     pub prior_base: f32,
     /// Labels within this distance of the coarse disparity (full-resolution px) are free.
@@ -86,6 +91,7 @@ impl Default for ConditionParams {
             prior_confidence: true,
             prior_untrusted: 0.5,
             prior_detail: 3.0,
+            prior_spread: 1,
             prior_margin_px: 1.0,
             prior_trunc_px: 8.0,
         }
@@ -107,6 +113,7 @@ impl ConditionParams {
             prior_base: 0.0,
             prior_confidence: false,
             prior_detail: 0.0,
+            prior_spread: 0,
             ..Self::default()
         }
     }
@@ -145,6 +152,9 @@ impl ConditionParams {
         check_nonneg("condition.prior_recurse_sigma", self.prior_recurse_sigma)?;
         if !(1..=4).contains(&self.prior_levels) {
             return Err(Error::param("condition.prior_levels", self.prior_levels, "1 to 4"));
+        }
+        if self.prior_spread > 8 {
+            return Err(Error::param("condition.prior_spread", self.prior_spread, "0 to 8"));
         }
         check_nonneg("condition.prior_margin_px", self.prior_margin_px)?;
         check_nonneg("condition.prior_trunc_px", self.prior_trunc_px)
