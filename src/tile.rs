@@ -13,7 +13,7 @@
 //!    widened by F + 2 labels (the coarse answer is good to about one coarse label) — the full range where the
 //!    coarse run left no disparity. The right crop is shifted by `lo` columns, so label d' of the tile is
 //!    disparity `lo + d'` and the tile is an ordinary problem of `hi − lo + 1` labels. The coarse answer is
-//!    also the tile's prior, with the weight of the untiled run;
+//!    also the tile's prior (a point prior: no spread at its depth edges), with the weight of the untiled run;
 //! 4. keeps each tile's core (`lo` added back) and stitches the cores.
 //!
 //! **Halo.** A core pixel must see what it would see untiled: the fully connected kernel reaches 3σx, the weighted
@@ -185,7 +185,9 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     let weight = input.prior_weight.max(TILED_PRIOR_FLOOR);
     let mut prior = Prior::from_coarse(coarse, weight, params.condition.prior_untrusted);
     prior.weaken_at_detail(&cost_pair.left.to_grey(), f, params.condition.prior_detail);
-    prior.spread_at_edges(f, params.condition.prior_spread, params.condition.prior_trunc_px);
+    // The tiles keep the point prior (no `prior_spread`): the coarse level is the base answer here, and freeing its
+    // depth edges let the fine level move them on the ×4 scenes (Adirondack 1.66 -> 1.74, Vintage 8.45 -> 8.51;
+    // docs/tuning-log.md, "The prior at coarse depth edges"). The coarse level's own chain has the spread.
 
     on_stage("tiles");
     let mut out = Output {
