@@ -164,6 +164,8 @@ pub struct SceneRun {
     pub seconds: f64,
     /// Per-stage times.
     pub timings: Timings,
+    /// What the adaptive front end measured on the pair (`None` when conditioning is off).
+    pub measured: Option<crate::Measured>,
 }
 
 /// How a scene ended.
@@ -301,7 +303,7 @@ fn run_pair_in(
     }
     let time = pair.time_text(seconds);
     crate::io::write_all_or_none(&[(&files.disparity, &disparity), (&files.time, time.as_bytes())])?;
-    Ok(SceneRun { size: stereo.left.dims(), ndisp, seconds, timings: out.timings })
+    Ok(SceneRun { size: stereo.left.dims(), ndisp, seconds, timings: out.timings, measured: out.measured })
 }
 
 /// The memory the concurrent scenes of a batch share: a scene reserves its estimate before it loads its images
@@ -542,7 +544,7 @@ mod tests {
         assert_eq!(failed(guarded(|| panic!("static"))), "panic in the pipeline: static");
         assert_eq!(failed(guarded(|| todo!("mean field"))), "panic in the pipeline: not yet implemented: mean field");
         assert_eq!(failed(guarded(|| Err(Error::Input("bad calib".into())))), "bad calib");
-        let run = SceneRun { size: (2, 1), ndisp: 1, seconds: 0.5, timings: Timings::default() };
+        let run = SceneRun { size: (2, 1), ndisp: 1, seconds: 0.5, timings: Timings::default(), measured: None };
         assert!(matches!(guarded(|| Ok(run)), SceneStatus::Done(r) if r.seconds == 0.5));
     }
 }

@@ -223,7 +223,7 @@ fn memory_limit_runs_in_tiles() {
 }
 
 /// `-v` reports what the adaptive front end measured (noise, gains) and set from it; the paper's pipeline, with
-/// `[condition]` off, has nothing to report.
+/// `[condition]` off, has nothing to report; `jem batch -v` prints the same line per scene.
 #[test]
 fn verbose_prints_what_was_measured() {
     let dir = tempfile::tempdir().unwrap();
@@ -239,6 +239,17 @@ fn verbose_prints_what_was_measured() {
     let out = run_in(dir.path(), &[&l[..], &r, "-o", "p.pfm", "-v", "-c", paper.to_str().unwrap()]);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(!stderr(&out).contains("measured: "), "{}", stderr(&out));
+
+    // jem batch -v: the same line per scene after the table, with the scene's name.
+    let scene = dir.path().join("scenes").join("Synth");
+    std::fs::create_dir_all(&scene).unwrap();
+    for f in ["im0.png", "im1.png", "calib.txt"] {
+        std::fs::copy(example(f), scene.join(f)).unwrap();
+    }
+    let out = run_in(dir.path(), &["batch", "scenes", "--alg", "M", "-v"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert!(stdout.lines().any(|l| l == format!("Synth: {line}")), "no line 'Synth: {line}' in:\n{stdout}");
 }
 
 /// Issue 16: the memory a run plans for (the estimate in one piece; the budget when tiled) bounds its measured

@@ -210,8 +210,8 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     Ok(if failed > 0 { ExitCode::from(2) } else { ExitCode::SUCCESS })
 }
 
-/// The end-of-run table: scene, size, ndisp, seconds (and per-stage seconds with -v), status; then counts and
-/// the failures.
+/// The end-of-run table: scene, size, ndisp, seconds (and per-stage seconds with -v), status; then counts, with -v
+/// what was measured on each pair (as `jem -v` prints it), and the failures.
 fn batch_summary(reports: &[jem::batch::SceneReport], verbose: bool) -> String {
     use jem::batch::SceneStatus;
     let mut stages: Vec<&'static str> = Vec::new();
@@ -271,6 +271,13 @@ fn batch_summary(reports: &[jem::batch::SceneReport], verbose: bool) -> String {
         "{} scene(s): {done} done, {skipped} skipped, {failed} failed; pipeline time {total_s:.3} s{mean}\n",
         reports.len()
     ));
+    if verbose {
+        for r in reports {
+            if let SceneStatus::Done(jem::batch::SceneRun { measured: Some(m), .. }) = &r.status {
+                out.push_str(&format!("{}: {}\n", r.name, super::r#match::describe_measured(m)));
+            }
+        }
+    }
     if failed > 0 {
         out.push_str("failures:\n");
         for r in reports {

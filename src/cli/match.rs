@@ -189,7 +189,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
 }
 
 /// One line: what the adaptive front end measured on the pair and set from it.
-fn describe_measured(m: &jem::Measured) -> String {
+pub(super) fn describe_measured(m: &jem::Measured) -> String {
     let [nl, nr] = m.stats.noise;
     let [gl, gr] = m.stats.gain;
     let gradient = m.gradient.map_or("raw".to_string(), |(mean, eps)| format!("local contrast {mean:.1}, ε {eps:.1}"));
