@@ -24,7 +24,10 @@
 //!    in the scene), and the full-resolution cost of label d at pixel i
 //!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = (`prior_base` + `prior_per_sigma`·σn) × the
 //!    coarse run's confidence at i (its max-marginal, with `prior_confidence`) × `prior_untrusted` where the
-//!    coarse left-right check failed (the fill guessed there). The coarse level removes the
+//!    coarse left-right check failed (the fill guessed there), × [`detail_factor`] where the image has detail the
+//!    coarse level cannot hold. Beside a depth edge of the coarse answer (`prior_spread`) the distance is taken
+//!    from the whole step, [low, high] of [`edge_range`], instead of d_coarse: the coarse level places an edge
+//!    only to within its own pixels, and fattens near objects under noise. The coarse level removes the
 //!    gross errors that fine-scale noise causes, the fine level keeps the precision; the prior also places
 //!    each pixel well enough that three full-resolution iterations do the work of five. With `prior_levels` L
 //!    the coarse run has a coarse prior of its own, L − 1 levels deep (default 2: the half-resolution run is

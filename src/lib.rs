@@ -329,7 +329,8 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
     // Label d' of the shifted pair is disparity lo + d'.
     let (guide, cost_shifted) = tile::shift_right_views(pair, cost_pair, lo, labels)?;
     let prior = coarse.map(|mut p| {
-        for plane in [&mut p.disparity, &mut p.low, &mut p.high] {
+        let free = p.free.iter_mut().flat_map(|(low, high)| [low, high]);
+        for plane in std::iter::once(&mut p.disparity).chain(free) {
             plane.data.iter_mut().for_each(|d| *d -= lo as f32);
         }
         p
@@ -346,11 +347,10 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
 pub(crate) struct Prior {
     /// The coarse disparities (`inf`: no prior at that pixel).
     pub disparity: DisparityMap,
-    /// The labels the prior leaves free (up to its margin) run from `low` to `high`: the coarse disparity itself,
-    /// or beside a coarse depth edge the whole step ([`Prior::spread_at_edges`]).
-    pub low: DisparityMap,
-    /// See `low`.
-    pub high: DisparityMap,
+    /// The labels the prior leaves free (up to its margin), `(low, high)`: beside a coarse depth edge the whole
+    /// step, elsewhere the coarse disparity itself ([`Prior::spread_at_edges`]; `None`: the coarse disparity
+    /// everywhere).
+    pub free: Option<(DisparityMap, DisparityMap)>,
     /// Per-pixel factor of the weight (the coarse confidence, lowered where its left-right check failed).
     pub confidence: Plane<f32>,
     /// λ before the per-pixel factor.
@@ -365,8 +365,7 @@ impl Prior {
         confidence.data.iter_mut().zip(&coarse.consistent.data).filter(|(_, ok)| !**ok).for_each(|(c, _)| {
             *c *= untrusted;
         });
-        let (low, high) = (coarse.disparity.clone(), coarse.disparity.clone());
-        Prior { disparity: coarse.disparity, low, high, confidence, weight }
+        Prior { disparity: coarse.disparity, free: None, confidence, weight }
     }
 
     /// Beside a depth edge of the coarse answer (a level `factor` times coarser), leaves the whole step free: the
@@ -374,7 +373,7 @@ impl Prior {
     /// ([`condition::edge_range`]; nothing when `spread` is 0).
     pub(crate) fn spread_at_edges(&mut self, factor: usize, spread: usize, min_jump: f32) {
         if spread > 0 {
-            (self.low, self.high) = condition::edge_range(&self.disparity, spread * factor, min_jump);
+            self.free = Some(condition::edge_range(&self.disparity, spread * factor, min_jump));
         }
     }
 
@@ -467,7 +466,8 @@ pub(crate) fn fine_pass(
     if let Some(prior) = prior {
         let (m, margin, trunc) = (cost_left.ndisp, c.prior_margin_px, c.prior_trunc_px);
         let (by_confidence, weight) = (c.prior_confidence, prior.weight);
-        let free = prior.low.data.par_iter().zip(prior.high.data.par_iter());
+        let (low, high) = prior.free.as_ref().map_or((&prior.disparity, &prior.disparity), |(l, h)| (l, h));
+        let free = low.data.par_iter().zip(high.data.par_iter());
         cost_left.data.par_chunks_mut(m).zip(free).zip(prior.confidence.data.par_iter()).for_each(
             |((costs, (&low, &high)), &conf)| {
                 let lambda = if by_confidence { weight * conf } else { weight };

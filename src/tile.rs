@@ -51,9 +51,8 @@ pub const HALO_PX: usize = 32;
 pub const MIN_CORE_PX: usize = 64;
 
 /// Memory per full-resolution pixel beside the tiles: the pair and its conditioned copies (4 RGB `f32` images),
-/// the coarse result at full size, the prior made of it (its disparities, their free range and its weights) and
-/// the stitched maps.
-pub const FULL_SIZE_BYTES_PER_PX: u64 = 4 * 12 + 8 * 4 + 2;
+/// the coarse result at full size, the prior made of it and the stitched maps.
+pub const FULL_SIZE_BYTES_PER_PX: u64 = 4 * 12 + 6 * 4 + 2;
 
 /// How [`run_tiled`] cuts the problem.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -334,8 +333,7 @@ impl TileJob<'_> {
         let (guide, cost_pair) = cut_pairs(self.guide, self.cost_pair, crop, lo, tile.labels)?;
         let prior = Prior {
             disparity: cut_plane(&self.prior.disparity, crop, |d| d - lo as f32),
-            low: cut_plane(&self.prior.low, crop, |d| d - lo as f32),
-            high: cut_plane(&self.prior.high, crop, |d| d - lo as f32),
+            free: None,
             confidence: cut_plane(&self.prior.confidence, crop, |v| v),
             weight: self.prior.weight,
         };
@@ -563,8 +561,7 @@ mod tests {
         };
         let prior_of = |f: &dyn Fn(usize, usize) -> f32| {
             let disparity = Plane::from_vec(w, h, (0..w * h).map(|i| f(i % w, i / w)).collect());
-            let (low, high) = (disparity.clone(), disparity.clone());
-            Prior { disparity, low, high, confidence: Plane::new(w, h, 1.0), weight: 1.0 }
+            Prior { disparity, free: None, confidence: Plane::new(w, h, 1.0), weight: 1.0 }
         };
         let core = Rect { x0: 0, y0: 0, x1: w, y1: h };
         job_for(&prior_of(&|x, y| if x < 200 && y < 80 { 150.0 } else { 10.0 }), &|job| {
