@@ -302,6 +302,8 @@ mod tests {
             Params::load(None, &["meanfield.unary_scale_start=0.05".into()]).unwrap().meanfield.unary_scale_start,
             0.05
         );
+        let e = Params::load(None, &["condition.prior_spread=9".into()]).unwrap_err();
+        assert_eq!(e.to_string(), "invalid condition.prior_spread = 9 (expected 0 to 8)");
         let e = Params::load(None, &["cost.census_width=4".into()]).unwrap_err();
         assert!(e.to_string().contains("cost.census_width = 4"), "{e}");
         let e = Params::from_toml_str("downscale = 0\n", Path::new("c.toml")).unwrap_err();
