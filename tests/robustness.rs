@@ -22,15 +22,24 @@ fn mean_error(params: &Params, pair: &StereoPair, scene: &SynthScene) -> f64 {
 
 /// [`mean_error`] over the visible pixels i with `keep(i)` only.
 fn mean_error_where(params: &Params, pair: &StereoPair, scene: &SynthScene, keep: impl Fn(usize) -> bool) -> f64 {
+    mean_errors(params, pair, scene, keep).0
+}
+
+/// One run of `params` on `pair`, scored twice: the mean absolute error over the visible pixels i with `keep(i)`,
+/// and over all visible pixels.
+fn mean_errors(params: &Params, pair: &StereoPair, scene: &SynthScene, keep: impl Fn(usize) -> bool) -> (f64, f64) {
     let out = jem::run(params, pair).unwrap();
-    let (mut sum, mut n) = (0.0, 0usize);
+    let ((mut sum, mut n), (mut sum_all, mut n_all)) = ((0.0, 0usize), (0.0, 0usize));
     for (i, ((d, g), m)) in out.disparity.data.iter().zip(&scene.gt.data).zip(&scene.mask.data).enumerate() {
-        if *m == MASK_VISIBLE && keep(i) {
-            sum += f64::from((d - g).abs());
-            n += 1;
+        if *m == MASK_VISIBLE {
+            let e = f64::from((d - g).abs());
+            (sum_all, n_all) = (sum_all + e, n_all + 1);
+            if keep(i) {
+                (sum, n) = (sum + e, n + 1);
+            }
         }
     }
-    sum / n as f64
+    (sum / n as f64, sum_all / n_all as f64)
 }
 
 /// `img` with its contrast cut to `contrast` around mid-grey (weak texture).
@@ -211,12 +220,10 @@ fn thin_structures_under_noise() {
         vmax: (ndisp - 1) as f32,
     };
     let pair = degraded(&scene, Some("noise:8"), 5);
-    let on_bars =
-        |params: &Params| mean_error_where(params, &pair, &scene, |i| bar(i % w) && i / w > 4 && i / w < h - 4);
+    let on_bars = |params: &Params| mean_errors(params, &pair, &scene, |i| bar(i % w) && i / w > 4 && i / w < h - 4);
     let mut without = Params::default();
     without.condition.prior_detail = 0.0;
-    let (off, on) = (on_bars(&without), on_bars(&Params::default()));
-    let (all_off, all_on) = (mean_error(&without, &pair, &scene), mean_error(&Params::default(), &pair, &scene));
+    let ((off, all_off), (on, all_on)) = (on_bars(&without), on_bars(&Params::default()));
     eprintln!(
         "thin bars under noise σ 8: prior_detail off {off:.3} px, default {on:.3} px (whole image {all_off:.3} / {all_on:.3})"
     );
@@ -244,8 +251,9 @@ fn depth_edges_under_noise() {
         };
         let pair = degraded(&s, Some("noise:8"), 5);
         for (k, params) in [&point, &Params::default()].into_iter().enumerate() {
-            near[k] += mean_error_where(params, &pair, &s, near_edge) / 6.0;
-            all[k] += mean_error(params, &pair, &s) / 6.0;
+            let (at_edges, whole) = mean_errors(params, &pair, &s, near_edge);
+            near[k] += at_edges / 6.0;
+            all[k] += whole / 6.0;
         }
     }
     eprintln!(
