@@ -146,16 +146,25 @@ pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditio
 pub fn detail_factor(grey: &Plane<f32>, factor: usize, k: f32) -> Plane<f32> {
     let (w, h) = grey.dims();
     let f = factor.max(1);
-    let mut lost = Plane::new(w, h, 0.0f32);
-    lost.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
-        let (y0, y1) = (y / f * f, (y / f * f + f).min(h));
-        for (x, v) in row.iter_mut().enumerate() {
-            let (x0, x1) = (x / f * f, (x / f * f + f).min(w));
+    // The mean of each F × F block (clipped at the borders), once per block.
+    let bw = w.div_ceil(f);
+    let mut block_means = vec![0.0f32; bw * h.div_ceil(f)];
+    block_means.par_chunks_mut(bw.max(1)).enumerate().for_each(|(by, means)| {
+        let (y0, y1) = (by * f, (by * f + f).min(h));
+        for (bx, m) in means.iter_mut().enumerate() {
+            let (x0, x1) = (bx * f, (bx * f + f).min(w));
             let mut sum = 0.0f32;
             for yy in y0..y1 {
                 sum += grey.row(yy)[x0..x1].iter().fold(0.0f32, |a, &g| a + g);
             }
-            *v = grey.row(y)[x] - sum / ((y1 - y0) * (x1 - x0)) as f32;
+            *m = sum / ((y1 - y0) * (x1 - x0)) as f32;
+        }
+    });
+    let mut lost = Plane::new(w, h, 0.0f32);
+    lost.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        let (g, means) = (grey.row(y), &block_means[y / f * bw..]);
+        for (x, v) in row.iter_mut().enumerate() {
+            *v = g[x] - means[x / f];
         }
     });
     let mut out = crate::cost::local_mean_abs(&lost, 1);
