@@ -20,15 +20,10 @@ import time
 import cv2
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from pfm import write_pfm  # noqa: E402 (the scripts' own module, beside them)
+
 cv2.setNumThreads(1)
-
-
-def write_pfm(path, a):
-    a = np.asarray(a, dtype='<f4')
-    h, w = a.shape
-    with open(path, 'wb') as f:
-        f.write(b'Pf\n%d %d\n-1\n' % (w, h))
-        f.write(np.flipud(a).tobytes())
 
 
 def fill_background(d):
