@@ -19,7 +19,8 @@ SRC holds clones of the five repositories, each checked out at the commit below,
     git clone https://github.com/DeepMotionAIResearch/DenseMatchingBenchmark SRC/DenseMatchingBenchmark
     git -C SRC/DenseMatchingBenchmark checkout 010aeb66e3ceaf3d866036b0ca751861df39432d
 
-Needs numpy and OpenCV (pip install numpy opencv-python-headless). OUT must not exist. The data stay outside this
+Needs numpy and OpenCV (pip install numpy opencv-python-headless). OUT must not exist; it is written whole or not
+at all. The data stay outside this
 repository: the samples are the repositories' (and their benchmarks') own, under their terms.
 
 Per pair: ndisp = 1.1 × the largest true disparity, rounded up to a multiple of 16; mask0nocc.png is 255 where the
@@ -29,6 +30,7 @@ no occlusion information: every pixel with ground truth is 255).
 """
 import math
 import os
+import shutil
 import sys
 
 import cv2
@@ -192,10 +194,16 @@ def main():
         sys.exit(0)
     if len(sys.argv) != 3:
         sys.exit(__doc__.split('\n\n')[1].strip())
-    src, out = sys.argv[1], sys.argv[2]
-    if os.path.exists(out):
+    src, out = sys.argv[1], os.path.normpath(sys.argv[2])
+    if os.path.lexists(out):
         sys.exit(f'error: {out}: exists (give a new folder)')
-    Builder(src, os.path.join(out, 'trainingQ')).build()
+    # Built in a hidden folder beside OUT and renamed at the end: OUT appears whole or not at all.
+    partial = os.path.join(os.path.dirname(out) or '.', f'.{os.path.basename(out)}.partial-{os.getpid()}')
+    try:
+        Builder(src, os.path.join(partial, 'trainingQ')).build()
+        os.rename(partial, out)
+    finally:
+        shutil.rmtree(partial, ignore_errors=True)
 
 
 if __name__ == '__main__':

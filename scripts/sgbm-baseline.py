@@ -7,8 +7,8 @@ valid disparities to the left and right) and disp0NAMEraw.pfm (holes = inf), wit
 (seconds of compute(), one thread); then `jem eval TREE --alg NAME --alg NAMEraw` scores them. Settings: mode
 3WAY, block 5, P1 = 8·3·5², P2 = 32·3·5², uniqueness 10, speckle window 100 / range 2, disp12MaxDiff 1,
 numDisparities = ndisp of calib.txt rounded up to 16. Needs numpy and OpenCV (pip install numpy
-opencv-python-headless). Existing files of that NAME are overwritten (jem's own results are never touched: NAME
-must not be a name jem wrote).
+opencv-python-headless). A tree that already holds results of that NAME is refused before anything is written;
+each scene's four files appear together.
 """
 import glob
 import math
@@ -69,11 +69,21 @@ def run(scene, name):
     seconds = time.perf_counter() - start
     d = fixed.astype(np.float32) / 16.0
     d[fixed < 0] = np.inf
-    write_pfm(os.path.join(scene, f'disp0{name}raw.pfm'), d)
-    write_pfm(os.path.join(scene, f'disp0{name}.pfm'), fill_background(d))
-    for n in (name, name + 'raw'):
-        with open(os.path.join(scene, f'time{n}.txt'), 'w') as f:
-            f.write(f'{seconds:.4f}\n')
+    # Each file written beside its place and renamed into it once all four are complete.
+    done = []
+    try:
+        for n, disparity in ((name + 'raw', d), (name, fill_background(d))):
+            write_pfm(os.path.join(scene, f'.disp0{n}.pfm.partial'), disparity)
+            done.append(f'disp0{n}.pfm')
+            with open(os.path.join(scene, f'.time{n}.txt.partial'), 'w') as f:
+                f.write(f'{seconds:.4f}\n')
+            done.append(f'time{n}.txt')
+        for f in done:
+            os.replace(os.path.join(scene, f'.{f}.partial'), os.path.join(scene, f))
+    finally:
+        for f in done:
+            if os.path.exists(os.path.join(scene, f'.{f}.partial')):
+                os.remove(os.path.join(scene, f'.{f}.partial'))
     print(f'{os.path.basename(scene):<28} numDisparities {labels:3d}  {seconds:.3f} s  '
           f'valid {100 * np.isfinite(d).mean():.1f} %')
 
@@ -91,6 +101,11 @@ def main():
                                                            recursive=True))
     if not scenes:
         sys.exit(f'error: {sys.argv[1]}: no scene folders (calib.txt) found')
+    # Never over another run's results (jem's, say, under the same name): refused before anything is written.
+    for scene in scenes:
+        for f in (f'disp0{name}.pfm', f'disp0{name}raw.pfm', f'time{name}.txt', f'time{name}raw.txt'):
+            if os.path.lexists(os.path.join(scene, f)):
+                sys.exit(f'error: {os.path.join(scene, f)}: exists (remove it or give another NAME)')
     for scene in scenes:
         run(scene, name)
 
