@@ -55,6 +55,7 @@ pub mod meanfield;
 pub mod params;
 pub mod post;
 pub mod range;
+pub mod rectify;
 #[doc(hidden)]
 pub mod rng;
 pub mod scale;
@@ -63,6 +64,7 @@ pub mod table;
 pub mod tile;
 pub mod viz;
 
+use std::borrow::Cow;
 use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
@@ -123,6 +125,17 @@ pub struct Measured {
     pub census_support: f32,
     /// ḡ and ε of the gradient normalisation (`None`: the raw gradient).
     pub gradient: Option<(f32, f32)>,
+    /// The right view's residual vertical offset ([`rectify`]; `None`: not measured).
+    pub vertical: Option<VerticalMeasured>,
+}
+
+/// The right view's residual vertical offset as measured ([`rectify::estimate`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VerticalMeasured {
+    /// Its smallest and largest value over the image (px, at the resolution the pipeline ran at).
+    pub range: (f32, f32),
+    /// Whether it was removed (it reached `condition.vertical_min_px`).
+    pub corrected: bool,
 }
 
 /// Estimated peak memory of [`run`] in bytes for a `width × height` pair with `ndisp` labels and `params`
@@ -276,10 +289,8 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         ));
     }
     let c = &params.condition;
-    let input = Prepared::of(params, pair, &mut t);
-    let (cost_params, prior_weight) = (&input.cost_params, input.prior_weight);
-    // The guidance pair (colour weights, post-processing) and the pair the matching cost sees.
-    let (pair, cost_pair) = input.pairs(pair);
+    let mut input = Prepared::of(params, pair, &mut t);
+    let (cost_params, prior_weight) = (input.cost_params.clone(), input.prior_weight);
     on_stage("cost volume");
     // Before the full-resolution volume exists, so the two runs' buffers are never alive together.
     // The coarse run needs a pair of at least 8 × 8 at half size whose halved range stays below its width.
@@ -307,14 +318,21 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
             prior_levels: if deeper { c.prior_levels - 1 } else { 1 },
             ..*c
         };
-        let coarse = t.time("coarse prior", || run_observed(&coarse_params, pair, &|_| {}))?;
+        let guide = input.pairs(pair).0;
+        let coarse = t.time("coarse prior", || run_observed(&coarse_params, guide, &|_| {}))?;
+        let grey_left = input.pairs(pair).1.left.to_grey();
+        // The right views moved onto the left view's rows where the coarse answer shows them off.
+        input.align_vertically(c, &grey_left, &coarse, &mut t);
         let mut prior = Prior::from_coarse(coarse, prior_weight, c.prior_untrusted);
-        prior.weaken_at_detail(&cost_pair.left.to_grey(), 2, c.prior_detail);
+        prior.weaken_at_detail(&grey_left, 2, c.prior_detail);
         prior.spread_at_edges(2, c.prior_spread, c.prior_trunc_px);
         Some(prior)
     } else {
         None
     };
+    let cost_params = &cost_params;
+    // The guidance pair (colour weights, post-processing) and the pair the matching cost sees.
+    let (pair, cost_pair) = input.pairs(pair);
     // The label window: only the disparities the coarse run found, widened by two coarse labels.
     let window = match &coarse {
         Some(prior) if c.prior_window => tile::label_window(&prior.disparity, pair.ndisp, 4),
@@ -396,6 +414,8 @@ pub(crate) struct Prepared<'a> {
     pub cost_params: params::CostParams,
     /// λ of the coarse prior before the per-pixel factor.
     pub prior_weight: f32,
+    /// The right view's residual vertical offset, once [`Prepared::align_vertically`] has measured it.
+    vertical: Option<VerticalMeasured>,
 }
 
 impl<'a> Prepared<'a> {
@@ -417,7 +437,41 @@ impl<'a> Prepared<'a> {
                 cost_params.grad_norm_mean = Some(cost::mean_local_contrast(&grey, cost_params.grad_norm_radius));
             }
         }
-        Prepared { conditioned, cost_params, prior_weight }
+        Prepared { conditioned, cost_params, prior_weight, vertical: None }
+    }
+
+    /// Measures the right view's residual vertical offset against a coarse answer at this size
+    /// ([`rectify::estimate`] on the cost pair, `grey_left` its left view in grey) and, where it reaches
+    /// `condition.vertical_min_px`, moves the right views of the guidance and the cost pair onto the left view's
+    /// rows (stage `vertical`). Nothing when conditioning or `vertical_align` is off.
+    pub(crate) fn align_vertically(
+        &mut self,
+        c: &params::ConditionParams,
+        grey_left: &Plane<f32>,
+        coarse: &Output,
+        t: &mut Timings,
+    ) {
+        let Some(cond) = self.conditioned.as_mut().filter(|_| c.enabled && c.vertical_align) else { return };
+        let offset = t.time("vertical", || {
+            rectify::estimate(grey_left, &cond.cost_pair().right.to_grey(), &coarse.disparity, &coarse.consistent)
+        });
+        let Some(v) = offset else { return };
+        let corrected = v.max_abs() >= c.vertical_min_px;
+        self.vertical = Some(VerticalMeasured { range: v.range(), corrected });
+        if corrected {
+            t.time("vertical", || {
+                if let Some(cost) = &mut cond.cost {
+                    cost.right = rectify::resample_right(&cost.right, &v);
+                }
+                let right = rectify::resample_right(&cond.guide.right, &v);
+                match &mut cond.guide {
+                    Cow::Owned(guide) => guide.right = right,
+                    Cow::Borrowed(guide) => {
+                        cond.guide = Cow::Owned(StereoPair { left: guide.left.clone(), right, ndisp: guide.ndisp });
+                    }
+                }
+            });
+        }
     }
 
     /// What was measured and derived, for [`Output::measured`] (`None` when conditioning is off).
@@ -429,6 +483,7 @@ impl<'a> Prepared<'a> {
             gradient: (self.cost_params.grad_norm_radius > 0)
                 .then(|| self.cost_params.grad_norm_mean.map(|m| (m, self.cost_params.grad_norm_eps)))
                 .flatten(),
+            vertical: self.vertical,
         })
     }
 

@@ -178,12 +178,15 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     // base answer, as good as a run at that resolution can be).
     let coarse = t.time("coarse level", || crate::run_observed(&coarse_params, pair, &|_| {}))?;
 
-    let input = Prepared::of(params, pair, &mut t);
+    let mut input = Prepared::of(params, pair, &mut t);
+    let grey_left = input.pairs(pair).1.left.to_grey();
+    // The right views moved onto the left view's rows where the coarse answer shows them off (as untiled).
+    input.align_vertically(&params.condition, &grey_left, &coarse, &mut t);
     let (guide, cost_pair) = input.pairs(pair);
     // The coarse answer is the base of a tiled run: its weight never falls below TILED_PRIOR_FLOOR.
     let weight = input.prior_weight.max(TILED_PRIOR_FLOOR);
     let mut prior = Prior::from_coarse(coarse, weight, params.condition.prior_untrusted);
-    prior.weaken_at_detail(&cost_pair.left.to_grey(), f, params.condition.prior_detail);
+    prior.weaken_at_detail(&grey_left, f, params.condition.prior_detail);
     // The tiles keep the point prior (no `prior_spread`): the coarse level is the base answer here, and freeing its
     // depth edges let the fine level move them on the ×4 scenes (Adirondack 1.66 -> 1.74, Vintage 8.45 -> 8.51;
     // docs/tuning-log.md, "The prior at coarse depth edges"). The coarse level's own chain has the spread.

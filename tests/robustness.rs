@@ -263,3 +263,39 @@ fn depth_edges_under_noise() {
     assert!(near[1] < 0.8 * near[0], "near depth edges: spread {:.3}, point prior {:.3}", near[1], near[0]);
     assert!(all[1] < all[0], "whole images: spread {:.3}, point prior {:.3}", all[1], all[0]);
 }
+
+/// A rig whose rectification is off: the right view of six rendered scenes moved vertically by a known surface
+/// (0.8 to 1.9 px: a shift, a roll and a bend), with light noise (σ 1). The default measures the offset's range to
+/// within 0.15 px and removes it (mean error 0.47 px without, 0.22 px with, when written).
+#[test]
+fn vertical_misalignment_is_measured_and_removed() {
+    use jem::rectify::{VerticalOffset, resample_right};
+    let mut off = Params::default();
+    off.condition.vertical_align = false;
+    let (mut errors, mut worst) = ([0.0f64; 2], 0.0f64);
+    for seed in 11..=16 {
+        let s = scene(seed, 1.0);
+        let (w, h) = (s.gt.width, s.gt.height);
+        let mut truth = VerticalOffset::zero(w, h);
+        truth.coef = [1.2, 0.8, 0.0, 0.0, 1.2];
+        // The right view whose row y + v(x, y) shows what the left view's row y does.
+        let mut inverse = truth;
+        inverse.coef = truth.coef.map(|c| -c);
+        let moved = SynthScene { right: resample_right(&s.right, &inverse), ..s.clone() };
+        let pair = degraded(&moved, Some("noise:1"), 5);
+        let out = jem::run(&Params::default(), &pair).unwrap();
+        let measured = out.measured.and_then(|m| m.vertical).expect("the offset is measured");
+        assert!(measured.corrected, "seed {seed}: not removed ({:?})", measured.range);
+        let (lo, hi) = truth.range();
+        worst = worst.max(f64::from((measured.range.0 - lo).abs()).max(f64::from((measured.range.1 - hi).abs())));
+        for (k, params) in [&off, &Params::default()].into_iter().enumerate() {
+            errors[k] += mean_error(params, &pair, &moved) / 6.0;
+        }
+    }
+    eprintln!(
+        "vertical misalignment: not removed {:.3} px, removed {:.3} px; range measured to within {worst:.3} px",
+        errors[0], errors[1]
+    );
+    assert!(worst < 0.15, "the measured range is {worst:.3} px off");
+    assert!(errors[1] < 0.8 * errors[0], "removed {:.3}, not removed {:.3}", errors[1], errors[0]);
+}

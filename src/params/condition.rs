@@ -57,6 +57,12 @@ pub struct ConditionParams {
     /// smallest and largest are free (the coarse level places an edge only to within its own pixels, and under
     /// noise its edges fatten); 0 = off.
     pub prior_spread: usize,
+    /// Measure the right view's residual vertical offset against the coarse run's answer and remove it
+    /// ([`crate::rectify`]) before the full-resolution cost (needs the coarse prior).
+    pub vertical_align: bool,
+    /// The offset is removed only where it reaches this many pixels somewhere in the image (below it the
+    /// Census windows hardly differ, and a perfectly rectified pair stays as it is).
+    pub vertical_min_px: f32,
     /// A fixed prior weight added to the noise-scaled one.
     pub prior_base: f32,
     /// Labels within this distance of the coarse disparity (full-resolution px) are free.
@@ -92,6 +98,8 @@ impl Default for ConditionParams {
             prior_untrusted: 0.5,
             prior_detail: 3.0,
             prior_spread: 1,
+            vertical_align: true,
+            vertical_min_px: 0.1,
             prior_margin_px: 1.0,
             prior_trunc_px: 8.0,
         }
@@ -114,6 +122,7 @@ impl ConditionParams {
             prior_confidence: false,
             prior_detail: 0.0,
             prior_spread: 0,
+            vertical_align: false,
             ..Self::default()
         }
     }
@@ -155,6 +164,9 @@ impl ConditionParams {
         }
         if self.prior_spread > 8 {
             return Err(Error::param("condition.prior_spread", self.prior_spread, "0 to 8"));
+        }
+        if !(self.vertical_min_px.is_finite() && (0.0..=crate::rectify::MAX_OFFSET).contains(&self.vertical_min_px)) {
+            return Err(Error::param("condition.vertical_min_px", self.vertical_min_px, "0 to 4"));
         }
         check_nonneg("condition.prior_margin_px", self.prior_margin_px)?;
         check_nonneg("condition.prior_trunc_px", self.prior_trunc_px)
