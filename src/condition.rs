@@ -34,6 +34,10 @@
 //!    guided by a quarter-resolution one). With `prior_window` the full resolution searches only the labels
 //!    the coarse run found, widened by two coarse labels (off by default: as accurate, and on MiddEval3's
 //!    ranges hardly faster).
+//! 5. **Vertical alignment** (`vertical_align`, in [`crate::run`] and the tiled run): with the coarse run's answer,
+//!    the right view's residual vertical offset (imperfect rectification) is measured and, where it reaches
+//!    `vertical_min_px`, removed from the guidance and the cost pair before the full-resolution cost
+//!    ([`crate::rectify`]).
 //!
 //! Everything is measured on the pair itself; nothing depends on the dataset. The paper's configs turn all of
 //! it off (`enabled = false`). Measurements: docs/tuning-log.md ("Robustness").

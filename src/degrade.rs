@@ -14,6 +14,9 @@
 //! - `exposure:G:P` — the right view only: v ↦ 255·(G·v/255)^P (a darker or brighter view with another tone
 //!   curve); Census is invariant to it, the gradient term and colour weights are not;
 //! - `blur:S` — a Gaussian blur of standard deviation S pixels on both views (defocus);
+//! - `misalign:D:A` — the right view only, moved down by D pixels and rotated by A degrees (counter-clockwise)
+//!   about its centre, bilinear: an imperfectly rectified rig (the ground truth is left as it is, so a rotation
+//!   also moves matches horizontally, which no matcher can undo);
 //! - `jpeg:Q` — JPEG compression of both views at quality Q (1–100; the `image` crate's baseline encoder);
 //! - several degradations separated by `+` apply in order (e.g. `blur:1+noise:4`).
 //!
@@ -57,6 +60,14 @@ pub enum Degradation {
     Blur {
         /// Standard deviation in pixels.
         sigma: f64,
+    },
+    /// Imperfect rectification: the right view moved down by `dy` pixels and rotated by `degrees` about its
+    /// centre (bilinear, borders replicated).
+    Misalign {
+        /// Vertical shift in pixels (positive: the content moves down).
+        dy: f64,
+        /// Rotation in degrees (positive: counter-clockwise on screen).
+        degrees: f64,
     },
     /// JPEG compression of both views (encoded with the `image` crate's baseline encoder and decoded again).
     Jpeg {
@@ -106,6 +117,10 @@ impl FromStr for Degradation {
                 arity(1)?;
                 Degradation::Blur { sigma: num(0, "sigma")? }
             }
+            "misalign" => {
+                arity(2)?;
+                Degradation::Misalign { dy: num(0, "shift")?, degrees: num(1, "rotation")? }
+            }
             "jpeg" => {
                 arity(1)?;
                 let q = num(0, "quality")?;
@@ -115,7 +130,9 @@ impl FromStr for Degradation {
                 Degradation::Jpeg { quality: q as u8 }
             }
             _ => {
-                return Err(format!("unknown degradation `{kind}` (expected noise, lowlight, exposure, blur or jpeg)"));
+                return Err(format!(
+                    "unknown degradation `{kind}` (expected noise, lowlight, exposure, blur, misalign or jpeg)"
+                ));
             }
         };
         step.validate().map_err(|e| format!("`{text}`: {e}"))?;
@@ -130,8 +147,9 @@ fn usage(kind: &str) -> &'static str {
         "lowlight" => "lowlight:GAIN:READ_SIGMA",
         "exposure" => "exposure:GAIN:GAMMA",
         "blur" => "blur:SIGMA",
+        "misalign" => "misalign:SHIFT:DEGREES",
         "jpeg" => "jpeg:QUALITY",
-        _ => "noise:S, lowlight:G:R, exposure:G:P, blur:S or jpeg:Q",
+        _ => "noise:S, lowlight:G:R, exposure:G:P, blur:S, misalign:DY:DEG or jpeg:Q",
     }
 }
 
@@ -143,12 +161,14 @@ impl Degradation {
                 gain > 0.0 && gain <= 1.0 && (0.0..=100.0).contains(&read_sigma)
             }
             Degradation::Exposure { gain, gamma } => gain > 0.0 && gain <= 10.0 && gamma > 0.0 && gamma <= 10.0,
+            Degradation::Misalign { dy, degrees } => dy.abs() <= 100.0 && degrees.abs() <= 45.0,
             Degradation::Jpeg { quality } => (1..=100).contains(&quality),
         };
         if ok {
             Ok(())
         } else {
-            Err("out of range (sigma 0..=100, gain 0 < g ≤ 1 for lowlight and ≤ 10 for exposure, gamma 0 < p ≤ 10)"
+            Err("out of range (sigma 0..=100, gain 0 < g ≤ 1 for lowlight and ≤ 10 for exposure, gamma 0 < p ≤ 10, \
+                 shift ±100 px, rotation ±45°)"
                 .to_string())
         }
     }
@@ -161,6 +181,7 @@ impl fmt::Display for Degradation {
             Degradation::LowLight { gain, read_sigma } => write!(f, "lowlight:{gain}:{read_sigma}"),
             Degradation::Exposure { gain, gamma } => write!(f, "exposure:{gain}:{gamma}"),
             Degradation::Blur { sigma } => write!(f, "blur:{sigma}"),
+            Degradation::Misalign { dy, degrees } => write!(f, "misalign:{dy}:{degrees}"),
             Degradation::Jpeg { quality } => write!(f, "jpeg:{quality}"),
         }
     }
@@ -247,7 +268,41 @@ fn apply(image: &RgbImage, step: Degradation, view: View, seed: u64) -> RgbImage
                 *ch = gaussian_blur(ch, image.width, image.height, sigma);
             }
         }
+        Degradation::Misalign { dy, degrees } => {
+            if view == View::Right {
+                out = misalign(image, dy, degrees);
+            }
+        }
         Degradation::Jpeg { quality } => out = jpeg_round_trip(image, quality),
+    }
+    out
+}
+
+/// The image moved down by `dy` pixels and rotated by `degrees` (counter-clockwise on screen) about its centre:
+/// each output pixel samples the input bilinearly at the inverse transform (coordinates clamped to the image),
+/// rounded to 8 bits.
+fn misalign(image: &RgbImage, dy: f64, degrees: f64) -> RgbImage {
+    let (w, h) = image.dims();
+    let (cx, cy) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
+    let (sin, cos) = degrees.to_radians().sin_cos();
+    let mut out = RgbImage::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            // Undo the shift, then the rotation (y points down, so counter-clockwise on screen is −θ in these
+            // coordinates).
+            let (px, py) = (x as f64 - cx, y as f64 - dy - cy);
+            let sx = (cos * px - sin * py + cx).clamp(0.0, (w - 1) as f64);
+            let sy = (sin * px + cos * py + cy).clamp(0.0, (h - 1) as f64);
+            let (x0, y0) = (sx.floor() as usize, sy.floor() as usize);
+            let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+            let (fx, fy) = (sx - x0 as f64, sy - y0 as f64);
+            for (src, dst) in image.channels.iter().zip(out.channels.iter_mut()) {
+                let at = |xx: usize, yy: usize| f64::from(src[yy * w + xx]);
+                let top = at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx;
+                let bottom = at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx;
+                dst[y * w + x] = quantise(top * (1.0 - fy) + bottom * fy);
+            }
+        }
     }
     out
 }
@@ -484,6 +539,10 @@ mod tests {
             assert!(bad.parse::<Recipe>().is_err(), "{bad:?} was accepted");
         }
         assert_eq!("jpeg:40".parse::<Recipe>().unwrap().to_string(), "jpeg:40");
+        assert_eq!("misalign:0.5:-0.2".parse::<Recipe>().unwrap().to_string(), "misalign:0.5:-0.2");
+        for bad in ["misalign:1", "misalign:1:90", "misalign:200:0", "misalign:x:0"] {
+            assert!(bad.parse::<Recipe>().is_err(), "{bad:?} was accepted");
+        }
         for bad in ["jpeg:0", "jpeg:101", "jpeg:50.5", "jpeg"] {
             assert!(bad.parse::<Recipe>().is_err(), "{bad:?} was accepted");
         }
@@ -529,6 +588,29 @@ mod tests {
         let dark = degrade(&img, &"lowlight:0.2:0".parse().unwrap(), View::Left, 1).unwrap();
         let mean = |im: &RgbImage| im.channels[0].iter().sum::<f32>() / im.len() as f32;
         assert!((mean(&dark) / mean(&img) - 0.2).abs() < 0.02, "{} vs {}", mean(&dark), mean(&img));
+    }
+
+    /// Misalignment moves the right view only: a whole-pixel shift moves the rows exactly, and a rotation about
+    /// the centre keeps the centre pixel and moves the corners by about the angle × their distance.
+    #[test]
+    fn misalign_moves_the_right_view() {
+        let mut img = RgbImage::new(41, 31);
+        for (i, v) in img.channels[0].iter_mut().enumerate() {
+            *v = ((i % 41) * 3 + (i / 41) * 2) as f32;
+        }
+        let r: Recipe = "misalign:2:0".parse().unwrap();
+        assert_eq!(degrade(&img, &r, View::Left, 1).unwrap(), img);
+        let moved = degrade(&img, &r, View::Right, 1).unwrap();
+        for y in 2..31 {
+            assert_eq!(moved.channels[0][y * 41..][..41], img.channels[0][(y - 2) * 41..][..41]);
+        }
+        let turned = degrade(&img, &"misalign:0:1".parse().unwrap(), View::Right, 1).unwrap();
+        let centre = 15 * 41 + 20;
+        assert_eq!(turned.channels[0][centre], img.channels[0][centre]);
+        // The right edge's middle pixel samples 20·sin 1° ≈ 0.35 rows away: values change by about 2 × 0.35, rounded.
+        let edge = 15 * 41 + 40;
+        let moved_by = (turned.channels[0][edge] - img.channels[0][edge]).abs();
+        assert!((0.5..=1.5).contains(&moved_by), "{moved_by}");
     }
 
     /// Blur keeps a constant image and the mean, and lowers the variance of noise.

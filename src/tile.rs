@@ -32,8 +32,8 @@
 //! the allocator keeps of freed volumes (`tile_need`); a core whose tile would exceed nine tenths of the budget
 //! (the rest is left for what the allocator keeps between tiles) is split in four until it fits (or reaches
 //! [`MIN_CORE_PX`]). One tile at a time is alive (its pipeline is parallel inside; `run_tiled` says why tiles do
-//! not run side by side). The coarse run needs the untiled estimate at 1/F. On top: the full-size pair and its
-//! conditioned copies, the prior and the full-size maps, [`FULL_SIZE_BYTES_PER_PX`] per pixel.
+//! not run side by side). The coarse run needs the untiled estimate at 1/F. On top: the full-size pair, its
+//! conditioned and aligned copies, the prior and the full-size maps, [`FULL_SIZE_BYTES_PER_PX`] per pixel.
 //!
 //! Parameters measured in pixels keep their meaning; the plane segments keep their size (a tile gets the share
 //! of `post.sps.segments` that its area is of the image).
@@ -50,9 +50,10 @@ pub const HALO_PX: usize = 32;
 /// The smallest core a tile is split down to.
 pub const MIN_CORE_PX: usize = 64;
 
-/// Memory per full-resolution pixel beside the tiles: the pair and its conditioned copies (4 RGB `f32` images),
-/// the coarse result at full size, the prior made of it and the stitched maps.
-pub const FULL_SIZE_BYTES_PER_PX: u64 = 4 * 12 + 6 * 4 + 2;
+/// Memory per full-resolution pixel beside the tiles: the pair, its conditioned copies and the vertically
+/// aligned right views ([`crate::rectify`]; up to 6 RGB `f32` images), the coarse result at full size, the prior
+/// made of it and the stitched maps.
+pub const FULL_SIZE_BYTES_PER_PX: u64 = 6 * 12 + 6 * 4 + 2;
 
 /// How [`run_tiled`] cuts the problem.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

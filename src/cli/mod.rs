@@ -125,7 +125,7 @@ enum Command {
     Config(ConfigArgs),
     /// Render a synthetic scene with exact ground truth in MiddEval3 layout.
     Synth(SynthArgs),
-    /// Write a degraded copy of a scene tree (noise, low light, exposure mismatch, blur), seeded.
+    /// Write a degraded copy of a scene tree (noise, low light, exposure mismatch, blur, misalignment, JPEG), seeded.
     ///
     /// Every scene under SRC (folders with im0.png, im1.png, calib.txt) is copied to OUT under the same relative
     /// path, its images degraded by the recipe, its calib.txt, disp0GT.pfm and mask0nocc.png copied unchanged,
@@ -134,6 +134,8 @@ enum Command {
     ///   lowlight:G:R   light × G (values taken as linear), photon shot noise, read noise σ R, no gain after
     ///   exposure:G:P   right view only: v -> 255 (G v / 255)^P
     ///   blur:S         Gaussian blur of σ S pixels, both views
+    ///   misalign:D:A   right view only: moved down D pixels and rotated A degrees about its centre (imperfect
+    ///                  rectification; the ground truth is unchanged)
     ///   jpeg:Q         JPEG compression at quality Q (1-100), both views
     ///   A+B            A, then B
     /// OUT is written as a whole or not at all; it must not exist (or be empty) and must be outside SRC.
