@@ -193,13 +193,19 @@ pub(super) fn describe_measured(m: &jem::Measured) -> String {
     let [nl, nr] = m.stats.noise;
     let [gl, gr] = m.stats.gain;
     let gradient = m.gradient.map_or("raw".to_string(), |(mean, eps)| format!("local contrast {mean:.1}, ε {eps:.1}"));
+    let [bl, br] = m.stats.cost_blur;
+    let blur = if bl > 0.0 || br > 0.0 {
+        format!("; cost blur σ {bl:.2} / {br:.2} px (sharpness matched)")
+    } else {
+        String::new()
+    };
     let vertical = m.vertical.map_or(String::new(), |v| {
         let (lo, hi) = v.range;
         let done = if v.corrected { "removed" } else { "left" };
         format!("; right view's vertical offset {lo:+.2} to {hi:+.2} px ({done})")
     });
     format!(
-        "measured: noise σ {nl:.2} / {nr:.2}, contrast gain {gl:.2} / {gr:.2} (left / right); prior λ {:.2}, Census support {:.1}, gradient {gradient}{vertical}",
+        "measured: noise σ {nl:.2} / {nr:.2}, contrast gain {gl:.2} / {gr:.2} (left / right); prior λ {:.2}, Census support {:.1}, gradient {gradient}{blur}{vertical}",
         m.prior_weight, m.census_support
     )
 }

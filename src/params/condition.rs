@@ -57,6 +57,9 @@ pub struct ConditionParams {
     /// smallest and largest are free (the coarse level places an edge only to within its own pixels, and under
     /// noise its edges fatten); 0 = off.
     pub prior_spread: usize,
+    /// When one view of the cost pair is sharper than the other by more than this factor ([`crate::condition::sharpness`]),
+    /// it is blurred until they match (0 = never).
+    pub sharpness_ratio: f32,
     /// Measure the right view's residual vertical offset against the coarse run's answer and remove it
     /// ([`crate::rectify`]) before the full-resolution cost (needs the coarse prior).
     pub vertical_align: bool,
@@ -100,6 +103,7 @@ impl Default for ConditionParams {
             prior_spread: 1,
             vertical_align: true,
             vertical_min_px: 0.1,
+            sharpness_ratio: 1.25,
             prior_margin_px: 1.0,
             prior_trunc_px: 8.0,
         }
@@ -123,6 +127,7 @@ impl ConditionParams {
             prior_detail: 0.0,
             prior_spread: 0,
             vertical_align: false,
+            sharpness_ratio: 0.0,
             ..Self::default()
         }
     }
@@ -164,6 +169,9 @@ impl ConditionParams {
         }
         if self.prior_spread > 8 {
             return Err(Error::param("condition.prior_spread", self.prior_spread, "0 to 8"));
+        }
+        if !(self.sharpness_ratio == 0.0 || (self.sharpness_ratio.is_finite() && self.sharpness_ratio >= 1.0)) {
+            return Err(Error::param("condition.sharpness_ratio", self.sharpness_ratio, "0 (off) or at least 1"));
         }
         if !(self.vertical_min_px.is_finite() && (0.0..=crate::rectify::MAX_OFFSET).contains(&self.vertical_min_px)) {
             return Err(Error::param("condition.vertical_min_px", self.vertical_min_px, "0 to 4"));
