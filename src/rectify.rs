@@ -365,21 +365,25 @@ fn keys(t: f64) -> f64 {
 pub fn resample_right(img: &RgbImage, v: &VerticalOffset) -> RgbImage {
     let (w, h) = (img.width, img.height);
     let mut out = RgbImage::new(w, h);
-    for (src, dst) in img.channels.iter().zip(out.channels.iter_mut()) {
-        dst.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
-            for (x, o) in row.iter_mut().enumerate() {
-                let yy = y as f64 + v.at(x as f64, y as f64);
-                let y0 = yy.floor();
-                let f = yy - y0;
-                let mut acc = 0.0;
-                for k in -1i64..=2 {
-                    let yi = (y0 as i64 + k).clamp(0, h as i64 - 1) as usize;
-                    acc += keys(f - k as f64) * f64::from(src[yi * w + x]);
-                }
-                *o = acc.clamp(0.0, 255.0) as f32;
+    let [r, g, b] = &mut out.channels;
+    let rows = r.par_chunks_mut(w.max(1)).zip(g.par_chunks_mut(w.max(1))).zip(b.par_chunks_mut(w.max(1)));
+    rows.enumerate().for_each(|(y, ((r, g), b))| {
+        let mut dst = [r, g, b];
+        for x in 0..w {
+            // The four taps and their weights, once for the three channels.
+            let yy = y as f64 + v.at(x as f64, y as f64);
+            let y0 = yy.floor();
+            let f = yy - y0;
+            let taps: [(usize, f64); 4] = std::array::from_fn(|t| {
+                let k = t as i64 - 1;
+                ((y0 as i64 + k).clamp(0, h as i64 - 1) as usize, keys(f - k as f64))
+            });
+            for (src, row) in img.channels.iter().zip(dst.iter_mut()) {
+                let acc = taps.iter().fold(0.0, |acc, &(yi, wt)| acc + wt * f64::from(src[yi * w + x]));
+                row[x] = acc.clamp(0.0, 255.0) as f32;
             }
-        });
-    }
+        }
+    });
     out
 }
 
