@@ -148,12 +148,13 @@ pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditio
     let mut cost_blur = [0.0f32; 2];
     if p.sharpness_ratio > 0.0 {
         let c = cost.as_ref().unwrap_or(&guide);
-        let s = [sharpness(&c.left.to_grey()), sharpness(&c.right.to_grey())];
+        let grey = [c.left.to_grey(), c.right.to_grey()];
+        let s = [sharpness(&grey[0]), sharpness(&grey[1])];
         let sharper = usize::from(s[1] > s[0]);
         if s[sharper] > p.sharpness_ratio * s[1 - sharper] {
+            let sigma = matching_blur(&grey[sharper], s[1 - sharper]);
             let mut pair = cost.take().unwrap_or_else(|| guide.as_ref().clone());
             let view = if sharper == 0 { &mut pair.left } else { &mut pair.right };
-            let sigma = matching_blur(view, s[1 - sharper]);
             *view = gaussian_blur(view, sigma);
             cost_blur[sharper] = sigma;
             cost = Some(pair);
@@ -191,13 +192,16 @@ pub fn sharpness(grey: &Plane<f32>) -> f32 {
 /// The Gaussian σ (px, in steps of 0.125 up to 3) whose blur brings `img`'s [`sharpness`] closest to `target`.
 /// Sharpness falls as the blur grows, so a bisection finds the first step at or below `target` (six blurs instead
 /// of 24: on a large image each is a pass over every pixel), and the closer of it and the step before wins.
-fn matching_blur(img: &RgbImage, target: f32) -> f32 {
+fn matching_blur(grey: &Plane<f32>, target: f32) -> f32 {
     const STEPS: usize = 24;
-    let grey = img.to_grey();
     let sigma = |k: usize| k as f32 * 0.125;
-    let at = |k: usize| {
-        let blurred = gaussian_blur_plane(&grey.data, grey.width, grey.height, sigma(k));
-        sharpness(&Plane::from_vec(grey.width, grey.height, blurred))
+    // Each step's sharpness once (a blur of the whole image each).
+    let mut seen = [None; STEPS + 1];
+    let mut at = |k: usize| {
+        *seen[k].get_or_insert_with(|| {
+            let blurred = gaussian_blur_plane(&grey.data, grey.width, grey.height, sigma(k));
+            sharpness(&Plane::from_vec(grey.width, grey.height, blurred))
+        })
     };
     // The first k in 1..=STEPS with at(k) ≤ target (STEPS when there is none).
     let (mut lo, mut hi) = (1, STEPS);
@@ -205,7 +209,7 @@ fn matching_blur(img: &RgbImage, target: f32) -> f32 {
         let mid = (lo + hi) / 2;
         if at(mid) <= target { hi = mid } else { lo = mid + 1 }
     }
-    let gap = |k: usize| (at(k) - target).abs();
+    let mut gap = |k: usize| (at(k) - target).abs();
     if lo > 1 && gap(lo - 1) < gap(lo) { sigma(lo - 1) } else { sigma(lo) }
 }
 
@@ -647,7 +651,7 @@ mod tests {
         let target = sharpness(&blurred.to_grey());
         assert!(target < 0.7 * sharpness(&grey), "{target} vs {}", sharpness(&grey));
         // Blurring 0.7 px by σ gives √(0.7² + σ²); 1.5 more is about 1.66 in all, so σ ≈ 1.5 matches.
-        let sigma = matching_blur(&img, target);
+        let sigma = matching_blur(&img.to_grey(), target);
         assert!((1.25..=1.75).contains(&sigma), "matching blur {sigma}");
         // The default conditions such a pair: the sharper (left) view of the cost pair is blurred.
         // The default conditions such a pair (without the stretch, so the guidance is the input itself): the

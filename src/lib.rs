@@ -451,7 +451,8 @@ impl<'a> Prepared<'a> {
         coarse: &Output,
         t: &mut Timings,
     ) {
-        let Some(cond) = self.conditioned.as_mut().filter(|_| c.enabled && c.vertical_align) else { return };
+        // (`conditioned` exists only when conditioning is enabled.)
+        let Some(cond) = self.conditioned.as_mut().filter(|_| c.vertical_align) else { return };
         let offset = t.time("vertical", || {
             rectify::estimate(grey_left, &cond.cost_pair().right.to_grey(), &coarse.disparity, &coarse.consistent)
         });

@@ -142,6 +142,14 @@ fn bilinear(p: &Plane<f32>, x: f64, y: f64) -> f64 {
     top * (1.0 - fy) + bottom * fy
 }
 
+/// The right view's column that left pixel `i` (of a `w`-wide image) matches at its coarse disparity, where the
+/// coarse left-right check passed there and the column lies at least `margin` px inside the image.
+fn matched_column(disparity: &DisparityMap, trusted: &Plane<bool>, i: usize, w: usize, margin: usize) -> Option<f64> {
+    let d = disparity.data[i];
+    let xr = (i % w) as f64 - f64::from(d);
+    (trusted.data[i] && d.is_finite() && xr >= margin as f64 && xr <= (w - 1 - margin) as f64).then_some(xr)
+}
+
 /// One block's measurement: the mean of its pixels' terms, the vertical displacement the Lucas–Kanade step
 /// found (relative to the current estimate) and the block's structure per pixel (its weight).
 struct BlockStep {
@@ -169,14 +177,8 @@ fn block_step(
     for y in by..(by + BLOCK).min(h) {
         for x in bx..(bx + BLOCK).min(w) {
             let i = y * w + x;
-            let d = disparity.data[i];
-            if !trusted.data[i] || !d.is_finite() {
-                continue;
-            }
-            let xr = x as f64 - f64::from(d);
-            if xr < 1.0 || xr > (w - 2) as f64 {
-                continue;
-            }
+            // One pixel of room for the gradients' neighbours.
+            let Some(xr) = matched_column(disparity, trusted, i, w, 1) else { continue };
             let yr = y as f64 + v.at(x as f64, y as f64);
             let e = bilinear(right, xr, yr) - f64::from(left.data[i]);
             let gx = 0.5 * (bilinear(&rgrad.0, xr, yr) + f64::from(lgrad.0.data[i]));
@@ -322,14 +324,7 @@ fn best_whole_shift(left: &Plane<f32>, right: &Plane<f32>, disparity: &Disparity
             }
             for x in (0..w).step_by(2) {
                 let i = y * w + x;
-                let d = disparity.data[i];
-                if !trusted.data[i] || !d.is_finite() {
-                    continue;
-                }
-                let xr = x as f64 - f64::from(d);
-                if xr < 0.0 || xr > (w - 1) as f64 {
-                    continue;
-                }
+                let Some(xr) = matched_column(disparity, trusted, i, w, 0) else { continue };
                 let (l, r) = (f64::from(left.data[i]), bilinear(right, xr, f64::from(yr)));
                 for (acc, v) in s.iter_mut().zip([1.0, l, r, l * l, r * r, l * r]) {
                     *acc += v;
