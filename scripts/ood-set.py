@@ -199,6 +199,8 @@ def main():
         sys.exit(f'error: {out}: exists (give a new folder)')
     # Built in a hidden folder beside OUT and renamed at the end: OUT appears whole or not at all.
     partial = os.path.join(os.path.dirname(out) or '.', f'.{os.path.basename(out)}.partial-{os.getpid()}')
+    # Created here (an existing folder of that name is an error), so the clean-up below only removes our own.
+    os.mkdir(partial)
     try:
         Builder(src, os.path.join(partial, 'trainingQ')).build()
         os.rename(partial, out)

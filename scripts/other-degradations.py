@@ -4,8 +4,8 @@
 Usage: scripts/other-degradations.py SRC VARIANT OUT
 Copies every scene folder of SRC (a MiddEval3 tree such as trainingQ: folders with im0.png and im1.png) to OUT,
 the images degraded as VARIANT says, calib.txt, disp0GT.pfm and mask0nocc.png copied unchanged (when present).
-OUT must not exist; it is built in a hidden sibling folder and renamed at the end, so a failed run leaves
-nothing. Seeded: numpy's default_rng streams spawned from SeedSequence(1), one for every left view and one for
+OUT must not exist; it is built in a hidden sibling folder of its own and renamed at the end, so a failed run
+leaves nothing. Seeded: numpy's default_rng streams spawned from SeedSequence(1), one for every left view and one for
 every right view, the scenes in sorted order; a rerun writes the same bytes. Needs numpy, OpenCV and Pillow
 (pip install numpy opencv-python-headless pillow). Colours are in OpenCV's BGR order inside this script.
 
@@ -148,12 +148,13 @@ def main():
     scenes = sorted(d for d in os.listdir(src) if os.path.isfile(os.path.join(src, d, 'im0.png')))
     if not scenes:
         sys.exit(f'error: {src} holds no scene folder (im0.png, im1.png)')
-    tmp = os.path.join(os.path.dirname(out), '.' + os.path.basename(out) + '.partial')
-    shutil.rmtree(tmp, ignore_errors=True)
+    # Built in a hidden folder of our own beside OUT (created here, so never someone else's) and renamed at the end.
+    tmp = os.path.join(os.path.dirname(out), f'.{os.path.basename(out)}.partial-{os.getpid()}')
+    os.mkdir(tmp)
     rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(1).spawn(2)]
     try:
         for s in scenes:
-            os.makedirs(os.path.join(tmp, s))
+            os.mkdir(os.path.join(tmp, s))
             for f in COPIED:
                 if os.path.isfile(os.path.join(src, s, f)):
                     shutil.copy2(os.path.join(src, s, f), os.path.join(tmp, s, f))
@@ -163,7 +164,8 @@ def main():
                 if img is None:
                     raise SystemExit(f'error: {os.path.join(src, s, name)}: not a readable image')
                 res = degrade(variant, img.astype(np.float64), view, rngs[view])
-                cv2.imwrite(os.path.join(tmp, s, name), np.clip(np.rint(res), 0, 255).astype(np.uint8))
+                if not cv2.imwrite(os.path.join(tmp, s, name), np.clip(np.rint(res), 0, 255).astype(np.uint8)):
+                    raise SystemExit(f'error: {os.path.join(tmp, s, name)}: could not be written')
         os.rename(tmp, out)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
