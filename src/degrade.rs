@@ -279,7 +279,8 @@ fn apply(image: &RgbImage, step: Degradation, view: View, seed: u64) -> RgbImage
 }
 
 /// The image moved down by `dy` pixels and rotated by `degrees` (counter-clockwise on screen) about its centre:
-/// each output pixel samples the input bilinearly at the inverse transform (coordinates clamped to the image),
+/// each output pixel samples the input bilinearly at the inverse transform ([`crate::rectify::sample_bilinear`],
+/// coordinates clamped to the image),
 /// rounded to 8 bits.
 fn misalign(image: &RgbImage, dy: f64, degrees: f64) -> RgbImage {
     let (w, h) = image.dims();
@@ -291,16 +292,9 @@ fn misalign(image: &RgbImage, dy: f64, degrees: f64) -> RgbImage {
             // Undo the shift, then the rotation (y points down, so counter-clockwise on screen is −θ in these
             // coordinates).
             let (px, py) = (x as f64 - cx, y as f64 - dy - cy);
-            let sx = (cos * px - sin * py + cx).clamp(0.0, (w - 1) as f64);
-            let sy = (sin * px + cos * py + cy).clamp(0.0, (h - 1) as f64);
-            let (x0, y0) = (sx.floor() as usize, sy.floor() as usize);
-            let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-            let (fx, fy) = (sx - x0 as f64, sy - y0 as f64);
+            let (sx, sy) = (cos * px - sin * py + cx, sin * px + cos * py + cy);
             for (src, dst) in image.channels.iter().zip(out.channels.iter_mut()) {
-                let at = |xx: usize, yy: usize| f64::from(src[yy * w + xx]);
-                let top = at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx;
-                let bottom = at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx;
-                dst[y * w + x] = quantise(top * (1.0 - fy) + bottom * fy);
+                dst[y * w + x] = quantise(crate::rectify::sample_bilinear(src, w, h, sx, sy));
             }
         }
     }

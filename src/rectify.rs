@@ -130,13 +130,18 @@ fn gradients(p: &Plane<f32>) -> (Plane<f32>, Plane<f32>) {
 
 /// Bilinear sample of `p` at (x, y), clamped to the image.
 fn bilinear(p: &Plane<f32>, x: f64, y: f64) -> f64 {
-    let (w, h) = p.dims();
+    sample_bilinear(&p.data, p.width, p.height, x, y)
+}
+
+/// Bilinear sample of a row-major `w × h` plane at (x, y), clamped to the image (also [`crate::degrade`]'s
+/// misalignment).
+pub(crate) fn sample_bilinear(data: &[f32], w: usize, h: usize, x: f64, y: f64) -> f64 {
     let x = x.clamp(0.0, (w - 1) as f64);
     let y = y.clamp(0.0, (h - 1) as f64);
     let (x0, y0) = ((x.floor() as usize).min(w.saturating_sub(2)), (y.floor() as usize).min(h.saturating_sub(2)));
     let (fx, fy) = (x - x0 as f64, y - y0 as f64);
     let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let at = |x: usize, y: usize| f64::from(p.data[y * w + x]);
+    let at = |x: usize, y: usize| f64::from(data[y * w + x]);
     let top = at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx;
     let bottom = at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx;
     top * (1.0 - fy) + bottom * fy
