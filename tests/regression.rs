@@ -13,7 +13,19 @@ mod common;
 use std::path::Path;
 
 use jem::eval::{MaskMode, evaluate, scene_weight};
-use jem::{Params, StereoPair};
+use jem::{DisparityMap, Params, RgbImage, StereoPair};
+
+/// A trainingQ scene folder's pair (the right view passed through `right_view`) and its scorer: the avgErr of a
+/// disparity map under MiddEval3's rules (nonocc, errors ×4).
+fn scene(dir: &Path, right_view: impl FnOnce(RgbImage) -> RgbImage) -> (StereoPair, impl Fn(&DisparityMap) -> f64) {
+    let left = jem::io::png::load_rgb(&dir.join("im0.png")).unwrap();
+    let right = right_view(jem::io::png::load_rgb(&dir.join("im1.png")).unwrap());
+    let ndisp = jem::io::calib::read_ndisp(&dir.join("calib.txt")).unwrap();
+    let gt = jem::io::pfm::read_pfm(&dir.join("disp0GT.pfm")).unwrap();
+    let mask = jem::io::png::load_grey8(&dir.join("mask0nocc.png")).unwrap();
+    let score = move |d: &DisparityMap| evaluate(d, &gt, Some(&mask), ndisp, 4, MaskMode::Nonocc).avgerr;
+    (StereoPair::new(left, right, ndisp).unwrap(), score)
+}
 
 /// Runs `config` on every trainingQ scene and returns (per-scene avgErr, weighted avgErr).
 fn weighted_avgerr(data: &Path, config: &str) -> (Vec<(String, f64)>, f64) {
@@ -22,18 +34,12 @@ fn weighted_avgerr(data: &Path, config: &str) -> (Vec<(String, f64)>, f64) {
     let (mut sum, mut weights) = (0.0, 0.0);
     for dir in common::training_scenes(data) {
         let name = dir.file_name().unwrap().to_string_lossy().into_owned();
-        let left = jem::io::png::load_rgb(&dir.join("im0.png")).unwrap();
-        let right = jem::io::png::load_rgb(&dir.join("im1.png")).unwrap();
-        let ndisp = jem::io::calib::read_ndisp(&dir.join("calib.txt")).unwrap();
-        let pair = StereoPair::new(left, right, ndisp).unwrap();
-        let out = jem::run(&params, &pair).unwrap();
-        let gt = jem::io::pfm::read_pfm(&dir.join("disp0GT.pfm")).unwrap();
-        let mask = jem::io::png::load_grey8(&dir.join("mask0nocc.png")).unwrap();
-        let m = evaluate(&out.disparity, &gt, Some(&mask), ndisp, 4, MaskMode::Nonocc);
+        let (pair, score) = scene(&dir, |right| right);
+        let m = score(&jem::run(&params, &pair).unwrap().disparity);
         let w = scene_weight(&name);
-        sum += w * m.avgerr;
+        sum += w * m;
         weights += w;
-        per_scene.push((name, m.avgerr));
+        per_scene.push((name, m));
     }
     assert_eq!(per_scene.len(), 15, "expected the 15 trainingQ scenes");
     (per_scene, sum / weights)
@@ -108,15 +114,9 @@ fn one_view_out_of_focus_trainingq() {
     let mut errors = [0.0f64; 2];
     for name in ["Adirondack", "Motorcycle", "Teddy"] {
         let dir = data.join("MiddEval3/trainingQ").join(name);
-        let left = jem::io::png::load_rgb(&dir.join("im0.png")).unwrap();
-        let right = jem::condition::gaussian_blur(&jem::io::png::load_rgb(&dir.join("im1.png")).unwrap(), 1.5);
-        let ndisp = jem::io::calib::read_ndisp(&dir.join("calib.txt")).unwrap();
-        let pair = StereoPair::new(left, right, ndisp).unwrap();
-        let gt = jem::io::pfm::read_pfm(&dir.join("disp0GT.pfm")).unwrap();
-        let mask = jem::io::png::load_grey8(&dir.join("mask0nocc.png")).unwrap();
+        let (pair, score) = scene(&dir, |right| jem::condition::gaussian_blur(&right, 1.5));
         for (k, params) in [&off, &Params::default()].into_iter().enumerate() {
-            let out = jem::run(params, &pair).unwrap();
-            errors[k] += evaluate(&out.disparity, &gt, Some(&mask), ndisp, 4, MaskMode::Nonocc).avgerr / 3.0;
+            errors[k] += score(&jem::run(params, &pair).unwrap().disparity) / 3.0;
         }
     }
     eprintln!("right view blurred σ 1.5: sharpness not matched {:.3}, matched {:.3}", errors[0], errors[1]);
