@@ -406,11 +406,20 @@ fn noise_of(data: &[f32], w: usize, h: usize) -> f32 {
         return 0.0;
     }
     let row = |y: usize| &data[y * w..(y + 1) * w];
+    // A clipped region (a saturated sky or highlight, crushed shadows) holds the image's extreme value exactly and
+    // carries no noise: a window entirely at an extreme is left out, or an overexposed image would read as
+    // noiseless. (Single pixels that noise pushed past an extreme stay: they are noise.)
+    let (lo, hi) = data.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let plateau =
+        |x: usize, rows: [&[f32]; 3], level: f32| rows.iter().all(|r| r[x - 1..=x + 1].iter().all(|&v| v == level));
     let mut resp = Vec::with_capacity((w - 2) * (h - 2));
     let mut grad = Vec::with_capacity((w - 2) * (h - 2));
     for y in 1..h - 1 {
         let (u, m, d) = (row(y - 1), row(y), row(y + 1));
         for x in 1..w - 1 {
+            if plateau(x, [u, m, d], lo) || plateau(x, [u, m, d], hi) {
+                continue;
+            }
             let l = u[x - 1] - 2.0 * u[x] + u[x + 1] - 2.0 * (m[x - 1] - 2.0 * m[x] + m[x + 1])
                 + (d[x - 1] - 2.0 * d[x] + d[x + 1]);
             let gx = (u[x + 1] - u[x - 1]) + 2.0 * (m[x + 1] - m[x - 1]) + (d[x + 1] - d[x - 1]);
@@ -418,6 +427,9 @@ fn noise_of(data: &[f32], w: usize, h: usize) -> f32 {
             resp.push(l.abs());
             grad.push(gx.abs() + gy.abs());
         }
+    }
+    if grad.is_empty() {
+        return 0.0;
     }
     let median_grad = rank_value(&mut grad.clone(), FLAT_FRACTION);
     let mut flat: Vec<f32> = resp.iter().zip(&grad).filter(|(_, g)| **g <= median_grad).map(|(r, _)| *r).collect();
@@ -578,6 +590,27 @@ mod tests {
             assert!((f64::from(est) / sigma - 1.0).abs() < 0.1, "σ {sigma}: estimated {est}");
         }
         assert!(channel_noise(&textured(160, 120, 0.0, 3)) < 0.6);
+    }
+
+    /// Overexposed: more than half of the image saturated (exactly 255), the rest noisy. The saturated plateau
+    /// carries no noise and is left out; counted, it would be the flattest quarter and read as σ 0. Pixels that
+    /// the noise alone pushes to an extreme still count.
+    #[test]
+    fn noise_estimate_ignores_clipped_regions() {
+        let (w, h, sigma) = (160, 120, 4.0);
+        let mut img = textured(w, h, sigma, 5);
+        for ch in &mut img.channels {
+            ch.iter_mut().enumerate().filter(|(i, _)| i % w < 100).for_each(|(_, v)| *v = 255.0);
+        }
+        let est = channel_noise(&img);
+        assert!((f64::from(est) / sigma - 1.0).abs() < 0.15, "estimated {est}");
+        // Crushed shadows likewise.
+        let mut dark = textured(w, h, sigma, 6);
+        for ch in &mut dark.channels {
+            ch.iter_mut().enumerate().filter(|(i, _)| i / w < 70).for_each(|(_, v)| *v = 0.0);
+        }
+        let est = channel_noise(&dark);
+        assert!((f64::from(est) / sigma - 1.0).abs() < 0.15, "estimated {est}");
     }
 
     /// A right view with another gain and gamma is mapped back onto the left view's levels.
