@@ -25,6 +25,12 @@ pub struct ConditionParams {
     pub denoise_sigma_xy: f32,
     /// A view whose measured noise σ (grey levels) is below this is not denoised.
     pub denoise_min_sigma: f32,
+    /// Count a JPEG-decoded view's compression error as noise ([`crate::condition::jpeg_noise`]); the coarse
+    /// levels, whose images are reduced off the block grid, do not measure it.
+    pub jpeg_noise: bool,
+    /// Census dead band as a multiple of the measured JPEG blocking ([`crate::condition::blockiness`], the larger
+    /// view's): a bit is set only where the neighbour is darker by more than the block grid's own steps; 0 = none.
+    pub block_band: f32,
     /// Census dead band as a multiple of the grey noise σ measured after denoising; 0 = none.
     pub census_band: f32,
     /// Widens `cost.census_support` by this multiple of the measured noise σn (when the support is on): under
@@ -89,6 +95,8 @@ impl Default for ConditionParams {
             denoise_strength: 3.0,
             denoise_sigma_xy: 3.0,
             denoise_min_sigma: 2.0,
+            jpeg_noise: true,
+            block_band: 1.0,
             census_band: 0.0,
             support_per_sigma: 2.5,
             grad_eps_per_sigma: 30.0,
@@ -118,6 +126,8 @@ impl ConditionParams {
             match_histograms: false,
             stretch: false,
             denoise_strength: 0.0,
+            jpeg_noise: false,
+            block_band: 0.0,
             census_band: 0.0,
             support_per_sigma: 0.0,
             grad_eps_per_sigma: 0.0,
@@ -139,6 +149,8 @@ impl ConditionParams {
                 || self.stretch
                 || self.denoise_strength > 0.0
                 || self.census_band > 0.0
+                || self.block_band > 0.0
+                || self.jpeg_noise
                 || self.prior_per_sigma > 0.0
                 || self.prior_base > 0.0)
     }
@@ -157,6 +169,7 @@ impl ConditionParams {
         }
         check_nonneg("condition.denoise_min_sigma", self.denoise_min_sigma)?;
         check_nonneg("condition.census_band", self.census_band)?;
+        check_nonneg("condition.block_band", self.block_band)?;
         check_nonneg("condition.support_per_sigma", self.support_per_sigma)?;
         check_nonneg("condition.grad_eps_per_sigma", self.grad_eps_per_sigma)?;
         check_nonneg("condition.prior_per_sigma", self.prior_per_sigma)?;
