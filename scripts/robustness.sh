@@ -53,6 +53,7 @@ variants=(
     "exposure|exposure:0.6:1.4|right view darker (× 0.6) with gamma 1.4"
     "blur|blur:1.2|defocus: Gaussian blur σ 1.2 px on both views"
     "jpeg|jpeg:40|JPEG compression at quality 40, both views"
+    "jpeg90|jpeg:90|JPEG at quality 90 (what cameras and phones write), both views"
     "vshift|misalign:1:0|imperfect rectification: the right view 1 px (quarter resolution) lower"
 )
 
