@@ -199,13 +199,19 @@ pub(super) fn describe_measured(m: &jem::Measured) -> String {
     } else {
         String::new()
     };
+    let jpeg = if m.stats.is_jpeg() {
+        let ([jl, jr], [bl, br]) = (m.stats.jpeg, m.stats.blocking);
+        format!("; JPEG: compression error σ {jl:.2} / {jr:.2}, block steps {bl:.2} / {br:.2}")
+    } else {
+        String::new()
+    };
     let vertical = m.vertical.map_or(String::new(), |v| {
         let (lo, hi) = v.range;
         let done = if v.corrected { "removed" } else { "left" };
         format!("; right view's vertical offset {lo:+.2} to {hi:+.2} px ({done})")
     });
     format!(
-        "measured: noise σ {nl:.2} / {nr:.2}, contrast gain {gl:.2} / {gr:.2} (left / right); prior λ {:.2}, Census support {:.1}, gradient {gradient}{blur}{vertical}",
+        "measured: noise σ {nl:.2} / {nr:.2}, contrast gain {gl:.2} / {gr:.2} (left / right); prior λ {:.2}, Census support {:.1}, gradient {gradient}{blur}{jpeg}{vertical}",
         m.prior_weight, m.census_support
     )
 }
