@@ -81,13 +81,10 @@ impl PairStats {
     pub fn is_jpeg(&self) -> bool {
         self.jpeg.iter().any(|&j| j > 0.0)
     }
-}
 
-impl PairStats {
     /// The noisier view's σn: what the adaptive stages scale with.
     pub fn sigma(&self) -> f32 {
-        let f: f32 = std::env::var("JEM_SFLOOR").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
-        self.noise[0].max(self.noise[1]).max(f)
+        self.noise[0].max(self.noise[1])
     }
 }
 
@@ -485,11 +482,8 @@ fn quantisation_step(c: &[f32]) -> Option<u32> {
 /// The error variance of a coefficient quantised with step `q` of which the share `zero` went to 0, under a
 /// Laplacian model (see [`jpeg_noise`]).
 fn coefficient_error_variance(q: f64, zero: f64) -> f64 {
-    if zero >= 1.0 {
-        // All in the dead zone: at most uniform over it.
-        return q * q / 12.0;
-    }
-    if zero <= 0.0 {
+    // None in the dead zone (no scale to fit), or all of it (the coefficient is unknown): uniform over one step.
+    if zero <= 0.0 || zero >= 1.0 {
         return q * q / 12.0;
     }
     let b = q / (2.0 * -(1.0 - zero).ln());
