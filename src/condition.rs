@@ -404,14 +404,14 @@ const JPEG_PROBES_NEEDED: usize = 6;
 ///
 /// JPEG quantises each 8 × 8 block's DCT coefficient (u, v) to a multiple of a step q(u, v), so the decoded
 /// image's coefficients cluster at those multiples (up to the rounding to 8 bits). For each AC frequency, q is
-/// the largest step (2 to 255, the range of baseline tables) at which the coefficients of magnitude above q/2 sit at its multiples: the mean of
-/// cos(2πc/q) is above 0.6. The error of a coefficient is then modelled with a Laplacian of the coefficient
-/// (scale b from the share p0 quantised to 0: P(|c| ≥ q/2) = exp(−q/2b)): inside the dead zone it is the
-/// coefficient itself, E[c² | |c| < q/2]; elsewhere its position inside its step, the variance of an
-/// exponential truncated to one step. The DCT is orthonormal, so the pixels' error variance is the mean over
-/// the 64 coefficients. One-image noise estimates cannot see this error: compression removes exactly the
-/// high frequencies they measure. Measured on MiddEval3 trainingQ compressed at quality 90 / 75 / 40, it reads
-/// 2.5–3.2 / 3.9–5.3 / 5.2–6.8 where the true error is 1.8–2.5 / 2.9–4.1 / 4.3–5.9; uncompressed images,
+/// the largest step (2 to 255, the range of baseline tables) at which the coefficients of magnitude above q/2 sit
+/// at its multiples: the mean of cos(2πc/q) is above 0.6. The error of a coefficient is then modelled with a
+/// Laplacian of the coefficient (scale b from the share p0 quantised to 0: P(|c| ≥ q/2) = exp(−q/2b)): inside
+/// the dead zone it is the coefficient itself, E[c² | |c| < q/2]; elsewhere its position inside its step, the
+/// variance of an exponential truncated to one step. The DCT is orthonormal, so the pixels' error variance is the
+/// mean over the 64 coefficients. One-image noise estimates cannot see this error: compression removes exactly
+/// the high frequencies they measure. Measured on MiddEval3 trainingQ compressed at quality 90 / 75 / 40, it
+/// reads 1.6–3.1 / 2.7–4.8 / 3.6–6.5 where the true error is 1.3–2.5 / 2.1–4.1 / 3.2–6.4; uncompressed images,
 /// noisy or not, read 0. Blocks on the grid from the image's origin (an image cropped after compression is not
 /// seen).
 pub fn jpeg_noise(grey: &Plane<f32>) -> f32 {
@@ -860,8 +860,9 @@ mod tests {
     /// JPEG's compression error is read from the quantisation of the block DCT: of the order of the true error at
     /// two qualities, and 0 on an uncompressed image, with or without noise (the noise-free one is a regular
     /// pattern whose coefficients repeat a few exact values: it looks quantised at 3 of the 9 probe frequencies);
-    /// the one-image estimate reads less than the true error after compression. (Where whole frequencies are quantised to 0, as at quality 50 on
-    /// this image's sharp squares, their loss cannot be seen and the estimate is low: 4.4 against 7.6.)
+    /// the one-image estimate reads less than the true error after compression. (Where whole frequencies are
+    /// quantised to 0, as at quality 50 on this image's sharp squares, their loss cannot be seen and the estimate
+    /// is low: 4.4 against 7.6.)
     #[test]
     fn jpeg_noise_reads_the_compression_error() {
         use crate::degrade::{View, degrade};

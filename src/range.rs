@@ -6,8 +6,8 @@
 //! nothing. [`find_ndisp`] measures the range instead: the matching cost at 1/4 resolution over the whole
 //! candidate range, winner-take-all in both views, the matches that are left-right consistent, distinct and
 //! spatially coherent (at least [`MIN_COHERENT_NEIGHBOURS`] of the 8 neighbours' winners within one label), and
-//! the largest disparity a dense group of them holds, plus a margin. The policy ([`needs_search`]): search when no range is given,
-//! or when the given one is at least half the image width.
+//! the largest disparity a dense group of them holds, plus a margin. The policy ([`needs_search`]): search when
+//! no range is given, or when the given one is at least half the image width.
 
 use crate::cost;
 use crate::image::RgbImage;
