@@ -446,7 +446,8 @@ pub fn jpeg_noise(grey: &Plane<f32>) -> f32 {
     if quantised.count() < JPEG_PROBES_NEEDED {
         return 0.0;
     }
-    let variance: f64 = (1..64)
+    // Per frequency in parallel, summed in frequency order (a parallel float sum would depend on the thread count).
+    let per_frequency: Vec<f64> = (1..64)
         .into_par_iter()
         .map(|f| {
             let c = coefficients(f);
@@ -455,7 +456,8 @@ pub fn jpeg_noise(grey: &Plane<f32>) -> f32 {
             let zero = 1.0 - c.partition_point(|v| v.abs() >= half) as f64 / c.len() as f64;
             coefficient_error_variance(f64::from(q), zero)
         })
-        .sum();
+        .collect();
+    let variance: f64 = per_frequency.iter().sum();
     (variance / 64.0).sqrt() as f32
 }
 

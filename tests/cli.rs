@@ -71,6 +71,27 @@ fn same_output_bytes_whatever_the_thread_count() {
     }
 }
 
+/// The same on a noisy JPEG pair, where the compression is measured (`jpeg_noise`: a parallel sum over the DCT
+/// frequencies) and the views are denoised (the vectorised bilateral filter): `-v` reports the JPEG, and the
+/// output is the same with 1, 2 and 3 threads.
+#[test]
+fn same_output_bytes_whatever_the_thread_count_jpeg() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = repo().join("examples").to_string_lossy().into_owned();
+    let out = run_in(dir.path(), &["degrade", &src, "dg", "--recipe", "noise:3+jpeg:75", "--seed", "1", "--quiet"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let (l, r) = ("dg/synth/im0.png", "dg/synth/im1.png");
+    for (threads, name) in [("1", "t1.pfm"), ("2", "t2.pfm"), ("3", "t3.pfm")] {
+        let out = run_in(dir.path(), &["--threads", threads, l, r, "-o", name, "-v"]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert!(stderr(&out).contains("JPEG: compression error"), "{}", stderr(&out));
+    }
+    let first = std::fs::read(dir.path().join("t1.pfm")).unwrap();
+    for name in ["t2.pfm", "t3.pfm"] {
+        assert!(std::fs::read(dir.path().join(name)).unwrap() == first, "{name} differs from t1.pfm");
+    }
+}
+
 #[test]
 fn ndisp_comes_from_calib_or_flag() {
     let dir = tempfile::tempdir().unwrap();
