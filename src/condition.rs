@@ -139,11 +139,18 @@ pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditio
     // The compression error is measured on the input (the stretch moves the quantisation steps off the integers)
     // and scaled by the view's gain.
     let view_noise = |img: &RgbImage, input: &RgbImage, gain: f32| {
-        let b = blockiness(&img.to_grey());
-        let jpeg = if p.jpeg_noise { gain * jpeg_noise(&input.to_grey()) } else { 0.0 };
-        (channel_noise(img).max(b * std::f32::consts::PI.sqrt() / 2.0).max(jpeg), b, jpeg)
+        let grey = img.to_grey();
+        let b = blockiness(&grey);
+        let jpeg = if p.jpeg_noise {
+            // An unstretched view is the input itself: its grey is the one just made.
+            let input_grey = (!std::ptr::eq(img, input)).then(|| input.to_grey());
+            gain * jpeg_noise(input_grey.as_ref().unwrap_or(&grey))
+        } else {
+            0.0
+        };
+        (channel_noise(img).max(b * std::f32::consts::PI.sqrt() / 2.0).max(jpeg), b, jpeg, grey)
     };
-    let ((nl, bl, jl), (nr, br, jr)) =
+    let ((nl, bl, jl, grey_l), (nr, br, jr, grey_r)) =
         rayon::join(|| view_noise(&guide.left, &pair.left, gain[0]), || view_noise(&guide.right, &pair.right, gain[1]));
     let noise = [nl, nr];
     let (blocking, jpeg) = ([bl, br], [jl, jr]);
@@ -165,8 +172,11 @@ pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditio
     let mut cost = cost;
     let mut cost_blur = [0.0f32; 2];
     if p.sharpness_ratio > 0.0 {
-        let c = cost.as_ref().unwrap_or(&guide);
-        let grey = [c.left.to_grey(), c.right.to_grey()];
+        // The guide's greys when the cost pair is the guide.
+        let grey = match &cost {
+            Some(c) => [c.left.to_grey(), c.right.to_grey()],
+            None => [grey_l, grey_r],
+        };
         let s = [sharpness(&grey[0]), sharpness(&grey[1])];
         let sharper = usize::from(s[1] > s[0]);
         if s[sharper] > p.sharpness_ratio * s[1 - sharper] {
@@ -641,11 +651,7 @@ fn bilateral(img: &RgbImage, sigma_xy: f32, sigma_range: f32) -> RgbImage {
         return img.clone();
     }
     let (w, h) = img.dims();
-    let r = (2.0 * sigma_xy).ceil() as isize;
-    let spatial: Vec<(isize, isize, f32)> = (-r..=r)
-        .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
-        .map(|(dx, dy)| (dx, dy, -((dx * dx + dy * dy) as f32) / (2.0 * sigma_xy * sigma_xy)))
-        .collect();
+    let spatial = bilateral_taps(sigma_xy);
     let inv_range = 1.0 / (2.0 * sigma_range * sigma_range);
     let mut out = RgbImage::new(w, h);
     let [r_out, g_out, b_out] = &mut out.channels;
@@ -689,6 +695,15 @@ fn bilateral(img: &RgbImage, sigma_xy: f32, sigma_range: f32) -> RgbImage {
     out
 }
 
+/// The taps of [`bilateral`]'s window (radius ⌈2σ⌉), row by row: (dx, dy, the log of the spatial weight).
+fn bilateral_taps(sigma_xy: f32) -> Vec<(isize, isize, f32)> {
+    let r = (2.0 * sigma_xy).ceil() as isize;
+    (-r..=r)
+        .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
+        .map(|(dx, dy)| (dx, dy, -((dx * dx + dy * dy) as f32) / (2.0 * sigma_xy * sigma_xy)))
+        .collect()
+}
+
 /// One tap of [`bilateral`] over a run of pixels: neighbours `q`, centres `c` (R, G, B), accumulated into the
 /// weighted sums and the total weight. Compiled for AVX2 + FMA as well, picked at run time (same results: no
 /// contraction of a·b + c).
@@ -714,17 +729,14 @@ fn bilateral_tap(q: [&[f32]; 3], c: [&[f32]; 3], ls: f32, inv_range: f32, acc: [
 mod tests {
     use super::*;
     use crate::rng::SplitMix64;
+
     /// The bilateral filter as written first: pixel by pixel, libm's exp (the reference for [`bilateral`]).
     fn bilateral_reference(img: &RgbImage, sigma_xy: f32, sigma_range: f32) -> RgbImage {
         if sigma_range <= 0.0 || sigma_xy <= 0.0 {
             return img.clone();
         }
         let (w, h) = img.dims();
-        let r = (2.0 * sigma_xy).ceil() as isize;
-        let spatial: Vec<(isize, isize, f32)> = (-r..=r)
-            .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
-            .map(|(dx, dy)| (dx, dy, -((dx * dx + dy * dy) as f32) / (2.0 * sigma_xy * sigma_xy)))
-            .collect();
+        let spatial = bilateral_taps(sigma_xy);
         let inv_range = 1.0 / (2.0 * sigma_range * sigma_range);
         let mut out = RgbImage::new(w, h);
         let [r_out, g_out, b_out] = &mut out.channels;
@@ -962,7 +974,6 @@ mod tests {
         // Blurring 0.7 px by σ gives √(0.7² + σ²); 1.5 more is about 1.66 in all, so σ ≈ 1.5 matches.
         let sigma = matching_blur(&img.to_grey(), target);
         assert!((1.25..=1.75).contains(&sigma), "matching blur {sigma}");
-        // The default conditions such a pair: the sharper (left) view of the cost pair is blurred.
         // The default conditions such a pair (without the stretch, so the guidance is the input itself): the
         // sharper (left) view of the cost pair is blurred, the guidance keeps it sharp.
         let p = ConditionParams { stretch: false, ..ConditionParams::default() };

@@ -280,8 +280,7 @@ fn apply(image: &RgbImage, step: Degradation, view: View, seed: u64) -> RgbImage
 
 /// The image moved down by `dy` pixels and rotated by `degrees` (counter-clockwise on screen) about its centre:
 /// each output pixel samples the input bilinearly at the inverse transform ([`crate::rectify::sample_bilinear`],
-/// coordinates clamped to the image),
-/// rounded to 8 bits.
+/// coordinates clamped to the image), rounded to 8 bits.
 fn misalign(image: &RgbImage, dy: f64, degrees: f64) -> RgbImage {
     let (w, h) = image.dims();
     let (cx, cy) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);

@@ -314,7 +314,7 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
             match_histograms: false,
             stretch: false,
             jpeg_noise: false,
-            block_band: if input.is_jpeg() || !c.jpeg_noise { c.block_band } else { 0.0 },
+            block_band: input.block_band(c),
             prior_per_sigma: if recurse { c.prior_per_sigma } else { 0.0 },
             prior_base: if recurse { c.prior_base } else { 0.0 },
             prior_levels: if deeper { c.prior_levels - 1 } else { 1 },
@@ -430,12 +430,9 @@ impl<'a> Prepared<'a> {
         if let Some(cond) = &conditioned {
             prior_weight = c.prior_base + c.prior_per_sigma * cond.stats.sigma();
             cost_params.census_dead_band += c.census_band * cond.stats.residual_grey_noise;
-            // JPEG: steps no larger than the block grid's own are compression artefacts, not texture. (The coarse
-            // levels, reduced off the block grid, do not measure the compression; they keep the band when the full
-            // resolution found it.)
-            if cond.stats.is_jpeg() || !c.jpeg_noise {
-                cost_params.census_dead_band += c.block_band * cond.stats.blocking[0].max(cond.stats.blocking[1]);
-            }
+            // JPEG: steps no larger than the block grid's own are compression artefacts, not texture.
+            cost_params.census_dead_band +=
+                c.block_band_for(&cond.stats) * cond.stats.blocking[0].max(cond.stats.blocking[1]);
             if cost_params.census_support > 0.0 {
                 cost_params.census_support += c.support_per_sigma * cond.stats.sigma();
             }
@@ -501,9 +498,10 @@ impl<'a> Prepared<'a> {
         self.conditioned.as_ref().map_or(0.0, |cond| cond.stats.sigma())
     }
 
-    /// Whether the pair was measured as JPEG-compressed ([`condition::PairStats::is_jpeg`]).
-    pub(crate) fn is_jpeg(&self) -> bool {
-        self.conditioned.as_ref().is_some_and(|cond| cond.stats.is_jpeg())
+    /// The block band that applied at this level ([`params::ConditionParams::block_band_for`]; 0 when conditioning
+    /// is off): a coarse level, reduced off the block grid, keeps it.
+    pub(crate) fn block_band(&self, c: &params::ConditionParams) -> f32 {
+        self.conditioned.as_ref().map_or(0.0, |cond| c.block_band_for(&cond.stats))
     }
 
     /// The guidance pair (colour weights, post-processing) and the pair the matching cost sees; `pair` itself

@@ -13,8 +13,8 @@
 //! [`VerticalOffset`] is fitted to the blocks' vertical displacements by iteratively reweighted least squares
 //! (Tukey's biweight, so blocks on wrong coarse disparities or occlusions drop out), and the whole is iterated,
 //! each time sampling the right view at the current estimate, from the whole-pixel shift that correlates best
-//! (the steps converge from within about a pixel; a rig can be several pixels off). [`resample_right`] then moves the right view by
-//! −v (cubic interpolation), and the pipeline continues on the aligned pair.
+//! (the steps converge from within about a pixel; a rig can be several pixels off). [`resample_right`] then
+//! moves the right view by −v (cubic interpolation), and the pipeline continues on the aligned pair.
 
 use rayon::prelude::*;
 

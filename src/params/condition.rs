@@ -63,8 +63,8 @@ pub struct ConditionParams {
     /// smallest and largest are free (the coarse level places an edge only to within its own pixels, and under
     /// noise its edges fatten); 0 = off.
     pub prior_spread: usize,
-    /// When one view of the cost pair is sharper than the other by more than this factor ([`crate::condition::sharpness`]),
-    /// it is blurred until they match (0 = never).
+    /// When one view of the cost pair is sharper than the other by more than this factor
+    /// ([`crate::condition::sharpness`]), it is blurred until they match (0 = never).
     pub sharpness_ratio: f32,
     /// Measure the right view's residual vertical offset against the coarse run's answer and remove it
     /// ([`crate::rectify`]) before the full-resolution cost (needs the coarse prior).
@@ -140,6 +140,13 @@ impl ConditionParams {
             sharpness_ratio: 0.0,
             ..Self::default()
         }
+    }
+
+    /// The Census band's multiple of the blocking for a pair measured as `stats`: `block_band` where JPEG was
+    /// detected, or where this level does not look for it (a coarse level, reduced off the block grid, gets the
+    /// band of the level above); 0 otherwise.
+    pub fn block_band_for(&self, stats: &crate::condition::PairStats) -> f32 {
+        if stats.is_jpeg() || !self.jpeg_noise { self.block_band } else { 0.0 }
     }
 
     /// Whether any part is on (when none is, the pair goes to the cost unchanged).
