@@ -30,8 +30,8 @@
 //!    only to within its own pixels, and fattens near objects under noise. The coarse level removes the
 //!    gross errors that fine-scale noise causes, the fine level keeps the precision; the prior also places
 //!    each pixel well enough that three full-resolution iterations do the work of five. With `prior_levels` L
-//!    the coarse run has a coarse prior of its own, L − 1 levels deep (default 2: the half-resolution run is
-//!    guided by a quarter-resolution one). With `prior_window` the full resolution searches only the labels
+//!    the coarse run has a coarse prior of its own, L − 1 levels deep (default 3: the half-resolution run is
+//!    guided by a quarter-resolution one, and that by an eighth-resolution one). With `prior_window` the full resolution searches only the labels
 //!    the coarse run found, widened by two coarse labels (off by default: as accurate, and on MiddEval3's
 //!    ranges hardly faster).
 //! 5. **Vertical alignment** (`vertical_align`, in [`crate::run`] and the tiled run): with the coarse run's answer,

@@ -129,9 +129,10 @@ fn jpeg_pair_default_beats_the_paper_pipeline() {
 
 /// A surface with no texture at all (the nearest object of a rendered scene, a slanted disc on 12 % of the image,
 /// painted one flat colour in both views): its matching cost is flat inside, so only its outline and the
-/// pairwise terms place it. Measured inside the disc: the paper's pipeline 6.82 px, the default 1.92 px (1.64 before
+/// pairwise terms place it. Measured inside the disc: the paper's pipeline 6.82 px, the default 2.34 px (1.64 before
 /// the Census support of session 9, 2.24 with it, 1.92 since the gradient normalisation of session 10; the coarse
-/// prior sees the outline over a larger share of the disc), winner-take-all 34.7 px.
+/// prior sees the outline over a larger share of the disc; 2.34 since the third coarse level of session 14, at
+/// whose 1/8 the disc is about 9 px across), winner-take-all 34.7 px.
 #[test]
 fn untextured_surface() {
     let s = render_scene(&SynthParams { width: 360, height: 240, ndisp: 48, seed: 25 }).unwrap();
@@ -172,7 +173,7 @@ fn untextured_surface() {
 }
 
 /// Thin structures under noise (σ 8): bars two pixels wide, 12 px of disparity in front of a textured background.
-/// The coarse runs (at 1/2 and 1/4) cannot hold them, and a prior as strong as the noise asks would forbid them;
+/// The coarse runs (at 1/2, 1/4 and 1/8) cannot hold them, and a prior as strong as the noise asks would forbid them;
 /// the prior weakened at detail (`condition.prior_detail`) lets the full-resolution cost keep them.
 #[test]
 fn thin_structures_under_noise() {
