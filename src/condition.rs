@@ -22,8 +22,9 @@
 //! 4. **Coarse prior** (`prior_*`, in [`crate::run`]): the whole pipeline first runs on the conditioned pair
 //!    reduced 2× (noise halves, the range of labels too; a quarter of the plane segments, so they keep their size
 //!    in the scene), and the full-resolution cost of label d at pixel i
-//!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = (`prior_base` + `prior_per_sigma`·σn) × the
-//!    coarse run's confidence at i (its max-marginal, with `prior_confidence`) × `prior_untrusted` where the
+//!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = max(`prior_base` + `prior_per_sigma`·σn,
+//!    `prior_flat` × the flatness of the pixel's cost, [`crate::cost::flatness`]: an untextured surface follows the
+//!    coarse answer whatever the noise) × the coarse run's confidence at i (its max-marginal, with `prior_confidence`) × `prior_untrusted` where the
 //!    coarse left-right check failed (the fill guessed there), × [`detail_factor`] where the image has detail the
 //!    coarse level cannot hold. Beside a depth edge of the coarse answer (`prior_spread`) the distance is taken
 //!    from the whole step, [low, high] of [`edge_range`], instead of d_coarse: the coarse level places an edge

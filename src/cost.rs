@@ -318,6 +318,35 @@ pub fn winner_take_all(vol: &CostVolume) -> Plane<f32> {
     out
 }
 
+/// How flat each pixel's cost is over the labels, in (0, 1]: `1 / (1 + s / s̄)`, s the pixel's spread (mean − min
+/// over its labels) and s̄ the median spread of the image. 1 where every label costs the same (an untextured
+/// surface, where the cost says nothing), ½ at the median pixel, towards 0 where one label stands out. Relative to
+/// the image's own median, so it does not depend on the cost's scale. All ones when the median spread is 0.
+pub fn flatness(vol: &CostVolume) -> Plane<f32> {
+    let m = vol.ndisp.max(1);
+    let spread: Vec<f32> = vol
+        .data
+        .par_chunks(m)
+        .map(|c| {
+            let (min, sum) = c.iter().fold((f32::INFINITY, 0.0f32), |(lo, s), &v| (lo.min(v), s + v));
+            sum / m as f32 - min
+        })
+        .collect();
+    let mut out = Plane::from_vec(vol.width, vol.height, spread);
+    if out.data.is_empty() {
+        return out;
+    }
+    let mut sorted = out.data.clone();
+    let mid = sorted.len() / 2;
+    let median = *sorted.select_nth_unstable_by(mid, f32::total_cmp).1;
+    if median > 0.0 && median.is_finite() {
+        out.data.par_iter_mut().for_each(|s| *s = 1.0 / (1.0 + *s / median));
+    } else {
+        out.data.fill(1.0);
+    }
+    out
+}
+
 /// Index of the smallest value (the first one on ties). NaN never wins.
 #[inline]
 pub fn argmin(values: &[f32]) -> usize {
@@ -336,6 +365,21 @@ pub fn argmin(values: &[f32]) -> usize {
 #[allow(clippy::needless_range_loop)] // index loops read best in reference implementations
 mod tests {
     use super::*;
+
+    #[test]
+    fn flatness_is_one_where_every_label_costs_the_same() {
+        // Four pixels, three labels: flat, a clear winner, the median's spread, twice it.
+        let data = vec![5.0, 5.0, 5.0, 0.0, 9.0, 9.0, 1.0, 2.0, 3.0, 0.0, 2.0, 4.0];
+        let vol = CostVolume { width: 4, height: 1, ndisp: 3, data };
+        let f = flatness(&vol);
+        // Spreads 0, 6, 1, 2; the median (the upper middle of four) is 2.
+        let expected = [1.0, 1.0 / 4.0, 1.0 / 1.5, 0.5];
+        for (got, want) in f.data.iter().zip(expected) {
+            assert!((got - want).abs() < 1e-6, "{:?} against {expected:?}", f.data);
+        }
+        let flat = CostVolume { width: 2, height: 1, ndisp: 2, data: vec![1.0; 4] };
+        assert_eq!(flatness(&flat).data, vec![1.0, 1.0], "no spread anywhere: all flat");
+    }
 
     /// Deterministic pseudo-random texture, integer values 0..255.
     pub(crate) fn noise(w: usize, h: usize, seed: u64) -> Vec<f32> {

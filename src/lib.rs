@@ -121,6 +121,8 @@ pub struct Measured {
     pub stats: condition::PairStats,
     /// λ of the coarse prior before its per-pixel factor (0: no prior).
     pub prior_weight: f32,
+    /// λ's floor where the cost is flat (`condition.prior_flat`, × the pixel's flatness).
+    pub prior_flat: f32,
     /// The Census support τ in grey levels (0: every bit compared).
     pub census_support: f32,
     /// ḡ and ε of the gradient normalisation (`None`: the raw gradient).
@@ -290,13 +292,13 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
     }
     let c = &params.condition;
     let mut input = Prepared::of(params, pair, &mut t);
-    let (cost_params, prior_weight) = (input.cost_params.clone(), input.prior_weight);
+    let (cost_params, prior_weight, prior_flat) = (input.cost_params.clone(), input.prior_weight, input.prior_flat);
     on_stage("cost volume");
     // Before the full-resolution volume exists, so the two runs' buffers are never alive together.
     // The coarse run needs a pair of at least 8 × 8 at half size whose halved range stays below its width.
     let coarse_fits =
         pair.left.width >= 16 && pair.left.height >= 16 && pair.ndisp.div_ceil(2) < pair.left.width.div_ceil(2);
-    let coarse = if prior_weight > 0.0 && coarse_fits {
+    let coarse = if (prior_weight > 0.0 || prior_flat > 0.0) && coarse_fits {
         // The same pipeline on the pair reduced 2× (conditioning off: the pair is conditioned already), then a
         // penalty for labels far from its answer.
         let mut coarse_params = params.clone();
@@ -317,6 +319,7 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
             block_band: input.block_band(c),
             prior_per_sigma: if recurse { c.prior_per_sigma } else { 0.0 },
             prior_base: if recurse { c.prior_base } else { 0.0 },
+            prior_flat: if recurse { c.prior_flat } else { 0.0 },
             prior_levels: if deeper { c.prior_levels - 1 } else { 1 },
             ..*c
         };
@@ -325,7 +328,7 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         let grey_left = input.pairs(pair).1.left.to_grey();
         // The right views moved onto the left view's rows where the coarse answer shows them off.
         input.align_vertically(c, &grey_left, &coarse, &mut t);
-        let mut prior = Prior::from_coarse(coarse, prior_weight, c.prior_untrusted);
+        let mut prior = Prior::from_coarse(coarse, prior_weight, prior_flat, c.prior_untrusted);
         prior.weaken_at_detail(&grey_left, 2, c.prior_detail);
         prior.spread_at_edges(2, c.prior_spread, c.prior_trunc_px);
         Some(prior)
@@ -375,17 +378,19 @@ pub(crate) struct Prior {
     pub confidence: Plane<f32>,
     /// λ before the per-pixel factor.
     pub weight: f32,
+    /// Where the fine cost is flat, λ is at least this × its flatness ([`cost::flatness`]; `condition.prior_flat`).
+    pub flat: f32,
 }
 
 impl Prior {
     /// The prior of a coarse run's output (brought to the fine size) with weight λ = `weight`: a pixel the coarse
     /// left-right check rejected was filled by a guess, so its factor is its confidence × `untrusted`.
-    pub(crate) fn from_coarse(coarse: Output, weight: f32, untrusted: f32) -> Prior {
+    pub(crate) fn from_coarse(coarse: Output, weight: f32, flat: f32, untrusted: f32) -> Prior {
         let mut confidence = coarse.confidence;
         confidence.data.iter_mut().zip(&coarse.consistent.data).filter(|(_, ok)| !**ok).for_each(|(c, _)| {
             *c *= untrusted;
         });
-        Prior { disparity: coarse.disparity, free: None, confidence, weight }
+        Prior { disparity: coarse.disparity, free: None, confidence, weight, flat }
     }
 
     /// Beside a depth edge of the coarse answer (a level `factor` times coarser), leaves the whole step free: the
@@ -395,6 +400,39 @@ impl Prior {
         if spread > 0 {
             self.free = Some(condition::edge_range(&self.disparity, spread * factor, min_jump));
         }
+    }
+
+    /// Adds the prior's penalty to `cost` (the fine level's left volume, before inference): at pixel i, label d
+    /// gets λᵢ·min(max(dist(d) − margin, 0), trunc), dist the distance from the labels the prior leaves free, and
+    /// λᵢ = max(`weight`, `flat` × the flatness of the pixel's cost, [`cost::flatness`]) × its confidence factor
+    /// (the confidence only with `prior_confidence`). Stage `flatness` when the floor can matter.
+    pub(crate) fn add_to(&self, cost: &mut CostVolume, c: &params::ConditionParams, t: &mut Timings) {
+        let (m, margin, trunc) = (cost.ndisp, c.prior_margin_px, c.prior_trunc_px);
+        let (by_confidence, weight) = (c.prior_confidence, self.weight);
+        // Nothing to do where the noise-scaled weight is at least `flat`: the floor never exceeds it.
+        let floor = match self.flat {
+            flat if flat > weight => {
+                let mut f = t.time("flatness", || cost::flatness(cost));
+                f.data.iter_mut().for_each(|v| *v *= flat);
+                f
+            }
+            _ => Plane::new(cost.width, cost.height, 0.0),
+        };
+        let (low, high) = self.free.as_ref().map_or((&self.disparity, &self.disparity), |(l, h)| (l, h));
+        let free = low.data.par_iter().zip(high.data.par_iter());
+        let scale = self.confidence.data.par_iter().zip(floor.data.par_iter());
+        cost.data.par_chunks_mut(m).zip(free).zip(scale).for_each(|((costs, (&low, &high)), (&conf, &floor))| {
+            let weight = weight.max(floor);
+            let lambda = if by_confidence { weight * conf } else { weight };
+            if low.is_finite() {
+                for (d, v) in costs.iter_mut().enumerate() {
+                    // The distance from [low, high]: |d − d_coarse| where the two are one.
+                    let d = d as f32;
+                    let off = if d < low { low - d } else { (d - high).max(0.0) };
+                    *v += lambda * (off - margin).clamp(0.0, trunc);
+                }
+            }
+        });
     }
 
     /// Weakens the prior where `grey` (the full-resolution cost image) has detail a level `factor` times coarser
@@ -416,6 +454,8 @@ pub(crate) struct Prepared<'a> {
     pub cost_params: params::CostParams,
     /// λ of the coarse prior before the per-pixel factor.
     pub prior_weight: f32,
+    /// The floor of λ where the cost is flat (`condition.prior_flat`; 0 when conditioning is off).
+    pub prior_flat: f32,
     /// The right view's residual vertical offset, once [`Prepared::align_vertically`] has measured it.
     vertical: Option<VerticalMeasured>,
 }
@@ -426,6 +466,7 @@ impl<'a> Prepared<'a> {
         let c = &params.condition;
         let mut cost_params = params.cost.clone();
         let mut prior_weight = 0.0f32;
+        let prior_flat = if c.is_active() { c.prior_flat } else { 0.0 };
         let conditioned = c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c)));
         if let Some(cond) = &conditioned {
             prior_weight = c.prior_base + c.prior_per_sigma * cond.stats.sigma();
@@ -442,7 +483,7 @@ impl<'a> Prepared<'a> {
                 cost_params.grad_norm_mean = Some(cost::mean_local_contrast(&grey, cost_params.grad_norm_radius));
             }
         }
-        Prepared { conditioned, cost_params, prior_weight, vertical: None }
+        Prepared { conditioned, cost_params, prior_weight, prior_flat, vertical: None }
     }
 
     /// Measures the right view's residual vertical offset against a coarse answer at this size
@@ -485,6 +526,7 @@ impl<'a> Prepared<'a> {
         self.conditioned.as_ref().map(|cond| Measured {
             stats: cond.stats,
             prior_weight: self.prior_weight,
+            prior_flat: self.prior_flat,
             census_support: self.cost_params.census_support,
             gradient: (self.cost_params.grad_norm_radius > 0)
                 .then(|| self.cost_params.grad_norm_mean.map(|m| (m, self.cost_params.grad_norm_eps)))
@@ -531,23 +573,7 @@ pub(crate) fn fine_pass(
     let mut cost_left =
         t.time("cost", || cost::build_cost_volume(&cost_pair.left, &cost_pair.right, pair.ndisp, cost_params));
     if let Some(prior) = prior {
-        let (m, margin, trunc) = (cost_left.ndisp, c.prior_margin_px, c.prior_trunc_px);
-        let (by_confidence, weight) = (c.prior_confidence, prior.weight);
-        let (low, high) = prior.free.as_ref().map_or((&prior.disparity, &prior.disparity), |(l, h)| (l, h));
-        let free = low.data.par_iter().zip(high.data.par_iter());
-        cost_left.data.par_chunks_mut(m).zip(free).zip(prior.confidence.data.par_iter()).for_each(
-            |((costs, (&low, &high)), &conf)| {
-                let lambda = if by_confidence { weight * conf } else { weight };
-                if low.is_finite() {
-                    for (d, v) in costs.iter_mut().enumerate() {
-                        // The distance from [low, high]: |d − d_coarse| where the two are one.
-                        let d = d as f32;
-                        let off = if d < low { low - d } else { (d - high).max(0.0) };
-                        *v += lambda * (off - margin).clamp(0.0, trunc);
-                    }
-                }
-            },
-        );
+        prior.add_to(&mut cost_left, c, &mut t);
     }
 
     // Left inference first, then the right volume from the left one; the left volume is spent before the right
@@ -648,6 +674,33 @@ pub(crate) mod test_util {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_prior_holds_where_the_cost_is_flat_even_at_zero_noise() {
+        // Two pixels, five labels: a flat cost and one with a clear winner at label 4; the coarse answer says 1.
+        let data = vec![3.0, 3.0, 3.0, 3.0, 3.0, 6.0, 6.0, 6.0, 6.0, 0.0];
+        let prior = |flat| Prior {
+            disparity: Plane::from_vec(2, 1, vec![1.0, 1.0]),
+            free: None,
+            confidence: Plane::new(2, 1, 1.0),
+            weight: 0.0, // a noiseless pair: no noise-scaled weight
+            flat,
+        };
+        let c = params::ConditionParams { prior_margin_px: 0.0, prior_trunc_px: 8.0, ..Default::default() };
+        let with = |flat| {
+            let mut cost = CostVolume { width: 2, height: 1, ndisp: 5, data: data.clone() };
+            prior(flat).add_to(&mut cost, &c, &mut Timings::default());
+            cost
+        };
+        assert_eq!(with(0.0).data, data, "no floor, no weight: the cost is unchanged");
+        let held = with(1.0);
+        // The flat pixel has flatness 1 (λ = 1): label 1 now wins, by 1 per label of distance.
+        assert_eq!(cost::argmin(held.pixel(0)), 1);
+        assert_eq!(held.pixel(0), &[4.0, 3.0, 4.0, 5.0, 6.0]);
+        // The distinct pixel: spread 4.8, median spread 4.8 (the upper of two), flatness ½: the winner stays.
+        assert_eq!(cost::argmin(held.pixel(1)), 4);
+        assert!((held.pixel(1)[4] - 1.5).abs() < 1e-6, "{:?}", held.pixel(1));
+    }
 
     #[test]
     fn memory_estimate_scales_with_pixels_and_labels() {

@@ -186,7 +186,7 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     let (guide, cost_pair) = input.pairs(pair);
     // The coarse answer is the base of a tiled run: its weight never falls below TILED_PRIOR_FLOOR.
     let weight = input.prior_weight.max(TILED_PRIOR_FLOOR);
-    let mut prior = Prior::from_coarse(coarse, weight, params.condition.prior_untrusted);
+    let mut prior = Prior::from_coarse(coarse, weight, input.prior_flat, params.condition.prior_untrusted);
     prior.weaken_at_detail(&grey_left, f, params.condition.prior_detail);
     // The tiles keep the point prior (no `prior_spread`): the coarse level is the base answer here, and freeing its
     // depth edges let the fine level move them on the ×4 scenes (Adirondack 1.66 -> 1.74, Vintage 8.45 -> 8.51;
@@ -340,6 +340,7 @@ impl TileJob<'_> {
             free: None,
             confidence: cut_plane(&self.prior.confidence, crop, |v| v),
             weight: self.prior.weight,
+            flat: self.prior.flat,
         };
         let (w, h) = self.guide.left.dims();
         let mut params = self.params.clone();
@@ -565,7 +566,7 @@ mod tests {
         };
         let prior_of = |f: &dyn Fn(usize, usize) -> f32| {
             let disparity = Plane::from_vec(w, h, (0..w * h).map(|i| f(i % w, i / w)).collect());
-            Prior { disparity, free: None, confidence: Plane::new(w, h, 1.0), weight: 1.0 }
+            Prior { disparity, free: None, confidence: Plane::new(w, h, 1.0), weight: 1.0, flat: 0.0 }
         };
         let core = Rect { x0: 0, y0: 0, x1: w, y1: h };
         job_for(&prior_of(&|x, y| if x < 200 && y < 80 { 150.0 } else { 10.0 }), &|job| {

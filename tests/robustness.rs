@@ -132,7 +132,7 @@ fn jpeg_pair_default_beats_the_paper_pipeline() {
 /// pairwise terms place it. Measured inside the disc: the paper's pipeline 6.82 px, the default 2.34 px (1.64 before
 /// the Census support of session 9, 2.24 with it, 1.92 since the gradient normalisation of session 10; the coarse
 /// prior sees the outline over a larger share of the disc; 2.34 since the third coarse level of session 14, at
-/// whose 1/8 the disc is about 9 px across), winner-take-all 34.7 px.
+/// whose 1/8 the disc is about 9 px across), winner-take-all 34.7 px. Then the same pair as if noiseless (below).
 #[test]
 fn untextured_surface() {
     let s = render_scene(&SynthParams { width: 360, height: 240, ndisp: 48, seed: 25 }).unwrap();
@@ -170,6 +170,17 @@ fn untextured_surface() {
     eprintln!("untextured surface ({:.1} % of the image): paper {paper:.3}, default {default:.3}", 100.0 * share);
     assert!(paper > 3.0, "the flat surface should defeat the paper's pipeline: {paper:.3}");
     assert!(default < 0.5 * paper && default < 2.5, "paper {paper:.3}, default {default:.3}");
+
+    // As if the pair were noiseless (this renderer's texture reads σn ≈ 2, so λ would be about 1 from the noise
+    // alone): without the noise-scaled weight only the floor where the cost is flat (`condition.prior_flat`) lets
+    // the coarse levels hold the disc. Measured: 12.61 px without the floor (no coarse prior at all), 1.93 with it.
+    let mut noiseless = Params::default();
+    noiseless.condition.prior_per_sigma = 0.0;
+    let mut no_floor = noiseless.clone();
+    no_floor.condition.prior_flat = 0.0;
+    let (with, without) = (inside(&noiseless), inside(&no_floor));
+    eprintln!("untextured surface, no noise-scaled prior: floor where the cost is flat {with:.3}, none {without:.3}");
+    assert!(with < 0.3 * without && with < 2.5, "with the floor {with:.3}, without {without:.3}");
 }
 
 /// Thin structures under noise (σ 8): bars two pixels wide, 12 px of disparity in front of a textured background.

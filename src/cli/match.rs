@@ -211,9 +211,9 @@ pub(super) fn describe_measured(m: &jem::Measured) -> String {
         format!("; right view's vertical offset {lo:+.2} to {hi:+.2} px ({done})")
     });
     format!(
-        "measured: noise σ {nl:.2} / {nr:.2}, contrast gain {gl:.2} / {gr:.2} (left / right); prior λ {:.2}, \
-         Census support {:.1}, gradient {gradient}{blur}{jpeg}{vertical}",
-        m.prior_weight, m.census_support
+        "measured: noise σ {nl:.2} / {nr:.2}, contrast gain {gl:.2} / {gr:.2} (left / right); prior λ {:.2} \
+         (at least {:.2} × the cost's flatness), Census support {:.1}, gradient {gradient}{blur}{jpeg}{vertical}",
+        m.prior_weight, m.prior_flat, m.census_support
     )
 }
 

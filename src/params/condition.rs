@@ -74,6 +74,10 @@ pub struct ConditionParams {
     pub vertical_min_px: f32,
     /// A fixed prior weight added to the noise-scaled one.
     pub prior_base: f32,
+    /// Where the full-resolution cost is flat the prior weighs at least this × 1 / (1 + s / s̄), s the pixel's
+    /// cost spread over the labels (mean − min) and s̄ its image median ([`crate::cost::flatness`]): an untextured
+    /// surface follows the coarse answer even in a clean pair, whose noise-scaled weight is near 0; 0 = off.
+    pub prior_flat: f32,
     /// Labels within this distance of the coarse disparity (full-resolution px) are free.
     pub prior_margin_px: f32,
     /// The penalty stops growing beyond this distance past the margin.
@@ -108,6 +112,7 @@ impl Default for ConditionParams {
             prior_confidence: true,
             prior_untrusted: 0.5,
             prior_detail: 1.5,
+            prior_flat: 1.0,
             prior_spread: 1,
             vertical_align: true,
             vertical_min_px: 0.1,
@@ -159,7 +164,8 @@ impl ConditionParams {
                 || self.block_band > 0.0
                 || self.jpeg_noise
                 || self.prior_per_sigma > 0.0
-                || self.prior_base > 0.0)
+                || self.prior_base > 0.0
+                || self.prior_flat > 0.0)
     }
 
     /// Checks every value's range.
@@ -183,6 +189,7 @@ impl ConditionParams {
         check_nonneg("condition.prior_base", self.prior_base)?;
         check_nonneg("condition.prior_untrusted", self.prior_untrusted)?;
         check_nonneg("condition.prior_detail", self.prior_detail)?;
+        check_nonneg("condition.prior_flat", self.prior_flat)?;
         check_nonneg("condition.prior_recurse_sigma", self.prior_recurse_sigma)?;
         if !(1..=4).contains(&self.prior_levels) {
             return Err(Error::param("condition.prior_levels", self.prior_levels, "1 to 4"));
