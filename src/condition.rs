@@ -23,18 +23,19 @@
 //!    reduced 2× (noise halves, the range of labels too; a quarter of the plane segments, so they keep their size
 //!    in the scene), and the full-resolution cost of label d at pixel i
 //!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = max(`prior_base` + `prior_per_sigma`·σn,
-//!    `prior_flat` × the flatness of the pixel's cost, [`crate::cost::flatness`]: an untextured surface follows the
-//!    coarse answer whatever the noise) × the coarse run's confidence at i (its max-marginal, with `prior_confidence`) × `prior_untrusted` where the
-//!    coarse left-right check failed (the fill guessed there), × [`detail_factor`] where the image has detail the
-//!    coarse level cannot hold. Beside a depth edge of the coarse answer (`prior_spread`) the distance is taken
-//!    from the whole step, [low, high] of [`edge_range`], instead of d_coarse: the coarse level places an edge
-//!    only to within its own pixels, and fattens near objects under noise. The coarse level removes the
-//!    gross errors that fine-scale noise causes, the fine level keeps the precision; the prior also places
-//!    each pixel well enough that three full-resolution iterations do the work of five. With `prior_levels` L
+//!    `prior_flat` × the flatness of the pixel's cost, [`crate::cost::flatness`]: an untextured surface follows
+//!    the coarse answer whatever the noise) × the coarse run's confidence at i (its max-marginal, with
+//!    `prior_confidence`) × `prior_untrusted` where the coarse left-right check failed (the fill guessed there),
+//!    × [`detail_factor`] where the image has detail the coarse level cannot hold. Beside a depth edge of the
+//!    coarse answer (`prior_spread`) the distance is taken from the whole step, [low, high] of [`edge_range`],
+//!    instead of d_coarse: the coarse level places an edge only to within its own pixels, and fattens near
+//!    objects under noise. The coarse level removes the gross errors that fine-scale noise causes, the fine level
+//!    keeps the precision; the prior also places each pixel well enough that three full-resolution iterations do
+//!    the work of five. With `prior_levels` L
 //!    the coarse run has a coarse prior of its own, L − 1 levels deep (default 3: the half-resolution run is
-//!    guided by a quarter-resolution one, and that by an eighth-resolution one). With `prior_window` the full resolution searches only the labels
-//!    the coarse run found, widened by two coarse labels (off by default: as accurate, and on MiddEval3's
-//!    ranges hardly faster).
+//!    guided by a quarter-resolution one, and that by an eighth-resolution one). With `prior_window` the full
+//!    resolution searches only the labels the coarse run found, widened by two coarse labels (off by default: as
+//!    accurate, and on MiddEval3's ranges hardly faster).
 //! 5. **Vertical alignment** (`vertical_align`, in [`crate::run`] and the tiled run): with the coarse run's answer,
 //!    the right view's residual vertical offset (imperfect rectification) is measured and, where it reaches
 //!    `vertical_min_px`, removed from the guidance and the cost pair before the full-resolution cost
