@@ -548,19 +548,13 @@ pub fn channel_noise(img: &RgbImage) -> f32 {
     sum / 3.0
 }
 
-/// The value at fraction `f` of `v` in sorted order (nearest rank), found by selection (`v` is reordered).
-fn rank_value(v: &mut [f32], f: f64) -> f32 {
-    let k = ((v.len() - 1) as f64 * f).round() as usize;
-    *v.select_nth_unstable_by(k, f32::total_cmp).1
-}
-
 /// The values at fractions `a` and `b` of the sorted data (nearest rank), non-finite values left out.
 fn percentiles(data: &[f32], a: f64, b: f64) -> (f32, f32) {
     let mut v: Vec<f32> = data.iter().copied().filter(|x| x.is_finite()).collect();
     if v.is_empty() {
         return (0.0, 0.0);
     }
-    (rank_value(&mut v, a), rank_value(&mut v, b))
+    (crate::cost::rank_value(&mut v, a), crate::cost::rank_value(&mut v, b))
 }
 
 /// Noise σ of a grey image in grey levels, robust to texture: the 3 × 3 operator
@@ -602,9 +596,9 @@ fn noise_of(data: &[f32], w: usize, h: usize) -> f32 {
     if grad.is_empty() {
         return 0.0;
     }
-    let median_grad = rank_value(&mut grad.clone(), FLAT_FRACTION);
+    let median_grad = crate::cost::rank_value(&mut grad.clone(), FLAT_FRACTION);
     let mut flat: Vec<f32> = resp.iter().zip(&grad).filter(|(_, g)| **g <= median_grad).map(|(r, _)| *r).collect();
-    rank_value(&mut flat, 0.5) / (6.0 * 0.6745)
+    crate::cost::rank_value(&mut flat, 0.5) / (6.0 * 0.6745)
 }
 
 /// Maps each channel of `src` onto the distribution of the same channel of `reference` (histogram

@@ -137,6 +137,12 @@ pub fn mean_local_contrast(grey: &Plane<f32>, radius: usize) -> f32 {
     plane_mean(&local_mean_abs(&sobel_x(grey), radius))
 }
 
+/// The value at fraction `f` of `v` in sorted order (nearest rank), found by selection (`v` is reordered).
+pub(crate) fn rank_value(v: &mut [f32], f: f64) -> f32 {
+    let k = ((v.len() - 1) as f64 * f).round() as usize;
+    *v.select_nth_unstable_by(k, f32::total_cmp).1
+}
+
 /// The mean of a plane (summed in `f64`, row-major: the same value whatever the thread count).
 pub(crate) fn plane_mean(p: &Plane<f32>) -> f32 {
     (p.data.iter().map(|&v| f64::from(v)).sum::<f64>() / p.data.len().max(1) as f64) as f32
@@ -336,9 +342,7 @@ pub fn flatness(vol: &CostVolume) -> Plane<f32> {
     if out.data.is_empty() {
         return out;
     }
-    let mut sorted = out.data.clone();
-    let mid = sorted.len() / 2;
-    let median = *sorted.select_nth_unstable_by(mid, f32::total_cmp).1;
+    let median = rank_value(&mut out.data.clone(), 0.5);
     if median > 0.0 && median.is_finite() {
         out.data.par_iter_mut().for_each(|s| *s = 1.0 / (1.0 + *s / median));
     } else {

@@ -409,28 +409,22 @@ impl Prior {
     pub(crate) fn add_to(&self, cost: &mut CostVolume, c: &params::ConditionParams, t: &mut Timings) {
         let (m, margin, trunc) = (cost.ndisp, c.prior_margin_px, c.prior_trunc_px);
         let (by_confidence, weight) = (c.prior_confidence, self.weight);
-        // Nothing to do where the noise-scaled weight is at least `flat`: the floor never exceeds it.
-        let floor = match self.flat {
-            flat if flat > weight => {
-                let mut f = t.time("flatness", || cost::flatness(cost));
-                f.data.iter_mut().for_each(|v| *v *= flat);
-                f
-            }
-            _ => Plane::new(cost.width, cost.height, 0.0),
-        };
+        // Nothing to compute where the noise-scaled weight is at least `flat`: the floor never exceeds it.
+        let flatness = (self.flat > weight).then(|| t.time("flatness", || cost::flatness(cost)));
         let (low, high) = self.free.as_ref().map_or((&self.disparity, &self.disparity), |(l, h)| (l, h));
-        let free = low.data.par_iter().zip(high.data.par_iter());
-        let scale = self.confidence.data.par_iter().zip(floor.data.par_iter());
-        cost.data.par_chunks_mut(m).zip(free).zip(scale).for_each(|((costs, (&low, &high)), (&conf, &floor))| {
+        cost.data.par_chunks_mut(m).enumerate().for_each(|(i, costs)| {
+            let (low, high) = (low.data[i], high.data[i]);
+            if !low.is_finite() {
+                return;
+            }
+            let floor = flatness.as_ref().map_or(0.0, |f| self.flat * f.data[i]);
             let weight = weight.max(floor);
-            let lambda = if by_confidence { weight * conf } else { weight };
-            if low.is_finite() {
-                for (d, v) in costs.iter_mut().enumerate() {
-                    // The distance from [low, high]: |d − d_coarse| where the two are one.
-                    let d = d as f32;
-                    let off = if d < low { low - d } else { (d - high).max(0.0) };
-                    *v += lambda * (off - margin).clamp(0.0, trunc);
-                }
+            let lambda = if by_confidence { weight * self.confidence.data[i] } else { weight };
+            for (d, v) in costs.iter_mut().enumerate() {
+                // The distance from [low, high]: |d − d_coarse| where the two are one.
+                let d = d as f32;
+                let off = if d < low { low - d } else { (d - high).max(0.0) };
+                *v += lambda * (off - margin).clamp(0.0, trunc);
             }
         });
     }
@@ -465,11 +459,11 @@ impl<'a> Prepared<'a> {
     pub(crate) fn of(params: &Params, pair: &'a StereoPair, t: &mut Timings) -> Self {
         let c = &params.condition;
         let mut cost_params = params.cost.clone();
-        let mut prior_weight = 0.0f32;
-        let prior_flat = if c.is_active() { c.prior_flat } else { 0.0 };
+        let (mut prior_weight, mut prior_flat) = (0.0f32, 0.0f32);
         let conditioned = c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c)));
         if let Some(cond) = &conditioned {
             prior_weight = c.prior_base + c.prior_per_sigma * cond.stats.sigma();
+            prior_flat = c.prior_flat;
             cost_params.census_dead_band += c.census_band * cond.stats.residual_grey_noise;
             // JPEG: steps no larger than the block grid's own are compression artefacts, not texture.
             cost_params.census_dead_band +=
