@@ -187,6 +187,17 @@ pub fn truncation_cost(p: &CostParams) -> f32 {
 /// # Panics
 /// If the images differ in size (checked by [`crate::StereoPair::new`]) or the Census window is invalid.
 pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &CostParams) -> CostVolume {
+    build_cost_volume_in(left, right, ndisp, p, Vec::new())
+}
+
+/// [`build_cost_volume`] in `storage` (reused whatever its size and contents).
+pub fn build_cost_volume_in(
+    left: &RgbImage,
+    right: &RgbImage,
+    ndisp: usize,
+    p: &CostParams,
+    storage: Vec<f32>,
+) -> CostVolume {
     assert_eq!(left.dims(), right.dims(), "left and right images differ in size");
     let (w, h) = left.dims();
     let (grey_l, grey_r) = (left.to_grey(), right.to_grey());
@@ -209,8 +220,10 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
     }
     let out_of_view = truncation_cost(p);
     let (a, tc, b, tg) = (p.census_weight, p.census_trunc, p.grad_weight, p.grad_trunc);
-    // Zeroed (fresh pages from the OS, no fill pass); every entry is written below, rows in parallel.
-    let mut vol = CostVolume::new(w, h, ndisp, 0.0);
+    // Every entry is written below, rows in parallel: a fresh allocation is zeroed by the OS (no fill pass), a
+    // reused one keeps what it held until then.
+    let data = crate::image::reuse_storage(storage, w * h * ndisp);
+    let mut vol = CostVolume { width: w, height: h, ndisp, data };
     let rows = CostRows {
         cen_l: &cen_l,
         cen_r: &cen_r,
@@ -298,9 +311,7 @@ pub fn derive_right_volume(left: &CostVolume, out_of_view: f32) -> CostVolume {
 /// an allocation that is already paged in.
 pub fn derive_right_volume_in(left: &CostVolume, out_of_view: f32, mut storage: Vec<f32>) -> CostVolume {
     let (w, h, nd) = (left.width, left.height, left.ndisp);
-    if storage.len() != w * h * nd {
-        storage = vec![0.0; w * h * nd]; // zeroed pages from the OS, no fill pass
-    }
+    storage = crate::image::reuse_storage(storage, w * h * nd); // every entry is written below
     storage.par_chunks_mut(w * nd).enumerate().for_each(|(y, row)| {
         let lrow = &left.data[y * w * nd..][..w * nd];
         for (x, costs) in row.chunks_exact_mut(nd).enumerate() {

@@ -55,6 +55,40 @@ impl<T: Copy> Plane<T> {
     pub fn at(&self, x: usize, y: usize) -> T {
         self.data[y * self.width + x]
     }
+
+    /// The columns `x0..` of the plane.
+    ///
+    /// # Panics
+    /// If `x0` is beyond the width.
+    pub fn columns_from(&self, x0: usize) -> Self {
+        Plane::from_vec(self.width - x0, self.height, columns_from(&self.data, self.width, 1, x0))
+    }
+}
+
+/// `storage` resized to `len` values, for a buffer whose every value is written before it is read: a fresh
+/// allocation is zeroed by the OS (no fill pass); a reused one keeps what it held (only a grown part is zeroed), so
+/// a buffer carried from one run to the next is not page-faulted again.
+pub fn reuse_storage(mut storage: Vec<f32>, len: usize) -> Vec<f32> {
+    if storage.capacity() == 0 {
+        return vec![0.0; len];
+    }
+    if storage.len() >= len {
+        storage.truncate(len);
+    } else {
+        storage.reserve_exact(len - storage.len());
+        storage.resize(len, 0.0);
+    }
+    storage
+}
+
+/// The columns `x0..` of every row of a row-major buffer of `width` pixels of `k` values each.
+fn columns_from<T: Copy>(data: &[T], width: usize, k: usize, x0: usize) -> Vec<T> {
+    assert!(x0 <= width, "column {x0} is beyond the width {width}");
+    let mut out = Vec::with_capacity(data.len() / width.max(1) * (width - x0));
+    for row in data.chunks_exact(width * k) {
+        out.extend_from_slice(&row[x0 * k..]);
+    }
+    out
 }
 
 /// A disparity map of the left (or right) view in pixels; `f32::INFINITY` marks an invalid/unknown pixel
@@ -107,6 +141,15 @@ impl RgbImage {
         Plane::from_vec(self.width, self.height, data)
     }
 
+    /// The columns `x0..` of the image.
+    ///
+    /// # Panics
+    /// If `x0` is beyond the width.
+    pub fn columns_from(&self, x0: usize) -> RgbImage {
+        let channels = self.channels.each_ref().map(|c| columns_from(c, self.width, 1, x0));
+        RgbImage { width: self.width - x0, height: self.height, channels }
+    }
+
     /// The image mirrored left-right. Matching the right view against the left is the left-view problem on
     /// mirrored images, which lets one implementation serve both views.
     pub fn mirrored(&self) -> RgbImage {
@@ -156,6 +199,22 @@ impl CostVolume {
     pub fn pixel_mut(&mut self, i: usize) -> &mut [f32] {
         &mut self.data[i * self.ndisp..][..self.ndisp]
     }
+
+    /// The columns `x0..` of the volume, all labels, in `storage` (reused whatever its size).
+    ///
+    /// # Panics
+    /// If `x0` is beyond the width.
+    pub fn columns_from_in(&self, x0: usize, storage: Vec<f32>) -> CostVolume {
+        assert!(x0 <= self.width, "column {x0} is beyond the width {}", self.width);
+        let (w, m) = (self.width - x0, self.ndisp);
+        let mut data = reuse_storage(storage, w * self.height * m);
+        if w > 0 {
+            data.chunks_exact_mut(w * m).zip(self.data.chunks_exact(self.width * m)).for_each(|(dst, src)| {
+                dst.copy_from_slice(&src[x0 * m..]);
+            });
+        }
+        CostVolume { width: w, height: self.height, ndisp: m, data }
+    }
 }
 
 /// A rectified stereo pair and its disparity search range.
@@ -190,5 +249,32 @@ impl StereoPair {
             ));
         }
         Ok(StereoPair { left, right, ndisp })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn columns_from_keeps_the_right_part_of_every_row() {
+        let p = Plane::from_vec(3, 2, vec![1, 2, 3, 4, 5, 6]);
+        assert_eq!(p.columns_from(1).data, vec![2, 3, 5, 6]);
+        assert_eq!(p.columns_from(3).dims(), (0, 2));
+        let mut img = RgbImage::new(3, 2);
+        img.channels[2] = vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        assert_eq!(img.columns_from(2).channels[2], vec![3.0, 6.0]);
+        // Two labels per pixel; the storage handed in (too long, stale) is resized and overwritten.
+        let vol = CostVolume { width: 3, height: 1, ndisp: 2, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] };
+        let kept = vol.columns_from_in(1, vec![9.0; 10]);
+        assert_eq!((kept.width, kept.height, kept.ndisp), (2, 1, 2));
+        assert_eq!(kept.data, vec![3.0, 4.0, 5.0, 6.0]);
+    }
+
+    #[test]
+    fn reused_storage_has_the_length_asked_for() {
+        assert_eq!(reuse_storage(Vec::new(), 3), vec![0.0; 3]);
+        assert_eq!(reuse_storage(vec![7.0; 5], 2), vec![7.0; 2]);
+        assert_eq!(reuse_storage(vec![7.0; 2], 4), vec![7.0, 7.0, 0.0, 0.0]);
     }
 }

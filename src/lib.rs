@@ -91,6 +91,16 @@ impl Timings {
         out
     }
 
+    /// Adds `other`'s stages to the ones of the same name (appending new names): the sums of many runs.
+    pub fn add_summed(&mut self, other: &Timings) {
+        for &(name, d) in &other.stages {
+            match self.stages.iter_mut().find(|(n, _)| *n == name) {
+                Some((_, sum)) => *sum += d,
+                None => self.stages.push((name, d)),
+            }
+        }
+    }
+
     /// Sum of all stages.
     pub fn total(&self) -> Duration {
         self.stages.iter().map(|(_, d)| *d).sum()
@@ -345,7 +355,8 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
     };
     let measured = input.measured();
     let Some((lo, labels)) = window else {
-        let mut out = fine_pass(params, pair, cost_pair, cost_params, coarse.as_ref(), on_stage, t)?;
+        let mut out =
+            fine_pass(params, pair, cost_pair, cost_params, coarse.as_ref(), 0, &mut Default::default(), on_stage, t)?;
         out.measured = measured;
         return Ok(out);
     };
@@ -358,8 +369,9 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         }
         p
     });
-    let mut out =
-        fine_pass(params, &guide, cost_shifted.as_ref().unwrap_or(&guide), cost_params, prior.as_ref(), on_stage, t)?;
+    let cost_shifted = cost_shifted.as_ref().unwrap_or(&guide);
+    let mut buffers = meanfield::Buffers::default();
+    let mut out = fine_pass(params, &guide, cost_shifted, cost_params, prior.as_ref(), 0, &mut buffers, on_stage, t)?;
     out.disparity.data.iter_mut().for_each(|d| *d += lo as f32);
     out.measured = measured;
     Ok(out)
@@ -552,41 +564,64 @@ impl<'a> Prepared<'a> {
 
 /// The pipeline from the cost volume on: `pair` is the guidance (colour weights, post-processing), `cost_pair`
 /// what the matching cost sees, `prior` an optional coarse prior.
+///
+/// The left view's first `left_from` columns are there only for the right view's matches (a tile's extension,
+/// [`tile`]): the left view's inference and post-processing skip them, and the output maps start after them.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn fine_pass(
     params: &Params,
     pair: &StereoPair,
     cost_pair: &StereoPair,
     cost_params: &params::CostParams,
     prior: Option<&Prior>,
+    left_from: usize,
+    buffers: &mut meanfield::Buffers,
     on_stage: &dyn Fn(&str),
     mut t: Timings,
 ) -> Result<Output> {
     let c = &params.condition;
     let post = &params.post;
     let need_right = post.lrc.mode != LrcMode::Off;
-    let mut cost_left =
-        t.time("cost", || cost::build_cost_volume(&cost_pair.left, &cost_pair.right, pair.ndisp, cost_params));
+    let (w, h) = pair.left.dims();
+    let storage = buffers.take(w * h * pair.ndisp);
+    let mut cost_left = t.time("cost", || {
+        cost::build_cost_volume_in(&cost_pair.left, &cost_pair.right, pair.ndisp, cost_params, storage)
+    });
     if let Some(prior) = prior {
         prior.add_to(&mut cost_left, c, &mut t);
     }
 
     // Left inference first, then the right volume from the left one; the left volume is spent before the right
     // inference: at most one volume plus one view's inference buffers are alive at a time (three N × M buffers
-    // in all, plus the lattice's).
+    // in all, plus the lattice's). Spent buffers go back to `buffers` for the next volume, view or call.
     on_stage("inference (left)");
-    let mut buffers = meanfield::Buffers::default();
-    let left = estimate_view(params, &pair.left, &cost_left, &mut t, &mut buffers);
+    // Without the extension the left view's volume is a copy of the columns it keeps: with its inference's
+    // marginals and lattice, less than the two volumes the memory estimate counts for them.
+    let guide_left = match left_from {
+        0 => std::borrow::Cow::Borrowed(&pair.left),
+        _ => std::borrow::Cow::Owned(pair.left.columns_from(left_from)),
+    };
+    let left = if left_from > 0 {
+        let storage = buffers.take((w - left_from) * h * pair.ndisp);
+        let kept = t.time("cost", || cost_left.columns_from_in(left_from, storage));
+        estimate_view(params, &guide_left, &kept, &mut t, buffers)
+    } else {
+        estimate_view(params, &guide_left, &cost_left, &mut t, buffers)
+    };
     let right = if need_right {
         // The right volume goes into the left view's spent marginals, and the left volume's storage becomes the
         // right view's marginals: no new allocation (nor page faults) for the right view.
-        let spare = buffers.take_spare();
+        let storage = buffers.take(cost_left.data.len());
         let cost_right = t.time("cost right", || {
-            cost::derive_right_volume_in(&cost_left, cost::truncation_cost(&params.cost), spare)
+            cost::derive_right_volume_in(&cost_left, cost::truncation_cost(&params.cost), storage)
         });
         buffers.recycle(cost_left.data);
         on_stage("inference (right)");
-        Some(estimate_view(params, &pair.right, &cost_right, &mut t, &mut buffers))
+        let right = estimate_view(params, &pair.right, &cost_right, &mut t, buffers);
+        buffers.recycle(cost_right.data);
+        Some(right)
     } else {
+        buffers.recycle(cost_left.data);
         None
     };
 
@@ -595,7 +630,14 @@ pub(crate) fn fine_pass(
     let mut trusted = Plane::new(disparity.width, disparity.height, true);
     if let Some(right) = &right {
         let (checked, mask) = t.time("lrc", || {
-            post::lr_check::left_right_check(&disparity, &right.disparity, post.lrc.mode, post.lrc.thresh_px)
+            // The left map at the right view's width (unknown in the extension), checked, and cut again.
+            let mut full = Plane::new(right.disparity.width, right.disparity.height, f32::INFINITY);
+            for y in 0..full.height {
+                full.row_mut(y)[left_from..].copy_from_slice(disparity.row(y));
+            }
+            let (checked, mask) =
+                post::lr_check::left_right_check(&full, &right.disparity, post.lrc.mode, post.lrc.thresh_px);
+            (checked.columns_from(left_from), mask.columns_from(left_from))
         });
         disparity = checked;
         trusted = mask;
@@ -606,10 +648,10 @@ pub(crate) fn fine_pass(
     if post.wmedian.enabled {
         let targets = Plane::from_vec(trusted.width, trusted.height, trusted.data.iter().map(|ok| !ok).collect());
         disparity =
-            t.time("wmedian", || post::wmedian::weighted_median(&disparity, &pair.left, &targets, &post.wmedian));
+            t.time("wmedian", || post::wmedian::weighted_median(&disparity, &guide_left, &targets, &post.wmedian));
     }
     if post.sps.enabled {
-        disparity = t.time("sps", || post::planes::fit_slanted_planes(&pair.left, &disparity, &trusted, &post.sps));
+        disparity = t.time("sps", || post::planes::fit_slanted_planes(&guide_left, &disparity, &trusted, &post.sps));
         // A plane extrapolated to a segment's far corner can leave the search range: the answer is never
         // outside the range that was searched.
         let top = (pair.ndisp - 1) as f32;
@@ -668,6 +710,15 @@ pub(crate) mod test_util {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn timings_add_up_by_stage_name() {
+        let ms = Duration::from_millis;
+        let mut sum = Timings { stages: vec![("cost", ms(1))] };
+        sum.add_summed(&Timings { stages: vec![("mf", ms(2)), ("cost", ms(3))] });
+        sum.add_summed(&Timings { stages: vec![("mf", ms(4))] });
+        assert_eq!(sum.stages, vec![("cost", ms(4)), ("mf", ms(6))]);
+    }
 
     #[test]
     fn the_prior_holds_where_the_cost_is_flat_even_at_zero_noise() {

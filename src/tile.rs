@@ -18,7 +18,9 @@
 //!
 //! **Halo.** A core pixel must see what it would see untiled: the fully connected kernel reaches 3σx, the weighted
 //! median its radius, and the plane segments about their size, so every side gets [`HALO_PX`] pixels; the left
-//! side also gets the window width, so that every core pixel's candidate matches lie inside the right crop.
+//! side also gets the window width, so that every core pixel's candidate matches lie inside the right crop. That
+//! *extension* is for the right view only: the left view's inference and post-processing start at the halo
+//! (`left_from` of `fine_pass`; on Adirondack ×4 it was a quarter of the tiles' pixels).
 //! Inside the halo the tile differs from the untiled run (its borders are the crop's), so the tiled result
 //! agrees with the untiled one up to the coarse-window truncation and the far reach of the kernel and the planes
 //! (tests: `tiled_matches_untiled`).
@@ -28,12 +30,15 @@
 //! a core is split while its four quarters are less work in all than it is by a fifth (Adirondack and Vintage
 //! ×4: 4 % faster, avgErr 1.69 and 9.04 against 1.69 and 9.03).
 //!
-//! **Memory.** Each tile needs [`crate::estimate_memory_bytes`] for its crop and window plus one volume for what
-//! the allocator keeps of freed volumes (`tile_need`); a core whose tile would exceed nine tenths of the budget
-//! (the rest is left for what the allocator keeps between tiles) is split in four until it fits (or reaches
-//! [`MIN_CORE_PX`]). One tile at a time is alive (its pipeline is parallel inside; `run_tiled` says why tiles do
-//! not run side by side). The coarse run needs the untiled estimate at 1/F. On top: the full-size pair, its
-//! conditioned and aligned copies, the prior and the full-size maps, [`FULL_SIZE_BYTES_PER_PX`] per pixel.
+//! **Memory.** Each tile needs [`crate::estimate_memory_bytes`] for its crop and window, plus one volume for what
+//! the allocator keeps of freed volumes and one for the left view's copy of the columns it keeps (`tile_need`); a
+//! core whose tile would exceed nine tenths of the budget (the rest is left for what the allocator keeps between
+//! tiles) is split in four until it fits (or reaches [`MIN_CORE_PX`]). One tile at a time is alive (its pipeline
+//! is parallel inside; `run_tiled` says why tiles do not run side by side). The coarse run needs the untiled
+//! estimate at 1/F. On top: the full-size pair, its conditioned and aligned copies, the prior and the full-size
+//! maps, [`FULL_SIZE_BYTES_PER_PX`] per pixel. A tile's spent volumes and marginals are the next tile's
+//! (`meanfield::Buffers`): a volume freed to the OS and allocated again is page-faulted and zeroed again, which was
+//! a tenth of a ×4 run's time.
 //!
 //! Parameters measured in pixels keep their meaning; the plane segments keep their size (a tile gets the share
 //! of `post.sps.segments` that its area is of the image).
@@ -210,7 +215,12 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     }
     let job = TileJob { params, guide, cost_pair, cost_params: &input.cost_params, prior: &prior, margin };
     let share = tile_share(plan.tile_budget_bytes);
-    t.time("tiles", || -> Result<()> {
+    // Each stage of the tiles is reported summed over them, and the cutting and stitching as "tiles (rest)".
+    let start = std::time::Instant::now();
+    let mut in_tiles = Timings::default();
+    // The volumes and marginals of one tile are the next one's (not allocated and page-faulted again).
+    let mut buffers = crate::meanfield::Buffers::default();
+    (|| -> Result<()> {
         // Depth first, in a fixed order: the output does not depend on the thread count. One tile at a time:
         // tiles side by side (each on its own thread, as many as fit the budget together) were 5–7 % faster on
         // 2 cores, but the allocator's per-thread arenas each keep their tile's freed memory, and the peak passed
@@ -223,10 +233,15 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
                 cores.extend(split(core).into_iter().rev());
                 continue;
             }
-            job.keep(&tile, &job.run(&tile)?, &mut out);
+            let result = job.run(&tile, &mut buffers)?;
+            in_tiles.add_summed(&result.timings);
+            job.keep(&tile, &result, &mut out);
         }
         Ok(())
-    })?;
+    })()?;
+    let rest = start.elapsed().saturating_sub(in_tiles.total());
+    t.stages.extend(in_tiles.stages);
+    t.stages.push(("tiles (rest)", rest));
     out.timings = t;
     Ok(out)
 }
@@ -234,10 +249,12 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
 /// The memory a tile plans for: [`crate::estimate_memory_bytes`] of its crop and window, plus one volume
 /// (crop pixels × labels × 4 bytes): inside a tile the allocator keeps some of what is freed (a volume freed on
 /// the heap leaves a hole the next, larger one does not fit). Measured on a 1280×960 scene of 160 labels under
-/// `--max-memory 300M` (tests/cli.rs): one tile used 182 MiB against an estimate of 148.
+/// `--max-memory 300M` (tests/cli.rs): one tile used 182 MiB against an estimate of 148. Plus the left view's
+/// copy of the columns it keeps (the crop without the extension; `fine_pass`).
 fn tile_need(tile: &Tile, params: &Params) -> u64 {
     let (w, h) = (tile.crop.x1 - tile.crop.x0, tile.crop.y1 - tile.crop.y0);
-    crate::estimate_memory_bytes(w, h, tile.labels, params) + 4 * tile.work()
+    let left_copy = 4 * ((w - tile.left_from()) * h * tile.labels) as u64;
+    crate::estimate_memory_bytes(w, h, tile.labels, params) + 4 * tile.work() + left_copy
 }
 
 /// The four quarters of a core (fewer for a thin one), in row-major order.
@@ -273,6 +290,12 @@ struct Tile {
 }
 
 impl Tile {
+    /// The crop's first columns that are there only for the right view's matches: the left view's inference and
+    /// output start after them, at the core's halo.
+    fn left_from(&self) -> usize {
+        self.core.x0.saturating_sub(HALO_PX) - self.crop.x0
+    }
+
     /// Its work: crop pixels × labels (also the entries of one of its volumes).
     fn work(&self) -> u64 {
         ((self.crop.x1 - self.crop.x0) * (self.crop.y1 - self.crop.y0) * self.labels) as u64
@@ -332,7 +355,7 @@ impl TileJob<'_> {
     }
 
     /// Runs the pipeline on one tile.
-    fn run(&self, tile: &Tile) -> Result<Output> {
+    fn run(&self, tile: &Tile, buffers: &mut crate::meanfield::Buffers) -> Result<Output> {
         let (crop, lo) = (tile.crop, tile.lo);
         let (guide, cost_pair) = cut_pairs(self.guide, self.cost_pair, crop, lo, tile.labels)?;
         let prior = Prior {
@@ -344,7 +367,7 @@ impl TileJob<'_> {
         };
         let (w, h) = self.guide.left.dims();
         let mut params = self.params.clone();
-        let area = ((crop.x1 - crop.x0) * (crop.y1 - crop.y0)) as f64 / (w * h) as f64;
+        let area = ((crop.x1 - crop.x0 - tile.left_from()) * (crop.y1 - crop.y0)) as f64 / (w * h) as f64;
         params.post.sps.segments = ((self.params.post.sps.segments as f64 * area).ceil() as usize).max(1);
         crate::fine_pass(
             &params,
@@ -352,6 +375,8 @@ impl TileJob<'_> {
             cost_pair.as_ref().unwrap_or(&guide),
             self.cost_params,
             Some(&prior),
+            tile.left_from(),
+            buffers,
             &|_| {},
             Timings::default(),
         )
@@ -361,11 +386,12 @@ impl TileJob<'_> {
     fn keep(&self, tile: &Tile, result: &Output, out: &mut Output) {
         let (crop, lo) = (tile.crop, tile.lo);
         let w = self.guide.left.width;
-        let cw = crop.x1 - crop.x0;
+        let x0 = crop.x0 + tile.left_from();
+        let cw = crop.x1 - x0;
         for y in tile.core.y0..tile.core.y1 {
             let src = (y - crop.y0) * cw;
             for x in tile.core.x0..tile.core.x1 {
-                let i = src + x - crop.x0;
+                let i = src + x - x0;
                 let o = y * w + x;
                 out.disparity.data[o] = result.disparity.data[i] + lo as f32;
                 out.confidence.data[o] = result.confidence.data[i];
@@ -507,6 +533,38 @@ mod tests {
         let small = run_tiled(&params, &pair, &split_plan, &|_| {}).unwrap();
         let (e_small, _, apart) = compare(&small.disparity, &one.disparity, &scene.gt, &scene.mask);
         assert!(apart <= 0.05 && e_small <= 1.1 * e_one + 0.05, "{apart} {e_small}");
+    }
+
+    /// A tile's extension (the columns only the right view's matches need) is left out of the left view: the map
+    /// over the kept columns is the one computed with them (up to 1 px on ≥ 98 % of the visible pixels; the
+    /// plane segments of a narrower image differ, and the kernel's reach from the left border), and the
+    /// buffers carried into a second call give the same bytes as fresh ones.
+    #[test]
+    fn the_left_extension_is_skipped() {
+        let scene = render_scene(&SynthParams { width: 240, height: 160, ndisp: 32, seed: 7 }).unwrap();
+        let pair = StereoPair::new(scene.left.clone(), scene.right.clone(), scene.ndisp).unwrap();
+        let params = Params::default();
+        let pass = |left_from, buffers: &mut crate::meanfield::Buffers| {
+            crate::fine_pass(&params, &pair, &pair, &params.cost, None, left_from, buffers, &|_| {}, Timings::default())
+                .unwrap()
+        };
+        let mut buffers = crate::meanfield::Buffers::default();
+        let all = pass(0, &mut buffers);
+        let k = 40;
+        let kept = pass(k, &mut buffers);
+        assert_eq!(kept.disparity.dims(), (240 - k, 160));
+        assert_eq!(kept.confidence.dims(), (240 - k, 160));
+        let cut = |m: &DisparityMap| m.columns_from(k);
+        let gt = cut(&scene.gt);
+        let mask = scene.mask.columns_from(k);
+        let (e_kept, e_all, apart) = compare(&kept.disparity, &cut(&all.disparity), &gt, &mask);
+        assert!(apart <= 0.02, "{:.1} % apart", 100.0 * apart);
+        assert!(e_kept <= e_all + 0.05, "{e_kept} vs {e_all}");
+        // The buffers now hold spent volumes and marginals of both sizes: reused, they give the same bytes.
+        let again = pass(0, &mut buffers);
+        assert_eq!(again.disparity.data, all.disparity.data);
+        let again = pass(k, &mut Default::default());
+        assert_eq!(again.disparity.data, kept.disparity.data);
     }
 
     /// The default pipeline with a label window from the coarse run gives the same map (up to 1 px on ≥ 98 %

@@ -72,25 +72,43 @@ pub struct PairwiseWeights {
     pub lcm: f32,
 }
 
-/// Large buffers a [`MeanField`] can take over from a previous one (the other view), so that they are not
-/// allocated and page-faulted again.
+/// Large buffers a [`MeanField`] can take over from a previous one (the other view, the previous tile), so that
+/// they are not allocated and page-faulted again.
 #[derive(Debug, Default)]
 pub struct Buffers {
-    q: Vec<f32>,
+    /// Spare `N × M` allocations: spent marginals, dropped cost volumes (at most [`MAX_SPARE`]).
+    spare: Vec<Vec<f32>>,
     next: Vec<f32>,
     scratch: LatticeScratch,
 }
 
+/// The most spare allocations [`Buffers`] keeps: a view's inference needs its cost volume and its marginals, and
+/// the next volume is built while they are alive.
+pub const MAX_SPARE: usize = 3;
+
 impl Buffers {
-    /// Gives back an `N × M` allocation that is no longer needed (old marginals, a dropped cost volume): the next
-    /// [`MeanField`] keeps its marginals in it.
+    /// Gives back an allocation that is no longer needed (old marginals, a dropped cost volume): the next
+    /// [`MeanField`] keeps its marginals in one, and [`Buffers::take`] hands them out. Beyond [`MAX_SPARE`] the
+    /// smallest is freed.
     pub fn recycle(&mut self, storage: Vec<f32>) {
-        self.q = storage;
+        if storage.capacity() == 0 {
+            return;
+        }
+        self.spare.push(storage);
+        if self.spare.len() > MAX_SPARE {
+            let smallest = (0..self.spare.len()).min_by_key(|&i| self.spare[i].capacity()).unwrap_or(0);
+            self.spare.swap_remove(smallest);
+        }
     }
 
-    /// Takes the spare `N × M` allocation out (empty if there is none), e.g. to build a cost volume in it.
-    pub fn take_spare(&mut self) -> Vec<f32> {
-        std::mem::take(&mut self.q)
+    /// A spare allocation of `len` values (what it held before, or zeros; for a buffer that is written in full
+    /// before it is read): the smallest that holds `len`, else the largest, grown; a fresh one if there is none.
+    pub fn take(&mut self, len: usize) -> Vec<f32> {
+        let cap = |i: &usize| self.spare[*i].capacity();
+        let all = 0..self.spare.len();
+        let pick = all.clone().filter(|i| cap(i) >= len).min_by_key(cap).or_else(|| all.max_by_key(cap));
+        let storage = pick.map_or_else(Vec::new, |i| self.spare.swap_remove(i));
+        crate::image::reuse_storage(storage, len)
     }
 }
 
@@ -114,6 +132,8 @@ pub struct MeanField<'a> {
     /// Two rows per band of rows for the in-place checkerboard.
     edges: Vec<f32>,
     scratch: LatticeScratch,
+    /// The spare allocations this run did not take, handed on with the buffers.
+    spare: Vec<Vec<f32>>,
 }
 
 impl<'a> MeanField<'a> {
@@ -169,12 +189,11 @@ impl<'a> MeanField<'a> {
         let (n, m) = (image.len(), cost.ndisp);
         let weights = label_aware_weights(weights, p, m);
         let full = (weights.fcm > 0.0).then(|| FullKernel::new(image, p));
-        let Buffers { mut q, mut next, scratch } = buffers;
-        // Fresh buffers are zeroed by the OS (no fill pass); Q is then written in parallel, and `next` (needed by
-        // the Jacobi schedule only) is written by each iteration before it is read.
-        if q.len() != n * m {
-            q = vec![0.0; n * m];
-        }
+        let mut buffers = buffers;
+        // Q is written in full below, in parallel, and `next` (needed by the Jacobi schedule only) by each iteration
+        // before it is read: what a reused buffer held does not matter.
+        let mut q = buffers.take(n * m);
+        let Buffers { spare, mut next, scratch } = buffers;
         let next_len = if p.schedule == Schedule::Jacobi { n * m } else { 0 };
         if next.len() != next_len {
             next = vec![0.0; next_len];
@@ -210,6 +229,7 @@ impl<'a> MeanField<'a> {
             next,
             edges,
             scratch,
+            spare,
         }
     }
 
@@ -266,7 +286,7 @@ impl<'a> MeanField<'a> {
     /// Consumes the state, returning the marginals and the buffers for reuse by another [`MeanField`].
     pub fn into_marginals_and_buffers(self) -> (Marginals, Buffers) {
         let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
-        let buffers = Buffers { q: Vec::new(), next: self.next, scratch: self.scratch };
+        let buffers = Buffers { spare: self.spare, next: self.next, scratch: self.scratch };
         (CostVolume { width: w, height: h, ndisp: m, data: self.q }, buffers)
     }
 }

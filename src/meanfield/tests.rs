@@ -397,3 +397,20 @@ fn meanfield_annealing_applies_the_schedule_per_iteration() {
     let b = infer_mean_field(&cost, &left, &plain, weights);
     assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()));
 }
+
+/// Spare buffers: the smallest that holds the length asked for, else the largest (grown); at most `MAX_SPARE` kept.
+#[test]
+fn buffers_hand_out_the_best_fitting_spare() {
+    let mut b = Buffers::default();
+    for len in [10, 40, 20] {
+        b.recycle(vec![0.0; len]);
+    }
+    assert_eq!(b.take(15).capacity(), 20, "the smallest that holds 15");
+    assert_eq!(b.take(50).len(), 50, "none holds 50: the largest, grown");
+    assert_eq!(b.take(5).capacity(), 10);
+    assert_eq!(b.take(5).capacity(), 5, "none left: a fresh one");
+    for len in 1..=super::MAX_SPARE + 2 {
+        b.recycle(vec![0.0; len]);
+    }
+    assert_eq!(b.take(1).capacity(), 3, "the smallest were freed beyond MAX_SPARE");
+}
