@@ -13,7 +13,8 @@
 //!    widened by F + 2 labels (the coarse answer is good to about one coarse label) — the full range where the
 //!    coarse run left no disparity. The right crop is shifted by `lo` columns, so label d' of the tile is
 //!    disparity `lo + d'` and the tile is an ordinary problem of `hi − lo + 1` labels. The coarse answer is
-//!    also the tile's prior (a point prior: no spread at its depth edges), with the weight of the untiled run;
+//!    also the tile's prior (a point prior: no spread at its depth edges), with the weight of the untiled run, or
+//!    more where the full resolution adds little detail to the coarse level ([`tiled_prior_floor`]);
 //! 4. keeps each tile's core (`lo` added back) and stitches the cores.
 //!
 //! **Halo.** A core pixel must see what it would see untiled: the fully connected kernel reaches 3σx, the weighted
@@ -86,11 +87,24 @@ struct Rect {
 /// The memory a tiled run plans for (at most): it stays near this whatever the image size.
 pub const TILED_BUDGET_BYTES: u64 = 2 << 30;
 
-/// The least weight of the coarse prior in a tile. The untiled default weighs the prior by the measured noise
-/// (0.5·σn), which is near 0 on a clean or smooth pair; at full resolution over a coarse level 4× smaller, the
-/// fine cost alone then drifts inside its label window (Adirondack upscaled ×4, native px: floor 0 → avgErr
-/// 4.80, 1 → 1.79, 2 → 1.75; the coarse level alone, upsampled, 1.71).
+/// The least weight of the coarse prior in a tile whose full resolution holds no more detail than its coarse
+/// level (see [`tiled_prior_floor`]). The untiled default weighs the prior by the measured noise (0.5·σn) and the
+/// cost's flatness, relative to the image's own; on an image upscaled ×4 every pixel's cost is about as flat, and
+/// the fine cost alone drifts inside its label window (Adirondack upscaled ×4, native px, session 7: floor 0 →
+/// avgErr 4.80, 1 → 1.79, 2 → 1.75; the coarse level alone, upsampled, 1.71).
 pub const TILED_PRIOR_FLOOR: f32 = 2.0;
+
+/// The prior's floor in the tiles: [`TILED_PRIOR_FLOOR`] × min(1, 2·(1 − k)), k the share of the coarse level's
+/// sharpness ([`crate::condition::sharpness`], the cost pair's left view) that the full resolution keeps. A photo
+/// has detail at every scale and keeps most of it (trainingQ run in tiles over a coarse level at 1/2: k 0.85–0.96,
+/// a floor of 0.2–0.6); an image enlarged from a smaller one has none to add (the ×4 scenes: k 0.35–0.45, the
+/// full floor). A constant floor of 2 cost the photos: tiled trainingQ (`jem batch --max-memory 300M`) 3.83 with
+/// it, 3.67 with this one, 3.68 with none; the ×4 scenes are unchanged.
+pub fn tiled_prior_floor(full_grey: &Plane<f32>, coarse_grey: &Plane<f32>) -> f32 {
+    let coarse = crate::condition::sharpness(coarse_grey);
+    let kept = if coarse > 0.0 { crate::condition::sharpness(full_grey) / coarse } else { 1.0 };
+    TILED_PRIOR_FLOOR * (2.0 * (1.0 - kept)).clamp(0.0, 1.0)
+}
 
 /// Chooses a plan for a `width × height` pair with `ndisp` labels within `limit_bytes`: after the full-size
 /// maps, the smallest coarse factor (a power of two) whose untiled run fits what is left, and cores of 1024
@@ -189,8 +203,10 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     // The right views moved onto the left view's rows where the coarse answer shows them off (as untiled).
     input.align_vertically(&params.condition, &grey_left, &coarse, &mut t);
     let (guide, cost_pair) = input.pairs(pair);
-    // The coarse answer is the base of a tiled run: its weight never falls below TILED_PRIOR_FLOOR.
-    let weight = input.prior_weight.max(TILED_PRIOR_FLOOR);
+    // The coarse answer is the base of a tiled run: where the full resolution adds little detail to it, its weight
+    // has a floor.
+    let coarse_grey = crate::scale::downsample_rgb(&cost_pair.left, f).to_grey();
+    let weight = input.prior_weight.max(tiled_prior_floor(&grey_left, &coarse_grey));
     let mut prior = Prior::from_coarse(coarse, weight, input.prior_flat, params.condition.prior_untrusted);
     prior.weaken_at_detail(&grey_left, f, params.condition.prior_detail);
     // The tiles keep the point prior (no `prior_spread`): the coarse level is the base answer here, and freeing its
@@ -565,6 +581,28 @@ mod tests {
         assert_eq!(again.disparity.data, all.disparity.data);
         let again = pass(k, &mut Default::default());
         assert_eq!(again.disparity.data, kept.disparity.data);
+    }
+
+    /// The prior's floor follows the detail the full resolution adds: seeded white noise has detail at every scale
+    /// and keeps its sharpness over its half-resolution copy (no floor); the same noise enlarged ×4 (bilinear)
+    /// keeps little of it over its quarter (the whole floor). A flat image measures nothing and gets none.
+    #[test]
+    fn the_prior_floor_is_for_images_without_fine_detail() {
+        let (w, h) = (160, 120);
+        let mut noise = RgbImage::new(w, h);
+        for (c, ch) in noise.channels.iter_mut().enumerate() {
+            *ch = crate::test_util::rand_vec(w * h, 10 + c as u64).iter().map(|v| 255.0 * v).collect();
+        }
+        let reduced = |img: &RgbImage, f| crate::scale::downsample_rgb(img, f).to_grey();
+        let detailed = tiled_prior_floor(&noise.to_grey(), &reduced(&noise, 2));
+        assert!(detailed < 0.1 * TILED_PRIOR_FLOOR, "floor {detailed} on white noise");
+        let mut enlarged = RgbImage::new(4 * w, 4 * h);
+        for (dst, src) in enlarged.channels.iter_mut().zip(&noise.channels) {
+            *dst = crate::scale::upsample_plane(&Plane::from_vec(w, h, src.clone()), 4, 4 * w, 4 * h).data;
+        }
+        assert_eq!(tiled_prior_floor(&enlarged.to_grey(), &reduced(&enlarged, 4)), TILED_PRIOR_FLOOR);
+        let flat = Plane::new(64, 64, 100.0);
+        assert_eq!(tiled_prior_floor(&flat, &flat), 0.0, "no detail at either level: no measurement, no floor");
     }
 
     /// The default pipeline with a label window from the coarse run gives the same map (up to 1 px on ≥ 98 %
