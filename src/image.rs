@@ -61,7 +61,7 @@ impl<T: Copy> Plane<T> {
     /// # Panics
     /// If `x0` is beyond the width.
     pub fn columns_from(&self, x0: usize) -> Self {
-        Plane::from_vec(self.width - x0, self.height, columns_from(&self.data, self.width, 1, x0))
+        Plane::from_vec(self.width - x0, self.height, columns_from(&self.data, self.width, 1, x0, Vec::new()))
     }
 }
 
@@ -81,11 +81,13 @@ pub fn reuse_storage(mut storage: Vec<f32>, len: usize) -> Vec<f32> {
     storage
 }
 
-/// The columns `x0..` of every row of a row-major buffer of `width` pixels of `k` values each.
-fn columns_from<T: Copy>(data: &[T], width: usize, k: usize, x0: usize) -> Vec<T> {
+/// The columns `x0..` of every row of a row-major buffer of `width` pixels of `k` values each, written into `out`
+/// (its contents replaced; its allocation kept when it is large enough).
+fn columns_from<T: Copy>(data: &[T], width: usize, k: usize, x0: usize, mut out: Vec<T>) -> Vec<T> {
     assert!(x0 <= width, "column {x0} is beyond the width {width}");
-    let mut out = Vec::with_capacity(data.len() / width.max(1) * (width - x0));
-    for row in data.chunks_exact(width * k) {
+    out.clear();
+    out.reserve_exact(data.len() / width.max(1) * (width - x0));
+    for row in data.chunks_exact((width * k).max(1)) {
         out.extend_from_slice(&row[x0 * k..]);
     }
     out
@@ -146,7 +148,7 @@ impl RgbImage {
     /// # Panics
     /// If `x0` is beyond the width.
     pub fn columns_from(&self, x0: usize) -> RgbImage {
-        let channels = self.channels.each_ref().map(|c| columns_from(c, self.width, 1, x0));
+        let channels = self.channels.each_ref().map(|c| columns_from(c, self.width, 1, x0, Vec::new()));
         RgbImage { width: self.width - x0, height: self.height, channels }
     }
 
@@ -205,15 +207,8 @@ impl CostVolume {
     /// # Panics
     /// If `x0` is beyond the width.
     pub fn columns_from_in(&self, x0: usize, storage: Vec<f32>) -> CostVolume {
-        assert!(x0 <= self.width, "column {x0} is beyond the width {}", self.width);
-        let (w, m) = (self.width - x0, self.ndisp);
-        let mut data = reuse_storage(storage, w * self.height * m);
-        if w > 0 {
-            data.chunks_exact_mut(w * m).zip(self.data.chunks_exact(self.width * m)).for_each(|(dst, src)| {
-                dst.copy_from_slice(&src[x0 * m..]);
-            });
-        }
-        CostVolume { width: w, height: self.height, ndisp: m, data }
+        let data = columns_from(&self.data, self.width, self.ndisp, x0, storage);
+        CostVolume { width: self.width - x0, height: self.height, ndisp: self.ndisp, data }
     }
 }
 

@@ -632,13 +632,18 @@ pub(crate) fn fine_pass(
     let mut trusted = Plane::new(disparity.width, disparity.height, true);
     if let Some(right) = &right {
         let (checked, mask) = t.time("lrc", || {
+            let check = |left: &DisparityMap| {
+                post::lr_check::left_right_check(left, &right.disparity, post.lrc.mode, post.lrc.thresh_px)
+            };
+            if left_from == 0 {
+                return check(&disparity);
+            }
             // The left map at the right view's width (unknown in the extension), checked, and cut again.
             let mut full = Plane::new(right.disparity.width, right.disparity.height, f32::INFINITY);
             for y in 0..full.height {
                 full.row_mut(y)[left_from..].copy_from_slice(disparity.row(y));
             }
-            let (checked, mask) =
-                post::lr_check::left_right_check(&full, &right.disparity, post.lrc.mode, post.lrc.thresh_px);
+            let (checked, mask) = check(&full);
             (checked.columns_from(left_from), mask.columns_from(left_from))
         });
         disparity = checked;

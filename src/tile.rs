@@ -236,25 +236,22 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     let mut in_tiles = Timings::default();
     // The volumes and marginals of one tile are the next one's (not allocated and page-faulted again).
     let mut buffers = crate::meanfield::Buffers::default();
-    (|| -> Result<()> {
-        // Depth first, in a fixed order: the output does not depend on the thread count. One tile at a time:
-        // tiles side by side (each on its own thread, as many as fit the budget together) were 5–7 % faster on
-        // 2 cores, but the allocator's per-thread arenas each keep their tile's freed memory, and the peak passed
-        // the limit (395 MiB at 300 MB on the large-scene test of tests/cli.rs).
-        while let Some(core) = cores.pop() {
-            let tile = job.tile(core);
-            let need = tile_need(&tile, params);
-            let side = (core.x1 - core.x0).max(core.y1 - core.y0);
-            if side > MIN_CORE_PX && (need > share || (plan.split_for_work && job.splitting_saves_work(&tile))) {
-                cores.extend(split(core).into_iter().rev());
-                continue;
-            }
-            let result = job.run(&tile, &mut buffers)?;
-            in_tiles.add_summed(&result.timings);
-            job.keep(&tile, &result, &mut out);
+    // Depth first, in a fixed order: the output does not depend on the thread count. One tile at a time:
+    // tiles side by side (each on its own thread, as many as fit the budget together) were 5–7 % faster on
+    // 2 cores, but the allocator's per-thread arenas each keep their tile's freed memory, and the peak passed
+    // the limit (395 MiB at 300 MB on the large-scene test of tests/cli.rs).
+    while let Some(core) = cores.pop() {
+        let tile = job.tile(core);
+        let need = tile_need(&tile, params);
+        let side = (core.x1 - core.x0).max(core.y1 - core.y0);
+        if side > MIN_CORE_PX && (need > share || (plan.split_for_work && job.splitting_saves_work(&tile))) {
+            cores.extend(split(core).into_iter().rev());
+            continue;
         }
-        Ok(())
-    })()?;
+        let result = job.run(&tile, &mut buffers)?;
+        in_tiles.add_summed(&result.timings);
+        job.keep(&tile, &result, &mut out);
+    }
     let rest = start.elapsed().saturating_sub(in_tiles.total());
     t.stages.extend(in_tiles.stages);
     t.stages.push(("tiles (rest)", rest));
