@@ -65,7 +65,7 @@ fn stages(c: &mut Criterion) {
             b.iter(|| lattice.filter(black_box(&input), &mut output, channels, &mut scratch))
         });
         g.bench_function(BenchmarkId::new(format!("splat + blur {channels} channels"), &name), |b| {
-            b.iter(|| black_box(lattice.splat_blur(black_box(&input), None, channels, &mut scratch).len()))
+            b.iter(|| black_box(lattice.splat_blur(black_box(&input), None, None, channels, &mut scratch).len()))
         });
     }
     g.finish();

@@ -392,7 +392,13 @@ pub(crate) struct Prior {
     pub weight: f32,
     /// Where the fine cost is flat, λ is at least this × its flatness ([`cost::flatness`]; `condition.prior_flat`).
     pub flat: f32,
+    /// Whether inference keeps each pixel to a band of labels around the prior ([`Prior::label_bands`]; tiles).
+    pub in_bands: bool,
 }
+
+/// The labels either side of a pixel's own best label that its band holds ([`Prior::label_bands`]): the sub-pixel
+/// parabola's neighbours and one more. Measured in tiles (docs/tuning-log.md, "Label bands in tiles").
+const OWN_BEST_BAND: usize = 2;
 
 impl Prior {
     /// The prior of a coarse run's output (brought to the fine size) with weight λ = `weight`: a pixel the coarse
@@ -402,7 +408,33 @@ impl Prior {
         confidence.data.iter_mut().zip(&coarse.consistent.data).filter(|(_, ok)| !**ok).for_each(|(c, _)| {
             *c *= untrusted;
         });
-        Prior { disparity: coarse.disparity, free: None, confidence, weight, flat }
+        Prior { disparity: coarse.disparity, free: None, confidence, weight, flat, in_bands: false }
+    }
+
+    /// Each pixel's band of labels for inference at the fine level ([`meanfield::bands`]): the labels the prior
+    /// leaves free within the fully connected kernel's reach (3σx), widened by the labels over which its
+    /// penalty still changes (margin + truncation + 1), joined with the pixel's own best label by its cost alone,
+    /// `own_best`, ± [`OWN_BEST_BAND`]. For the `right_view`, the prior is carried over to it first
+    /// ([`meanfield::bands::warp_to_right_view`]).
+    pub(crate) fn label_bands(
+        &self,
+        own_best: &DisparityMap,
+        ndisp: usize,
+        right_view: bool,
+        params: &Params,
+    ) -> meanfield::LabelBands {
+        let c = &params.condition;
+        let reach = (3.0 * params.meanfield.sigma_xy).ceil() as usize;
+        let half_width = c.prior_margin_px + c.prior_trunc_px + 1.0;
+        let (low, high) = self.free.as_ref().map_or((&self.disparity, &self.disparity), |(l, h)| (l, h));
+        let bands =
+            |low, high| meanfield::LabelBands::around((low, high), own_best, ndisp, reach, half_width, OWN_BEST_BAND);
+        if right_view {
+            let (low, high) = meanfield::bands::warp_to_right_view(low, high);
+            bands(&low, &high)
+        } else {
+            bands(low, high)
+        }
     }
 
     /// Beside a depth edge of the coarse answer (a level `factor` times coarser), leaves the whole step free: the
@@ -587,9 +619,18 @@ pub(crate) fn fine_pass(
     let mut cost_left = t.time("cost", || {
         cost::build_cost_volume_in(&cost_pair.left, &cost_pair.right, pair.ndisp, cost_params, storage)
     });
+    // Label bands (tiles): each pixel's own best label is taken before the prior is added.
+    let prior_bands = prior.filter(|p| p.in_bands);
+    let own_best = prior_bands.map(|_| t.time("bands", || cost::winner_take_all(&cost_left)));
     if let Some(prior) = prior {
         prior.add_to(&mut cost_left, c, &mut t);
     }
+    let left_bands = own_best.zip(prior_bands).map(|(best, prior)| {
+        t.time("bands", || {
+            let bands = prior.label_bands(&best, pair.ndisp, false, params);
+            if left_from > 0 { bands.columns_from(left_from) } else { bands }
+        })
+    });
 
     // Left inference first, then the right volume from the left one; the left volume is spent before the right
     // inference: at most one volume plus one view's inference buffers are alive at a time (three N × M buffers
@@ -606,9 +647,9 @@ pub(crate) fn fine_pass(
     let left = if left_from > 0 {
         let storage = buffers.take((w - left_from) * h * pair.ndisp);
         let kept = t.time("cost", || cost_left.columns_from_in(left_from, storage));
-        estimate_view(params, &guide_left, &kept, &mut t, buffers)
+        estimate_view(params, &guide_left, &kept, left_bands, &mut t, buffers)
     } else {
-        estimate_view(params, &guide_left, &cost_left, &mut t, buffers)
+        estimate_view(params, &guide_left, &cost_left, left_bands, &mut t, buffers)
     };
     let right = if need_right {
         // The right volume goes into the left view's spent marginals (grown if the left view was narrower), and
@@ -618,8 +659,14 @@ pub(crate) fn fine_pass(
             cost::derive_right_volume_in(&cost_left, cost::truncation_cost(&params.cost), storage)
         });
         buffers.recycle(cost_left.data);
+        let right_bands = prior_bands.map(|prior| {
+            t.time("bands", || {
+                let best = cost::winner_take_all(&cost_right);
+                prior.label_bands(&best, pair.ndisp, true, params)
+            })
+        });
         on_stage("inference (right)");
-        let right = estimate_view(params, &pair.right, &cost_right, &mut t, buffers);
+        let right = estimate_view(params, &pair.right, &cost_right, right_bands, &mut t, buffers);
         buffers.recycle(cost_right.data);
         Some(right)
     } else {
@@ -667,12 +714,14 @@ pub(crate) fn fine_pass(
     Ok(Output { disparity, confidence: left.confidence, consistent: trusted, timings: t, measured: None })
 }
 
-/// Inference for one view: WTA on the cost, or mean field with the view's own image.
-/// `buffers` carries the large allocations from one view to the next.
+/// Inference for one view: WTA on the cost, or mean field with the view's own image, within `bands` if given
+/// (not with the mean field's pyramid, nor for WTA). `buffers` carries the large allocations from one view to the
+/// next.
 fn estimate_view(
     params: &Params,
     image: &RgbImage,
     cost: &CostVolume,
+    bands: Option<meanfield::LabelBands>,
     t: &mut Timings,
     buffers: &mut meanfield::Buffers,
 ) -> ViewEstimate {
@@ -689,8 +738,11 @@ fn estimate_view(
             let (q, rest) = if params.meanfield.pyramid_levels > 1 {
                 t.time("mf pyramid", || meanfield::infer_coarse_to_fine(cost, image, &params.meanfield, weights, reuse))
             } else {
-                let mut mf = t.time("mf setup", || {
-                    meanfield::MeanField::with_buffers(cost, image, &params.meanfield, weights, reuse)
+                let mut mf = t.time("mf setup", || match bands {
+                    Some(bands) => {
+                        meanfield::MeanField::in_label_bands(cost, image, &params.meanfield, weights, reuse, bands)
+                    }
+                    None => meanfield::MeanField::with_buffers(cost, image, &params.meanfield, weights, reuse),
                 });
                 t.time("mf iterations", || (0..params.meanfield.iterations).for_each(|_| mf.step()));
                 mf.into_marginals_and_buffers()
@@ -737,6 +789,7 @@ mod tests {
             confidence: Plane::new(2, 1, 1.0),
             weight: 0.0, // a noiseless pair: no noise-scaled weight
             flat,
+            in_bands: false,
         };
         let c = params::ConditionParams { prior_margin_px: 0.0, prior_trunc_px: 8.0, ..Default::default() };
         let with = |flat| {

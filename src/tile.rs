@@ -14,7 +14,11 @@
 //!    coarse run left no disparity. The right crop is shifted by `lo` columns, so label d' of the tile is
 //!    disparity `lo + d'` and the tile is an ordinary problem of `hi − lo + 1` labels. The coarse answer is
 //!    also the tile's prior (a point prior: no spread at its depth edges), with the weight of the untiled run, or
-//!    more where the full resolution adds little detail to the coarse level ([`tiled_prior_floor`]);
+//!    more where the full resolution adds little detail to the coarse level ([`tiled_prior_floor`]). Inside the
+//!    window, each pixel's inference keeps to its own *label band* (`crate::meanfield::bands`): the coarse answers
+//!    within the kernel's reach, ± the prior's margin and truncation, and the pixel's own best label. On the ×4
+//!    scenes a band is about 44 labels where the tile's window is about 104: the iterations are about a tenth
+//!    faster (their time is mostly per pixel, not per label) and a little more accurate;
 //! 4. keeps each tile's core (`lo` added back) and stitches the cores.
 //!
 //! **Halo.** A core pixel must see what it would see untiled: the fully connected kernel reaches 3σx, the weighted
@@ -377,6 +381,7 @@ impl TileJob<'_> {
             confidence: cut_plane(&self.prior.confidence, crop, |v| v),
             weight: self.prior.weight,
             flat: self.prior.flat,
+            in_bands: true,
         };
         let (w, h) = self.guide.left.dims();
         let mut params = self.params.clone();
@@ -659,7 +664,7 @@ mod tests {
         };
         let prior_of = |f: &dyn Fn(usize, usize) -> f32| {
             let disparity = Plane::from_vec(w, h, (0..w * h).map(|i| f(i % w, i / w)).collect());
-            Prior { disparity, free: None, confidence: Plane::new(w, h, 1.0), weight: 1.0, flat: 0.0 }
+            Prior { disparity, free: None, confidence: Plane::new(w, h, 1.0), weight: 1.0, flat: 0.0, in_bands: false }
         };
         let core = Rect { x0: 0, y0: 0, x1: w, y1: h };
         job_for(&prior_of(&|x, y| if x < 200 && y < 80 { 150.0 } else { 10.0 }), &|job| {

@@ -178,7 +178,7 @@ impl Lattice {
     pub fn filter(&self, input: &[f32], output: &mut [f32], channels: usize, scratch: &mut LatticeScratch) {
         let nc = channels;
         assert_eq!(output.len(), self.npix * nc, "lattice filter output has the wrong size");
-        let vals = self.splat_blur(input, None, nc, scratch);
+        let vals = self.splat_blur(input, None, None, nc, scratch);
         const CHUNK: usize = 256;
         output.par_chunks_mut(nc.max(1) * CHUNK).enumerate().for_each(|(k, out)| {
             slice_pixels(self, vals, k * CHUNK, out, nc.max(1));
@@ -189,12 +189,18 @@ impl Lattice {
     /// `pixel_scale[p]` if given) and blurs; returns the vertex values (`num_vertices × channels`), to be read
     /// per pixel with [`Lattice::slice`]. Lets a caller fuse slicing into its own per-pixel loop.
     ///
+    /// With `bands`, pixel p splats only its channels `bands[p][0]..bands[p][1]`: the caller promises that its
+    /// other channels are 0, and the result is the same, bit for bit, as splatting them all (adding w·0 to a sum
+    /// of non-negative terms changes nothing).
+    ///
     /// # Panics
-    /// If `input` does not have `num_pixels × channels` elements or `pixel_scale` not `num_pixels`.
+    /// If `input` does not have `num_pixels × channels` elements, `pixel_scale` or `bands` not `num_pixels`, or a
+    /// band is not within `0..channels`.
     pub fn splat_blur<'s>(
         &self,
         input: &[f32],
         pixel_scale: Option<&[f32]>,
+        bands: Option<&[[u32; 2]]>,
         channels: usize,
         scratch: &'s mut LatticeScratch,
     ) -> &'s [f32] {
@@ -202,6 +208,10 @@ impl Lattice {
         assert_eq!(input.len(), self.npix * nc, "lattice filter input has the wrong size");
         if let Some(s) = pixel_scale {
             assert_eq!(s.len(), self.npix, "lattice pixel scale has the wrong size");
+        }
+        if let Some(b) = bands {
+            assert_eq!(b.len(), self.npix, "lattice bands have the wrong size");
+            assert!(b.iter().all(|&[lo, hi]| lo <= hi && hi as usize <= nc), "a lattice band is out of range");
         }
         let len = self.nvert * nc;
         scratch.a.resize(len, 0.0);
@@ -214,7 +224,7 @@ impl Lattice {
         let zero: &[f32] = zero;
         let (mut cur, mut next) = (a, b);
 
-        self.splat(input, pixel_scale, nc, cur);
+        self.splat(input, pixel_scale, bands, nc, cur);
         const CHUNK: usize = 256;
 
         // Blur along each of the d+1 directions: v ← v + ½(down + up), a missing neighbour counting as 0.
@@ -233,7 +243,14 @@ impl Lattice {
     /// `input[p]`. Each range of vertices (in parallel) scans the pixels that contribute to it in order, so the
     /// pixels' values are read in order rather than gathered, and every sum is taken in pixel order whatever
     /// the ranges: the result does not depend on the thread count.
-    fn splat(&self, input: &[f32], pixel_scale: Option<&[f32]>, nc: usize, vals: &mut [f32]) {
+    fn splat(
+        &self,
+        input: &[f32],
+        pixel_scale: Option<&[f32]>,
+        bands: Option<&[[u32; 2]]>,
+        nc: usize,
+        vals: &mut [f32],
+    ) {
         let mut parts = Vec::with_capacity(self.splat_ranges.len());
         let mut rest: &mut [f32] = vals;
         for &(v0, v1, p0, p1) in &self.splat_ranges {
@@ -241,8 +258,9 @@ impl Lattice {
             rest = r;
             parts.push((v0, p0..p1, part));
         }
-        parts.into_par_iter().for_each(|(v0, pixels, acc)| {
-            splat_scatter(self, input, pixel_scale, v0, pixels, acc, nc);
+        parts.into_par_iter().for_each(|(v0, pixels, acc)| match bands {
+            None => splat_scatter(self, input, pixel_scale, v0, pixels, acc, nc),
+            Some(bands) => splat_scatter_in_bands(self, input, pixel_scale, bands, v0, pixels, acc, nc),
         });
     }
 
@@ -257,6 +275,25 @@ impl Lattice {
         let [s0, s1, s2, s3, s4, s5]: [&[f32]; D1] = std::array::from_fn(|k| &vals[ids[k] as usize * nc..][..nc]);
         // One pass over the labels, the vertices added in their order from 0 (the same sums as accumulating
         // vertex by vertex into a zeroed output, without writing the output D1 + 1 times).
+        for (d, o) in out.iter_mut().enumerate() {
+            let acc = 0.0 + w[0] * s0[d];
+            let acc = acc + w[1] * s1[d];
+            let acc = acc + w[2] * s2[d];
+            let acc = acc + w[3] * s3[d];
+            let acc = acc + w[4] * s4[d];
+            *o = acc + w[5] * s5[d];
+        }
+    }
+
+    /// [`Lattice::slice`] for the channels `first..first + out.len()` only.
+    #[inline(always)]
+    pub fn slice_channels(&self, vals: &[f32], pixel: usize, channels: usize, first: usize, out: &mut [f32]) {
+        let len = out.len();
+        let ids = &self.pix_vertex[pixel * D1..][..D1];
+        let ws = &self.pix_weight[pixel * D1..][..D1];
+        let w: [f32; D1] = std::array::from_fn(|k| ws[k] * OUTPUT_SCALE);
+        let [s0, s1, s2, s3, s4, s5]: [&[f32]; D1] =
+            std::array::from_fn(|k| &vals[ids[k] as usize * channels + first..][..len]);
         for (d, o) in out.iter_mut().enumerate() {
             let acc = 0.0 + w[0] * s0[d];
             let acc = acc + w[1] * s1[d];
@@ -326,6 +363,40 @@ fn splat_scatter(
             if local < count {
                 let w = w * scale;
                 for (a, s) in acc[local * nc..][..nc].iter_mut().zip(src) {
+                    *a += w * s;
+                }
+            }
+        }
+    }
+}
+
+/// [`splat_scatter`] with pixel p's values read and added only in its band `bands[p]` (see
+/// [`Lattice::splat_blur`]). Compiled for AVX2 + FMA as well (same results).
+#[allow(clippy::too_many_arguments)]
+#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
+fn splat_scatter_in_bands(
+    lat: &Lattice,
+    input: &[f32],
+    pixel_scale: Option<&[f32]>,
+    bands: &[[u32; 2]],
+    first: usize,
+    pixels: std::ops::Range<usize>,
+    acc: &mut [f32],
+    nc: usize,
+) {
+    acc.fill(0.0);
+    let count = acc.len() / nc;
+    for p in pixels {
+        let ids = &lat.pix_vertex[p * D1..][..D1];
+        let ws = &lat.pix_weight[p * D1..][..D1];
+        let scale = pixel_scale.map_or(1.0, |s| s[p]);
+        let [lo, hi] = bands[p].map(|b| b as usize);
+        let src = &input[p * nc + lo..][..hi - lo];
+        for (&v, &w) in ids.iter().zip(ws) {
+            let local = (v as usize).wrapping_sub(first);
+            if local < count {
+                let w = w * scale;
+                for (a, s) in acc[local * nc + lo..][..hi - lo].iter_mut().zip(src) {
                     *a += w * s;
                 }
             }

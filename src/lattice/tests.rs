@@ -205,8 +205,45 @@ fn lattice_splat_matches_per_vertex_sums() {
     for count in [1, 2, 5, 64] {
         lat.splat_ranges = splat_ranges(&lat.pix_vertex, nv, count);
         let mut vals = vec![0.0; nv * nc];
-        lat.splat(&input, Some(&scale), nc, &mut vals);
+        lat.splat(&input, Some(&scale), None, nc, &mut vals);
         assert!(vals.iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()), "{count} ranges");
+    }
+}
+
+/// Splatting each pixel's band only gives the same vertex values, bit for bit, as splatting every channel of an
+/// input that is 0 outside the bands (including empty bands and bands of all channels).
+#[test]
+fn lattice_splat_in_bands_matches_the_full_splat() {
+    let img = test_image(29, 19, 7);
+    let nc = 11;
+    let lat = Lattice::build(&img, 3.0, 30.0);
+    let r = rand_vec(2 * img.len(), 8);
+    let bands: Vec<[u32; 2]> = (0..img.len())
+        .map(|p| {
+            let (a, b) = ((r[2 * p] * nc as f32) as u32, (r[2 * p + 1] * (nc + 1) as f32) as u32);
+            match p % 5 {
+                0 => [0, nc as u32],
+                1 => [a, a],
+                _ => [a.min(b), a.max(b)],
+            }
+        })
+        .collect();
+    let mut input = rand_vec(img.len() * nc, 9);
+    for (p, values) in input.chunks_exact_mut(nc).enumerate() {
+        let [a, b] = bands[p].map(|v| v as usize);
+        values.iter_mut().enumerate().filter(|(c, _)| *c < a || *c >= b).for_each(|(_, v)| *v = 0.0);
+    }
+    let scale: Vec<f32> = rand_vec(img.len(), 10).iter().map(|s| 0.5 + s).collect();
+    let (mut full, mut banded) = (LatticeScratch::default(), LatticeScratch::default());
+    let a = lat.splat_blur(&input, Some(&scale), None, nc, &mut full);
+    let b = lat.splat_blur(&input, Some(&scale), Some(&bands), nc, &mut banded);
+    assert!(a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()));
+    let mut out = vec![0.0; 4];
+    for p in [0, 17, img.len() - 1] {
+        let mut all = vec![0.0; nc];
+        lat.slice(a, p, &mut all);
+        lat.slice_channels(a, p, nc, 5, &mut out);
+        assert_eq!(out, all[5..9]);
     }
 }
 

@@ -60,15 +60,28 @@ impl FullKernel {
 
     /// Splats the marginals `q` (`N × m`, pre-scaled for the symmetric normalisation) onto the lattice and blurs
     /// them: the vertex values that [`FullKernel::slice`] reads per pixel.
-    pub(super) fn splat_blur<'s>(&self, q: &[f32], m: usize, scratch: &'s mut LatticeScratch) -> &'s [f32] {
+    /// With `bands`, pixel i's marginals are 0 outside `bands[i]` and only its band is splatted (the same result).
+    pub(super) fn splat_blur<'s>(
+        &self,
+        q: &[f32],
+        bands: Option<&[[u32; 2]]>,
+        m: usize,
+        scratch: &'s mut LatticeScratch,
+    ) -> &'s [f32] {
         let scale = (!self.in_scale.is_empty()).then_some(self.in_scale.as_slice());
-        self.lattice.splat_blur(q, scale, m, scratch)
+        self.lattice.splat_blur(q, scale, bands, m, scratch)
     }
 
     /// The raw filtered values of pixel `i` (before [`FullKernel::message_factors`]) into `out`, one per label.
     #[inline(always)]
     pub(super) fn slice(&self, vals: &[f32], i: usize, out: &mut [f32]) {
         self.lattice.slice(vals, i, out);
+    }
+
+    /// [`FullKernel::slice`] for the labels `first..first + out.len()` of `m`.
+    #[inline(always)]
+    pub(super) fn slice_labels(&self, vals: &[f32], i: usize, m: usize, first: usize, out: &mut [f32]) {
+        self.lattice.slice_channels(vals, i, m, first, out);
     }
 
     /// Pixel i's message factors: Q̃_i(l) = out_scale · (raw_i(l) − self_w · Q_i(l)), where raw is the lattice
@@ -84,7 +97,7 @@ impl FullKernel {
     /// The message Q̃ (normalised, self term excluded as configured) of every pixel for the marginals `q`
     /// (`N × m`), as one `N × m` buffer: the update computes the same values inline.
     pub(super) fn message(&self, q: &[f32], m: usize, scratch: &mut LatticeScratch) -> Vec<f32> {
-        let vals = self.splat_blur(q, m, scratch);
+        let vals = self.splat_blur(q, None, m, scratch);
         let mut out = vec![0.0; q.len()];
         for (i, msg) in out.chunks_exact_mut(m).enumerate() {
             self.slice(vals, i, msg);

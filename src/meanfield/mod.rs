@@ -37,6 +37,7 @@
 //! thread.
 
 pub mod anneal;
+pub mod bands;
 pub mod decode;
 pub mod energy;
 pub mod full;
@@ -51,6 +52,7 @@ use crate::lattice::LatticeScratch;
 use crate::params::{MeanFieldParams, Schedule};
 
 pub use anneal::{UnarySchedule, label_aware_weights};
+pub use bands::LabelBands;
 pub use decode::{decode_marginals, parabola_offset};
 pub use energy::{LocalWeights, MIN_RELATIVE_PROBABILITY, add_local_energy, local_edge_weight, local_weights};
 pub use pyramid::{downsample_volume, infer_coarse_to_fine};
@@ -134,6 +136,8 @@ pub struct MeanField<'a> {
     scratch: LatticeScratch,
     /// The spare allocations this run did not take, handed on with the buffers.
     spare: Vec<Vec<f32>>,
+    /// Each pixel's labels (its marginal is 0 outside them); `None`: all labels.
+    label_bands: Option<LabelBands>,
 }
 
 impl<'a> MeanField<'a> {
@@ -156,7 +160,23 @@ impl<'a> MeanField<'a> {
         weights: PairwiseWeights,
         buffers: Buffers,
     ) -> Self {
-        Self::build(cost, image, p, weights, buffers, None)
+        Self::build(cost, image, p, weights, buffers, None, None)
+    }
+
+    /// Like [`MeanField::with_buffers`], with each pixel's marginal kept to its band of labels (0 outside it):
+    /// an iteration's update, splat and slice cost the bands, not all labels ([`bands`]).
+    ///
+    /// # Panics
+    /// If the image, the cost volume and the bands differ in size or labels.
+    pub fn in_label_bands(
+        cost: &'a CostVolume,
+        image: &RgbImage,
+        p: &MeanFieldParams,
+        weights: PairwiseWeights,
+        buffers: Buffers,
+        label_bands: LabelBands,
+    ) -> Self {
+        Self::build(cost, image, p, weights, buffers, None, Some(label_bands))
     }
 
     /// Like [`MeanField::with_buffers`], but Q starts from the marginals of a level reduced 2 times instead of
@@ -173,10 +193,11 @@ impl<'a> MeanField<'a> {
         buffers: Buffers,
         coarse: &Marginals,
     ) -> Self {
-        Self::build(cost, image, p, weights, buffers, Some(coarse))
+        Self::build(cost, image, p, weights, buffers, Some(coarse), None)
     }
 
-    /// The constructors' common body: Q from `coarse` if given, else softmax(−ψ_u).
+    /// The constructors' common body: Q from `coarse` if given, else softmax(−ψ_u) (within the label bands, if
+    /// given).
     fn build(
         cost: &'a CostVolume,
         image: &RgbImage,
@@ -184,8 +205,12 @@ impl<'a> MeanField<'a> {
         weights: PairwiseWeights,
         buffers: Buffers,
         coarse: Option<&Marginals>,
+        label_bands: Option<LabelBands>,
     ) -> Self {
         assert_eq!((cost.width, cost.height), image.dims(), "cost volume and image differ in size");
+        if let Some(b) = &label_bands {
+            assert_eq!((b.width, b.height, b.ndisp), (cost.width, cost.height, cost.ndisp), "label bands differ");
+        }
         let (n, m) = (image.len(), cost.ndisp);
         let weights = label_aware_weights(weights, p, m);
         let full = (weights.fcm > 0.0).then(|| FullKernel::new(image, p));
@@ -197,6 +222,9 @@ impl<'a> MeanField<'a> {
         let next_len = if p.schedule == Schedule::Jacobi { n * m } else { 0 };
         if next.len() != next_len {
             next = vec![0.0; next_len];
+        } else if label_bands.is_some() {
+            // Each iteration writes only the bands of `next`: the rest must be 0.
+            next.fill(0.0);
         }
         let edges = match p.schedule {
             Schedule::Jacobi => Vec::new(),
@@ -206,9 +234,19 @@ impl<'a> MeanField<'a> {
         };
         let unary_schedule = UnarySchedule::new(p);
         let scale = unary_schedule.at(0);
-        match coarse {
-            Some(coarse) => copy_from_coarse(&mut q, cost.width, cost.height, m, coarse),
-            None => {
+        match (coarse, &label_bands) {
+            (Some(coarse), _) => copy_from_coarse(&mut q, cost.width, cost.height, m, coarse),
+            (None, Some(bands)) => {
+                const CHUNK: usize = 256;
+                q.par_chunks_mut(m * CHUNK).zip(cost.data.par_chunks(m * CHUNK)).enumerate().for_each(|(k, (q, c))| {
+                    for (j, (q, c)) in q.chunks_exact_mut(m).zip(c.chunks_exact(m)).enumerate() {
+                        let (lo, hi) = bands.of(k * CHUNK + j);
+                        q.fill(0.0);
+                        unary_marginals(&c[lo..hi], scale, hi - lo, &mut q[lo..hi]);
+                    }
+                });
+            }
+            (None, None) => {
                 const CHUNK: usize = 256;
                 q.par_chunks_mut(m * CHUNK).zip(cost.data.par_chunks(m * CHUNK)).for_each(|(q, c)| {
                     unary_marginals(c, scale, m, q);
@@ -230,6 +268,7 @@ impl<'a> MeanField<'a> {
             edges,
             scratch,
             spare,
+            label_bands,
         }
     }
 
@@ -244,7 +283,7 @@ impl<'a> MeanField<'a> {
         let mut scratch = std::mem::take(&mut self.scratch);
         let mut edges = std::mem::take(&mut self.edges);
         let vals: &[f32] = match &self.full {
-            Some(full) => full.splat_blur(&q, m, &mut scratch),
+            Some(full) => full.splat_blur(&q, self.label_bands.as_ref().map(LabelBands::as_slice), m, &mut scratch),
             None => &[],
         };
         let this = &*self;

@@ -213,7 +213,7 @@ fn meanfield_in_place_checkerboard_matches_two_sweeps() {
             for _ in 0..3 {
                 let (mut q, mut next) = (std::mem::take(&mut mf.q), std::mem::take(&mut mf.next));
                 let mut scratch = std::mem::take(&mut mf.scratch);
-                let vals = mf.full.as_ref().unwrap().splat_blur(&q, nd, &mut scratch);
+                let vals = mf.full.as_ref().unwrap().splat_blur(&q, None, nd, &mut scratch);
                 mf.checkerboard_two_pass(&mut q, &mut next, vals);
                 (mf.q, mf.next, mf.scratch) = (q, next, scratch);
             }
@@ -226,7 +226,7 @@ fn meanfield_in_place_checkerboard_matches_two_sweeps() {
             for _ in 0..3 {
                 let mut q = std::mem::take(&mut mf.q);
                 let mut scratch = std::mem::take(&mut mf.scratch);
-                let vals = mf.full.as_ref().unwrap().splat_blur(&q, nd, &mut scratch);
+                let vals = mf.full.as_ref().unwrap().splat_blur(&q, None, nd, &mut scratch);
                 mf.checkerboard_in_place(&mut q, vals, &bands, &mut edges);
                 (mf.q, mf.scratch) = (q, scratch);
             }
@@ -357,6 +357,80 @@ fn meanfield_cold_marginals_hold_no_subnormal_floats() {
 }
 
 const LCM_ONLY: PairwiseWeights = PairwiseWeights { fcm: 0.0, lcm: 1.0 };
+
+/// Random label bands for a `w × h` view of `m` labels, a fifth of them all labels.
+fn random_bands(w: usize, h: usize, m: usize, seed: u64) -> LabelBands {
+    let r = rand_vec(2 * w * h, seed);
+    let centre = Plane::from_vec(w, h, (0..w * h).map(|i| (r[2 * i] * m as f32).floor()).collect());
+    let best = Plane::from_vec(
+        w,
+        h,
+        (0..w * h).map(|i| if i % 5 == 0 { f32::INFINITY } else { (r[2 * i + 1] * m as f32).floor() }).collect(),
+    );
+    // Reach 0, half width 1, joined with the own best label ± 0: from two labels to all of them.
+    LabelBands::around((&centre, &centre), &best, m, 0, 1.0, 0)
+}
+
+/// Label bands of all labels are the dense run, bit for bit, with either schedule.
+#[test]
+fn meanfield_full_label_bands_are_the_dense_run() {
+    let (w, h, m) = (21, 13, 9);
+    let cost = random_cost(w, h, m, 21, 20.0);
+    let (image, _, _) = banded_pair(w, h);
+    let weights = PairwiseWeights { fcm: 6.0, lcm: 1.5 };
+    for schedule in [Schedule::Checkerboard, Schedule::Jacobi] {
+        let p = MeanFieldParams { schedule, ..MeanFieldParams::default() };
+        let mut dense = MeanField::new(&cost, &image, &p, weights);
+        let full = LabelBands::full(w, h, m);
+        let mut banded = MeanField::in_label_bands(&cost, &image, &p, weights, Buffers::default(), full);
+        for _ in 0..3 {
+            dense.step();
+            banded.step();
+        }
+        let same = dense.marginals().iter().zip(banded.marginals()).all(|(a, b)| a.to_bits() == b.to_bits());
+        assert!(same, "{schedule:?}");
+    }
+}
+
+/// Inference in label bands is the dense inference with every label outside a pixel's band made impossible (a
+/// cost so high that its probability is below the floor, so exactly 0): the same marginals up to the rounding of
+/// the softmax's sums (over the band, not over all labels), and exactly 0 outside the bands. Reused buffers
+/// holding other values do not leak into the bands' zeros.
+#[test]
+fn meanfield_label_bands_are_dense_inference_with_the_rest_forbidden() {
+    let (w, h, m) = (24, 15, 12);
+    let cost = random_cost(w, h, m, 22, 20.0);
+    let (image, _, _) = banded_pair(w, h);
+    let bands = random_bands(w, h, m, 23);
+    let mut forbidden = cost.clone();
+    for (i, costs) in forbidden.data.chunks_exact_mut(m).enumerate() {
+        let (lo, hi) = bands.of(i);
+        costs.iter_mut().enumerate().filter(|(d, _)| *d < lo || *d >= hi).for_each(|(_, c)| *c += 1e4);
+    }
+    let weights = PairwiseWeights { fcm: 6.0, lcm: 1.5 };
+    for schedule in [Schedule::Checkerboard, Schedule::Jacobi] {
+        let p = MeanFieldParams { schedule, ..MeanFieldParams::default() };
+        let mut dense = MeanField::new(&forbidden, &image, &p, weights);
+        let mut stale = Buffers::default();
+        stale.recycle(vec![0.5; w * h * m]);
+        stale.next = vec![0.25; if schedule == Schedule::Jacobi { w * h * m } else { 0 }];
+        let mut banded = MeanField::in_label_bands(&cost, &image, &p, weights, stale, bands.clone());
+        for _ in 0..3 {
+            dense.step();
+            banded.step();
+        }
+        for (i, (a, b)) in dense.marginals().chunks_exact(m).zip(banded.marginals().chunks_exact(m)).enumerate() {
+            let (lo, hi) = bands.of(i);
+            for d in 0..m {
+                if d < lo || d >= hi {
+                    assert!(a[d] == 0.0 && b[d] == 0.0, "{schedule:?}: pixel {i}, label {d} outside its band");
+                } else {
+                    assert!((a[d] - b[d]).abs() < 1e-5, "{schedule:?}: pixel {i}, label {d}: {} vs {}", a[d], b[d]);
+                }
+            }
+        }
+    }
+}
 
 /// A `w × h × m` cost volume of uniform random costs in `[0, scale)`.
 fn random_cost(w: usize, h: usize, m: usize, seed: u64, scale: f32) -> CostVolume {

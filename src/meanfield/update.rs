@@ -80,10 +80,14 @@ pub(super) fn update_row<'c, 'r>(
             Some(r) => &r[x * m..][..m],
             None => e,
         };
+        // The pixel's labels a..b (all of them without label bands; outside its band its marginal stays 0).
+        let (a, b) = mf.label_bands.as_ref().map_or((0, m), |bands| bands.of(i));
+        let len = b - a;
+        let own = &own[a..b];
         let full = full_kernel.map(|kernel| {
-            kernel.slice(vals, i, &mut s.msg);
+            kernel.slice_labels(vals, i, m, a, &mut s.msg[..len]);
             let (out_scale, self_weight) = kernel.message_factors(i);
-            FullTerm { msg: &s.msg, own, omega: fcm, out_scale, self_weight }
+            FullTerm { msg: &s.msg[..len], own, omega: fcm, out_scale, self_weight }
         });
         let local = (lcm > 0.0).then(|| {
             // Missing neighbours (image border) read a row of zeros with weight 0.
@@ -105,14 +109,21 @@ pub(super) fn update_row<'c, 'r>(
             });
             let qu = nbrs.above.map_or(zeros, |row| &row[x * m..][..m]);
             let qd = nbrs.below.map_or(zeros, |row| &row[x * m..][..m]);
-            // Accumulated in the order left, right, up, down (the sequential reference's order).
-            for (k, p) in s.p_padded[1..=m].iter_mut().enumerate() {
-                *p = wts[0] * ql[k] + wts[1] * qr[k] + wts[2] * qu[k] + wts[3] * qd[k];
+            // P̃ of the labels a − 1 ..= b (`p_padded[k]` = P̃(a − 1 + k), 0 outside the labels), accumulated in
+            // the order left, right, up, down (the sequential reference's order).
+            let p_padded = &mut s.p_padded[..len + 2];
+            let (lo, hi) = (a.saturating_sub(1), (b + 1).min(m));
+            p_padded[0] = 0.0;
+            p_padded[len + 1] = 0.0;
+            let terms = ql[lo..hi].iter().zip(&qr[lo..hi]).zip(&qu[lo..hi]).zip(&qd[lo..hi]);
+            for (p, (((l, r), u), d)) in p_padded[lo + 1 - a..].iter_mut().zip(terms) {
+                *p = wts[0] * l + wts[1] * r + wts[2] * u + wts[3] * d;
             }
-            LocalTerm { p_padded: &s.p_padded, omega: lcm, beta: mf.beta }
+            LocalTerm { p_padded: &s.p_padded[..len + 2], omega: lcm, beta: mf.beta }
         });
-        pixel_energies(mf.cost.pixel(i), mf.unary_scale, full, local, &mut s.energy[..m]);
-        softmax_neg_padded(&s.energy, &mut s.exps, e);
+        pixel_energies(&mf.cost.pixel(i)[a..b], mf.unary_scale, full, local, &mut s.energy[..len]);
+        let lanes = len.next_multiple_of(8);
+        softmax_neg_padded(&s.energy[..lanes], &mut s.exps[..lanes], &mut e[a..b]);
     }
 }
 

@@ -1,0 +1,231 @@
+//! Label bands (our addition, for tiles; [`crate::tile`]): each pixel's marginal is kept to a contiguous run of
+//! labels and is 0 outside it, so the update, the splat and the slice of an iteration cost the pixel's band, not
+//! the view's whole label range. The blur still runs over every label of a vertex.
+//!
+//! A band holds what the pixel can plausibly take: every answer of the coarse level within the fully connected
+//! kernel's reach (3σx), widened by the labels over which the coarse prior still changes its penalty (its margin
+//! plus its truncation: beyond that it is flat, and the data alone would have to pull a label there), and the
+//! pixel's own best label by its cost alone (what the full resolution sees that the coarse level lost: thin
+//! structures). [`LabelBands::around`] builds them; for the right view, around the coarse answer carried over to it
+//! ([`warp_to_right_view`]) and the right pixel's own best label.
+
+use rayon::prelude::*;
+
+use crate::image::{DisparityMap, Plane};
+
+/// Per pixel, the labels `lo..hi` its marginal may hold (the rest are 0), for a `width × height` view of `ndisp`
+/// labels.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LabelBands {
+    /// The view's width.
+    pub width: usize,
+    /// The view's height.
+    pub height: usize,
+    /// The view's labels.
+    pub ndisp: usize,
+    /// `[lo, hi]` per pixel, raster order: `lo < hi ≤ ndisp`.
+    bands: Vec<[u32; 2]>,
+}
+
+impl LabelBands {
+    /// Every pixel's band is all `ndisp` labels.
+    pub fn full(width: usize, height: usize, ndisp: usize) -> Self {
+        LabelBands { width, height, ndisp, bands: vec![[0, ndisp as u32]; width * height] }
+    }
+
+    /// The bands around a coarse answer whose pixels allow the disparities `low..=high` (`inf`: no answer at
+    /// that pixel) in the labels `0..ndisp`: at each pixel, the smallest `low` and largest `high` within `reach`
+    /// pixels (a square), less and plus `half_width` labels, joined with `own_best` ± `own_half_width` (the
+    /// pixel's own best label). A pixel with no coarse answer within reach gets all labels.
+    ///
+    /// # Panics
+    /// If the maps differ in size, or `ndisp` is 0.
+    pub fn around(
+        (low, high): (&DisparityMap, &DisparityMap),
+        own_best: &DisparityMap,
+        ndisp: usize,
+        reach: usize,
+        half_width: f32,
+        own_half_width: usize,
+    ) -> Self {
+        assert!(ndisp > 0, "label bands need labels");
+        let (w, h) = (low.width, low.height);
+        assert!(
+            [(high.width, high.height), (own_best.width, own_best.height)].iter().all(|&s| s == (w, h)),
+            "label bands: sizes differ"
+        );
+        let low = window_extreme(low, reach, f32::INFINITY, f32::min);
+        let high = window_extreme(high, reach, f32::NEG_INFINITY, f32::max);
+        let top = ndisp as f32;
+        let bands = (0..w * h)
+            .into_par_iter()
+            .map(|i| {
+                let (dmin, dmax) = (low.data[i], high.data[i]);
+                if !dmin.is_finite() {
+                    return [0, ndisp as u32];
+                }
+                let mut lo = (dmin - half_width).floor().clamp(0.0, top - 1.0) as usize;
+                let mut hi = ((dmax + half_width).ceil().clamp(0.0, top - 1.0) as usize + 1).max(lo + 1);
+                let best = own_best.data[i];
+                if best.is_finite() {
+                    let best = best.round().clamp(0.0, top - 1.0) as usize;
+                    lo = lo.min(best.saturating_sub(own_half_width));
+                    hi = hi.max((best + own_half_width + 1).min(ndisp));
+                }
+                [lo as u32, hi as u32]
+            })
+            .collect();
+        LabelBands { width: w, height: h, ndisp, bands }
+    }
+
+    /// The labels `(lo, hi)` of pixel `i`.
+    #[inline(always)]
+    pub fn of(&self, i: usize) -> (usize, usize) {
+        let [lo, hi] = self.bands[i];
+        (lo as usize, hi as usize)
+    }
+
+    /// The bands as `[lo, hi]` per pixel.
+    pub fn as_slice(&self) -> &[[u32; 2]] {
+        &self.bands
+    }
+
+    /// The mean band width in labels.
+    pub fn mean_width(&self) -> f64 {
+        let sum: u64 = self.bands.iter().map(|&[lo, hi]| u64::from(hi - lo)).sum();
+        sum as f64 / self.bands.len().max(1) as f64
+    }
+
+    /// The bands of the columns `x0..` (for a view that starts there).
+    pub fn columns_from(&self, x0: usize) -> Self {
+        let w = self.width - x0;
+        let bands = self.bands.chunks_exact(self.width).flat_map(|row| row[x0..].iter().copied()).collect();
+        LabelBands { width: w, height: self.height, ndisp: self.ndisp, bands }
+    }
+}
+
+/// The right view's side of a left view's allowed disparities `low..=high` (`inf`: none): left pixel x at
+/// disparity d is right pixel x − d (rounded; the right volume of [`crate::cost::derive_right_volume`]), and a right
+/// pixel that several left pixels land on allows all their ranges; `inf` where none lands (occluded in the left
+/// view).
+pub fn warp_to_right_view(low: &DisparityMap, high: &DisparityMap) -> (DisparityMap, DisparityMap) {
+    let (w, h) = (low.width, low.height);
+    let mut right_low = Plane::new(w, h, f32::INFINITY);
+    let mut right_high = Plane::new(w, h, f32::INFINITY);
+    right_low.data.par_chunks_mut(w.max(1)).zip(right_high.data.par_chunks_mut(w.max(1))).enumerate().for_each(
+        |(y, (rl, rh))| {
+            for (x, (&lo, &hi)) in low.row(y).iter().zip(high.row(y)).enumerate() {
+                let Some(xr) = (lo.is_finite() && hi.is_finite()).then(|| x as f32 - lo.round()) else { continue };
+                if xr < 0.0 || xr >= w as f32 {
+                    continue;
+                }
+                let xr = xr as usize;
+                let first = !rh[xr].is_finite();
+                rl[xr] = if first { lo } else { rl[xr].min(lo) };
+                rh[xr] = if first { hi } else { rh[xr].max(hi) };
+            }
+        },
+    );
+    (right_low, right_high)
+}
+
+/// `pick` (`f32::min` or `f32::max`) of the finite values of `p` in the square of radius `r` around every
+/// pixel, in two separable passes; `empty` (the identity of `pick`: `inf` for the minimum) where there is none.
+fn window_extreme(p: &Plane<f32>, r: usize, empty: f32, pick: impl Fn(f32, f32) -> f32 + Copy + Sync) -> Plane<f32> {
+    let (w, h) = (p.width, p.height);
+    let mut rows = Plane::new(w, h, empty);
+    rows.data.par_chunks_mut(w.max(1)).zip(p.data.par_chunks(w.max(1))).for_each(|(dst, src)| {
+        let finite: Vec<f32> = src.iter().map(|&v| if v.is_finite() { v } else { empty }).collect();
+        running_extreme(&finite, r, empty, pick, dst);
+    });
+    let mut out = Plane::new(w, h, empty);
+    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, dst)| {
+        for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+            dst.iter_mut().zip(rows.row(yy)).for_each(|(o, &v)| *o = pick(*o, v));
+        }
+    });
+    out
+}
+
+/// `out[x]` = `pick` of `src[x − r ..= x + r]` (within the slice) for every x, in O(1) per value (van Herk /
+/// Gil–Werman: the running extremes from the start and from the end of blocks of 2r + 1, two per window).
+fn running_extreme(src: &[f32], r: usize, empty: f32, pick: impl Fn(f32, f32) -> f32, out: &mut [f32]) {
+    let k = 2 * r + 1;
+    let n = src.len() + 2 * r;
+    let padded = |i: usize| if i < r || i >= r + src.len() { empty } else { src[i - r] };
+    let (mut from_start, mut to_end) = (vec![empty; n], vec![empty; n]);
+    for i in 0..n {
+        from_start[i] = if i % k == 0 { padded(i) } else { pick(from_start[i - 1], padded(i)) };
+    }
+    for i in (0..n).rev() {
+        to_end[i] = if i % k == k - 1 || i + 1 == n { padded(i) } else { pick(to_end[i + 1], padded(i)) };
+    }
+    // Window x of the padded row is x ..= x + 2r: the end of x's block and the start of the next one.
+    for (x, o) in out.iter_mut().enumerate() {
+        *o = pick(to_end[x], from_start[x + 2 * r]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bands_hold_the_coarse_answers_within_reach_and_the_own_best() {
+        let (w, h, m) = (12, 5, 40);
+        let mut coarse = Plane::new(w, h, 10.0f32);
+        coarse.data[2 * w + 8] = 20.0;
+        coarse.data[0] = f32::INFINITY;
+        let mut best = Plane::new(w, h, 10.0f32);
+        best.data[4 * w] = 33.0;
+        let bands = LabelBands::around((&coarse, &coarse), &best, m, 2, 3.0, 1);
+        // Within 2 px of (8, 2): 10 − 3 ..= 20 + 3.
+        assert_eq!(bands.of(2 * w + 6), (7, 24));
+        assert_eq!(bands.of(4 * w + 10), (7, 24));
+        // Out of its reach: 10 ± 3.
+        assert_eq!(bands.of(2 * w + 5), (7, 14));
+        // The own best label joins: 33 ± 1.
+        assert_eq!(bands.of(4 * w), (7, 35));
+        // Clipped to the labels.
+        let wide = LabelBands::around((&coarse, &coarse), &best, m, 2, 30.0, 1);
+        assert_eq!(wide.of(2 * w + 7), (0, 40));
+        // No coarse answer within reach: all labels.
+        let nothing = Plane::new(w, h, f32::INFINITY);
+        let none = LabelBands::around((&nothing, &nothing), &best, m, 2, 3.0, 1);
+        assert!((0..w * h).all(|i| none.of(i) == (0, m)));
+        assert!((bands.mean_width() - 7.0).abs() < 5.0);
+    }
+
+    #[test]
+    fn running_extreme_matches_the_direct_window() {
+        let src: Vec<f32> = crate::test_util::rand_vec(23, 5).iter().map(|v| v * 10.0).collect();
+        for r in [0, 1, 3, 11, 30] {
+            for (empty, pick) in [(f32::INFINITY, f32::min as fn(f32, f32) -> f32), (f32::NEG_INFINITY, f32::max)] {
+                let mut out = vec![0.0; src.len()];
+                running_extreme(&src, r, empty, pick, &mut out);
+                for (x, &o) in out.iter().enumerate() {
+                    let window = &src[x.saturating_sub(r)..(x + r + 1).min(src.len())];
+                    assert_eq!(o, window.iter().fold(empty, |a, &v| pick(a, v)), "r {r}, x {x}");
+                }
+            }
+        }
+    }
+
+    /// Left pixels land on the right pixel x − d; where several land, the right pixel allows all their ranges.
+    #[test]
+    fn the_right_view_allows_what_lands_on_it() {
+        let (w, h) = (8, 1);
+        let low = Plane::from_vec(w, h, vec![0.0, 1.0, 1.0, f32::INFINITY, 3.0, 2.0, 4.0, 2.0]);
+        let high = Plane::from_vec(w, h, vec![0.0, 1.0, 2.0, f32::INFINITY, 3.0, 2.0, 5.0, 2.0]);
+        let (rl, rh) = warp_to_right_view(&low, &high);
+        // x 0 → 0, 1 → 0, 2 → 1, 4 → 1, 5 → 3, 6 → 2, 7 → 5.
+        let inf = f32::INFINITY;
+        assert_eq!(rl.data, vec![0.0, 1.0, 4.0, 2.0, inf, 2.0, inf, inf]);
+        assert_eq!(rh.data, vec![1.0, 3.0, 5.0, 2.0, inf, 2.0, inf, inf]);
+        let (w, m) = (30, 12);
+        let coarse = Plane::from_vec(w, 2, (0..w * 2).map(|i| ((i % w) % 7) as f32).collect());
+        let bands = LabelBands::around((&coarse, &coarse), &Plane::new(w, 2, f32::INFINITY), m, 1, 1.0, 0);
+        let cut = bands.columns_from(4);
+        assert_eq!((cut.width, cut.of(w - 4 + 3)), (w - 4, bands.of(w + 7)));
+    }
+}
