@@ -66,8 +66,8 @@ impl<T: Copy> Plane<T> {
 }
 
 /// `storage` resized to `len` values, for a buffer whose every value is written before it is read: a fresh
-/// allocation is zeroed by the OS (no fill pass); a reused one keeps what it held (only a grown part is zeroed), so
-/// a buffer carried from one run to the next is not page-faulted again.
+/// allocation is zeroed by the OS (no fill pass); a reused one keeps what it held (only a grown part is zeroed, in
+/// parallel), so a buffer carried from one run to the next is not page-faulted again.
 pub fn reuse_storage(mut storage: Vec<f32>, len: usize) -> Vec<f32> {
     if storage.capacity() == 0 {
         return vec![0.0; len];
@@ -75,8 +75,9 @@ pub fn reuse_storage(mut storage: Vec<f32>, len: usize) -> Vec<f32> {
     if storage.len() >= len {
         storage.truncate(len);
     } else {
-        storage.reserve_exact(len - storage.len());
-        storage.resize(len, 0.0);
+        let grow = len - storage.len();
+        storage.reserve_exact(grow);
+        rayon::iter::ParallelExtend::par_extend(&mut storage, rayon::iter::repeat_n(0.0, grow));
     }
     storage
 }

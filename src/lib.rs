@@ -645,7 +645,7 @@ pub(crate) fn fine_pass(
         _ => std::borrow::Cow::Owned(pair.left.columns_from(left_from)),
     };
     let left = if left_from > 0 {
-        let storage = buffers.take((w - left_from) * h * pair.ndisp);
+        let storage = buffers.take_as_is((w - left_from) * h * pair.ndisp);
         let kept = t.time("cost", || cost_left.columns_from_in(left_from, storage));
         estimate_view(params, &guide_left, &kept, left_bands, &mut t, buffers)
     } else {

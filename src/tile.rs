@@ -238,12 +238,9 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     // Each stage of the tiles is reported summed over them, and the cutting and stitching as "tiles (rest)".
     let start = std::time::Instant::now();
     let mut in_tiles = Timings::default();
-    // The volumes and marginals of one tile are the next one's (not allocated and page-faulted again).
-    let mut buffers = crate::meanfield::Buffers::default();
-    // Depth first, in a fixed order: the output does not depend on the thread count. One tile at a time:
-    // tiles side by side (each on its own thread, as many as fit the budget together) were 5–7 % faster on
-    // 2 cores, but the allocator's per-thread arenas each keep their tile's freed memory, and the peak passed
-    // the limit (395 MiB at 300 MB on the large-scene test of tests/cli.rs).
+    // The tiles, depth first, in a fixed order: the output does not depend on the thread count. Where a core is
+    // split depends on the coarse answer only, so the list is known before any tile runs.
+    let mut tiles = Vec::new();
     while let Some(core) = cores.pop() {
         let tile = job.tile(core);
         let need = tile_need(&tile, params);
@@ -252,9 +249,23 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
             cores.extend(split(core).into_iter().rev());
             continue;
         }
-        let result = job.run(&tile, &mut buffers)?;
+        tiles.push(tile);
+    }
+    // The volumes and marginals of one tile are the next one's. They are allocated once, at the size of the largest
+    // tile's volume (which that tile needs anyway), so that no tile grows them: a grown buffer is copied and its new
+    // pages are faulted in and zeroed (page faults were 8 % of an Adirondack ×4 run).
+    let mut buffers = crate::meanfield::Buffers::default();
+    let largest = tiles.iter().map(Tile::work).max().unwrap_or(0) as usize;
+    for _ in 0..crate::meanfield::MAX_SPARE {
+        buffers.recycle(vec![0.0; largest]);
+    }
+    // One tile at a time: tiles side by side (each on its own thread, as many as fit the budget together) were
+    // 5–7 % faster on 2 cores, but the allocator's per-thread arenas each keep their tile's freed memory, and the
+    // peak passed the limit (395 MiB at 300 MB on the large-scene test of tests/cli.rs).
+    for tile in &tiles {
+        let result = job.run(tile, &mut buffers)?;
         in_tiles.add_summed(&result.timings);
-        job.keep(&tile, &result, &mut out);
+        job.keep(tile, &result, &mut out);
     }
     let rest = start.elapsed().saturating_sub(in_tiles.total());
     t.stages.extend(in_tiles.stages);
