@@ -21,8 +21,10 @@
 //!    faster (their time is mostly per pixel, not per label) and a little more accurate;
 //! 4. keeps each tile's core (`lo` added back) and stitches the cores.
 //!
-//! **Halo.** A core pixel must see what it would see untiled: the fully connected kernel reaches 3σx, the weighted
-//! median its radius, and the plane segments about their size, so every side gets [`HALO_PX`] pixels; the left
+//! **Halo.** A core pixel must see what it would see untiled: the fully connected kernel reaches 3σx, and the
+//! weighted median reads the pixels within its radius, whose own kernels reach 3σx further; so every side gets
+//! [`halo_px`] pixels (24 by default; the plane segments near a crop border are cut by it, and fitted on what is
+//! left of them). The left
 //! side also gets the window width, so that every core pixel's candidate matches lie inside the right crop. That
 //! *extension* is for the right view only: the left view's inference and post-processing start at the halo
 //! (`left_from` of `fine_pass`; on Adirondack ×4 it was a quarter of the tiles' pixels).
@@ -53,9 +55,13 @@ use crate::image::{DisparityMap, Plane, RgbImage, StereoPair};
 use crate::params::Params;
 use crate::{Output, Prepared, Prior, Timings};
 
-/// Pixels added on every side of a core (3σx of the default kernel is 15, the weighted median's radius 9, plus
-/// room for the planes).
-pub const HALO_PX: usize = 32;
+/// Pixels added on every side of a core: the fully connected kernel's reach, 3σx, plus the weighted median's
+/// radius (15 + 9 by default). A halo of 32 (until session 16) was 0.95× and 0.89× as fast on the ×4 scenes with
+/// avgErr 1.49 and 5.36 against 1.48 and 5.37 now; 16 (the kernel alone) cost Adirondack ×4 1.57.
+pub fn halo_px(params: &Params) -> usize {
+    let kernel = (3.0 * params.meanfield.sigma_xy).ceil() as usize;
+    kernel + if params.post.wmedian.enabled { params.post.wmedian.radius } else { 0 }
+}
 
 /// The smallest core a tile is split down to.
 pub const MIN_CORE_PX: usize = 64;
@@ -117,7 +123,7 @@ pub fn plan(width: usize, height: usize, ndisp: usize, params: &Params, limit_by
     let beside = FULL_SIZE_BYTES_PER_PX * (width * height) as u64;
     let budget = limit_bytes.checked_sub(beside)?;
     // The smallest tile must fit even with the whole range as its window.
-    let side = MIN_CORE_PX + 2 * HALO_PX;
+    let side = MIN_CORE_PX + 2 * halo_px(params);
     if crate::estimate_memory_bytes((side + ndisp).min(width), side.min(height), ndisp, params) > tile_share(budget) {
         return None;
     }
@@ -233,7 +239,15 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
             cores.push(Rect { x0, y0, x1: (x0 + step).min(w), y1: (y0 + step).min(h) });
         }
     }
-    let job = TileJob { params, guide, cost_pair, cost_params: &input.cost_params, prior: &prior, margin };
+    let job = TileJob {
+        params,
+        guide,
+        cost_pair,
+        cost_params: &input.cost_params,
+        prior: &prior,
+        margin,
+        halo: halo_px(params),
+    };
     let share = tile_share(plan.tile_budget_bytes);
     // Each stage of the tiles is reported summed over them, and the cutting and stitching as "tiles (rest)".
     let start = std::time::Instant::now();
@@ -307,11 +321,14 @@ struct TileJob<'a> {
     cost_params: &'a crate::params::CostParams,
     prior: &'a Prior,
     margin: usize,
+    /// [`halo_px`].
+    halo: usize,
 }
 
-/// One tile: its core, its crop, its label window.
+/// One tile: its core, its halo, its crop, its label window.
 struct Tile {
     core: Rect,
+    halo: usize,
     crop: Rect,
     lo: usize,
     labels: usize,
@@ -321,7 +338,7 @@ impl Tile {
     /// The crop's first columns that are there only for the right view's matches: the left view's inference and
     /// output start after them, at the core's halo.
     fn left_from(&self) -> usize {
-        self.core.x0.saturating_sub(HALO_PX) - self.crop.x0
+        self.core.x0.saturating_sub(self.halo) - self.crop.x0
     }
 
     /// Its work: crop pixels × labels (also the entries of one of its volumes).
@@ -337,10 +354,10 @@ impl TileJob<'_> {
         let ndisp = self.guide.ndisp;
         // The window: the coarse disparities in the core and its halo.
         let around = Rect {
-            x0: core.x0.saturating_sub(HALO_PX),
-            y0: core.y0.saturating_sub(HALO_PX),
-            x1: (core.x1 + HALO_PX).min(w),
-            y1: (core.y1 + HALO_PX).min(h),
+            x0: core.x0.saturating_sub(self.halo),
+            y0: core.y0.saturating_sub(self.halo),
+            x1: (core.x1 + self.halo).min(w),
+            y1: (core.y1 + self.halo).min(h),
         };
         let (mut dmin, mut dmax) = (f32::INFINITY, f32::NEG_INFINITY);
         for y in around.y0..around.y1 {
@@ -360,17 +377,17 @@ impl TileJob<'_> {
         };
         let labels = hi - lo + 1;
         let mut crop = Rect {
-            x0: core.x0.saturating_sub(HALO_PX + labels),
-            y0: core.y0.saturating_sub(HALO_PX),
-            x1: (core.x1 + HALO_PX).min(w),
-            y1: (core.y1 + HALO_PX).min(h),
+            x0: core.x0.saturating_sub(self.halo + labels),
+            y0: core.y0.saturating_sub(self.halo),
+            x1: (core.x1 + self.halo).min(w),
+            y1: (core.y1 + self.halo).min(h),
         };
         // The tile's range must stay below its width.
         if crop.x1 - crop.x0 <= labels {
             crop.x1 = (crop.x0 + labels + 1).min(w);
             crop.x0 = crop.x1.saturating_sub(labels + 1);
         }
-        Tile { core, crop, lo, labels }
+        Tile { core, halo: self.halo, crop, lo, labels }
     }
 
     /// Whether the four quarters of a tile's core, each with its own halo and label window, are clearly less work
@@ -557,7 +574,8 @@ mod tests {
         assert!(e_many <= 1.1 * e_one + 0.05, "tiled {e_many:.3} px vs untiled {e_one:.3} px");
         assert!(e_one < 1.0, "the scene is matched: {e_one:.3} px");
         // A tight memory budget splits the cores further; the result is still the same problem.
-        let need = crate::estimate_memory_bytes(96 + 2 * HALO_PX + 40, 96 + 2 * HALO_PX, 40, &params);
+        let halo = halo_px(&params);
+        let need = crate::estimate_memory_bytes(96 + 2 * halo + 40, 96 + 2 * halo, 40, &params);
         let split_plan = TilePlan { tile_budget_bytes: need / 2, ..tiles };
         let small = run_tiled(&params, &pair, &split_plan, &|_| {}).unwrap();
         let (e_small, _, apart) = compare(&small.disparity, &one.disparity, &scene.gt, &scene.mask);
@@ -670,6 +688,7 @@ mod tests {
                 cost_params: &params.cost,
                 prior,
                 margin: 4,
+                halo: halo_px(&params),
             };
             check(&job);
         };
