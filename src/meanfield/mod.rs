@@ -28,6 +28,7 @@
 //!   (evidence crosses the local term twice as fast per iteration);
 //! - [`anneal`]: deterministic annealing of the unary temperature and the label-aware local coupling;
 //! - [`pyramid`]: coarse-to-fine inference (the same model on a 2× reduced grid first);
+//! - [`bands`]: label bands, each pixel's marginal kept to a run of labels (the tiles of [`crate::tile`]);
 //! - in [`full`]: the normalisation of the message (the paper leaves it unnormalised);
 //! - in [`energy`]: the floor under tiny probabilities ([`MIN_RELATIVE_PROBABILITY`]) and the sub-pixel parabola.
 //!
