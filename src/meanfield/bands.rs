@@ -104,10 +104,10 @@ impl LabelBands {
     }
 }
 
-/// The right view's side of a left view's allowed disparities `low..=high` (`inf`: none): left pixel x at
-/// disparity d is right pixel x − d (rounded; the right volume of [`crate::cost::derive_right_volume`]), and a right
-/// pixel that several left pixels land on allows all their ranges; `inf` where none lands (occluded in the left
-/// view).
+/// The right view's side of a left view's allowed disparities `low..=high` (`inf`: none): left pixel x lands on
+/// right pixel x − low (rounded; the right volume of [`crate::cost::derive_right_volume`] matches right pixel x at
+/// label d with left pixel x + d), and a right pixel that several left pixels land on allows all their ranges; `inf`
+/// where none lands (occluded in the left view).
 pub fn warp_to_right_view(low: &DisparityMap, high: &DisparityMap) -> (DisparityMap, DisparityMap) {
     let (w, h) = (low.width, low.height);
     let mut right_low = Plane::new(w, h, f32::INFINITY);
