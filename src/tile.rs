@@ -24,10 +24,10 @@
 //! **Halo.** A core pixel must see what it would see untiled: the fully connected kernel reaches 3σx, and the
 //! weighted median reads the pixels within its radius, whose own kernels reach 3σx further; so every side gets
 //! [`halo_px`] pixels (24 by default; the plane segments near a crop border are cut by it, and fitted on what is
-//! left of them). The left
-//! side also gets the window width, so that every core pixel's candidate matches lie inside the right crop. That
-//! *extension* is for the right view only: the left view's inference and post-processing start at the halo
-//! (`left_from` of `fine_pass`; on Adirondack ×4 it was a quarter of the tiles' pixels).
+//! left of them). The left side also gets the window width, so that every core pixel's candidate matches lie
+//! inside the right crop. That *extension* is for the right view only: the left view's inference and
+//! post-processing start at the halo (`left_from` of `fine_pass`; on Adirondack ×4 it was a quarter of the tiles'
+//! pixels).
 //! Inside the halo the tile differs from the untiled run (its borders are the crop's), so the tiled result
 //! agrees with the untiled one up to the coarse-window truncation and the far reach of the kernel and the planes
 //! (tests: `tiled_matches_untiled`).
@@ -56,8 +56,8 @@ use crate::params::Params;
 use crate::{Output, Prepared, Prior, Timings};
 
 /// Pixels added on every side of a core: the fully connected kernel's reach, 3σx, plus the weighted median's
-/// radius (15 + 9 by default). A halo of 32 (until session 16) was 0.95× and 0.89× as fast on the ×4 scenes with
-/// avgErr 1.49 and 5.36 against 1.48 and 5.37 now; 16 (the kernel alone) cost Adirondack ×4 1.57.
+/// radius (15 + 9 by default). Against the constant 32 of earlier sessions: 0.95× and 0.89× the time on the ×4
+/// scenes, avgErr 1.48 and 5.37 against 1.49 and 5.36; 16 (the kernel alone) cost Adirondack ×4 1.57.
 pub fn halo_px(params: &Params) -> usize {
     let kernel = (3.0 * params.meanfield.sigma_xy).ceil() as usize;
     kernel + if params.post.wmedian.enabled { params.post.wmedian.radius } else { 0 }

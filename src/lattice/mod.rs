@@ -258,9 +258,8 @@ impl Lattice {
             rest = r;
             parts.push((v0, p0..p1, part));
         }
-        parts.into_par_iter().for_each(|(v0, pixels, acc)| match bands {
-            None => splat_scatter(self, input, pixel_scale, v0, pixels, acc, nc),
-            Some(bands) => splat_scatter_in_bands(self, input, pixel_scale, bands, v0, pixels, acc, nc),
+        parts.into_par_iter().for_each(|(v0, pixels, acc)| {
+            splat_scatter(self, input, pixel_scale, bands, v0, pixels, acc, nc);
         });
     }
 
@@ -268,26 +267,14 @@ impl Lattice {
     /// [`OUTPUT_SCALE`]), with `vals` from [`Lattice::splat_blur`] and `out.len()` channels.
     #[inline(always)]
     pub fn slice(&self, vals: &[f32], pixel: usize, out: &mut [f32]) {
-        let nc = out.len();
-        let ids = &self.pix_vertex[pixel * D1..][..D1];
-        let ws = &self.pix_weight[pixel * D1..][..D1];
-        let w: [f32; D1] = std::array::from_fn(|k| ws[k] * OUTPUT_SCALE);
-        let [s0, s1, s2, s3, s4, s5]: [&[f32]; D1] = std::array::from_fn(|k| &vals[ids[k] as usize * nc..][..nc]);
-        // One pass over the labels, the vertices added in their order from 0 (the same sums as accumulating
-        // vertex by vertex into a zeroed output, without writing the output D1 + 1 times).
-        for (d, o) in out.iter_mut().enumerate() {
-            let acc = 0.0 + w[0] * s0[d];
-            let acc = acc + w[1] * s1[d];
-            let acc = acc + w[2] * s2[d];
-            let acc = acc + w[3] * s3[d];
-            let acc = acc + w[4] * s4[d];
-            *o = acc + w[5] * s5[d];
-        }
+        self.slice_channels(vals, pixel, out.len(), 0, out);
     }
 
-    /// [`Lattice::slice`] for the channels `first..first + out.len()` only.
+    /// [`Lattice::slice`] for the channels `first..first + out.len()` of `channels` only.
     #[inline(always)]
     pub fn slice_channels(&self, vals: &[f32], pixel: usize, channels: usize, first: usize, out: &mut [f32]) {
+        // One pass over the channels, the vertices added in their order from 0 (the same sums as accumulating
+        // vertex by vertex into a zeroed output, without writing the output D1 + 1 times).
         let len = out.len();
         let ids = &self.pix_vertex[pixel * D1..][..D1];
         let ws = &self.pix_weight[pixel * D1..][..D1];
@@ -340,12 +327,15 @@ fn splat_ranges(pix_vertex: &[u32], nvert: usize, count: usize) -> Vec<(usize, u
 
 /// Splats into the vertices `first..first + acc.len() / nc` by scanning the pixels `pixels` (which include
 /// every pixel contributing to them) in order and adding each one's value to those of its vertices in the range:
-/// every vertex sums its contributions in pixel order. Compiled for AVX2 + FMA as well (same results).
+/// every vertex sums its contributions in pixel order. With `bands`, pixel p's values are read and added only in
+/// its band `bands[p]` (see [`Lattice::splat_blur`]). Compiled for AVX2 + FMA as well (same results).
+#[allow(clippy::too_many_arguments)]
 #[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 fn splat_scatter(
     lat: &Lattice,
     input: &[f32],
     pixel_scale: Option<&[f32]>,
+    bands: Option<&[[u32; 2]]>,
     first: usize,
     pixels: std::ops::Range<usize>,
     acc: &mut [f32],
@@ -357,40 +347,7 @@ fn splat_scatter(
         let ids = &lat.pix_vertex[p * D1..][..D1];
         let ws = &lat.pix_weight[p * D1..][..D1];
         let scale = pixel_scale.map_or(1.0, |s| s[p]);
-        let src = &input[p * nc..][..nc];
-        for (&v, &w) in ids.iter().zip(ws) {
-            let local = (v as usize).wrapping_sub(first);
-            if local < count {
-                let w = w * scale;
-                for (a, s) in acc[local * nc..][..nc].iter_mut().zip(src) {
-                    *a += w * s;
-                }
-            }
-        }
-    }
-}
-
-/// [`splat_scatter`] with pixel p's values read and added only in its band `bands[p]` (see
-/// [`Lattice::splat_blur`]). Compiled for AVX2 + FMA as well (same results).
-#[allow(clippy::too_many_arguments)]
-#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
-fn splat_scatter_in_bands(
-    lat: &Lattice,
-    input: &[f32],
-    pixel_scale: Option<&[f32]>,
-    bands: &[[u32; 2]],
-    first: usize,
-    pixels: std::ops::Range<usize>,
-    acc: &mut [f32],
-    nc: usize,
-) {
-    acc.fill(0.0);
-    let count = acc.len() / nc;
-    for p in pixels {
-        let ids = &lat.pix_vertex[p * D1..][..D1];
-        let ws = &lat.pix_weight[p * D1..][..D1];
-        let scale = pixel_scale.map_or(1.0, |s| s[p]);
-        let [lo, hi] = bands[p].map(|b| b as usize);
+        let [lo, hi] = bands.map_or([0, nc], |b| b[p].map(|v| v as usize));
         let src = &input[p * nc + lo..][..hi - lo];
         for (&v, &w) in ids.iter().zip(ws) {
             let local = (v as usize).wrapping_sub(first);
