@@ -154,6 +154,11 @@ pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditio
     };
     let ((nl, bl, jl, grey_l), (nr, br, jr, grey_r)) =
         rayon::join(|| view_noise(&guide.left, &pair.left, gain[0]), || view_noise(&guide.right, &pair.right, gain[1]));
+    // A coarse level of the prior's chain: at most the finer level's noise, reduced.
+    let [nl, nr] = match p.noise_ceiling {
+        Some([cl, cr]) => [nl.min(cl), nr.min(cr)],
+        None => [nl, nr],
+    };
     let noise = [nl, nr];
     let (blocking, jpeg) = ([bl, br], [jl, jr]);
     // Below `denoise_min_sigma` (a clean camera, quantisation noise) a view is not filtered.
@@ -1008,6 +1013,31 @@ mod tests {
         assert!(matches!(out.guide, Cow::Borrowed(_)), "a full-contrast pair is not copied");
         let out = condition_pair(&dark_pair, &ConditionParams::off());
         assert_eq!(out.guide.left, dark);
+    }
+
+    /// A pair reduced 4× keeps its texture and loses its noise. Where the texture is as fine as the reduced
+    /// pixels (here 4 × 4 blocks of random grey), one image cannot tell it from noise: the estimate reads it, far
+    /// above the σ/4 the box average leaves. A coarse level of the prior's chain takes the finer level's σ reduced
+    /// as its ceiling (`noise_ceiling`); a ceiling above the estimate changes nothing.
+    #[test]
+    fn a_coarse_level_keeps_the_finer_levels_noise_as_a_ceiling() {
+        let (w, h, sigma, f) = (160, 120, 4.0, 4);
+        let mut fine = textured(w, h, sigma, 13);
+        let blocks = crate::test_util::rand_vec((w / f) * (h / f), 14);
+        for ch in &mut fine.channels {
+            ch.iter_mut()
+                .enumerate()
+                .for_each(|(i, v)| *v = (*v + 30.0 * blocks[(i / w / f) * (w / f) + i % w / f]).min(255.0));
+        }
+        let coarse = crate::scale::downsample_rgb(&fine, f);
+        let pair = StereoPair { left: coarse.clone(), right: coarse, ndisp: 4 };
+        let reduced = sigma as f32 / f as f32;
+        let own = condition_pair(&pair, &ConditionParams { stretch: false, ..ConditionParams::default() });
+        assert!(own.stats.noise[0] > 3.0 * reduced, "the estimate at 1/{f}: {:?}", own.stats.noise);
+        let p = ConditionParams { stretch: false, noise_ceiling: Some([reduced; 2]), ..ConditionParams::default() };
+        assert_eq!(condition_pair(&pair, &p).stats.noise, [reduced; 2]);
+        let high = ConditionParams { noise_ceiling: Some([100.0; 2]), ..p };
+        assert_eq!(condition_pair(&pair, &high).stats.noise, own.stats.noise);
     }
 
     /// Denoising is gated by the measured noise and reaches the cost pair only.

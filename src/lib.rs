@@ -316,9 +316,9 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
         // The same segment size in the scene: a quarter of the pixels gets a quarter of the segments.
         coarse_params.post.sps.segments = params.post.sps.segments.div_ceil(4);
         let sigma = input.sigma();
-        // The coarse level measures its own (halved) noise: it is denoised by the same rule, and gets a coarse
-        // prior of its own only while the pair is still noisy enough (`prior_recurse_sigma`). The alignment and
-        // stretch are done already.
+        // The coarse level measures its own (halved) noise, at most this level's halved: it is denoised by the same
+        // rule, and gets a coarse prior of its own only while the pair is still noisy enough
+        // (`prior_recurse_sigma`). The alignment and stretch are done already.
         // With `prior_levels` > 1 the coarse run has a prior of its own, one level fewer.
         let deeper = c.prior_levels > 1;
         let recurse = deeper || (c.prior_recurse_sigma > 0.0 && sigma >= c.prior_recurse_sigma);
@@ -331,6 +331,8 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
             prior_base: if recurse { c.prior_base } else { 0.0 },
             prior_flat: if recurse { c.prior_flat } else { 0.0 },
             prior_levels: if deeper { c.prior_levels - 1 } else { 1 },
+            // The coarse level's noise is this level's, reduced: its own estimate reads texture as noise.
+            noise_ceiling: input.noise().map(|n| n.map(|v| v / coarse_params.downscale as f32)),
             ..*c
         };
         let guide = input.pairs(pair).0;
@@ -571,6 +573,11 @@ impl<'a> Prepared<'a> {
                 .flatten(),
             vertical: self.vertical,
         })
+    }
+
+    /// Each view's measured noise σn (`None` when conditioning is off).
+    pub(crate) fn noise(&self) -> Option<[f32; 2]> {
+        self.conditioned.as_ref().map(|cond| cond.stats.noise)
     }
 
     /// The measured noise σn that the adaptive stages scale with (0 when conditioning is off).
