@@ -49,7 +49,7 @@ use std::borrow::Cow;
 use rayon::prelude::*;
 
 use crate::fastmath::exp_nonpositive;
-use crate::image::{Plane, RgbImage, StereoPair};
+use crate::image::{Plane, RgbImage, StereoPair, window_extreme};
 use crate::params::ConditionParams;
 
 /// The grey-level span the left view's 0.5–99.5 % range is stretched to (when it is smaller).
@@ -332,30 +332,15 @@ pub fn edge_range(coarse: &Plane<f32>, radius: usize, min_jump: f32) -> (Plane<f
     if radius == 0 || w == 0 || h == 0 {
         return (coarse.clone(), coarse.clone());
     }
-    // Separable: the smallest and largest finite value along each row's window, then down each column's.
-    let mut across = vec![(f32::INFINITY, f32::NEG_INFINITY); w * h];
-    across.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-        let row = coarse.row(y);
-        for (x, o) in out.iter_mut().enumerate() {
-            let window = &row[x.saturating_sub(radius)..(x + radius + 1).min(w)];
-            *o = window.iter().filter(|d| d.is_finite()).fold(*o, |(lo, hi), &d| (lo.min(d), hi.max(d)));
-        }
-    });
+    let (lo, hi) = (
+        window_extreme(coarse, radius, f32::INFINITY, f32::min),
+        window_extreme(coarse, radius, f32::NEG_INFINITY, f32::max),
+    );
     let mut low = coarse.clone();
     let mut high = coarse.clone();
-    low.data.par_chunks_mut(w).zip(high.data.par_chunks_mut(w)).enumerate().for_each(|(y, (lo_row, hi_row))| {
-        let (y0, y1) = (y.saturating_sub(radius), (y + radius + 1).min(h));
-        for x in 0..w {
-            if !coarse.row(y)[x].is_finite() {
-                continue;
-            }
-            let (lo, hi) = (y0..y1)
-                .map(|yy| across[yy * w + x])
-                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), (a, b)| (lo.min(a), hi.max(b)));
-            if hi - lo > min_jump {
-                lo_row[x] = lo;
-                hi_row[x] = hi;
-            }
+    low.data.par_iter_mut().zip(&mut high.data).enumerate().for_each(|(i, (l, h))| {
+        if l.is_finite() && hi.data[i] - lo.data[i] > min_jump {
+            (*l, *h) = (lo.data[i], hi.data[i]);
         }
     });
     (low, high)
