@@ -83,10 +83,10 @@ pub struct ConditionParams {
     /// The penalty stops growing beyond this distance past the margin.
     pub prior_trunc_px: f32,
     /// Set by the pipeline for a coarse level of the prior's chain (and for a tiled run's coarse level), never by
-    /// a config: each view's noise σn at the level above divided by the reduction factor. A box average of F × F pixels divides independent noise by
-    /// F, while the one-image estimate reads fine texture as noise where few flat pixels are left (1/8 of
-    /// trainingQ: 0.7–1.2 grey levels on clean pairs against 0.2–0.4 at 1/4), so a coarse level keeps the smaller
-    /// of its own estimate and this.
+    /// a config: each view's noise σn at the level above divided by the reduction factor. A box average of F × F
+    /// pixels divides independent noise by F, while the one-image estimate reads fine texture as noise where few
+    /// flat pixels are left (1/8 of trainingQ: 0.7–1.2 grey levels on clean pairs against 0.2–0.4 at 1/4), so a
+    /// coarse level keeps the smaller of its own estimate and this.
     #[serde(skip)]
     pub noise_ceiling: Option<[f32; 2]>,
 }
