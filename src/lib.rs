@@ -332,7 +332,7 @@ fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut
             prior_flat: if recurse { c.prior_flat } else { 0.0 },
             prior_levels: if deeper { c.prior_levels - 1 } else { 1 },
             // The coarse level's noise is this level's, reduced: its own estimate reads texture as noise.
-            noise_ceiling: input.noise().map(|n| n.map(|v| v / coarse_params.downscale as f32)),
+            noise_ceiling: input.noise_ceiling(coarse_params.downscale),
             ..*c
         };
         let guide = input.pairs(pair).0;
@@ -575,9 +575,11 @@ impl<'a> Prepared<'a> {
         })
     }
 
-    /// Each view's measured noise σn (`None` when conditioning is off).
-    pub(crate) fn noise(&self) -> Option<[f32; 2]> {
-        self.conditioned.as_ref().map(|cond| cond.stats.noise)
+    /// The noise ceiling of a level reduced `factor`× from this one
+    /// ([`params::ConditionParams::noise_ceiling`]): each view's measured σn / `factor`, what an F × F box average
+    /// leaves of independent noise (`None` when conditioning is off).
+    pub(crate) fn noise_ceiling(&self, factor: usize) -> Option<[f32; 2]> {
+        self.conditioned.as_ref().map(|cond| cond.stats.noise.map(|v| v / factor as f32))
     }
 
     /// The measured noise σn that the adaptive stages scale with (0 when conditioning is off).

@@ -210,7 +210,7 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     // resolution's, reduced by the f × f box average (σ / f), as a coarse level of the untiled chain keeps its
     // finer level's ([`crate::params::ConditionParams::noise_ceiling`]). Its own one-image estimate reads texture
     // as noise, and the gradient term's ε that follows it hides faint shading (Vintage ×4 4.82 -> 4.73).
-    coarse_params.condition.noise_ceiling = input.noise().map(|n| n.map(|v| v / f as f32));
+    coarse_params.condition.noise_ceiling = input.noise_ceiling(f);
     let coarse = t.time("coarse level", || crate::run_observed(&coarse_params, pair, &|_| {}))?;
 
     let grey_left = input.pairs(pair).1.left.to_grey();
