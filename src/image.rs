@@ -63,7 +63,7 @@ impl<T: Copy> Plane<T> {
     /// # Panics
     /// If `x0` is beyond the width.
     pub fn columns_from(&self, x0: usize) -> Self {
-        Plane::from_vec(self.width - x0, self.height, columns_from(&self.data, self.width, 1, x0, Vec::new()))
+        Plane::from_vec(self.width - x0, self.height, columns_from(&self.data, self.width, x0))
     }
 }
 
@@ -84,14 +84,12 @@ pub fn reuse_storage(mut storage: Vec<f32>, len: usize) -> Vec<f32> {
     storage
 }
 
-/// The columns `x0..` of every row of a row-major buffer of `width` pixels of `k` values each, written into `out`
-/// (its contents replaced; its allocation kept when it is large enough).
-fn columns_from<T: Copy>(data: &[T], width: usize, k: usize, x0: usize, mut out: Vec<T>) -> Vec<T> {
+/// The columns `x0..` of every row of a row-major buffer `width` values wide.
+fn columns_from<T: Copy>(data: &[T], width: usize, x0: usize) -> Vec<T> {
     assert!(x0 <= width, "column {x0} is beyond the width {width}");
-    out.clear();
-    out.reserve_exact(data.len() / width.max(1) * (width - x0));
-    for row in data.chunks_exact((width * k).max(1)) {
-        out.extend_from_slice(&row[x0 * k..]);
+    let mut out = Vec::with_capacity(data.len() / width.max(1) * (width - x0));
+    for row in data.chunks_exact(width.max(1)) {
+        out.extend_from_slice(&row[x0..]);
     }
     out
 }
@@ -151,7 +149,7 @@ impl RgbImage {
     /// # Panics
     /// If `x0` is beyond the width.
     pub fn columns_from(&self, x0: usize) -> RgbImage {
-        let channels = self.channels.each_ref().map(|c| columns_from(c, self.width, 1, x0, Vec::new()));
+        let channels = self.channels.each_ref().map(|c| columns_from(c, self.width, x0));
         RgbImage { width: self.width - x0, height: self.height, channels }
     }
 
@@ -205,13 +203,19 @@ impl CostVolume {
         &mut self.data[i * self.ndisp..][..self.ndisp]
     }
 
-    /// The columns `x0..` of the volume, all labels, in `storage` (reused whatever its size).
+    /// The columns `x0..` of the volume, all labels, moved to the front of its own storage (no new allocation:
+    /// row by row, each row moved towards the start, so no row is overwritten before it has moved).
     ///
     /// # Panics
     /// If `x0` is beyond the width.
-    pub fn columns_from_in(&self, x0: usize, storage: Vec<f32>) -> CostVolume {
-        let data = columns_from(&self.data, self.width, self.ndisp, x0, storage);
-        CostVolume { width: self.width - x0, height: self.height, ndisp: self.ndisp, data }
+    pub fn into_columns_from(mut self, x0: usize) -> CostVolume {
+        assert!(x0 <= self.width, "column {x0} is beyond the width {}", self.width);
+        let (row, kept) = (self.width * self.ndisp, (self.width - x0) * self.ndisp);
+        for y in 0..self.height {
+            self.data.copy_within(y * row + x0 * self.ndisp..(y + 1) * row, y * kept);
+        }
+        self.data.truncate(self.height * kept);
+        CostVolume { width: self.width - x0, ..self }
     }
 }
 
@@ -304,11 +308,11 @@ mod tests {
         let mut img = RgbImage::new(3, 2);
         img.channels[2] = vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
         assert_eq!(img.columns_from(2).channels[2], vec![3.0, 6.0]);
-        // Two labels per pixel; the storage handed in (too long, stale) is resized and overwritten.
-        let vol = CostVolume { width: 3, height: 1, ndisp: 2, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] };
-        let kept = vol.columns_from_in(1, vec![9.0; 10]);
-        assert_eq!((kept.width, kept.height, kept.ndisp), (2, 1, 2));
-        assert_eq!(kept.data, vec![3.0, 4.0, 5.0, 6.0]);
+        // Two labels per pixel, moved within the volume's own storage.
+        let vol = CostVolume { width: 3, height: 2, ndisp: 2, data: (1..=12).map(|v| v as f32).collect() };
+        let kept = vol.into_columns_from(1);
+        assert_eq!((kept.width, kept.height, kept.ndisp), (2, 2, 2));
+        assert_eq!(kept.data, vec![3.0, 4.0, 5.0, 6.0, 9.0, 10.0, 11.0, 12.0]);
     }
 
     #[test]

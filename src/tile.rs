@@ -295,12 +295,11 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
 /// The memory a tile plans for: [`crate::estimate_memory_bytes`] of its crop and window, plus one volume
 /// (crop pixels × labels × 4 bytes): inside a tile the allocator keeps some of what is freed (a volume freed on
 /// the heap leaves a hole the next, larger one does not fit). Measured on a 1280×960 scene of 160 labels under
-/// `--max-memory 300M` (tests/cli.rs): one tile used 182 MiB against an estimate of 148. Plus the left view's
-/// copy of the columns it keeps (the crop without the extension; `fine_pass`).
+/// `--max-memory 300M` (tests/cli.rs): one tile used 182 MiB against an estimate of 148. Plus the right view's
+/// volume, which a tile derives before the left view's inference (`fine_pass`): three volumes are alive then.
 fn tile_need(tile: &Tile, params: &Params) -> u64 {
     let (w, h) = (tile.crop.x1 - tile.crop.x0, tile.crop.y1 - tile.crop.y0);
-    let left_copy = 4 * ((w - tile.left_from()) * h * tile.labels) as u64;
-    crate::estimate_memory_bytes(w, h, tile.labels, params) + 4 * tile.work() + left_copy
+    crate::estimate_memory_bytes(w, h, tile.labels, params) + 2 * 4 * tile.work()
 }
 
 /// The four quarters of a core (fewer for a thin one), in row-major order.

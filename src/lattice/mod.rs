@@ -214,8 +214,10 @@ impl Lattice {
             assert!(b.iter().all(|&[lo, hi]| lo <= hi && hi as usize <= nc), "a lattice band is out of range");
         }
         let len = self.nvert * nc;
-        scratch.a.resize(len, 0.0);
-        scratch.b.resize(len, 0.0);
+        // Both are written in full before they are read (the splat zeroes its vertices, each blur pass writes every
+        // vertex): what a reused buffer held does not matter, and a grown one is zeroed in parallel.
+        scratch.a = crate::image::reuse_storage(std::mem::take(&mut scratch.a), len);
+        scratch.b = crate::image::reuse_storage(std::mem::take(&mut scratch.b), len);
         scratch.zero.resize(nc, 0.0);
         if nc == 0 || self.npix == 0 {
             return &scratch.a;

@@ -5,6 +5,8 @@
 //! constants left out (they cancel in the softmax), then Q = softmax(−E). Also here, our addition: the floor
 //! under tiny probabilities ([`MIN_RELATIVE_PROBABILITY`]) that keeps subnormal floats out of the lattice.
 
+use rayon::prelude::*;
+
 use crate::fastmath::{exp_nonpositive, lane_min, lane_sum};
 use crate::image::{Plane, RgbImage};
 use crate::params::MeanFieldParams;
@@ -35,17 +37,20 @@ pub fn local_weights(image: &RgbImage, p: &MeanFieldParams) -> LocalWeights {
     let (w, h) = image.dims();
     let mut right = Plane::new(w, h, 0.0f32);
     let mut down = Plane::new(w, h, 0.0f32);
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            if x + 1 < w {
-                right.data[i] = local_edge_weight(image.rgb(i), image.rgb(i + 1), p);
+    // Row by row in parallel: every weight depends on its two pixels only.
+    right.data.par_chunks_mut(w.max(1)).zip(down.data.par_chunks_mut(w.max(1))).enumerate().for_each(
+        |(y, (right, down))| {
+            for x in 0..w {
+                let i = y * w + x;
+                if x + 1 < w {
+                    right[x] = local_edge_weight(image.rgb(i), image.rgb(i + 1), p);
+                }
+                if y + 1 < h {
+                    down[x] = local_edge_weight(image.rgb(i), image.rgb(i + w), p);
+                }
             }
-            if y + 1 < h {
-                down.data[i] = local_edge_weight(image.rgb(i), image.rgb(i + w), p);
-            }
-        }
-    }
+        },
+    );
     LocalWeights { right, down }
 }
 

@@ -107,16 +107,10 @@ impl Buffers {
     /// A spare allocation of `len` values (what it held before, or zeros; for a buffer that is written in full
     /// before it is read): the smallest that holds `len`, else the largest, grown; a fresh one if there is none.
     pub fn take(&mut self, len: usize) -> Vec<f32> {
-        crate::image::reuse_storage(self.take_as_is(len), len)
-    }
-
-    /// The allocation [`Buffers::take`] would hand out for `len` values, as it is (for a caller that clears it and
-    /// extends it itself: no values are written for nothing).
-    pub fn take_as_is(&mut self, len: usize) -> Vec<f32> {
         let cap = |i: &usize| self.spare[*i].capacity();
         let all = 0..self.spare.len();
         let pick = all.clone().filter(|i| cap(i) >= len).min_by_key(cap).or_else(|| all.max_by_key(cap));
-        pick.map_or_else(Vec::new, |i| self.spare.swap_remove(i))
+        crate::image::reuse_storage(pick.map_or_else(Vec::new, |i| self.spare.swap_remove(i)), len)
     }
 }
 

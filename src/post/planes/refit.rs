@@ -85,8 +85,9 @@ pub(super) fn borrow_missing(
             break;
         }
     }
-    let fallback = [0.0, 0.0, median_of_data(scene)];
-    planes.iter().map(|pl| pl.unwrap_or(fallback)).collect()
+    // Left without a plane only if no segment has one: the median pass is not made otherwise.
+    let fallback = planes.iter().any(Option::is_none).then(|| [0.0, 0.0, median_of_data(scene)]);
+    planes.iter().map(|pl| pl.or(fallback).unwrap_or_default()).collect()
 }
 
 /// The median of the disparities with data weight > 0 (the lower median; 0 without any).
