@@ -38,14 +38,14 @@
 //! ×4: 4 % faster, avgErr 1.69 and 9.04 against 1.69 and 9.03).
 //!
 //! **Memory.** Each tile needs [`crate::estimate_memory_bytes`] for its crop and window, plus one volume for what
-//! the allocator keeps of freed volumes and one for the left view's copy of the columns it keeps (`tile_need`); a
-//! core whose tile would exceed nine tenths of the budget (the rest is left for what the allocator keeps between
-//! tiles) is split in four until it fits (or reaches [`MIN_CORE_PX`]). One tile at a time is alive (its pipeline
-//! is parallel inside; `run_tiled` says why tiles do not run side by side). The coarse run needs the untiled
-//! estimate at 1/F. On top: the full-size pair, its conditioned and aligned copies, the prior and the full-size
-//! maps, [`FULL_SIZE_BYTES_PER_PX`] per pixel. A tile's spent volumes and marginals are the next tile's
-//! (`meanfield::Buffers`): a volume freed to the OS and allocated again is page-faulted and zeroed again, which was
-//! a tenth of a ×4 run's time.
+//! the allocator keeps of freed volumes and one for the right view's volume, derived before the left view's
+//! inference (`tile_need`); a core whose tile would exceed nine tenths of the budget (the rest is left for what the
+//! allocator keeps between tiles) is split in four until it fits (or reaches [`MIN_CORE_PX`]). One tile at a time
+//! is alive (its pipeline is parallel inside; `run_tiled` says why tiles do not run side by side). The coarse run
+//! needs the untiled estimate at 1/F. On top: the full-size pair, its conditioned and aligned copies, the prior and
+//! the full-size maps, [`FULL_SIZE_BYTES_PER_PX`] per pixel. A tile's spent volumes and marginals are the next
+//! tile's (`meanfield::Buffers`): a volume freed to the OS and allocated again is page-faulted and zeroed again,
+//! which was a tenth of a ×4 run's time.
 //!
 //! Parameters measured in pixels keep their meaning; the plane segments keep their size (a tile gets the share
 //! of `post.sps.segments` that its area is of the image).
