@@ -203,14 +203,7 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
 
     let mut input = Prepared::of(params, pair, &mut t);
     on_stage("coarse level");
-    let mut coarse_params = params.clone();
-    coarse_params.downscale = f;
-    // The coarse level is an ordinary run of its own size (its segment count is not scaled down: it is the
-    // base answer, as good as a run at that resolution can be), except for its noise: at most the full
-    // resolution's, reduced by the f × f box average (σ / f), as a coarse level of the untiled chain keeps its
-    // finer level's ([`crate::params::ConditionParams::noise_ceiling`]). Its own one-image estimate reads texture
-    // as noise, and the gradient term's ε that follows it hides faint shading (Vintage ×4 4.82 -> 4.73).
-    coarse_params.condition.noise_ceiling = input.noise_ceiling(f);
+    let coarse_params = coarse_level_params(params, &input, f);
     let coarse = t.time("coarse level", || crate::run_observed(&coarse_params, pair, &|_| {}))?;
 
     let grey_left = input.pairs(pair).1.left.to_grey();
@@ -290,6 +283,19 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     t.stages.push(("tiles (rest)", rest));
     out.timings = t;
     Ok(out)
+}
+
+/// The parameters of a tiled run's coarse level, the pipeline at 1/`f`. It is an ordinary run of its own size
+/// (its segment count is not scaled down: it is the base answer, as good as a run at that resolution can be),
+/// except for its noise: at most the full resolution's (`input`), reduced by the f × f box average (σ / f), as a
+/// coarse level of the untiled chain keeps its finer level's ([`crate::params::ConditionParams::noise_ceiling`]).
+/// Its own one-image estimate reads texture as noise, and the gradient term's ε that follows it hides faint shading
+/// (Vintage ×4 4.82 -> 4.73).
+fn coarse_level_params(params: &Params, input: &Prepared, f: usize) -> Params {
+    let mut coarse = params.clone();
+    coarse.downscale = f;
+    coarse.condition.noise_ceiling = input.noise_ceiling(f);
+    coarse
 }
 
 /// The memory a tile plans for: [`crate::estimate_memory_bytes`] of its crop and window, plus one volume
@@ -556,6 +562,38 @@ mod tests {
             n += 1;
         }
         (ea / n as f64, eb / n as f64, apart as f64 / n as f64)
+    }
+
+    /// The coarse level of a tiled run keeps the full resolution's noise reduced as its ceiling: a noisy synthetic
+    /// pair whose random texture, reduced 4×, reads as noise to the one-image estimate (well above σ / 4 without
+    /// the ceiling), and at most σ / 4 with it.
+    #[test]
+    fn the_coarse_level_keeps_the_full_resolutions_noise_as_a_ceiling() {
+        use crate::degrade::{Degradation, Recipe, View, degrade};
+        let scene = render_scene(&SynthParams { width: 320, height: 240, ndisp: 32, seed: 9 }).unwrap();
+        let recipe = Recipe(vec![Degradation::Noise { sigma: 4.0 }]);
+        let (left, right) = (
+            degrade(&scene.left, &recipe, View::Left, 1).unwrap(),
+            degrade(&scene.right, &recipe, View::Right, 1).unwrap(),
+        );
+        let pair = StereoPair::new(left, right, scene.ndisp).unwrap();
+        let params = Params::default();
+        let f = 4;
+        let input = Prepared::of(&params, &pair, &mut Timings::default());
+        let ceiling = input.noise_ceiling(f).expect("conditioning is on by default");
+        let coarse_noise = |p: &Params| {
+            let out = crate::run_observed(p, &pair, &|_| {}).unwrap();
+            out.measured.expect("a conditioned run reports what it measured").stats.noise
+        };
+        let with = coarse_level_params(&params, &input, f);
+        assert_eq!(with.downscale, f);
+        let own = coarse_noise(&Params { downscale: f, ..params.clone() });
+        let kept = coarse_noise(&with);
+        eprintln!("full σn / {f} {ceiling:?}, coarse level's own estimate {own:?}, with the ceiling {kept:?}");
+        for v in 0..2 {
+            assert!(own[v] > 2.0 * ceiling[v], "view {v}: the texture reads as noise at 1/{f} ({own:?})");
+            assert!(kept[v] <= ceiling[v], "view {v}: {kept:?} above the ceiling {ceiling:?}");
+        }
     }
 
     /// Tiles agree with one tile over the whole image: cores of 96 px (12 tiles on 360 × 240) against a single
