@@ -198,6 +198,19 @@ pub fn build_cost_volume_in(
     p: &CostParams,
     storage: Vec<f32>,
 ) -> CostVolume {
+    build_cost_volume_then(left, right, ndisp, p, storage, |_, _| ()).0
+}
+
+/// [`build_cost_volume_in`], with `then(y, row)` called on each row of the volume as soon as it is written (in the
+/// same parallel task, while the row is still in cache); its results, row by row.
+pub fn build_cost_volume_then<R: Send>(
+    left: &RgbImage,
+    right: &RgbImage,
+    ndisp: usize,
+    p: &CostParams,
+    storage: Vec<f32>,
+    then: impl Fn(usize, &mut [f32]) -> R + Sync,
+) -> (CostVolume, Vec<R>) {
     assert_eq!(left.dims(), right.dims(), "left and right images differ in size");
     let (w, h) = left.dims();
     let (grey_l, grey_r) = (left.to_grey(), right.to_grey());
@@ -235,11 +248,19 @@ pub fn build_cost_volume_in(
         out_of_view,
         bits: (p.census_width * p.census_height - 1) as u32,
     };
-    vol.data.par_chunks_mut(w * ndisp).enumerate().for_each_init(
-        || (vec![0u64; w], vec![0.0f32; w], vec![0u64; w]),
-        |(cr_rev, gr_rev, mr_rev), (y, row)| cost_row(&rows, y, ndisp, cr_rev, gr_rev, mr_rev, row),
-    );
-    vol
+    let after = vol
+        .data
+        .par_chunks_mut(w * ndisp)
+        .enumerate()
+        .map_init(
+            || (vec![0u64; w], vec![0.0f32; w], vec![0u64; w]),
+            |(cr_rev, gr_rev, mr_rev), (y, row)| {
+                cost_row(&rows, y, ndisp, cr_rev, gr_rev, mr_rev, row);
+                then(y, row)
+            },
+        )
+        .collect();
+    (vol, after)
 }
 
 /// What [`cost_row`] reads: both views' census codes, support masks and gradients, the weights and truncations
@@ -309,21 +330,42 @@ pub fn derive_right_volume(left: &CostVolume, out_of_view: f32) -> CostVolume {
 
 /// [`derive_right_volume`] written into `storage` (any contents; resized as needed), so that a caller can reuse
 /// an allocation that is already paged in.
-pub fn derive_right_volume_in(left: &CostVolume, out_of_view: f32, mut storage: Vec<f32>) -> CostVolume {
+pub fn derive_right_volume_in(left: &CostVolume, out_of_view: f32, storage: Vec<f32>) -> CostVolume {
+    derive_right_volume_then(left, out_of_view, storage, |_, _| ()).0
+}
+
+/// [`derive_right_volume_in`], with `then(y, row)` called on each row as soon as it is written (as in
+/// [`build_cost_volume_then`]); its results, row by row.
+pub fn derive_right_volume_then<R: Send>(
+    left: &CostVolume,
+    out_of_view: f32,
+    mut storage: Vec<f32>,
+    then: impl Fn(usize, &mut [f32]) -> R + Sync,
+) -> (CostVolume, Vec<R>) {
     let (w, h, nd) = (left.width, left.height, left.ndisp);
     storage = crate::image::reuse_storage(storage, w * h * nd); // every entry is written below
-    storage.par_chunks_mut(w * nd).enumerate().for_each(|(y, row)| {
-        let lrow = &left.data[y * w * nd..][..w * nd];
-        for (x, costs) in row.chunks_exact_mut(nd).enumerate() {
-            let in_view = nd.min(w - x);
-            let (inside, outside) = costs.split_at_mut(in_view);
-            for (d, c) in inside.iter_mut().enumerate() {
-                *c = lrow[(x + d) * nd + d];
+    let after = storage
+        .par_chunks_mut(w * nd)
+        .enumerate()
+        .map(|(y, row)| {
+            let lrow = &left.data[y * w * nd..][..w * nd];
+            for (x, costs) in row.chunks_exact_mut(nd).enumerate() {
+                let in_view = nd.min(w - x);
+                let (inside, outside) = costs.split_at_mut(in_view);
+                for (d, c) in inside.iter_mut().enumerate() {
+                    *c = lrow[(x + d) * nd + d];
+                }
+                outside.fill(out_of_view);
             }
-            outside.fill(out_of_view);
-        }
-    });
-    CostVolume { width: w, height: h, ndisp: nd, data: storage }
+            then(y, row)
+        })
+        .collect();
+    (CostVolume { width: w, height: h, ndisp: nd, data: storage }, after)
+}
+
+/// [`winner_take_all`] of one row of a volume with `ndisp` labels.
+pub fn row_argmins(row: &[f32], ndisp: usize) -> Vec<f32> {
+    row.chunks_exact(ndisp.max(1)).map(|c| argmin(c) as f32).collect()
 }
 
 /// Winner-take-all: the label of least cost at every pixel (ties go to the smaller label), as `f32`.

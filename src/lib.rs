@@ -453,26 +453,47 @@ impl Prior {
     /// λᵢ = max(`weight`, `flat` × the flatness of the pixel's cost, [`cost::flatness`]) × its confidence factor
     /// (the confidence only with `prior_confidence`). Stage `flatness` when the floor can matter.
     pub(crate) fn add_to(&self, cost: &mut CostVolume, c: &params::ConditionParams, t: &mut Timings) {
-        let (m, margin, trunc) = (cost.ndisp, c.prior_margin_px, c.prior_trunc_px);
-        let (by_confidence, weight) = (c.prior_confidence, self.weight);
-        // Nothing to compute where the noise-scaled weight is at least `flat`: the floor never exceeds it.
-        let flatness = (self.flat > weight).then(|| t.time("flatness", || cost::flatness(cost)));
-        let (low, high) = self.free.as_ref().map_or((&self.disparity, &self.disparity), |(l, h)| (l, h));
+        let m = cost.ndisp;
+        let flatness = self.needs_flatness().then(|| t.time("flatness", || cost::flatness(cost)));
         cost.data.par_chunks_mut(m).enumerate().for_each(|(i, costs)| {
-            let (low, high) = (low.data[i], high.data[i]);
-            if !low.is_finite() {
-                return;
-            }
             let floor = flatness.as_ref().map_or(0.0, |f| self.flat * f.data[i]);
-            let weight = weight.max(floor);
-            let lambda = if by_confidence { weight * self.confidence.data[i] } else { weight };
-            for (d, v) in costs.iter_mut().enumerate() {
-                // The distance from [low, high]: |d − d_coarse| where the two are one.
-                let d = d as f32;
-                let off = if d < low { low - d } else { (d - high).max(0.0) };
-                *v += lambda * (off - margin).clamp(0.0, trunc);
-            }
+            self.add_at(i, floor, costs, c);
         });
+    }
+
+    /// Whether [`Prior::add_to`] needs the cost's flatness, a pass over the whole volume first: not where the
+    /// noise-scaled weight is at least `flat`, since the floor never exceeds it.
+    pub(crate) fn needs_flatness(&self) -> bool {
+        self.flat > self.weight
+    }
+
+    /// [`Prior::add_to`] for row `y` of a volume `width` pixels wide, `row` its costs (for a prior that does not
+    /// need the flatness: [`Prior::needs_flatness`]).
+    pub(crate) fn add_to_row(&self, y: usize, width: usize, row: &mut [f32], c: &params::ConditionParams) {
+        debug_assert!(!self.needs_flatness());
+        let m = row.len() / width.max(1);
+        for (x, costs) in row.chunks_exact_mut(m.max(1)).enumerate() {
+            self.add_at(y * width + x, 0.0, costs, c);
+        }
+    }
+
+    /// The penalty of pixel `i` added to its `costs`, its weight at least `floor`.
+    #[inline(always)]
+    fn add_at(&self, i: usize, floor: f32, costs: &mut [f32], c: &params::ConditionParams) {
+        let (margin, trunc) = (c.prior_margin_px, c.prior_trunc_px);
+        let (low, high) = self.free.as_ref().map_or((&self.disparity, &self.disparity), |(l, h)| (l, h));
+        let (low, high) = (low.data[i], high.data[i]);
+        if !low.is_finite() {
+            return;
+        }
+        let weight = self.weight.max(floor);
+        let lambda = if c.prior_confidence { weight * self.confidence.data[i] } else { weight };
+        for (d, v) in costs.iter_mut().enumerate() {
+            // The distance from [low, high]: |d − d_coarse| where the two are one.
+            let d = d as f32;
+            let off = if d < low { low - d } else { (d - high).max(0.0) };
+            *v += lambda * (off - margin).clamp(0.0, trunc);
+        }
     }
 
     /// Weakens the prior where `grey` (the full-resolution cost image) has detail a level `factor` times coarser
@@ -625,13 +646,21 @@ pub(crate) fn fine_pass(
     let need_right = post.lrc.mode != LrcMode::Off;
     let (w, h) = pair.left.dims();
     let storage = buffers.take(w * h * pair.ndisp);
-    let mut cost_left = t.time("cost", || {
-        cost::build_cost_volume_in(&cost_pair.left, &cost_pair.right, pair.ndisp, cost_params, storage)
-    });
-    // Label bands (tiles): each pixel's own best label is taken before the prior is added.
+    // Label bands (tiles): each pixel's own best label is taken before the prior is added. Both are done row by row
+    // as the volume is written, unless the prior needs the cost's flatness (a median over the whole volume) first.
     let prior_bands = prior.filter(|p| p.in_bands);
-    let own_best = prior_bands.map(|_| t.time("bands", || cost::winner_take_all(&cost_left)));
-    if let Some(prior) = prior {
+    let row_prior = prior.filter(|p| !p.needs_flatness());
+    let (mut cost_left, own_rows) = t.time("cost", || {
+        cost::build_cost_volume_then(&cost_pair.left, &cost_pair.right, pair.ndisp, cost_params, storage, |y, row| {
+            let own = prior_bands.map(|_| cost::row_argmins(row, pair.ndisp));
+            if let Some(prior) = row_prior {
+                prior.add_to_row(y, w, row, c);
+            }
+            own
+        })
+    });
+    let own_best = prior_bands.map(|_| Plane::from_vec(w, h, own_rows.into_iter().flatten().flatten().collect()));
+    if let Some(prior) = prior.filter(|p| p.needs_flatness()) {
         prior.add_to(&mut cost_left, c, &mut t);
     }
     let left_bands = own_best.zip(prior_bands).map(|(best, prior)| {
@@ -653,10 +682,17 @@ pub(crate) fn fine_pass(
         0 => std::borrow::Cow::Borrowed(&pair.left),
         _ => std::borrow::Cow::Owned(pair.left.columns_from(left_from)),
     };
+    // The right volume, with its pixels' own best labels for the label bands (tiles) taken row by row.
     let derive_right = |cost_left: &CostVolume, buffers: &mut meanfield::Buffers, t: &mut Timings| {
         let storage = buffers.take(cost_left.data.len());
         let out_of_view = cost::truncation_cost(&params.cost);
-        t.time("cost right", || cost::derive_right_volume_in(cost_left, out_of_view, storage))
+        let (cost_right, best_rows) = t.time("cost right", || {
+            cost::derive_right_volume_then(cost_left, out_of_view, storage, |_, row| {
+                prior_bands.map(|_| cost::row_argmins(row, pair.ndisp))
+            })
+        });
+        let best = prior_bands.map(|_| Plane::from_vec(w, h, best_rows.into_iter().flatten().flatten().collect()));
+        (cost_right, best)
     };
     let (left, cost_right) = if left_from > 0 {
         let cost_right = need_right.then(|| derive_right(&cost_left, buffers, &mut t));
@@ -672,13 +708,10 @@ pub(crate) fn fine_pass(
         buffers.recycle(cost_left.data);
         (left, cost_right)
     };
-    let right = cost_right.map(|cost_right| {
-        let right_bands = prior_bands.map(|prior| {
-            t.time("bands", || {
-                let best = cost::winner_take_all(&cost_right);
-                prior.label_bands(&best, pair.ndisp, true, params)
-            })
-        });
+    let right = cost_right.map(|(cost_right, best)| {
+        let right_bands = prior_bands
+            .zip(best)
+            .map(|(prior, best)| t.time("bands", || prior.label_bands(&best, pair.ndisp, true, params)));
         on_stage("inference (right)");
         let right = estimate_view(params, &pair.right, &cost_right, right_bands, &mut t, buffers);
         buffers.recycle(cost_right.data);
@@ -816,6 +849,35 @@ mod tests {
         // The distinct pixel: spread 4.8, median spread 4.8 (the upper of two), flatness ½: the winner stays.
         assert_eq!(cost::argmin(held.pixel(1)), 4);
         assert!((held.pixel(1)[4] - 1.5).abs() < 1e-6, "{:?}", held.pixel(1));
+    }
+
+    /// The prior added row by row as the volume is built, and the own best labels taken there, are what the
+    /// separate passes give (the fused path of `fine_pass`), bit for bit.
+    #[test]
+    fn the_prior_added_row_by_row_is_the_prior_added_after() {
+        let scene = synth::render_scene(&synth::SynthParams { width: 96, height: 64, ndisp: 24, seed: 3 }).unwrap();
+        let (w, h, m) = (96, 64, scene.ndisp);
+        let coarse: Vec<f32> = test_util::rand_vec(w * h, 5).iter().map(|v| v * m as f32).collect();
+        let mut disparity = Plane::from_vec(w, h, coarse);
+        disparity.data[7] = f32::INFINITY; // no prior at that pixel
+        let confidence = Plane::from_vec(w, h, test_util::rand_vec(w * h, 6));
+        let prior = Prior { disparity, free: None, confidence, weight: 1.5, flat: 1.0, in_bands: true };
+        assert!(!prior.needs_flatness());
+        let (c, p) = (params::ConditionParams::default(), params::CostParams::default());
+        let mut after = cost::build_cost_volume(&scene.left, &scene.right, m, &p);
+        let own = cost::winner_take_all(&after);
+        prior.add_to(&mut after, &c, &mut Timings::default());
+        let (fused, rows) = cost::build_cost_volume_then(&scene.left, &scene.right, m, &p, Vec::new(), |y, row| {
+            let own = cost::row_argmins(row, m);
+            prior.add_to_row(y, w, row, &c);
+            own
+        });
+        assert_eq!(fused.data, after.data);
+        assert_eq!(rows.concat(), own.data);
+        let (right, right_rows) =
+            cost::derive_right_volume_then(&after, 30.0, Vec::new(), |_, row| cost::row_argmins(row, m));
+        assert_eq!(right.data, cost::derive_right_volume(&after, 30.0).data);
+        assert_eq!(right_rows.concat(), cost::winner_take_all(&right).data);
     }
 
     #[test]
