@@ -650,6 +650,10 @@ pub(crate) fn fine_pass(
     // as the volume is written, unless the prior needs the cost's flatness (a median over the whole volume) first.
     let prior_bands = prior.filter(|p| p.in_bands);
     let row_prior = prior.filter(|p| !p.needs_flatness());
+    // The rows' own best labels as one map (with label bands only).
+    let best_of_rows = |rows: Vec<Option<Vec<f32>>>| {
+        prior_bands.map(|_| Plane::from_vec(w, h, rows.into_iter().flatten().flatten().collect()))
+    };
     let (mut cost_left, own_rows) = t.time("cost", || {
         cost::build_cost_volume_then(&cost_pair.left, &cost_pair.right, pair.ndisp, cost_params, storage, |y, row| {
             let own = prior_bands.map(|_| cost::row_argmins(row, pair.ndisp));
@@ -659,7 +663,7 @@ pub(crate) fn fine_pass(
             own
         })
     });
-    let own_best = prior_bands.map(|_| Plane::from_vec(w, h, own_rows.into_iter().flatten().flatten().collect()));
+    let own_best = best_of_rows(own_rows);
     if let Some(prior) = prior.filter(|p| p.needs_flatness()) {
         prior.add_to(&mut cost_left, c, &mut t);
     }
@@ -691,8 +695,7 @@ pub(crate) fn fine_pass(
                 prior_bands.map(|_| cost::row_argmins(row, pair.ndisp))
             })
         });
-        let best = prior_bands.map(|_| Plane::from_vec(w, h, best_rows.into_iter().flatten().flatten().collect()));
-        (cost_right, best)
+        (cost_right, best_of_rows(best_rows))
     };
     let (left, cost_right) = if left_from > 0 {
         let cost_right = need_right.then(|| derive_right(&cost_left, buffers, &mut t));
