@@ -8,7 +8,7 @@
 //! 2. conditions the full-resolution pair once (noise, contrast: [`crate::condition`]), so every tile sees the
 //!    same images and the same measured noise;
 //! 3. cuts the image into square *cores* of at most `core_px` pixels and runs the pipeline from the cost volume on
-//!    (`fine_pass` in lib.rs: mean field for both views, left-right check, fill, weighted median, planes) on each
+//!    (`fine_pass` in fine.rs: mean field for both views, left-right check, fill, weighted median, planes) on each
 //!    core plus a halo, over a *label window* `[lo, hi]`: the coarse disparities in and around the core,
 //!    widened by F + 2 labels (the coarse answer is good to about one coarse label) — the full range where the
 //!    coarse run left no disparity. The right crop is shifted by `lo` columns, so label d' of the tile is
@@ -51,16 +51,22 @@
 //! of `post.sps.segments` that its area is of the image).
 
 use crate::error::Result;
-use crate::image::{DisparityMap, Plane, RgbImage, StereoPair};
+use crate::image::{Plane, StereoPair};
 use crate::params::Params;
-use crate::{Output, Prepared, Prior, Timings};
+
+use super::fine::{FineInput, fine_pass};
+use super::memory::{check_memory, estimate_memory_bytes};
+use super::output::{Output, Timings};
+use super::prepared::Prepared;
+use super::prior::{CoarseLevel, Prior};
+pub use super::prior::{TILED_PRIOR_FLOOR, tiled_prior_floor};
+use super::window::{Rect, cut_pairs, cut_plane, kernel_reach_px, window_in};
 
 /// Pixels added on every side of a core: the fully connected kernel's reach, 3σx, plus the weighted median's
 /// radius (15 + 9 by default). Against the constant 32 of earlier sessions: 0.95× and 0.89× the time on the ×4
 /// scenes, avgErr 1.48 and 5.37 against 1.49 and 5.36; 16 (the kernel alone) cost Adirondack ×4 1.57.
 pub fn halo_px(params: &Params) -> usize {
-    let kernel = (3.0 * params.meanfield.sigma_xy).ceil() as usize;
-    kernel + if params.post.wmedian.enabled { params.post.wmedian.radius } else { 0 }
+    kernel_reach_px(params) + if params.post.wmedian.enabled { params.post.wmedian.radius } else { 0 }
 }
 
 /// The smallest core a tile is split down to.
@@ -85,36 +91,8 @@ pub struct TilePlan {
     pub split_for_work: bool,
 }
 
-/// A rectangle `[x0, x1) × [y0, y1)`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Rect {
-    x0: usize,
-    y0: usize,
-    x1: usize,
-    y1: usize,
-}
-
 /// The memory a tiled run plans for (at most): it stays near this whatever the image size.
 pub const TILED_BUDGET_BYTES: u64 = 2 << 30;
-
-/// The least weight of the coarse prior in a tile whose full resolution holds no more detail than its coarse
-/// level (see [`tiled_prior_floor`]). The untiled default weighs the prior by the measured noise (0.5·σn) and the
-/// cost's flatness, relative to the image's own; on an image upscaled ×4 every pixel's cost is about as flat, and
-/// the fine cost alone drifts inside its label window (Adirondack upscaled ×4, native px, session 7: floor 0 →
-/// avgErr 4.80, 1 → 1.79, 2 → 1.75; the coarse level alone, upsampled, 1.71).
-pub const TILED_PRIOR_FLOOR: f32 = 2.0;
-
-/// The prior's floor in the tiles: [`TILED_PRIOR_FLOOR`] × min(1, 2·(1 − k)), k the share of the coarse level's
-/// sharpness ([`crate::condition::sharpness`], the cost pair's left view) that the full resolution keeps. A photo
-/// has detail at every scale and keeps most of it (trainingQ run in tiles over a coarse level at 1/2: k 0.85–0.96,
-/// a floor of 0.2–0.6); an image enlarged from a smaller one has none to add (the ×4 scenes: k 0.35–0.45, the
-/// full floor). A constant floor of 2 cost the photos: tiled trainingQ (`jem batch --max-memory 300M`) 3.83 with
-/// it, 3.67 with this one, 3.68 with none; the ×4 scenes are unchanged.
-pub fn tiled_prior_floor(full_grey: &Plane<f32>, coarse_grey: &Plane<f32>) -> f32 {
-    let coarse = crate::condition::sharpness(coarse_grey);
-    let kept = if coarse > 0.0 { crate::condition::sharpness(full_grey) / coarse } else { 1.0 };
-    TILED_PRIOR_FLOOR * (2.0 * (1.0 - kept)).clamp(0.0, 1.0)
-}
 
 /// Chooses a plan for a `width × height` pair with `ndisp` labels within `limit_bytes`: after the full-size
 /// maps, the smallest coarse factor (a power of two) whose untiled run fits what is left, and cores of 1024
@@ -124,14 +102,13 @@ pub fn plan(width: usize, height: usize, ndisp: usize, params: &Params, limit_by
     let budget = limit_bytes.checked_sub(beside)?;
     // The smallest tile must fit even with the whole range as its window.
     let side = MIN_CORE_PX + 2 * halo_px(params);
-    if crate::estimate_memory_bytes((side + ndisp).min(width), side.min(height), ndisp, params) > tile_share(budget) {
+    if estimate_memory_bytes((side + ndisp).min(width), side.min(height), ndisp, params) > tile_share(budget) {
         return None;
     }
     let mut coarse = params.clone();
     let factor = (1..8).map(|k| 1usize << k).find(|&f| {
         coarse.downscale = f;
-        crate::scale::factor_fits(width, ndisp, f)
-            && crate::estimate_memory_bytes(width, height, ndisp, &coarse) <= budget
+        crate::scale::factor_fits(width, ndisp, f) && estimate_memory_bytes(width, height, ndisp, &coarse) <= budget
     })?;
     Some(TilePlan { coarse_factor: factor, core_px: 1024, tile_budget_bytes: budget, split_for_work: true })
 }
@@ -160,21 +137,21 @@ impl Strategy {
     /// # Errors
     /// [`crate::Error::OutOfMemory`] (as [`crate::check_memory`]) when neither fits.
     pub fn choose(width: usize, height: usize, ndisp: usize, params: &Params, limit_bytes: u64) -> Result<Strategy> {
-        let whole = crate::estimate_memory_bytes(width, height, ndisp, params);
+        let whole = estimate_memory_bytes(width, height, ndisp, params);
         if whole <= limit_bytes || params.downscale > 1 {
-            crate::check_memory(width, height, ndisp, params, limit_bytes)?;
+            check_memory(width, height, ndisp, params, limit_bytes)?;
             return Ok(Strategy::Whole);
         }
         match plan(width, height, ndisp, params, limit_bytes.min(TILED_BUDGET_BYTES)) {
             Some(p) => Ok(Strategy::Tiled(p)),
-            None => crate::check_memory(width, height, ndisp, params, limit_bytes).map(|()| Strategy::Whole),
+            None => check_memory(width, height, ndisp, params, limit_bytes).map(|()| Strategy::Whole),
         }
     }
 
     /// The memory the run may use (the estimate in one piece; the tiled budget plus the full-size maps).
     pub fn memory_bytes(&self, width: usize, height: usize, ndisp: usize, params: &Params) -> u64 {
         match self {
-            Strategy::Whole => crate::estimate_memory_bytes(width, height, ndisp, params),
+            Strategy::Whole => estimate_memory_bytes(width, height, ndisp, params),
             Strategy::Tiled(p) => p.tile_budget_bytes + FULL_SIZE_BYTES_PER_PX * (width * height) as u64,
         }
     }
@@ -185,7 +162,7 @@ impl Strategy {
     /// As [`crate::run`].
     pub fn run(&self, params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str)) -> Result<Output> {
         match self {
-            Strategy::Whole => crate::run_observed(params, pair, on_stage),
+            Strategy::Whole => super::run_observed(params, pair, on_stage),
             Strategy::Tiled(p) => run_tiled(params, pair, p, on_stage),
         }
     }
@@ -202,23 +179,10 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     let f = plan.coarse_factor.max(2);
 
     let mut input = Prepared::of(params, pair, &mut t);
-    on_stage("coarse level");
-    let coarse_params = coarse_level_params(params, &input, f);
-    let coarse = t.time("coarse level", || crate::run_observed(&coarse_params, pair, &|_| {}))?;
-
-    let grey_left = input.pairs(pair).1.left.to_grey();
-    // The right views moved onto the left view's rows where the coarse answer shows them off (as untiled).
-    input.align_vertically(&params.condition, &grey_left, &coarse, &mut t);
+    // The coarse answer is the base of a tiled run: a point prior, with a floor on its weight where the full
+    // resolution adds little detail to it (see `CoarseLevel::tiles`).
+    let prior = CoarseLevel::tiles(f).prior(params, pair, &mut input, on_stage, &mut t)?;
     let (guide, cost_pair) = input.pairs(pair);
-    // The coarse answer is the base of a tiled run: where the full resolution adds little detail to it, its weight
-    // has a floor.
-    let coarse_grey = crate::scale::downsample_rgb(&cost_pair.left, f).to_grey();
-    let weight = input.prior_weight.max(tiled_prior_floor(&grey_left, &coarse_grey));
-    let mut prior = Prior::from_coarse(coarse, weight, input.prior_flat, params.condition.prior_untrusted);
-    prior.weaken_at_detail(&grey_left, f, params.condition.prior_detail);
-    // The tiles keep the point prior (no `prior_spread`): the coarse level is the base answer here, and freeing its
-    // depth edges let the fine level move them on the ×4 scenes (Adirondack 1.66 -> 1.74, Vintage 8.45 -> 8.51;
-    // docs/tuning-log.md, "The prior at coarse depth edges"). The coarse level's own chain has the spread.
 
     on_stage("tiles");
     let mut out = Output {
@@ -285,19 +249,6 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     Ok(out)
 }
 
-/// The parameters of a tiled run's coarse level, the pipeline at 1/`f`. It is an ordinary run of its own size
-/// (its segment count is not scaled down: it is the base answer, as good as a run at that resolution can be),
-/// except for its noise: at most the full resolution's (`input`), reduced by the f × f box average (σ / f), as a
-/// coarse level of the untiled chain keeps its finer level's ([`crate::params::ConditionParams::noise_ceiling`]).
-/// Its own one-image estimate reads texture as noise, and the gradient term's ε that follows it hides faint shading
-/// (Vintage ×4 4.82 -> 4.73).
-fn coarse_level_params(params: &Params, input: &Prepared, f: usize) -> Params {
-    let mut coarse = params.clone();
-    coarse.downscale = f;
-    coarse.condition.noise_ceiling = input.noise_ceiling(f);
-    coarse
-}
-
 /// The memory a tile plans for: [`crate::estimate_memory_bytes`] of its crop and window, plus one volume
 /// (crop pixels × labels × 4 bytes): inside a tile the allocator keeps some of what is freed (a volume freed on
 /// the heap leaves a hole the next, larger one does not fit). Measured on a 1280×960 scene of 160 labels under
@@ -305,7 +256,7 @@ fn coarse_level_params(params: &Params, input: &Prepared, f: usize) -> Params {
 /// volume, which a tile derives before the left view's inference (`fine_pass`): three volumes are alive then.
 fn tile_need(tile: &Tile, params: &Params) -> u64 {
     let (w, h) = (tile.crop.x1 - tile.crop.x0, tile.crop.y1 - tile.crop.y0);
-    crate::estimate_memory_bytes(w, h, tile.labels, params) + 2 * 4 * tile.work()
+    estimate_memory_bytes(w, h, tile.labels, params) + 2 * 4 * tile.work()
 }
 
 /// The four quarters of a core (fewer for a thin one), in row-major order.
@@ -368,23 +319,8 @@ impl TileJob<'_> {
             x1: (core.x1 + self.halo).min(w),
             y1: (core.y1 + self.halo).min(h),
         };
-        let (mut dmin, mut dmax) = (f32::INFINITY, f32::NEG_INFINITY);
-        for y in around.y0..around.y1 {
-            for &d in &self.prior.disparity.row(y)[around.x0..around.x1] {
-                if d.is_finite() {
-                    dmin = dmin.min(d);
-                    dmax = dmax.max(d);
-                }
-            }
-        }
-        let (lo, hi) = if dmin.is_finite() {
-            let lo = (dmin.floor() as usize).saturating_sub(self.margin);
-            let hi = (dmax.ceil() as usize + self.margin).min(ndisp - 1);
-            (lo.min(hi), hi)
-        } else {
-            (0, ndisp - 1)
-        };
-        let labels = hi - lo + 1;
+        // The full range where the coarse run left no disparity.
+        let (lo, labels) = window_in(&self.prior.disparity, around, ndisp, self.margin).unwrap_or((0, ndisp));
         let mut crop = Rect {
             x0: core.x0.saturating_sub(self.halo + labels),
             y0: core.y0.saturating_sub(self.halo),
@@ -424,17 +360,14 @@ impl TileJob<'_> {
         let mut params = self.params.clone();
         let area = ((crop.x1 - crop.x0 - tile.left_from()) * (crop.y1 - crop.y0)) as f64 / (w * h) as f64;
         params.post.sps.segments = ((self.params.post.sps.segments as f64 * area).ceil() as usize).max(1);
-        crate::fine_pass(
-            &params,
-            &guide,
-            cost_pair.as_ref().unwrap_or(&guide),
-            self.cost_params,
-            Some(&prior),
-            tile.left_from(),
-            buffers,
-            &|_| {},
-            Timings::default(),
-        )
+        let input = FineInput {
+            guide: &guide,
+            cost_pair: cost_pair.as_ref().unwrap_or(&guide),
+            cost_params: self.cost_params,
+            prior: Some(&prior),
+            left_from: tile.left_from(),
+        };
+        fine_pass(&params, &input, buffers, &|_| {}, Timings::default())
     }
 
     /// Writes the core of a tile's `result` into `out` (with the window's `lo` added back).
@@ -456,97 +389,12 @@ impl TileJob<'_> {
     }
 }
 
-/// The label window `(lo, labels)` that holds every finite disparity of `coarse`, widened by `margin` labels
-/// and clipped to `0..ndisp`; `None` when it would not be narrower than the full range (or there is no finite
-/// disparity).
-pub(crate) fn label_window(coarse: &DisparityMap, ndisp: usize, margin: usize) -> Option<(usize, usize)> {
-    let (mut dmin, mut dmax) = (f32::INFINITY, f32::NEG_INFINITY);
-    for &d in coarse.data.iter().filter(|d| d.is_finite()) {
-        dmin = dmin.min(d);
-        dmax = dmax.max(d);
-    }
-    if !dmin.is_finite() {
-        return None;
-    }
-    let lo = (dmin.max(0.0).floor() as usize).saturating_sub(margin).min(ndisp - 1);
-    let hi = (dmax.max(0.0).ceil() as usize + margin).clamp(lo, ndisp - 1);
-    let labels = hi - lo + 1;
-    (labels < ndisp).then_some((lo, labels))
-}
-
-/// The guidance and the cost pair (`None` when the cost pair is the guidance itself) with their right views
-/// shifted right by `lo` columns (column x shows column x − lo; the first column repeats where that is left of
-/// the image) and `labels` labels: label d' of the result is disparity `lo + d'`.
-///
-/// # Errors
-/// As [`StereoPair::new`].
-pub(crate) fn shift_right_views(
-    guide: &StereoPair,
-    cost: &StereoPair,
-    lo: usize,
-    labels: usize,
-) -> Result<(StereoPair, Option<StereoPair>)> {
-    let (w, h) = guide.left.dims();
-    cut_pairs(guide, cost, Rect { x0: 0, y0: 0, x1: w, y1: h }, lo, labels)
-}
-
-/// The crop `r` of the guidance and the cost pair, right views shifted by `lo` columns ([`cut`]), with `labels`
-/// labels; the cost pair is `None` when it is the guidance pair itself.
-fn cut_pairs(
-    guide: &StereoPair,
-    cost: &StereoPair,
-    r: Rect,
-    lo: usize,
-    labels: usize,
-) -> Result<(StereoPair, Option<StereoPair>)> {
-    let pair = |p: &StereoPair| StereoPair::new(cut(&p.left, r, 0), cut(&p.right, r, lo), labels);
-    let cost = if std::ptr::eq(guide, cost) { None } else { Some(pair(cost)?) };
-    Ok((pair(guide)?, cost))
-}
-
-/// The crop `r` of `img`, shifted left by `shift` columns (column x of the crop is column `r.x0 + x − shift` of
-/// the image; columns left of the image repeat its first column).
-fn cut(img: &RgbImage, r: Rect, shift: usize) -> RgbImage {
-    let (cw, ch) = (r.x1 - r.x0, r.y1 - r.y0);
-    let mut out = RgbImage::new(cw, ch);
-    for (dst, src) in out.channels.iter_mut().zip(&img.channels) {
-        for y in 0..ch {
-            let row = &src[(r.y0 + y) * img.width..][..img.width];
-            for (x, v) in dst[y * cw..][..cw].iter_mut().enumerate() {
-                *v = row[(r.x0 + x).saturating_sub(shift)];
-            }
-        }
-    }
-    out
-}
-
-/// The crop `r` of a plane, each value mapped by `f`.
-fn cut_plane(p: &Plane<f32>, r: Rect, f: impl Fn(f32) -> f32) -> Plane<f32> {
-    let (cw, ch) = (r.x1 - r.x0, r.y1 - r.y0);
-    let mut data = Vec::with_capacity(cw * ch);
-    for y in r.y0..r.y1 {
-        data.extend(p.row(y)[r.x0..r.x1].iter().map(|&v| f(v)));
-    }
-    Plane::from_vec(cw, ch, data)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    #[test]
-    fn cut_shifts_and_repeats_the_first_column() {
-        let mut img = RgbImage::new(6, 2);
-        for (i, v) in img.channels[0].iter_mut().enumerate() {
-            *v = i as f32;
-        }
-        let c = cut(&img, Rect { x0: 1, y0: 1, x1: 4, y1: 2 }, 2);
-        // Columns 1−2, 2−2, 3−2 of row 1 → −1 (repeats column 0), 0, 1.
-        assert_eq!(c.channels[0], vec![6.0, 6.0, 7.0]);
-        let c = cut(&img, Rect { x0: 2, y0: 0, x1: 5, y1: 1 }, 0);
-        assert_eq!(c.channels[0], vec![2.0, 3.0, 4.0]);
-    }
-
+    use super::super::window::label_window;
+    use crate::image::{DisparityMap, RgbImage};
     use crate::synth::{MASK_VISIBLE, SynthParams, render_scene};
 
     /// Mean absolute errors of `a` and `b` over the visible pixels, and the share of those where `a` and `b`
@@ -585,7 +433,7 @@ mod tests {
             let out = crate::run_observed(p, &pair, &|_| {}).unwrap();
             out.measured.expect("a conditioned run reports what it measured").stats.noise
         };
-        let with = coarse_level_params(&params, &input, f);
+        let with = CoarseLevel::tiles(f).params(&params, &input);
         assert_eq!(with.downscale, f);
         let own = coarse_noise(&Params { downscale: f, ..params.clone() });
         let kept = coarse_noise(&with);
@@ -616,7 +464,7 @@ mod tests {
         assert!(e_one < 1.0, "the scene is matched: {e_one:.3} px");
         // A tight memory budget splits the cores further; the result is still the same problem.
         let halo = halo_px(&params);
-        let need = crate::estimate_memory_bytes(96 + 2 * halo + 40, 96 + 2 * halo, 40, &params);
+        let need = estimate_memory_bytes(96 + 2 * halo + 40, 96 + 2 * halo, 40, &params);
         let split_plan = TilePlan { tile_budget_bytes: need / 2, ..tiles };
         let small = run_tiled(&params, &pair, &split_plan, &|_| {}).unwrap();
         let (e_small, _, apart) = compare(&small.disparity, &one.disparity, &scene.gt, &scene.mask);
@@ -633,8 +481,8 @@ mod tests {
         let pair = StereoPair::new(scene.left.clone(), scene.right.clone(), scene.ndisp).unwrap();
         let params = Params::default();
         let pass = |left_from, buffers: &mut crate::meanfield::Buffers| {
-            crate::fine_pass(&params, &pair, &pair, &params.cost, None, left_from, buffers, &|_| {}, Timings::default())
-                .unwrap()
+            let input = FineInput { guide: &pair, cost_pair: &pair, cost_params: &params.cost, prior: None, left_from };
+            fine_pass(&params, &input, buffers, &|_| {}, Timings::default()).unwrap()
         };
         let mut buffers = crate::meanfield::Buffers::default();
         let all = pass(0, &mut buffers);
@@ -653,28 +501,6 @@ mod tests {
         assert_eq!(again.disparity.data, all.disparity.data);
         let again = pass(k, &mut Default::default());
         assert_eq!(again.disparity.data, kept.disparity.data);
-    }
-
-    /// The prior's floor follows the detail the full resolution adds: seeded white noise has detail at every scale
-    /// and keeps its sharpness over its half-resolution copy (no floor); the same noise enlarged ×4 (bilinear)
-    /// keeps little of it over its quarter (the whole floor). A flat image measures nothing and gets none.
-    #[test]
-    fn the_prior_floor_is_for_images_without_fine_detail() {
-        let (w, h) = (160, 120);
-        let mut noise = RgbImage::new(w, h);
-        for (c, ch) in noise.channels.iter_mut().enumerate() {
-            *ch = crate::test_util::rand_vec(w * h, 10 + c as u64).iter().map(|v| 255.0 * v).collect();
-        }
-        let reduced = |img: &RgbImage, f| crate::scale::downsample_rgb(img, f).to_grey();
-        let detailed = tiled_prior_floor(&noise.to_grey(), &reduced(&noise, 2));
-        assert!(detailed < 0.1 * TILED_PRIOR_FLOOR, "floor {detailed} on white noise");
-        let mut enlarged = RgbImage::new(4 * w, 4 * h);
-        for (dst, src) in enlarged.channels.iter_mut().zip(&noise.channels) {
-            *dst = crate::scale::upsample_plane(&Plane::from_vec(w, h, src.clone()), 4, 4 * w, 4 * h).data;
-        }
-        assert_eq!(tiled_prior_floor(&enlarged.to_grey(), &reduced(&enlarged, 4)), TILED_PRIOR_FLOOR);
-        let flat = Plane::new(64, 64, 100.0);
-        assert_eq!(tiled_prior_floor(&flat, &flat), 0.0, "no detail at either level: no measurement, no floor");
     }
 
     /// The default pipeline with a label window from the coarse run gives the same map (up to 1 px on ≥ 98 %

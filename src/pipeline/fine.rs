@@ -1,0 +1,212 @@
+//! The fine pass: the pipeline from the cost volume on, at the resolution the pair is matched at (the whole
+//! image, a label window of it, or one tile): Census + gradient cost ([`crate::cost`]), the coarse prior added to
+//! it, mean-field inference (or WTA) for both views ([`crate::meanfield`]), then the post-processing
+//! ([`crate::post`]): left-right check, occlusion fill, weighted median, slanted planes.
+
+use std::borrow::Cow;
+
+use crate::error::Result;
+use crate::image::{CostVolume, DisparityMap, Plane, RgbImage, StereoPair};
+use crate::params::{self, LrcMode, Model, Params};
+use crate::{cost, meanfield, post};
+
+use super::output::{Output, Timings};
+use super::prior::Prior;
+
+/// Disparity and confidence of one view.
+struct ViewEstimate {
+    disparity: DisparityMap,
+    confidence: Plane<f32>,
+}
+
+/// What the fine pass works on: the guidance pair (colour weights, post-processing), the pair the matching cost
+/// sees, its cost parameters and an optional coarse prior.
+#[derive(Clone, Copy)]
+pub(crate) struct FineInput<'a> {
+    /// The guidance pair.
+    pub guide: &'a StereoPair,
+    /// The pair the matching cost sees (the guidance itself when conditioning is off).
+    pub cost_pair: &'a StereoPair,
+    /// The cost parameters for this pair ([`super::prepared::Prepared::cost_params`]).
+    pub cost_params: &'a params::CostParams,
+    /// The coarse prior, if any.
+    pub prior: Option<&'a Prior>,
+    /// The left view's first `left_from` columns are there only for the right view's matches (a tile's extension,
+    /// [`super::tile`]): the left view's inference and post-processing skip them, and the output maps start after
+    /// them (0 outside tiles).
+    pub left_from: usize,
+}
+
+/// The pipeline from the cost volume on, for `input` ([`FineInput`]): cost volume (stage `cost volume`), inference
+/// for the left and the right view, left-right check, fill, weighted median and planes. `buffers` carries the
+/// large allocations from one call to the next (the tiles).
+pub(crate) fn fine_pass(
+    params: &Params,
+    input: &FineInput<'_>,
+    buffers: &mut meanfield::Buffers,
+    on_stage: &dyn Fn(&str),
+    mut t: Timings,
+) -> Result<Output> {
+    let FineInput { guide: pair, cost_pair, cost_params, prior, left_from } = *input;
+    on_stage("cost volume");
+    let c = &params.condition;
+    let post = &params.post;
+    let need_right = post.lrc.mode != LrcMode::Off;
+    let (w, h) = pair.left.dims();
+    let storage = buffers.take(w * h * pair.ndisp);
+    // Label bands (tiles): each pixel's own best label is taken before the prior is added. Both are done row by row
+    // as the volume is written, unless the prior needs the cost's flatness (a median over the whole volume) first.
+    let prior_bands = prior.filter(|p| p.in_bands);
+    let row_prior = prior.filter(|p| !p.needs_flatness());
+    // The rows' own best labels as one map (with label bands only).
+    let best_of_rows = |rows: Vec<Option<Vec<f32>>>| {
+        prior_bands.map(|_| Plane::from_vec(w, h, rows.into_iter().flatten().flatten().collect()))
+    };
+    let (mut cost_left, own_rows) = t.time("cost", || {
+        cost::build_cost_volume_then(&cost_pair.left, &cost_pair.right, pair.ndisp, cost_params, storage, |y, row| {
+            let own = prior_bands.map(|_| cost::row_argmins(row, pair.ndisp));
+            if let Some(prior) = row_prior {
+                prior.add_to_row(y, w, row, c);
+            }
+            own
+        })
+    });
+    let own_best = best_of_rows(own_rows);
+    if let Some(prior) = prior.filter(|p| p.needs_flatness()) {
+        prior.add_to(&mut cost_left, c, &mut t);
+    }
+    let left_bands = own_best.zip(prior_bands).map(|(best, prior)| {
+        t.time("bands", || {
+            let bands = prior.label_bands(&best, pair.ndisp, false, params);
+            if left_from > 0 { bands.columns_from(left_from) } else { bands }
+        })
+    });
+
+    // Left inference first, then the right volume from the left one; the left volume is spent before the right
+    // inference: at most one volume plus one view's inference buffers are alive at a time (three N × M buffers
+    // in all, plus the lattice's). Spent buffers go back to `buffers` for the next volume, view or call.
+    // With the extension (a tile) the right volume comes first, while the left volume still has every column; the
+    // columns the left view keeps then move to the front of the left volume's own storage. The left inference has
+    // the same three buffers alive (the two volumes and its marginals), and no copy of the kept columns is
+    // allocated, page-faulted and freed per tile (that copy, on one thread, was 5 % of an Adirondack ×4 run).
+    on_stage("inference (left)");
+    let guide_left = match left_from {
+        0 => Cow::Borrowed(&pair.left),
+        _ => Cow::Owned(pair.left.columns_from(left_from)),
+    };
+    // The right volume, with its pixels' own best labels for the label bands (tiles) taken row by row.
+    let derive_right = |cost_left: &CostVolume, buffers: &mut meanfield::Buffers, t: &mut Timings| {
+        let storage = buffers.take(cost_left.data.len());
+        let out_of_view = cost::truncation_cost(&params.cost);
+        let (cost_right, best_rows) = t.time("cost right", || {
+            cost::derive_right_volume_then(cost_left, out_of_view, storage, |_, row| {
+                prior_bands.map(|_| cost::row_argmins(row, pair.ndisp))
+            })
+        });
+        (cost_right, best_of_rows(best_rows))
+    };
+    let (left, cost_right) = if left_from > 0 {
+        let cost_right = need_right.then(|| derive_right(&cost_left, buffers, &mut t));
+        let kept = t.time("cost", || cost_left.into_columns_from(left_from));
+        let left = estimate_view(params, &guide_left, &kept, left_bands, &mut t, buffers);
+        buffers.recycle(kept.data);
+        (left, cost_right)
+    } else {
+        let left = estimate_view(params, &guide_left, &cost_left, left_bands, &mut t, buffers);
+        // The right volume goes into the left view's spent marginals, and the left volume's storage becomes the
+        // right view's marginals: no new allocation for the right view.
+        let cost_right = need_right.then(|| derive_right(&cost_left, buffers, &mut t));
+        buffers.recycle(cost_left.data);
+        (left, cost_right)
+    };
+    let right = cost_right.map(|(cost_right, best)| {
+        let right_bands = prior_bands
+            .zip(best)
+            .map(|(prior, best)| t.time("bands", || prior.label_bands(&best, pair.ndisp, true, params)));
+        on_stage("inference (right)");
+        let right = estimate_view(params, &pair.right, &cost_right, right_bands, &mut t, buffers);
+        buffers.recycle(cost_right.data);
+        right
+    });
+
+    on_stage("post-processing");
+    let mut disparity = left.disparity;
+    let mut trusted = Plane::new(disparity.width, disparity.height, true);
+    if let Some(right) = &right {
+        let (checked, mask) = t.time("lrc", || {
+            let check = |left: &DisparityMap| {
+                post::lr_check::left_right_check(left, &right.disparity, post.lrc.mode, post.lrc.thresh_px)
+            };
+            if left_from == 0 {
+                return check(&disparity);
+            }
+            // The left map at the right view's width (unknown in the extension), checked, and cut again.
+            let mut full = Plane::new(right.disparity.width, right.disparity.height, f32::INFINITY);
+            for y in 0..full.height {
+                full.row_mut(y)[left_from..].copy_from_slice(disparity.row(y));
+            }
+            let (checked, mask) = check(&full);
+            (checked.columns_from(left_from), mask.columns_from(left_from))
+        });
+        disparity = checked;
+        trusted = mask;
+    }
+    if post.fill {
+        t.time("fill", || post::fill::fill_occlusions_in_place(&mut disparity));
+    }
+    if post.wmedian.enabled {
+        let targets = Plane::from_vec(trusted.width, trusted.height, trusted.data.iter().map(|ok| !ok).collect());
+        disparity =
+            t.time("wmedian", || post::wmedian::weighted_median(&disparity, &guide_left, &targets, &post.wmedian));
+    }
+    if post.sps.enabled {
+        disparity = t.time("sps", || post::planes::fit_slanted_planes(&guide_left, &disparity, &trusted, &post.sps));
+        // A plane extrapolated to a segment's far corner can leave the search range: the answer is never
+        // outside the range that was searched.
+        let top = (pair.ndisp - 1) as f32;
+        disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
+    }
+    Ok(Output { disparity, confidence: left.confidence, consistent: trusted, timings: t, measured: None })
+}
+
+/// Inference for one view: WTA on the cost, or mean field with the view's own image, within `bands` if given
+/// (not with the mean field's pyramid, nor for WTA). `buffers` carries the large allocations from one view to the
+/// next.
+fn estimate_view(
+    params: &Params,
+    image: &RgbImage,
+    cost: &CostVolume,
+    bands: Option<meanfield::LabelBands>,
+    t: &mut Timings,
+    buffers: &mut meanfield::Buffers,
+) -> ViewEstimate {
+    match params.model {
+        Model::Wta => {
+            let disparity = t.time("wta", || cost::winner_take_all(cost));
+            let confidence = Plane::new(cost.width, cost.height, 1.0);
+            ViewEstimate { disparity, confidence }
+        }
+        Model::Lcm | Model::Fcm | Model::Jem => {
+            let weights =
+                meanfield::PairwiseWeights { fcm: params.effective_fcm_weight(), lcm: params.effective_lcm_weight() };
+            let reuse = std::mem::take(buffers);
+            let (q, rest) = if params.meanfield.pyramid_levels > 1 {
+                t.time("mf pyramid", || meanfield::infer_coarse_to_fine(cost, image, &params.meanfield, weights, reuse))
+            } else {
+                let mut mf = t.time("mf setup", || match bands {
+                    Some(bands) => {
+                        meanfield::MeanField::in_label_bands(cost, image, &params.meanfield, weights, reuse, bands)
+                    }
+                    None => meanfield::MeanField::with_buffers(cost, image, &params.meanfield, weights, reuse),
+                });
+                t.time("mf iterations", || (0..params.meanfield.iterations).for_each(|_| mf.step()));
+                mf.into_marginals_and_buffers()
+            };
+            let (disparity, confidence) =
+                t.time("decode", || meanfield::decode_marginals(&q, params.meanfield.subpixel));
+            *buffers = rest;
+            buffers.recycle(q.data);
+            ViewEstimate { disparity, confidence }
+        }
+    }
+}

@@ -1,0 +1,157 @@
+//! The memory model: what a run will need, estimated before anything large is allocated, and the guard that
+//! refuses a run that would not fit ([`check_memory`]; [`super::tile`] runs such a pair in tiles instead).
+
+use crate::error::{self, Error, Result};
+use crate::params::{LrcMode, Model, Params, Schedule};
+use crate::scale;
+
+/// Estimated peak memory of [`crate::run`] in bytes for a `width × height` pair with `ndisp` labels and `params`
+/// (including [`Params::downscale`]).
+///
+/// The model, at the resolution the pipeline runs at (the input reduced by `params.downscale`: N pixels,
+/// M labels, one N × M `f32` volume = 4NM bytes):
+/// - JEM and FCM: two volumes alive at the peak — the cost volume and the marginals Q (the right view reuses
+///   the left view's spent buffers, so it adds none), three with the Jacobi schedule (the next Q; the
+///   checkerboard updates Q in place) — plus the lattice's two vertex buffers, V × M `f32` each with V ≤ N
+///   vertices (~0.4 N on natural images; the bound is used): 4 volumes (5 with Jacobi);
+/// - LCM: the two (three) volumes;
+/// - coarse-to-fine (`meanfield.pyramid_levels` = L > 1): each coarse level k < L adds its volume and marginals
+///   (and next Q with Jacobi) at 4^−k of the size, at most 2/3 (1) of a volume more;
+/// - WTA: one volume, two with the left-right check (both views' cost volumes);
+/// - plus ~300 bytes per pixel: the images, the lattice's per-pixel tables, the maps of the post-processing;
+/// - plus the process itself, [`PROCESS_BYTES`].
+///
+/// With a downscale factor > 1, the full-size input pair and output maps (~32 bytes per input pixel) are added.
+pub fn estimate_memory_bytes(width: usize, height: usize, ndisp: usize, params: &Params) -> u64 {
+    estimate_at_factor(width, height, ndisp, params, params.downscale.max(1))
+}
+
+/// [`estimate_memory_bytes`] with the downscale factor given explicitly.
+fn estimate_at_factor(width: usize, height: usize, ndisp: usize, params: &Params, factor: usize) -> u64 {
+    let (w, h, m) =
+        (scale::reduced_len(width, factor), scale::reduced_len(height, factor), scale::reduced_ndisp(ndisp, factor));
+    let n = w as u64 * h as u64;
+    let volume = 4 * n * m as u64;
+    let next_q = u64::from(params.meanfield.schedule == Schedule::Jacobi);
+    let volumes = match params.model {
+        Model::Wta if params.post.lrc.mode == LrcMode::Off => 1,
+        Model::Wta => 2,
+        Model::Lcm => 2 + next_q,
+        Model::Fcm | Model::Jem => 4 + next_q,
+    };
+    // Coarse-to-fine: each coarse level's volume and marginals (and next Q with Jacobi), at 4^−k of the size.
+    let pyramid = match params.model {
+        Model::Wta => 0,
+        _ => (1..params.meanfield.pyramid_levels as u32).map(|k| (2 + next_q) * volume.div_ceil(4u64.pow(k))).sum(),
+    };
+    let full_size = if factor > 1 { 32 * width as u64 * height as u64 } else { 0 };
+    volumes * volume + pyramid + 300 * n + full_size + PROCESS_BYTES
+}
+
+/// The memory of the process before it holds any image: code, libraries, thread stacks (a 64 × 32 pair peaks at
+/// 8.9 MiB with 2 threads), counted with room to spare in [`estimate_memory_bytes`].
+pub const PROCESS_BYTES: u64 = 16 << 20;
+
+/// Fails fast, before anything large is allocated, when a run would need more than `limit_bytes`.
+///
+/// # Errors
+/// [`Error::OutOfMemory`] with the estimate, the limit and what to do about it: the smallest `--downscale`
+/// factor (above the current one) whose estimate fits, or, if none does, smaller images or a smaller ndisp; and
+/// `--max-memory` for a machine that has the memory.
+pub fn check_memory(width: usize, height: usize, ndisp: usize, params: &Params, limit_bytes: u64) -> Result<()> {
+    let needed = estimate_memory_bytes(width, height, ndisp, params);
+    if needed <= limit_bytes {
+        return Ok(());
+    }
+    let current = params.downscale.max(1);
+    let fitting = (current + 1..)
+        .take_while(|&f| scale::factor_fits(width, ndisp, f))
+        .map(|f| (f, estimate_at_factor(width, height, ndisp, params, f)))
+        .find(|&(_, bytes)| bytes <= limit_bytes);
+    let what = format!("{width}x{height} with ndisp {ndisp}");
+    let hint = match fitting {
+        Some((f, bytes)) => format!(
+            "{what} is too large; --downscale {f} (run at 1/{f} resolution) would need about {}; or raise \
+             --max-memory if the machine has the memory",
+            error::human_bytes(bytes)
+        ),
+        None => format!(
+            "{what} is too large even downscaled; use smaller images or a smaller ndisp, or raise --max-memory if \
+             the machine has the memory"
+        ),
+    };
+    Err(Error::OutOfMemory { needed, limit: limit_bytes, hint })
+}
+
+/// A default memory limit: 80% of the machine's physical memory (from `/proc/meminfo`), or 8 GiB where that
+/// cannot be read.
+pub fn default_memory_limit() -> u64 {
+    let total_kib = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
+        s.lines().find(|l| l.starts_with("MemTotal:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+    });
+    total_kib.map(|k| k * 1024 / 5 * 4).unwrap_or(8 << 30)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn memory_estimate_scales_with_pixels_and_labels() {
+        let p = Params::default();
+        // Vintage at quarter resolution: 720x480 (about), ndisp 190: 4 volumes of 263 MB plus 300 B/px = 1.15 GB.
+        let vintage = estimate_memory_bytes(720, 480, 190, &p);
+        assert_eq!(vintage, 4 * 4 * 720 * 480 * 190 + 300 * 720 * 480 + PROCESS_BYTES);
+        assert!(vintage > 1 << 30 && vintage < 2 << 30, "{vintage}");
+        let data = |w, h| estimate_memory_bytes(w, h, 10, &p) - PROCESS_BYTES;
+        assert_eq!(data(200, 100) * 4, data(400, 200));
+        let volume = 4 * 720 * 480 * 190;
+        let wta = Params { model: Model::Wta, ..Params::default() };
+        assert_eq!(vintage - estimate_memory_bytes(720, 480, 190, &wta), 2 * volume);
+        let mut one = wta.clone();
+        one.post.lrc.mode = LrcMode::Off;
+        assert_eq!(estimate_memory_bytes(720, 480, 190, &wta) - estimate_memory_bytes(720, 480, 190, &one), volume);
+        let lcm = Params { model: Model::Lcm, ..Params::default() };
+        assert_eq!(vintage - estimate_memory_bytes(720, 480, 190, &lcm), 2 * volume);
+        // The Jacobi schedule keeps a second Q.
+        let mut jacobi = Params::default();
+        jacobi.meanfield.schedule = Schedule::Jacobi;
+        assert_eq!(estimate_memory_bytes(720, 480, 190, &jacobi) - vintage, volume);
+        // Two pyramid levels: a coarse volume and its marginals, a quarter of the size each.
+        let mut pyramid = lcm.clone();
+        pyramid.meanfield.pyramid_levels = 2;
+        let extra = estimate_memory_bytes(720, 480, 190, &pyramid) - estimate_memory_bytes(720, 480, 190, &lcm);
+        assert_eq!(extra, 2 * volume / 4);
+    }
+
+    #[test]
+    fn memory_estimate_uses_the_reduced_size() {
+        let p = Params { downscale: 2, ..Params::default() };
+        // 722x480 at 1/2: 361x240 with 95 labels, plus the full-size images and maps (32 B per input pixel).
+        let n = 361 * 240;
+        assert_eq!(estimate_memory_bytes(722, 480, 190, &p), 4 * 4 * n * 95 + 300 * n + 32 * 722 * 480 + PROCESS_BYTES);
+        let full = estimate_memory_bytes(722, 480, 190, &Params::default());
+        assert!(estimate_memory_bytes(722, 480, 190, &p) * 6 < full, "about 1/8 of the memory");
+    }
+
+    #[test]
+    fn memory_guard_refuses_before_allocating() {
+        let p = Params::default();
+        // Full resolution 2880x1988 at ndisp 760 would need ~70 GB: refused at once with the numbers and the
+        // smallest downscale that fits (1/2: ~9 GB).
+        let e = check_memory(2880, 1988, 760, &p, 24 << 30).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.contains("needs about") && msg.contains("GiB") && msg.contains("2880x1988"), "{msg}");
+        assert!(msg.contains("--downscale 2 ") && msg.contains("--max-memory"), "{msg}");
+        check_memory(450, 375, 64, &p, 24 << 30).unwrap();
+        // With 2 GiB the same input needs 1/4 (~1.2 GB); downscale 2 in the config already is taken into account.
+        let msg = check_memory(2880, 1988, 760, &p, 2 << 30).unwrap_err().to_string();
+        assert!(msg.contains("--downscale 4 "), "{msg}");
+        let msg = check_memory(2880, 1988, 760, &Params { downscale: 2, ..p.clone() }, 2 << 30).unwrap_err();
+        assert!(msg.to_string().contains("--downscale 4 "), "{msg}");
+        check_memory(2880, 1988, 760, &Params { downscale: 4, ..p.clone() }, 2 << 30).unwrap();
+        // Nothing fits in 1 MiB: no downscale is suggested.
+        let msg = check_memory(2880, 1988, 760, &p, 1 << 20).unwrap_err().to_string();
+        assert!(msg.contains("even downscaled") && !msg.contains("--downscale"), "{msg}");
+    }
+}

@@ -1,0 +1,97 @@
+//! What a run produces: the maps ([`Output`]), what the adaptive front end measured ([`Measured`]) and the time
+//! each stage took ([`Timings`]).
+
+use std::time::{Duration, Instant};
+
+use crate::condition;
+use crate::image::{DisparityMap, Plane};
+
+/// Wall-clock time spent in each stage, in pipeline order.
+#[derive(Clone, Debug, Default)]
+pub struct Timings {
+    /// (stage name, duration) pairs.
+    pub stages: Vec<(&'static str, Duration)>,
+}
+
+impl Timings {
+    /// Runs `f`, recording its duration under `name`.
+    pub fn time<T>(&mut self, name: &'static str, f: impl FnOnce() -> T) -> T {
+        let start = Instant::now();
+        let out = f();
+        self.stages.push((name, start.elapsed()));
+        out
+    }
+
+    /// Adds `other`'s stages to the ones of the same name (appending new names): the sums of many runs.
+    pub fn add_summed(&mut self, other: &Timings) {
+        for &(name, d) in &other.stages {
+            match self.stages.iter_mut().find(|(n, _)| *n == name) {
+                Some((_, sum)) => *sum += d,
+                None => self.stages.push((name, d)),
+            }
+        }
+    }
+
+    /// Sum of all stages.
+    pub fn total(&self) -> Duration {
+        self.stages.iter().map(|(_, d)| *d).sum()
+    }
+}
+
+/// What a run produces.
+#[derive(Clone, Debug)]
+pub struct Output {
+    /// The left view's disparity map (`inf` = invalid, when post-processing leaves holes).
+    pub disparity: DisparityMap,
+    /// Per-pixel confidence of the left view before post-processing: the max-marginal (mean-field models) or
+    /// 1 (WTA).
+    pub confidence: Plane<f32>,
+    /// The pixels that passed the left-right check (all of them when it is off).
+    pub consistent: Plane<bool>,
+    /// Time per stage.
+    pub timings: Timings,
+    /// What the adaptive front end measured on the (full-resolution) pair and set from it; `None` when
+    /// `[condition]` is off.
+    pub measured: Option<Measured>,
+}
+
+/// What the adaptive front end ([`crate::condition`]) measured on a pair and the values it derived (`jem -v`
+/// prints it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measured {
+    /// Contrast gains and noise σn of both views.
+    pub stats: condition::PairStats,
+    /// λ of the coarse prior before its per-pixel factor (0: no prior).
+    pub prior_weight: f32,
+    /// λ's floor where the cost is flat (`condition.prior_flat`, × the pixel's flatness).
+    pub prior_flat: f32,
+    /// The Census support τ in grey levels (0: every bit compared).
+    pub census_support: f32,
+    /// ḡ and ε of the gradient normalisation (`None`: the raw gradient).
+    pub gradient: Option<(f32, f32)>,
+    /// The right view's residual vertical offset ([`crate::rectify`]; `None`: not measured).
+    pub vertical: Option<VerticalMeasured>,
+}
+
+/// The right view's residual vertical offset as measured ([`crate::rectify::estimate`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VerticalMeasured {
+    /// Its smallest and largest value over the image (px, at the resolution the pipeline ran at).
+    pub range: (f32, f32),
+    /// Whether it was removed (it reached `condition.vertical_min_px`).
+    pub corrected: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn timings_add_up_by_stage_name() {
+        let ms = Duration::from_millis;
+        let mut sum = Timings { stages: vec![("cost", ms(1))] };
+        sum.add_summed(&Timings { stages: vec![("mf", ms(2)), ("cost", ms(3))] });
+        sum.add_summed(&Timings { stages: vec![("mf", ms(4))] });
+        assert_eq!(sum.stages, vec![("cost", ms(4)), ("mf", ms(6))]);
+    }
+}

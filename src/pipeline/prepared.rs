@@ -1,0 +1,128 @@
+//! The pair prepared for matching: conditioned as `[condition]` says ([`crate::condition`]), with the cost
+//! parameters and the coarse prior's weight that follow from what was measured.
+
+use std::borrow::Cow;
+
+use crate::image::{Plane, StereoPair};
+use crate::params::{self, Params};
+use crate::{condition, cost, rectify};
+
+use super::output::{Measured, Output, Timings, VerticalMeasured};
+
+/// A pair after [`condition::condition_pair`] (when `[condition]` is active), with what follows from its
+/// measurements: the cost parameters (the Census dead band grows with the residual noise) and the coarse prior's
+/// weight λ = `prior_base` + `prior_per_sigma`·σn (0 when conditioning is off).
+pub(crate) struct Prepared<'a> {
+    conditioned: Option<condition::Conditioned<'a>>,
+    /// The cost parameters for this pair.
+    pub cost_params: params::CostParams,
+    /// λ of the coarse prior before the per-pixel factor.
+    pub prior_weight: f32,
+    /// The floor of λ where the cost is flat (`condition.prior_flat`; 0 when conditioning is off).
+    pub prior_flat: f32,
+    /// The right view's residual vertical offset, once [`Prepared::align_vertically`] has measured it.
+    vertical: Option<VerticalMeasured>,
+}
+
+impl<'a> Prepared<'a> {
+    /// Conditions `pair` as `params.condition` says (stage `condition`).
+    pub(crate) fn of(params: &Params, pair: &'a StereoPair, t: &mut Timings) -> Self {
+        let c = &params.condition;
+        let mut cost_params = params.cost.clone();
+        let (mut prior_weight, mut prior_flat) = (0.0f32, 0.0f32);
+        let conditioned = c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c)));
+        if let Some(cond) = &conditioned {
+            prior_weight = c.prior_base + c.prior_per_sigma * cond.stats.sigma();
+            prior_flat = c.prior_flat;
+            cost_params.census_dead_band += c.census_band * cond.stats.residual_grey_noise;
+            // JPEG: steps no larger than the block grid's own are compression artefacts, not texture.
+            cost_params.census_dead_band +=
+                c.block_band_for(&cond.stats) * cond.stats.blocking[0].max(cond.stats.blocking[1]);
+            if cost_params.census_support > 0.0 {
+                cost_params.census_support += c.support_per_sigma * cond.stats.sigma();
+            }
+            if cost_params.grad_norm_radius > 0 {
+                cost_params.grad_norm_eps += c.grad_eps_per_sigma * cond.stats.sigma();
+                let grey = cond.cost_pair().left.to_grey();
+                cost_params.grad_norm_mean = Some(cost::mean_local_contrast(&grey, cost_params.grad_norm_radius));
+            }
+        }
+        Prepared { conditioned, cost_params, prior_weight, prior_flat, vertical: None }
+    }
+
+    /// Measures the right view's residual vertical offset against a coarse answer at this size
+    /// ([`rectify::estimate`] on the cost pair, `grey_left` its left view in grey) and, where it reaches
+    /// `condition.vertical_min_px`, moves the right views of the guidance and the cost pair onto the left view's
+    /// rows (stage `vertical`). Nothing when conditioning or `vertical_align` is off.
+    pub(crate) fn align_vertically(
+        &mut self,
+        c: &params::ConditionParams,
+        grey_left: &Plane<f32>,
+        coarse: &Output,
+        t: &mut Timings,
+    ) {
+        // (`conditioned` exists only when conditioning is enabled.)
+        let Some(cond) = self.conditioned.as_mut().filter(|_| c.vertical_align) else { return };
+        let offset = t.time("vertical", || {
+            rectify::estimate(grey_left, &cond.cost_pair().right.to_grey(), &coarse.disparity, &coarse.consistent)
+        });
+        let Some(v) = offset else { return };
+        let corrected = v.max_abs() >= c.vertical_min_px;
+        self.vertical = Some(VerticalMeasured { range: v.range(), corrected });
+        if corrected {
+            t.time("vertical", || {
+                if let Some(cost) = &mut cond.cost {
+                    cost.right = rectify::resample_right(&cost.right, &v);
+                }
+                let right = rectify::resample_right(&cond.guide.right, &v);
+                match &mut cond.guide {
+                    Cow::Owned(guide) => guide.right = right,
+                    Cow::Borrowed(guide) => {
+                        cond.guide = Cow::Owned(StereoPair { left: guide.left.clone(), right, ndisp: guide.ndisp });
+                    }
+                }
+            });
+        }
+    }
+
+    /// What was measured and derived, for [`Output::measured`] (`None` when conditioning is off).
+    pub(crate) fn measured(&self) -> Option<Measured> {
+        self.conditioned.as_ref().map(|cond| Measured {
+            stats: cond.stats,
+            prior_weight: self.prior_weight,
+            prior_flat: self.prior_flat,
+            census_support: self.cost_params.census_support,
+            gradient: (self.cost_params.grad_norm_radius > 0)
+                .then(|| self.cost_params.grad_norm_mean.map(|m| (m, self.cost_params.grad_norm_eps)))
+                .flatten(),
+            vertical: self.vertical,
+        })
+    }
+
+    /// The noise ceiling of a level reduced `factor`× from this one
+    /// ([`params::ConditionParams::noise_ceiling`]): each view's measured σn / `factor`, what an F × F box average
+    /// leaves of independent noise (`None` when conditioning is off).
+    pub(crate) fn noise_ceiling(&self, factor: usize) -> Option<[f32; 2]> {
+        self.conditioned.as_ref().map(|cond| cond.stats.noise.map(|v| v / factor as f32))
+    }
+
+    /// The measured noise σn that the adaptive stages scale with (0 when conditioning is off).
+    pub(crate) fn sigma(&self) -> f32 {
+        self.conditioned.as_ref().map_or(0.0, |cond| cond.stats.sigma())
+    }
+
+    /// The block band that applied at this level ([`params::ConditionParams::block_band_for`]; 0 when conditioning
+    /// is off): a coarse level, reduced off the block grid, keeps it.
+    pub(crate) fn block_band(&self, c: &params::ConditionParams) -> f32 {
+        self.conditioned.as_ref().map_or(0.0, |cond| c.block_band_for(&cond.stats))
+    }
+
+    /// The guidance pair (colour weights, post-processing) and the pair the matching cost sees; `pair` itself
+    /// for both when conditioning is off.
+    pub(crate) fn pairs<'b>(&'b self, pair: &'b StereoPair) -> (&'b StereoPair, &'b StereoPair) {
+        match &self.conditioned {
+            Some(cond) => (&*cond.guide, cond.cost_pair()),
+            None => (pair, pair),
+        }
+    }
+}

@@ -1,0 +1,391 @@
+//! The coarse prior (our addition, not in the paper; see [`crate::condition`], "Coarse prior"): the pipeline run
+//! on the pair reduced F×, its answer brought back to full size, and a penalty on the fine cost for labels far
+//! from it ([`Prior`]).
+//!
+//! The coarse level is set up here once ([`CoarseLevel`]), for the whole image's chain and for the tiles
+//! ([`super::tile`]); what differs between the two is a named option of it.
+
+use rayon::prelude::*;
+
+use crate::error::Result;
+use crate::image::{CostVolume, DisparityMap, Plane, StereoPair};
+use crate::params::{self, Params};
+use crate::{condition, cost, meanfield, scale};
+
+use super::output::{Output, Timings};
+use super::prepared::Prepared;
+use super::window::kernel_reach_px;
+
+/// The coarse level's downscale factor in the whole image's chain: each level is the one above it reduced 2×
+/// (`condition.prior_levels` levels in all).
+pub(crate) const CHAIN_FACTOR: usize = 2;
+
+/// How a coarse level is set up and made into a prior. The whole image's chain ([`CoarseLevel::chain`]) and the
+/// tiles ([`CoarseLevel::tiles`]) run the same steps — the pipeline at 1/`factor` with the finer level's noise,
+/// reduced, as its ceiling; the right views aligned vertically against its answer; the prior made of it, weakened
+/// where the full resolution has detail the coarse level cannot hold — and differ in these options.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct CoarseLevel {
+    /// The downscale factor F.
+    pub factor: usize,
+    /// The stage its run is timed and reported under.
+    pub stage: &'static str,
+    /// The coarse run takes the pair as conditioned at this level, with the conditioning that is done already
+    /// (histogram matching, stretch, JPEG) off, this level's block band kept, and a coarse prior of its own one
+    /// level fewer (`prior_levels`; or while the pair is noisy enough, `prior_recurse_sigma`). Off (tiles), the
+    /// coarse level is an ordinary run on the input pair at its size, conditioned by itself.
+    pub on_conditioned_pair: bool,
+    /// The coarse run's plane segment count is scaled down with its area: the same segment size in the scene. Off
+    /// (tiles), it keeps the count: it is the base answer, as good as a run at that resolution can be.
+    pub same_segment_size: bool,
+    /// The prior leaves a coarse depth edge's whole step free (`condition.prior_spread`). Off (tiles), it is a point
+    /// prior: the coarse level is the base answer there, and freeing its depth edges let the fine level move them
+    /// on the ×4 scenes (Adirondack 1.66 -> 1.74, Vintage 8.45 -> 8.51; docs/tuning-log.md, "The prior at coarse
+    /// depth edges"). The coarse level's own chain has the spread.
+    pub spread_at_edges: bool,
+    /// The prior's weight has a floor where the full resolution adds little detail to the coarse level
+    /// ([`tiled_prior_floor`]; tiles, where the coarse answer is the base of the run).
+    pub detail_floor: bool,
+}
+
+impl CoarseLevel {
+    /// The whole image's coarse prior: the pair reduced [`CHAIN_FACTOR`]×.
+    pub(crate) fn chain() -> CoarseLevel {
+        CoarseLevel {
+            factor: CHAIN_FACTOR,
+            stage: "coarse prior",
+            on_conditioned_pair: true,
+            same_segment_size: true,
+            spread_at_edges: true,
+            detail_floor: false,
+        }
+    }
+
+    /// The coarse level of a tiled run, at 1/`factor`.
+    pub(crate) fn tiles(factor: usize) -> CoarseLevel {
+        CoarseLevel {
+            factor,
+            stage: "coarse level",
+            on_conditioned_pair: false,
+            same_segment_size: false,
+            spread_at_edges: false,
+            detail_floor: true,
+        }
+    }
+
+    /// Whether the chain's coarse level runs on `pair` (as prepared in `input`): when the prior has a weight, and
+    /// the reduced pair is at least 8 × 8 with its reduced range below its width.
+    pub(crate) fn applies(&self, pair: &StereoPair, input: &Prepared) -> bool {
+        let f = self.factor;
+        let fits = pair.left.width >= 8 * f
+            && pair.left.height >= 8 * f
+            && pair.ndisp.div_ceil(f) < pair.left.width.div_ceil(f);
+        (input.prior_weight > 0.0 || input.prior_flat > 0.0) && fits
+    }
+
+    /// The coarse run's parameters. Its noise is at most this level's (`input`), reduced by the F × F box average
+    /// (σ / F) ([`params::ConditionParams::noise_ceiling`]): its own one-image estimate reads texture as noise, and
+    /// the gradient term's ε that follows it hides faint shading (Vintage ×4 in tiles 4.82 -> 4.73).
+    pub(crate) fn params(&self, params: &Params, input: &Prepared) -> Params {
+        let mut coarse = params.clone();
+        coarse.downscale = self.factor;
+        if self.same_segment_size {
+            // A 1/F² of the pixels gets a 1/F² of the segments.
+            coarse.post.sps.segments = params.post.sps.segments.div_ceil(self.factor * self.factor);
+        }
+        if self.on_conditioned_pair {
+            let c = &params.condition;
+            let sigma = input.sigma();
+            let deeper = c.prior_levels > 1;
+            let recurse = deeper || (c.prior_recurse_sigma > 0.0 && sigma >= c.prior_recurse_sigma);
+            coarse.condition = params::ConditionParams {
+                match_histograms: false,
+                stretch: false,
+                jpeg_noise: false,
+                block_band: input.block_band(c),
+                prior_per_sigma: if recurse { c.prior_per_sigma } else { 0.0 },
+                prior_base: if recurse { c.prior_base } else { 0.0 },
+                prior_flat: if recurse { c.prior_flat } else { 0.0 },
+                prior_levels: if deeper { c.prior_levels - 1 } else { 1 },
+                ..*c
+            };
+        }
+        coarse.condition.noise_ceiling = input.noise_ceiling(self.factor);
+        coarse
+    }
+
+    /// Runs the coarse level (stage [`CoarseLevel::stage`]) and makes its answer the prior of this level. On the
+    /// way, the right views of `input` are moved onto the left view's rows where the coarse answer shows them off
+    /// ([`Prepared::align_vertically`]).
+    ///
+    /// # Errors
+    /// As [`super::run`].
+    pub(crate) fn prior(
+        &self,
+        params: &Params,
+        pair: &StereoPair,
+        input: &mut Prepared,
+        on_stage: &dyn Fn(&str),
+        t: &mut Timings,
+    ) -> Result<Prior> {
+        let c = &params.condition;
+        let coarse_params = self.params(params, input);
+        let source = if self.on_conditioned_pair { input.pairs(pair).0 } else { pair };
+        on_stage(self.stage);
+        let coarse = t.time(self.stage, || super::run_observed(&coarse_params, source, &|_| {}))?;
+        let grey_left = input.pairs(pair).1.left.to_grey();
+        input.align_vertically(c, &grey_left, &coarse, t);
+        let mut weight = input.prior_weight;
+        if self.detail_floor {
+            let coarse_grey = scale::downsample_rgb(&input.pairs(pair).1.left, self.factor).to_grey();
+            weight = weight.max(tiled_prior_floor(&grey_left, &coarse_grey));
+        }
+        let mut prior = Prior::from_coarse(coarse, weight, input.prior_flat, c.prior_untrusted);
+        prior.weaken_at_detail(&grey_left, self.factor, c.prior_detail);
+        if self.spread_at_edges {
+            prior.spread_at_edges(self.factor, c.prior_spread, c.prior_trunc_px);
+        }
+        Ok(prior)
+    }
+}
+
+/// What the full-resolution cost is pulled towards: a coarse run's disparities, in the labels of the pair it
+/// is added to (see [`condition`], "Coarse prior").
+pub(crate) struct Prior {
+    /// The coarse disparities (`inf`: no prior at that pixel).
+    pub disparity: DisparityMap,
+    /// The labels the prior leaves free (up to its margin), `(low, high)`: beside a coarse depth edge the whole
+    /// step, elsewhere the coarse disparity itself ([`Prior::spread_at_edges`]; `None`: the coarse disparity
+    /// everywhere).
+    pub free: Option<(DisparityMap, DisparityMap)>,
+    /// Per-pixel factor of the weight (the coarse confidence, lowered where its left-right check failed).
+    pub confidence: Plane<f32>,
+    /// λ before the per-pixel factor.
+    pub weight: f32,
+    /// Where the fine cost is flat, λ is at least this × its flatness ([`cost::flatness`]; `condition.prior_flat`).
+    pub flat: f32,
+    /// Whether inference keeps each pixel to a band of labels around the prior ([`Prior::label_bands`]; tiles).
+    pub in_bands: bool,
+}
+
+/// The labels either side of a pixel's own best label that its band holds ([`Prior::label_bands`]): the sub-pixel
+/// parabola's neighbours and one more. Measured in tiles (docs/tuning-log.md, "Label bands in tiles").
+const OWN_BEST_BAND: usize = 2;
+
+impl Prior {
+    /// The prior of a coarse run's output (brought to the fine size) with weight λ = `weight`: a pixel the coarse
+    /// left-right check rejected was filled by a guess, so its factor is its confidence × `untrusted`.
+    pub(crate) fn from_coarse(coarse: Output, weight: f32, flat: f32, untrusted: f32) -> Prior {
+        let mut confidence = coarse.confidence;
+        confidence.data.iter_mut().zip(&coarse.consistent.data).filter(|(_, ok)| !**ok).for_each(|(c, _)| {
+            *c *= untrusted;
+        });
+        Prior { disparity: coarse.disparity, free: None, confidence, weight, flat, in_bands: false }
+    }
+
+    /// Each pixel's band of labels for inference at the fine level ([`meanfield::bands`]): the labels the prior
+    /// leaves free within the fully connected kernel's reach (3σx), widened by the labels over which its
+    /// penalty still changes (margin + truncation + 1), joined with the pixel's own best label by its cost alone,
+    /// `own_best`, ± [`OWN_BEST_BAND`]. For the `right_view`, the prior is carried over to it first
+    /// ([`meanfield::bands::warp_to_right_view`]).
+    pub(crate) fn label_bands(
+        &self,
+        own_best: &DisparityMap,
+        ndisp: usize,
+        right_view: bool,
+        params: &Params,
+    ) -> meanfield::LabelBands {
+        let c = &params.condition;
+        let reach = kernel_reach_px(params);
+        let half_width = c.prior_margin_px + c.prior_trunc_px + 1.0;
+        let (low, high) = self.free.as_ref().map_or((&self.disparity, &self.disparity), |(l, h)| (l, h));
+        let bands =
+            |low, high| meanfield::LabelBands::around((low, high), own_best, ndisp, reach, half_width, OWN_BEST_BAND);
+        if right_view {
+            let (low, high) = meanfield::bands::warp_to_right_view(low, high);
+            bands(&low, &high)
+        } else {
+            bands(low, high)
+        }
+    }
+
+    /// Beside a depth edge of the coarse answer (a level `factor` times coarser), leaves the whole step free: the
+    /// range of the coarse disparities within `spread` coarse pixels where they differ by more than `min_jump`
+    /// ([`condition::edge_range`]; nothing when `spread` is 0).
+    pub(crate) fn spread_at_edges(&mut self, factor: usize, spread: usize, min_jump: f32) {
+        if spread > 0 {
+            self.free = Some(condition::edge_range(&self.disparity, spread * factor, min_jump));
+        }
+    }
+
+    /// Adds the prior's penalty to `cost` (the fine level's left volume, before inference): at pixel i, label d
+    /// gets λᵢ·min(max(dist(d) − margin, 0), trunc), dist the distance from the labels the prior leaves free, and
+    /// λᵢ = max(`weight`, `flat` × the flatness of the pixel's cost, [`cost::flatness`]) × its confidence factor
+    /// (the confidence only with `prior_confidence`). Stage `flatness` when the floor can matter.
+    pub(crate) fn add_to(&self, cost: &mut CostVolume, c: &params::ConditionParams, t: &mut Timings) {
+        let m = cost.ndisp;
+        let flatness = self.needs_flatness().then(|| t.time("flatness", || cost::flatness(cost)));
+        cost.data.par_chunks_mut(m).enumerate().for_each(|(i, costs)| {
+            let floor = flatness.as_ref().map_or(0.0, |f| self.flat * f.data[i]);
+            self.add_at(i, floor, costs, c);
+        });
+    }
+
+    /// Whether [`Prior::add_to`] needs the cost's flatness, a pass over the whole volume first: not where the
+    /// noise-scaled weight is at least `flat`, since the floor never exceeds it.
+    pub(crate) fn needs_flatness(&self) -> bool {
+        self.flat > self.weight
+    }
+
+    /// [`Prior::add_to`] for row `y` of a volume `width` pixels wide, `row` its costs (for a prior that does not
+    /// need the flatness: [`Prior::needs_flatness`]).
+    pub(crate) fn add_to_row(&self, y: usize, width: usize, row: &mut [f32], c: &params::ConditionParams) {
+        debug_assert!(!self.needs_flatness());
+        let m = row.len() / width.max(1);
+        for (x, costs) in row.chunks_exact_mut(m.max(1)).enumerate() {
+            self.add_at(y * width + x, 0.0, costs, c);
+        }
+    }
+
+    /// The penalty of pixel `i` added to its `costs`, its weight at least `floor`.
+    #[inline(always)]
+    fn add_at(&self, i: usize, floor: f32, costs: &mut [f32], c: &params::ConditionParams) {
+        let (margin, trunc) = (c.prior_margin_px, c.prior_trunc_px);
+        let (low, high) = self.free.as_ref().map_or((&self.disparity, &self.disparity), |(l, h)| (l, h));
+        let (low, high) = (low.data[i], high.data[i]);
+        if !low.is_finite() {
+            return;
+        }
+        let weight = self.weight.max(floor);
+        let lambda = if c.prior_confidence { weight * self.confidence.data[i] } else { weight };
+        for (d, v) in costs.iter_mut().enumerate() {
+            // The distance from [low, high]: |d − d_coarse| where the two are one.
+            let d = d as f32;
+            let off = if d < low { low - d } else { (d - high).max(0.0) };
+            *v += lambda * (off - margin).clamp(0.0, trunc);
+        }
+    }
+
+    /// Weakens the prior where `grey` (the full-resolution cost image) has detail a level `factor` times coarser
+    /// cannot hold ([`condition::detail_factor`] with `k`; nothing when `k` is 0).
+    pub(crate) fn weaken_at_detail(&mut self, grey: &Plane<f32>, factor: usize, k: f32) {
+        if k > 0.0 {
+            let f = condition::detail_factor(grey, factor, k);
+            self.confidence.data.iter_mut().zip(&f.data).for_each(|(c, f)| *c *= f);
+        }
+    }
+
+    /// The prior in the labels of a label window that starts at disparity `lo` (label d' is disparity lo + d').
+    pub(crate) fn shifted(mut self, lo: usize) -> Prior {
+        let free = self.free.iter_mut().flat_map(|(low, high)| [low, high]);
+        for plane in std::iter::once(&mut self.disparity).chain(free) {
+            plane.data.iter_mut().for_each(|d| *d -= lo as f32);
+        }
+        self
+    }
+}
+
+/// The least weight of the coarse prior in a tile whose full resolution holds no more detail than its coarse
+/// level (see [`tiled_prior_floor`]). The untiled default weighs the prior by the measured noise (0.5·σn) and the
+/// cost's flatness, relative to the image's own; on an image upscaled ×4 every pixel's cost is about as flat, and
+/// the fine cost alone drifts inside its label window (Adirondack upscaled ×4, native px, session 7: floor 0 →
+/// avgErr 4.80, 1 → 1.79, 2 → 1.75; the coarse level alone, upsampled, 1.71).
+pub const TILED_PRIOR_FLOOR: f32 = 2.0;
+
+/// The prior's floor in the tiles: [`TILED_PRIOR_FLOOR`] × min(1, 2·(1 − k)), k the share of the coarse level's
+/// sharpness ([`crate::condition::sharpness`], the cost pair's left view) that the full resolution keeps. A photo
+/// has detail at every scale and keeps most of it (trainingQ run in tiles over a coarse level at 1/2: k 0.85–0.96,
+/// a floor of 0.2–0.6); an image enlarged from a smaller one has none to add (the ×4 scenes: k 0.35–0.45, the
+/// full floor). A constant floor of 2 cost the photos: tiled trainingQ (`jem batch --max-memory 300M`) 3.83 with
+/// it, 3.67 with this one, 3.68 with none; the ×4 scenes are unchanged.
+pub fn tiled_prior_floor(full_grey: &Plane<f32>, coarse_grey: &Plane<f32>) -> f32 {
+    let coarse = condition::sharpness(coarse_grey);
+    let kept = if coarse > 0.0 { condition::sharpness(full_grey) / coarse } else { 1.0 };
+    TILED_PRIOR_FLOOR * (2.0 * (1.0 - kept)).clamp(0.0, 1.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::RgbImage;
+    use crate::synth;
+
+    #[test]
+    fn the_prior_holds_where_the_cost_is_flat_even_at_zero_noise() {
+        // Two pixels, five labels: a flat cost and one with a clear winner at label 4; the coarse answer says 1.
+        let data = vec![3.0, 3.0, 3.0, 3.0, 3.0, 6.0, 6.0, 6.0, 6.0, 0.0];
+        let prior = |flat| Prior {
+            disparity: Plane::from_vec(2, 1, vec![1.0, 1.0]),
+            free: None,
+            confidence: Plane::new(2, 1, 1.0),
+            weight: 0.0, // a noiseless pair: no noise-scaled weight
+            flat,
+            in_bands: false,
+        };
+        let c = params::ConditionParams { prior_margin_px: 0.0, prior_trunc_px: 8.0, ..Default::default() };
+        let with = |flat| {
+            let mut cost = CostVolume { width: 2, height: 1, ndisp: 5, data: data.clone() };
+            prior(flat).add_to(&mut cost, &c, &mut Timings::default());
+            cost
+        };
+        assert_eq!(with(0.0).data, data, "no floor, no weight: the cost is unchanged");
+        let held = with(1.0);
+        // The flat pixel has flatness 1 (λ = 1): label 1 now wins, by 1 per label of distance.
+        assert_eq!(cost::argmin(held.pixel(0)), 1);
+        assert_eq!(held.pixel(0), &[4.0, 3.0, 4.0, 5.0, 6.0]);
+        // The distinct pixel: spread 4.8, median spread 4.8 (the upper of two), flatness ½: the winner stays.
+        assert_eq!(cost::argmin(held.pixel(1)), 4);
+        assert!((held.pixel(1)[4] - 1.5).abs() < 1e-6, "{:?}", held.pixel(1));
+    }
+
+    /// The prior added row by row as the volume is built, and the own best labels taken there, are what the
+    /// separate passes give (the fused path of `fine_pass`), bit for bit.
+    #[test]
+    fn the_prior_added_row_by_row_is_the_prior_added_after() {
+        let scene = synth::render_scene(&synth::SynthParams { width: 96, height: 64, ndisp: 24, seed: 3 }).unwrap();
+        let (w, h, m) = (96, 64, scene.ndisp);
+        let coarse: Vec<f32> = crate::test_util::rand_vec(w * h, 5).iter().map(|v| v * m as f32).collect();
+        let mut disparity = Plane::from_vec(w, h, coarse);
+        disparity.data[7] = f32::INFINITY; // no prior at that pixel
+        let confidence = Plane::from_vec(w, h, crate::test_util::rand_vec(w * h, 6));
+        let prior = Prior { disparity, free: None, confidence, weight: 1.5, flat: 1.0, in_bands: true };
+        assert!(!prior.needs_flatness());
+        let (c, p) = (params::ConditionParams::default(), params::CostParams::default());
+        let mut after = cost::build_cost_volume(&scene.left, &scene.right, m, &p);
+        let own = cost::winner_take_all(&after);
+        prior.add_to(&mut after, &c, &mut Timings::default());
+        let (fused, rows) = cost::build_cost_volume_then(&scene.left, &scene.right, m, &p, Vec::new(), |y, row| {
+            let own = cost::row_argmins(row, m);
+            prior.add_to_row(y, w, row, &c);
+            own
+        });
+        assert_eq!(fused.data, after.data);
+        assert_eq!(rows.concat(), own.data);
+        let (right, right_rows) =
+            cost::derive_right_volume_then(&after, 30.0, Vec::new(), |_, row| cost::row_argmins(row, m));
+        assert_eq!(right.data, cost::derive_right_volume(&after, 30.0).data);
+        assert_eq!(right_rows.concat(), cost::winner_take_all(&right).data);
+    }
+
+    /// The prior's floor follows the detail the full resolution adds: seeded white noise has detail at every scale
+    /// and keeps its sharpness over its half-resolution copy (no floor); the same noise enlarged ×4 (bilinear)
+    /// keeps little of it over its quarter (the whole floor). A flat image measures nothing and gets none.
+    #[test]
+    fn the_prior_floor_is_for_images_without_fine_detail() {
+        let (w, h) = (160, 120);
+        let mut noise = RgbImage::new(w, h);
+        for (c, ch) in noise.channels.iter_mut().enumerate() {
+            *ch = crate::test_util::rand_vec(w * h, 10 + c as u64).iter().map(|v| 255.0 * v).collect();
+        }
+        let reduced = |img: &RgbImage, f| crate::scale::downsample_rgb(img, f).to_grey();
+        let detailed = tiled_prior_floor(&noise.to_grey(), &reduced(&noise, 2));
+        assert!(detailed < 0.1 * TILED_PRIOR_FLOOR, "floor {detailed} on white noise");
+        let mut enlarged = RgbImage::new(4 * w, 4 * h);
+        for (dst, src) in enlarged.channels.iter_mut().zip(&noise.channels) {
+            *dst = crate::scale::upsample_plane(&Plane::from_vec(w, h, src.clone()), 4, 4 * w, 4 * h).data;
+        }
+        assert_eq!(tiled_prior_floor(&enlarged.to_grey(), &reduced(&enlarged, 4)), TILED_PRIOR_FLOOR);
+        let flat = Plane::new(64, 64, 100.0);
+        assert_eq!(tiled_prior_floor(&flat, &flat), 0.0, "no detail at either level: no measurement, no floor");
+    }
+}
