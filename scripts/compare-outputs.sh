@@ -40,7 +40,8 @@ for config in "${configs[@]}"; do
         [[ $side == old && -n ${OLD_CONFIGS:-} ]] && side_config=$OLD_CONFIGS/$(basename "$config")
         [[ $side == old && ${REUSE_OLD:-} == 1 ]] && continue
         rm -f "$work/$side"/*/"disp0$alg.pfm"
-        "$bin" batch "$work/$side" --alg "$alg" --config "$side_config" ${extra[@]+"${extra[@]}"} --quiet >/dev/null || {
+        "$bin" batch "$work/$side" --alg "$alg" --config "$side_config" ${extra[@]+"${extra[@]}"} --quiet \
+            >/dev/null || {
             echo "error: $side binary failed on $config" >&2
             bad=1
         }

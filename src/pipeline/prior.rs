@@ -8,7 +8,7 @@
 use rayon::prelude::*;
 
 use crate::error::Result;
-use crate::image::{CostVolume, DisparityMap, Plane, StereoPair};
+use crate::image::{CostVolume, DisparityMap, Plane, StereoPair, window_extreme};
 use crate::params::{self, Params};
 use crate::{condition, cost, meanfield, scale};
 
@@ -211,10 +211,10 @@ impl Prior {
 
     /// Beside a depth edge of the coarse answer (a level `factor` times coarser), leaves the whole step free: the
     /// range of the coarse disparities within `spread` coarse pixels where they differ by more than `min_jump`
-    /// ([`condition::edge_range`]; nothing when `spread` is 0).
+    /// ([`edge_range`]; nothing when `spread` is 0).
     pub(crate) fn spread_at_edges(&mut self, factor: usize, spread: usize, min_jump: f32) {
         if spread > 0 {
-            self.free = Some(condition::edge_range(&self.disparity, spread * factor, min_jump));
+            self.free = Some(edge_range(&self.disparity, spread * factor, min_jump));
         }
     }
 
@@ -267,10 +267,10 @@ impl Prior {
     }
 
     /// Weakens the prior where `grey` (the full-resolution cost image) has detail a level `factor` times coarser
-    /// cannot hold ([`condition::detail_factor`] with `k`; nothing when `k` is 0).
+    /// cannot hold ([`detail_factor`] with `k`; nothing when `k` is 0).
     pub(crate) fn weaken_at_detail(&mut self, grey: &Plane<f32>, factor: usize, k: f32) {
         if k > 0.0 {
-            let f = condition::detail_factor(grey, factor, k);
+            let f = detail_factor(grey, factor, k);
             self.confidence.data.iter_mut().zip(&f.data).for_each(|(c, f)| *c *= f);
         }
     }
@@ -302,6 +302,68 @@ pub fn tiled_prior_floor(full_grey: &Plane<f32>, coarse_grey: &Plane<f32>) -> f3
     let coarse = condition::sharpness(coarse_grey);
     let kept = if coarse > 0.0 { condition::sharpness(full_grey) / coarse } else { 1.0 };
     TILED_PRIOR_FLOOR * (2.0 * (1.0 - kept)).clamp(0.0, 1.0)
+}
+
+/// How much of each pixel's neighbourhood a coarse level `factor` times smaller cannot hold, as a factor for the
+/// coarse prior's weight: `1 / (1 + D / (k·D̄))`, where D is the 3 × 3 mean of |G − the mean of G over the
+/// `factor` × `factor` block holding the pixel| and D̄ its mean over the image (so the factor does not depend on the
+/// image's contrast). Thin structures and edges, where the coarse answer is least reliable, get a weaker prior; flat
+/// regions keep it. All ones when `k` ≤ 0 or the image has no detail at all.
+pub(crate) fn detail_factor(grey: &Plane<f32>, factor: usize, k: f32) -> Plane<f32> {
+    let (w, h) = grey.dims();
+    let f = factor.max(1);
+    // The mean of each F × F block (clipped at the borders), once per block.
+    let bw = w.div_ceil(f);
+    let mut block_means = vec![0.0f32; bw * h.div_ceil(f)];
+    block_means.par_chunks_mut(bw.max(1)).enumerate().for_each(|(by, means)| {
+        let (y0, y1) = (by * f, (by * f + f).min(h));
+        for (bx, m) in means.iter_mut().enumerate() {
+            let (x0, x1) = (bx * f, (bx * f + f).min(w));
+            let mut sum = 0.0f32;
+            for yy in y0..y1 {
+                sum += grey.row(yy)[x0..x1].iter().fold(0.0f32, |a, &g| a + g);
+            }
+            *m = sum / ((y1 - y0) * (x1 - x0)) as f32;
+        }
+    });
+    let mut lost = Plane::new(w, h, 0.0f32);
+    lost.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        let (g, means) = (grey.row(y), &block_means[y / f * bw..]);
+        for (x, v) in row.iter_mut().enumerate() {
+            *v = g[x] - means[x / f];
+        }
+    });
+    let mut out = crate::cost::local_mean_abs(&lost, 1);
+    let scale = k * crate::cost::plane_mean(&out);
+    if scale > 0.0 && scale.is_finite() {
+        out.data.iter_mut().for_each(|d| *d = 1.0 / (1.0 + *d / scale));
+    } else {
+        out.data.fill(1.0);
+    }
+    out
+}
+
+/// The range of disparities a coarse prior accepts at each pixel: `(low, high)`, both the pixel's own value
+/// except beside a depth edge, where the values within `radius` pixels (a square window) differ by more than
+/// `min_jump`; there they are the window's smallest and largest. Non-finite values (no prior) are skipped, and
+/// stay non-finite. `radius` 0 returns two copies.
+pub(crate) fn edge_range(coarse: &Plane<f32>, radius: usize, min_jump: f32) -> (Plane<f32>, Plane<f32>) {
+    let (w, h) = coarse.dims();
+    if radius == 0 || w == 0 || h == 0 {
+        return (coarse.clone(), coarse.clone());
+    }
+    let (lo, hi) = (
+        window_extreme(coarse, radius, f32::INFINITY, f32::min),
+        window_extreme(coarse, radius, f32::NEG_INFINITY, f32::max),
+    );
+    let mut low = coarse.clone();
+    let mut high = coarse.clone();
+    low.data.par_iter_mut().zip(&mut high.data).enumerate().for_each(|(i, (l, h))| {
+        if l.is_finite() && hi.data[i] - lo.data[i] > min_jump {
+            (*l, *h) = (lo.data[i], hi.data[i]);
+        }
+    });
+    (low, high)
 }
 
 #[cfg(test)]
@@ -387,5 +449,63 @@ mod tests {
         assert_eq!(tiled_prior_floor(&enlarged.to_grey(), &reduced(&enlarged, 4)), TILED_PRIOR_FLOOR);
         let flat = Plane::new(64, 64, 100.0);
         assert_eq!(tiled_prior_floor(&flat, &flat), 0.0, "no detail at either level: no measurement, no floor");
+    }
+
+    /// A one-pixel line on a flat background: the 2 × 2 block average cannot hold it, so the prior is weakest on
+    /// and beside it and untouched far from it; the factor ignores the image's contrast, and a flat image keeps
+    /// the whole prior.
+    #[test]
+    fn detail_factor_weakens_the_prior_at_thin_structures_only() {
+        let (w, h) = (24, 12);
+        let line = |contrast: f32| Plane {
+            width: w,
+            height: h,
+            data: (0..w * h).map(|i| if i % w == 11 { 100.0 + contrast } else { 100.0 }).collect(),
+        };
+        let f = detail_factor(&line(60.0), 2, 3.0);
+        let at = |x: usize| f.data[6 * w + x];
+        assert!(at(11) < 0.5 && at(10) < 0.8, "on the line {} beside it {}", at(11), at(10));
+        assert_eq!(at(2), 1.0);
+        assert_eq!(at(20), 1.0);
+        let weaker = detail_factor(&line(6.0), 2, 3.0);
+        assert!(f.data.iter().zip(&weaker.data).all(|(a, b)| (a - b).abs() < 1e-6), "contrast changed the factor");
+        let flat = detail_factor(&line(0.0), 2, 3.0);
+        assert!(flat.data.iter().all(|&v| v == 1.0));
+        assert!(detail_factor(&line(60.0), 2, 0.0).data.iter().all(|&v| v == 1.0));
+    }
+
+    /// The prior's free range: widened to the whole step within `radius` of a coarse depth edge, on both sides;
+    /// a slope whose window spans less than `min_jump` keeps the point; a pixel without a prior keeps none.
+    #[test]
+    fn edge_range_frees_the_step_only_beside_depth_edges() {
+        let (w, h) = (20, 5);
+        // A step from 10 to 30 at x = 10, a gentle slope (0.1 px per px) on top, and one pixel without a prior.
+        let mut coarse = Plane::from_vec(
+            w,
+            h,
+            (0..w * h).map(|i| 0.1 * (i % w) as f32 + if i % w >= 10 { 20.0 } else { 10.0 }).collect(),
+        );
+        coarse.data[2 * w + 3] = f32::INFINITY;
+        let (low, high) = edge_range(&coarse, 2, 8.0);
+        for y in 0..h {
+            for x in 0..w {
+                let (c, lo, hi) = (coarse.row(y)[x], low.row(y)[x], high.row(y)[x]);
+                if !c.is_finite() {
+                    assert!(!lo.is_finite() && !hi.is_finite(), "no prior at ({x}, {y})");
+                } else if (8..12).contains(&x) {
+                    assert_eq!(
+                        (lo, hi),
+                        (0.1 * (x.saturating_sub(2)) as f32 + 10.0, 0.1 * (x + 2) as f32 + 20.0),
+                        "({x}, {y})"
+                    );
+                } else {
+                    assert_eq!((lo, hi), (c, c), "away from the step, ({x}, {y})");
+                }
+            }
+        }
+        // Radius 0: two copies.
+        let (low, high) = edge_range(&coarse, 0, 8.0);
+        assert!(low.data.iter().zip(&coarse.data).all(|(a, b)| a == b || (!a.is_finite() && !b.is_finite())));
+        assert!(high.data.iter().zip(&coarse.data).all(|(a, b)| a == b || (!a.is_finite() && !b.is_finite())));
     }
 }
