@@ -95,6 +95,13 @@ impl PairStats {
     pub fn sigma(&self) -> f32 {
         self.noise[0].max(self.noise[1])
     }
+
+    /// The Census band's multiple of the blocking for a pair measured so: `c.block_band` where JPEG was detected,
+    /// or where this level does not look for it (a coarse level, reduced off the block grid, gets the band of the
+    /// level above); 0 otherwise.
+    pub fn block_band(&self, c: &ConditionParams) -> f32 {
+        if self.is_jpeg() || !c.jpeg_noise { c.block_band } else { 0.0 }
+    }
 }
 
 /// A conditioned pair: what the guidance sees and, when it differs, what the matching cost sees.

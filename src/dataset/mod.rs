@@ -20,6 +20,7 @@
 //! A MiddEval3 scene and an ETH3D scene look the same; the folder around it decides, or `--layout`.
 
 mod kitti;
+pub mod walk;
 
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
@@ -237,7 +238,7 @@ pub struct Discovery {
 /// skipped.
 pub fn discover(roots: &[PathBuf], purpose: Purpose, how: &Discovery) -> Result<Vec<Pair>> {
     let mut found = Vec::new();
-    crate::batch::walk_folders(roots, &mut |dir| {
+    walk::walk_folders(roots, &mut |dir| {
         if let Some(layout) = kitti::recognise(dir) {
             found.extend(kitti::frames(dir, layout, purpose));
             return true;

@@ -155,13 +155,6 @@ impl ConditionParams {
         }
     }
 
-    /// The Census band's multiple of the blocking for a pair measured as `stats`: `block_band` where JPEG was
-    /// detected, or where this level does not look for it (a coarse level, reduced off the block grid, gets the
-    /// band of the level above); 0 otherwise.
-    pub fn block_band_for(&self, stats: &crate::condition::PairStats) -> f32 {
-        if stats.is_jpeg() || !self.jpeg_noise { self.block_band } else { 0.0 }
-    }
-
     /// Whether any part is on (when none is, the pair goes to the cost unchanged).
     pub fn is_active(&self) -> bool {
         self.enabled

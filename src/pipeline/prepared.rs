@@ -37,7 +37,7 @@ impl<'a> Prepared<'a> {
             cost_params.census_dead_band += c.census_band * cond.stats.residual_grey_noise;
             // JPEG: steps no larger than the block grid's own are compression artefacts, not texture.
             cost_params.census_dead_band +=
-                c.block_band_for(&cond.stats) * cond.stats.blocking[0].max(cond.stats.blocking[1]);
+                cond.stats.block_band(c) * cond.stats.blocking[0].max(cond.stats.blocking[1]);
             if cost_params.census_support > 0.0 {
                 cost_params.census_support += c.support_per_sigma * cond.stats.sigma();
             }
@@ -111,10 +111,10 @@ impl<'a> Prepared<'a> {
         self.conditioned.as_ref().map_or(0.0, |cond| cond.stats.sigma())
     }
 
-    /// The block band that applied at this level ([`params::ConditionParams::block_band_for`]; 0 when conditioning
+    /// The block band that applied at this level ([`condition::PairStats::block_band`]; 0 when conditioning
     /// is off): a coarse level, reduced off the block grid, keeps it.
     pub(crate) fn block_band(&self, c: &params::ConditionParams) -> f32 {
-        self.conditioned.as_ref().map_or(0.0, |cond| c.block_band_for(&cond.stats))
+        self.conditioned.as_ref().map_or(0.0, |cond| cond.stats.block_band(c))
     }
 
     /// The guidance pair (colour weights, post-processing) and the pair the matching cost sees; `pair` itself
