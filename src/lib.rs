@@ -21,7 +21,7 @@
 //! | [`params`] | both | one file per stage: defaults, reasons, `validate()` |
 //! | [`pipeline`] (with [`tile`]) | ours | the orchestrator: coarse prior, label windows, tiles, memory |
 //! | [`condition`], [`rectify`] | ours | measuring and conditioning the pair; its vertical offset |
-//! | [`range`], [`scale`] | ours | the search range when none is given; `--downscale` |
+//! | [`range`], [`scale`], [`plan`] | ours | the search range when none is given; `--downscale`; setting up a match |
 //! | [`io`], [`image`], [`dataset`], [`batch`] | around | files, data types, data-set layouts, batch runs |
 //! | [`eval`], [`viz`], [`synth`], [`degrade`] | around | scoring, colour maps, synthetic and degraded pairs |
 //! | [`geometry`], [`table`], [`fastmath`], [`error`] | around | depth and point clouds, shared helpers, errors |
@@ -55,6 +55,7 @@ pub mod lattice;
 pub mod meanfield;
 pub mod params;
 pub mod pipeline;
+pub mod plan;
 pub mod post;
 pub mod range;
 pub mod rectify;

@@ -9,8 +9,9 @@ use std::time::Instant;
 
 use clap::Args;
 use jem::io::calib;
+use jem::plan::{NdispSource, Plan, plan_match};
 use jem::tile::Strategy;
-use jem::{Error, Result, StereoPair};
+use jem::{Error, Result};
 
 use super::GlobalArgs;
 use super::config::ConfigArgs;
@@ -122,21 +123,17 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         Strategy::choose(w as usize, h as usize, n, &params, global.memory_limit())?;
     }
     let (l, r) = jem::io::png::load_rgb_pair(left, right)?;
-    let ndisp = match stated {
-        Some(n) if !search => n,
-        _ => {
-            let max = stated.unwrap_or(l.width / 2).clamp(2, l.width.max(2));
-            let n = jem::range::find_ndisp(&l, &r, max, &params.cost);
-            if !global.quiet {
-                let was = stated.map_or("no range given".to_string(), |s| format!("calib.txt says {s}"));
-                eprintln!("ndisp {n}, measured on the pair ({was}; --ndisp N sets it)");
-            }
-            n
-        }
+    let source = match (args.ndisp, stated) {
+        (Some(n), _) => NdispSource::Given(n),
+        (None, Some(n)) => NdispSource::Stated(n),
+        (None, None) => NdispSource::Unknown,
     };
-    let pair = StereoPair::new(l, r, ndisp)?;
-    // In one piece, or in tiles when that would need more than the memory limit (jem::tile).
-    let strategy = Strategy::choose(pair.left.width, pair.left.height, pair.ndisp, &params, global.memory_limit())?;
+    // The range and the way to run: shared with the Python module (jem::plan), so both give the same map.
+    let Plan { pair, strategy, ndisp_measured } = plan_match(l, r, source, &params, global.memory_limit())?;
+    if ndisp_measured && !global.quiet {
+        let was = stated.map_or("no range given".to_string(), |s| format!("calib.txt says {s}"));
+        eprintln!("ndisp {}, measured on the pair ({was}; --ndisp N sets it)", pair.ndisp);
+    }
     if let (Strategy::Tiled(plan), false) = (strategy, global.quiet) {
         eprintln!(
             "running in tiles of {} px after a coarse level at 1/{} (bounded memory)",
