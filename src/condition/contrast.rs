@@ -101,16 +101,16 @@ mod tests {
         let p = ConditionParams { stretch: true, ..ConditionParams::off() };
         let pair = |img: &RgbImage| StereoPair { left: img.clone(), right: img.clone(), ndisp: 4 };
         let dark_pair = pair(&dark);
-        let out = condition_pair(&dark_pair, &p);
+        let out = condition_pair(&dark_pair, &p, None);
         assert!(out.stats.gain[0] > 3.0 && out.stats.gain[0] == out.stats.gain[1], "gain {:?}", out.stats.gain);
         assert!(matches!(out.guide, Cow::Owned(_)));
         assert_eq!(out.guide.left, out.guide.right);
         assert!(out.cost.is_none(), "nothing denoised");
         let bright_pair = pair(&bright);
-        let out = condition_pair(&bright_pair, &p);
+        let out = condition_pair(&bright_pair, &p, None);
         assert_eq!(out.stats.gain, [1.0, 1.0]);
         assert!(matches!(out.guide, Cow::Borrowed(_)), "a full-contrast pair is not copied");
-        let out = condition_pair(&dark_pair, &ConditionParams::off());
+        let out = condition_pair(&dark_pair, &ConditionParams::off(), None);
         assert_eq!(out.guide.left, dark);
     }
 }

@@ -148,7 +148,7 @@ mod tests {
         let clean = textured(96, 64, 0.0, 11);
         let p = ConditionParams { denoise_strength: 3.0, denoise_min_sigma: 1.5, ..ConditionParams::off() };
         let pair = StereoPair { left: noisy.clone(), right: noisy.clone(), ndisp: 4 };
-        let out = condition_pair(&pair, &p);
+        let out = condition_pair(&pair, &p, None);
         assert_eq!(out.guide.left, noisy, "the guidance keeps the original");
         let err = |a: &RgbImage| {
             a.channels[0].iter().zip(&clean.channels[0]).map(|(p, q)| (p - q).abs()).sum::<f32>() / a.len() as f32
@@ -156,6 +156,6 @@ mod tests {
         let denoised = &out.cost.as_ref().expect("σ 6 is above the gate").left;
         assert!(err(denoised) < 0.6 * err(&noisy), "{} vs {}", err(denoised), err(&noisy));
         let clean_pair = StereoPair { left: clean.clone(), right: clean, ndisp: 4 };
-        assert!(condition_pair(&clean_pair, &p).cost.is_none(), "a clean pair is below the gate");
+        assert!(condition_pair(&clean_pair, &p, None).cost.is_none(), "a clean pair is below the gate");
     }
 }

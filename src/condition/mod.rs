@@ -124,7 +124,17 @@ impl Conditioned<'_> {
 
 /// Conditions a pair as the module doc says. Only the matching cost sees the denoised images: the guidance
 /// keeps the original edges (denoising it too was measured worse, docs/tuning-log.md).
-pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditioned<'a> {
+///
+/// `noise_ceiling` is run-time state, not a parameter: for a coarse level of the prior's chain (and a tiled run's
+/// coarse level) the pipeline passes each view's noise σn at the level above divided by the reduction factor F
+/// (`None` elsewhere). A box average of F × F pixels divides independent noise by F, while the one-image estimate
+/// reads fine texture as noise where few flat pixels are left (1/8 of trainingQ: 0.7–1.2 grey levels on clean
+/// pairs against 0.2–0.4 at 1/4), so a coarse level keeps the smaller of its own estimate and this.
+pub fn condition_pair<'a>(
+    pair: &'a StereoPair,
+    p: &ConditionParams,
+    noise_ceiling: Option<[f32; 2]>,
+) -> Conditioned<'a> {
     let mut guide = Cow::Borrowed(pair);
     if p.match_histograms {
         let right = match_histograms(&pair.right, &pair.left);
@@ -153,7 +163,7 @@ pub fn condition_pair<'a>(pair: &'a StereoPair, p: &ConditionParams) -> Conditio
     let ((nl, bl, jl, grey_l), (nr, br, jr, grey_r)) =
         rayon::join(|| view_noise(&guide.left, &pair.left, gain[0]), || view_noise(&guide.right, &pair.right, gain[1]));
     // A coarse level of the prior's chain: at most the finer level's noise, reduced.
-    let [nl, nr] = match p.noise_ceiling {
+    let [nl, nr] = match noise_ceiling {
         Some([cl, cr]) => [nl.min(cl), nr.min(cr)],
         None => [nl, nr],
     };

@@ -114,11 +114,10 @@ mod tests {
         let coarse = crate::scale::downsample_rgb(&fine, f);
         let pair = StereoPair { left: coarse.clone(), right: coarse, ndisp: 4 };
         let reduced = sigma as f32 / f as f32;
-        let own = condition_pair(&pair, &ConditionParams { stretch: false, ..ConditionParams::default() });
+        let own = condition_pair(&pair, &ConditionParams { stretch: false, ..ConditionParams::default() }, None);
         assert!(own.stats.noise[0] > 3.0 * reduced, "the estimate at 1/{f}: {:?}", own.stats.noise);
-        let p = ConditionParams { stretch: false, noise_ceiling: Some([reduced; 2]), ..ConditionParams::default() };
-        assert_eq!(condition_pair(&pair, &p).stats.noise, [reduced; 2]);
-        let high = ConditionParams { noise_ceiling: Some([100.0; 2]), ..p };
-        assert_eq!(condition_pair(&pair, &high).stats.noise, own.stats.noise);
+        let p = ConditionParams { stretch: false, ..ConditionParams::default() };
+        assert_eq!(condition_pair(&pair, &p, Some([reduced; 2])).stats.noise, [reduced; 2]);
+        assert_eq!(condition_pair(&pair, &p, Some([100.0; 2])).stats.noise, own.stats.noise);
     }
 }

@@ -125,12 +125,12 @@ mod tests {
         // sharper (left) view of the cost pair is blurred, the guidance keeps it sharp.
         let p = ConditionParams { stretch: false, ..ConditionParams::default() };
         let pair = StereoPair { left: img.clone(), right: blurred, ndisp: 8 };
-        let c = condition_pair(&pair, &p);
+        let c = condition_pair(&pair, &p, None);
         assert!(c.stats.cost_blur[0] > 1.0 && c.stats.cost_blur[1] == 0.0, "{:?}", c.stats.cost_blur);
         assert!(c.guide.left == img, "the guidance keeps the sharp view");
         assert!(c.cost_pair().left != img, "the cost sees the blurred one");
         // Two views alike are left alone.
         let same = StereoPair { left: img.clone(), right: img.clone(), ndisp: 8 };
-        assert_eq!(condition_pair(&same, &p).stats.cost_blur, [0.0, 0.0]);
+        assert_eq!(condition_pair(&same, &p, None).stats.cost_blur, [0.0, 0.0]);
     }
 }

@@ -82,21 +82,15 @@ pub struct ConditionParams {
     pub prior_margin_px: f32,
     /// The penalty stops growing beyond this distance past the margin.
     pub prior_trunc_px: f32,
-    /// Set by the pipeline for a coarse level of the prior's chain (and for a tiled run's coarse level), never by
-    /// a config: each view's noise σn at the level above divided by the reduction factor. A box average of F × F
-    /// pixels divides independent noise by F, while the one-image estimate reads fine texture as noise where few
-    /// flat pixels are left (1/8 of trainingQ: 0.7–1.2 grey levels on clean pairs against 0.2–0.4 at 1/4), so a
-    /// coarse level keeps the smaller of its own estimate and this.
-    #[serde(skip)]
-    pub noise_ceiling: Option<[f32; 2]>,
 }
 
 impl Default for ConditionParams {
     /// The default pipeline's conditioning (chosen in docs/tuning-log.md, "Robustness: the adaptive default"):
     /// stretch only a view that uses less than 1/1.5 of the range, denoise (for the cost) only a view measured
     /// noisier than 2 grey levels, and a coarse prior of weight 0.5·σn scaled by the coarse confidence, halved
-    /// where the coarse left-right check failed, from a half-resolution run that has such a prior of its own
-    /// (`prior_levels` 2, docs/tuning-log.md "Coarse priors of their own").
+    /// where the coarse left-right check failed, from a half-resolution run that has such a prior of its own, and
+    /// that one from a quarter-resolution run with one of its own (`prior_levels` 3: docs/tuning-log.md "Coarse
+    /// priors of their own", "A third coarse level").
     fn default() -> Self {
         ConditionParams {
             enabled: true,
@@ -126,7 +120,6 @@ impl Default for ConditionParams {
             sharpness_ratio: 1.25,
             prior_margin_px: 1.0,
             prior_trunc_px: 8.0,
-            noise_ceiling: None,
         }
     }
 }

@@ -52,15 +52,26 @@ pub fn run(params: &Params, pair: &StereoPair) -> Result<Output> {
 /// # Errors
 /// As [`run`].
 pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str)) -> Result<Output> {
+    run_level(params, pair, on_stage, None)
+}
+
+/// [`run_observed`] for a level whose measured noise is at most `noise_ceiling` (a coarse level: the `noise_ceiling`
+/// of [`crate::condition::condition_pair`]; `None` for the full resolution).
+fn run_level(
+    params: &Params,
+    pair: &StereoPair,
+    on_stage: &dyn Fn(&str),
+    noise_ceiling: Option<[f32; 2]>,
+) -> Result<Output> {
     params.validate()?;
     let factor = params.downscale;
     if factor == 1 {
-        return run_pipeline(params, pair, on_stage, Timings::default());
+        return run_pipeline(params, pair, on_stage, noise_ceiling, Timings::default());
     }
     let mut t = Timings::default();
     on_stage("downsample");
     let small = t.time("downsample", || scale::downsample_pair(pair, factor))?;
-    let low = run_pipeline(params, &small, on_stage, t)?;
+    let low = run_pipeline(params, &small, on_stage, noise_ceiling, t)?;
     drop(small);
     let mut t = low.timings;
     on_stage("upsample");
@@ -77,9 +88,15 @@ pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str))
 
 /// The pipeline at the pair's own resolution, appending its stage times to `t`: prepare, coarse prior, fine pass
 /// (within the coarse answer's label window with `condition.prior_window`).
-fn run_pipeline(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str), mut t: Timings) -> Result<Output> {
+fn run_pipeline(
+    params: &Params,
+    pair: &StereoPair,
+    on_stage: &dyn Fn(&str),
+    noise_ceiling: Option<[f32; 2]>,
+    mut t: Timings,
+) -> Result<Output> {
     check_features_fit(params, pair)?;
-    let mut input = Prepared::of(params, pair, &mut t);
+    let mut input = Prepared::of(params, pair, noise_ceiling, &mut t);
     // Before the full-resolution volume exists, so the two runs' buffers are never alive together.
     let chain = CoarseLevel::chain();
     let prior =

@@ -25,12 +25,14 @@ pub(crate) struct Prepared<'a> {
 }
 
 impl<'a> Prepared<'a> {
-    /// Conditions `pair` as `params.condition` says (stage `condition`).
-    pub(crate) fn of(params: &Params, pair: &'a StereoPair, t: &mut Timings) -> Self {
+    /// Conditions `pair` as `params.condition` says (stage `condition`), its measured noise at most
+    /// `noise_ceiling` (a coarse level's: [`condition::condition_pair`]).
+    pub(crate) fn of(params: &Params, pair: &'a StereoPair, noise_ceiling: Option<[f32; 2]>, t: &mut Timings) -> Self {
         let c = &params.condition;
         let mut cost_params = params.cost.clone();
         let (mut prior_weight, mut prior_flat) = (0.0f32, 0.0f32);
-        let conditioned = c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c)));
+        let conditioned =
+            c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c, noise_ceiling)));
         if let Some(cond) = &conditioned {
             prior_weight = c.prior_base + c.prior_per_sigma * cond.stats.sigma();
             prior_flat = c.prior_flat;
@@ -100,7 +102,7 @@ impl<'a> Prepared<'a> {
     }
 
     /// The noise ceiling of a level reduced `factor`× from this one
-    /// ([`params::ConditionParams::noise_ceiling`]): each view's measured σn / `factor`, what an F × F box average
+    /// (the `noise_ceiling` of [`condition::condition_pair`]): each view's measured σn / `factor`, what an F × F box average
     /// leaves of independent noise (`None` when conditioning is off).
     pub(crate) fn noise_ceiling(&self, factor: usize) -> Option<[f32; 2]> {
         self.conditioned.as_ref().map(|cond| cond.stats.noise.map(|v| v / factor as f32))

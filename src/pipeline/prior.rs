@@ -83,9 +83,7 @@ impl CoarseLevel {
         (input.prior_weight > 0.0 || input.prior_flat > 0.0) && fits
     }
 
-    /// The coarse run's parameters. Its noise is at most this level's (`input`), reduced by the F × F box average
-    /// (σ / F) ([`params::ConditionParams::noise_ceiling`]): its own one-image estimate reads texture as noise, and
-    /// the gradient term's ε that follows it hides faint shading (Vintage ×4 in tiles 4.82 -> 4.73).
+    /// The coarse run's parameters (its noise ceiling is not one of them: [`CoarseLevel::run`]).
     pub(crate) fn params(&self, params: &Params, input: &Prepared) -> Params {
         let mut coarse = params.clone();
         coarse.downscale = self.factor;
@@ -110,8 +108,20 @@ impl CoarseLevel {
                 ..*c
             };
         }
-        coarse.condition.noise_ceiling = input.noise_ceiling(self.factor);
         coarse
+    }
+
+    /// Runs the coarse level on `pair` (or, [`CoarseLevel::on_conditioned_pair`], on the pair as conditioned in
+    /// `input`). Its noise is at most this level's, reduced by the F × F box average (σ / F: the `noise_ceiling` of
+    /// [`condition::condition_pair`]): its own one-image estimate reads texture as noise, and the gradient term's ε
+    /// that follows it hides faint shading (Vintage ×4 in tiles 4.82 -> 4.73).
+    ///
+    /// # Errors
+    /// As [`super::run`].
+    pub(crate) fn run(&self, params: &Params, pair: &StereoPair, input: &Prepared) -> Result<Output> {
+        let coarse_params = self.params(params, input);
+        let source = if self.on_conditioned_pair { input.pairs(pair).0 } else { pair };
+        super::run_level(&coarse_params, source, &|_| {}, input.noise_ceiling(self.factor))
     }
 
     /// Runs the coarse level (stage [`CoarseLevel::stage`]) and makes its answer the prior of this level. On the
@@ -129,10 +139,8 @@ impl CoarseLevel {
         t: &mut Timings,
     ) -> Result<Prior> {
         let c = &params.condition;
-        let coarse_params = self.params(params, input);
-        let source = if self.on_conditioned_pair { input.pairs(pair).0 } else { pair };
         on_stage(self.stage);
-        let coarse = t.time(self.stage, || super::run_observed(&coarse_params, source, &|_| {}))?;
+        let coarse = t.time(self.stage, || self.run(params, pair, input))?;
         let grey_left = input.pairs(pair).1.left.to_grey();
         input.align_vertically(c, &grey_left, &coarse, t);
         let mut weight = input.prior_weight;

@@ -178,7 +178,7 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     let (w, h) = pair.left.dims();
     let f = plan.coarse_factor.max(2);
 
-    let mut input = Prepared::of(params, pair, &mut t);
+    let mut input = Prepared::of(params, pair, None, &mut t);
     // The coarse answer is the base of a tiled run: a point prior, with a floor on its weight where the full
     // resolution adds little detail to it (see `CoarseLevel::tiles`).
     let prior = CoarseLevel::tiles(f).prior(params, pair, &mut input, on_stage, &mut t)?;
@@ -427,16 +427,13 @@ mod tests {
         let pair = StereoPair::new(left, right, scene.ndisp).unwrap();
         let params = Params::default();
         let f = 4;
-        let input = Prepared::of(&params, &pair, &mut Timings::default());
+        let input = Prepared::of(&params, &pair, None, &mut Timings::default());
         let ceiling = input.noise_ceiling(f).expect("conditioning is on by default");
-        let coarse_noise = |p: &Params| {
-            let out = crate::run_observed(p, &pair, &|_| {}).unwrap();
-            out.measured.expect("a conditioned run reports what it measured").stats.noise
-        };
-        let with = CoarseLevel::tiles(f).params(&params, &input);
-        assert_eq!(with.downscale, f);
-        let own = coarse_noise(&Params { downscale: f, ..params.clone() });
-        let kept = coarse_noise(&with);
+        let noise = |out: Output| out.measured.expect("a conditioned run reports what it measured").stats.noise;
+        let level = CoarseLevel::tiles(f);
+        assert_eq!(level.params(&params, &input).downscale, f);
+        let own = noise(crate::run(&Params { downscale: f, ..params.clone() }, &pair).unwrap());
+        let kept = noise(level.run(&params, &pair, &input).unwrap());
         eprintln!("full σn / {f} {ceiling:?}, coarse level's own estimate {own:?}, with the ceiling {kept:?}");
         for v in 0..2 {
             assert!(own[v] > 2.0 * ceiling[v], "view {v}: the texture reads as noise at 1/{f} ({own:?})");
