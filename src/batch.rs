@@ -207,7 +207,7 @@ fn run_pair_in(
     let mut loaded = None;
     if search {
         let (left, right) = crate::io::png::load_rgb_pair(&pair.left, &pair.right)?;
-        ndisp = crate::range::find_ndisp(&left, &right, ndisp.min(w as usize), &params.cost);
+        ndisp = crate::range::find_ndisp(&left, &right, crate::range::search_limit(stated, w as usize), &params.cost);
         loaded = Some((left, right));
     }
     let (w, h) = (w as usize, h as usize);

@@ -16,7 +16,7 @@ pub enum NdispSource {
     /// Stated by the data (`calib.txt`): used unless it is no real bound ([`crate::range::needs_search`]), in which
     /// case the range is measured, up to it.
     Stated(usize),
-    /// None: the range is measured, up to half the width.
+    /// None: the range is measured, up to the width ([`crate::range::search_limit`], as `jem batch` does).
     Unknown,
 }
 
@@ -60,7 +60,7 @@ pub fn plan_match(
     let search = !matches!(source, NdispSource::Given(_)) && crate::range::needs_search(stated, w);
     let ndisp = match stated {
         Some(n) if !search => n,
-        _ => crate::range::find_ndisp(&left, &right, stated.unwrap_or(w / 2).clamp(2, w.max(2)), &params.cost),
+        _ => crate::range::find_ndisp(&left, &right, crate::range::search_limit(stated, w), &params.cost),
     };
     let pair = StereoPair::new(left, right, ndisp)?;
     let strategy = Strategy::choose(pair.left.width, pair.left.height, pair.ndisp, params, limit_bytes)?;

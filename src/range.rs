@@ -7,7 +7,8 @@
 //! candidate range, winner-take-all in both views, the matches that are left-right consistent, distinct and
 //! spatially coherent (at least [`MIN_COHERENT_NEIGHBOURS`] of the 8 neighbours' winners within one label), and
 //! the largest disparity a dense group of them holds, plus a margin. The policy ([`needs_search`]): search when
-//! no range is given, or when the given one is at least half the image width.
+//! no range is given, or when the given one is at least half the image width; up to [`search_limit`], the one
+//! rule of `jem` and `jem batch`.
 
 use crate::cost;
 use crate::image::RgbImage;
@@ -29,6 +30,13 @@ pub const SUSPECT_FRACTION: f64 = 0.5;
 /// Whether the range of a `width`-pixel-wide pair should be measured: none given, or `stated` ≥ half the width.
 pub fn needs_search(stated: Option<usize>, width: usize) -> bool {
     stated.is_none_or(|n| n as f64 >= SUSPECT_FRACTION * width as f64)
+}
+
+/// The largest range [`find_ndisp`] considers for a `width`-pixel-wide pair whose stated range is `stated`: the
+/// stated range, or the whole width when none is stated (no range is no bound, as ETH3D's ndisp = width is not:
+/// README, "ndisp"), never more than the width (nor below 2). `jem` and `jem batch` both ask this.
+pub fn search_limit(stated: Option<usize>, width: usize) -> usize {
+    stated.unwrap_or(width).clamp(2, width.max(2))
 }
 
 /// The search range 0..N−1 for the pair, at most `max_ndisp` (and at least 16): see the module doc. Falls back
@@ -93,6 +101,17 @@ pub fn find_ndisp(left: &RgbImage, right: &RgbImage, max_ndisp: usize, p: &CostP
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One rule for every caller: no range searches the whole width, a stated one up to itself, never past the
+    /// width (issue 38: `jem` searched up to half the width, `jem batch` up to the width).
+    #[test]
+    fn search_limit_is_the_stated_range_or_the_width() {
+        assert_eq!(search_limit(None, 640), 640);
+        assert_eq!(search_limit(Some(640), 640), 640);
+        assert_eq!(search_limit(Some(900), 640), 640);
+        assert_eq!(search_limit(Some(320), 640), 320);
+        assert_eq!(search_limit(None, 1), 2);
+    }
     use crate::synth::{SynthParams, render_scene};
 
     #[test]

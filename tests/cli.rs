@@ -879,3 +879,34 @@ fn ndisp_near_the_width_runs_with_the_defaults() {
     let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "d.pfm", "--ndisp", "95"]);
     assert!(out.status.success(), "{}", stderr(&out));
 }
+
+/// Issue 38: `jem` with no range and `jem batch` with one that is no bound (a calib.txt with ndisp = the width,
+/// as ETH3D writes) measure the range up to the same limit, [`jem::range::search_limit`] (before, `jem` stopped at
+/// half the width). A random texture seen with a disparity of 60 px in a 96 px wide pair: both paths find a range
+/// past half the width, agree on it, and write the same map.
+#[test]
+fn r38_jem_and_batch_search_up_to_the_same_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("shifted");
+    std::fs::create_dir(&scene).unwrap();
+    let (w, h, d) = (96, 48, 60);
+    let mut rng = jem::rng::SplitMix64::new(38);
+    let texture: Vec<u8> = (0..(w + d) * h).map(|_| (rng.next_u64() >> 56) as u8).collect();
+    // Left pixel x shows texture column x, right pixel x texture column x + d: left x matches right x − d.
+    for (f, from) in [("im0.png", 0), ("im1.png", d)] {
+        let rgb: Vec<u8> = (0..w * h).flat_map(|i| [texture[(i / w) * (w + d) + i % w + from]; 3]).collect();
+        jem::io::png::write_rgb8_png(&scene.join(f), w, h, &rgb).unwrap();
+    }
+    let wta = ["--set", "model=wta"];
+    let out = run_in(&scene, &[&["im0.png", "im1.png", "-o", "match.pfm"][..], &wta].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let said = stderr(&out);
+    let ndisp: usize =
+        said.split("ndisp ").nth(1).and_then(|r| r.split(',').next()).and_then(|n| n.parse().ok()).unwrap();
+    assert!(ndisp > d && ndisp <= w, "{said}");
+    std::fs::write(scene.join("calib.txt"), format!("width={w}\nheight={h}\nndisp={w}\n")).unwrap();
+    let out = run_in(dir.path(), &[&["batch", "shifted", "--alg", "T"][..], &wta].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let jem = std::fs::read(scene.join("match.pfm")).unwrap();
+    assert!(jem == std::fs::read(scene.join("disp0T.pfm")).unwrap(), "jem and jem batch wrote different maps");
+}
