@@ -1,0 +1,99 @@
+"""Stereo matching by joint energy minimization (Xue & Cai), on numpy arrays.
+
+``match`` computes a disparity map (the same bytes as the ``jem`` command line), ``depth`` turns it into metric
+depth, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads a PNG/PNM/JPEG.
+"""
+
+import os
+from typing import Any, Literal, Mapping, Optional, Tuple, Union, overload
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+_Image = Union[npt.NDArray[np.uint8], npt.NDArray[np.uint16]]
+_Map = npt.NDArray[np.float32]
+_Path = Union[str, "os.PathLike[str]"]
+_Config = Union[_Path, Mapping[str, Any], None]
+
+@overload
+def match(
+    left: _Image,
+    right: _Image,
+    ndisp: Optional[int] = None,
+    config: _Config = None,
+    overrides: Optional[Mapping[str, Any]] = None,
+    threads: Optional[int] = None,
+    max_memory: Optional[int] = None,
+    confidence: Literal[False] = False,
+    return_info: Literal[False] = False,
+    calib_ndisp: Optional[int] = None,
+) -> _Map: ...
+@overload
+def match(
+    left: _Image,
+    right: _Image,
+    ndisp: Optional[int] = None,
+    config: _Config = None,
+    overrides: Optional[Mapping[str, Any]] = None,
+    threads: Optional[int] = None,
+    max_memory: Optional[int] = None,
+    *,
+    confidence: Literal[True],
+    return_info: Literal[False] = False,
+    calib_ndisp: Optional[int] = None,
+) -> Tuple[_Map, _Map]: ...
+@overload
+def match(
+    left: _Image,
+    right: _Image,
+    ndisp: Optional[int] = None,
+    config: _Config = None,
+    overrides: Optional[Mapping[str, Any]] = None,
+    threads: Optional[int] = None,
+    max_memory: Optional[int] = None,
+    confidence: Literal[False] = False,
+    *,
+    return_info: Literal[True],
+    calib_ndisp: Optional[int] = None,
+) -> Tuple[_Map, dict[str, Any]]: ...
+@overload
+def match(
+    left: _Image,
+    right: _Image,
+    ndisp: Optional[int] = None,
+    config: _Config = None,
+    overrides: Optional[Mapping[str, Any]] = None,
+    threads: Optional[int] = None,
+    max_memory: Optional[int] = None,
+    *,
+    confidence: Literal[True],
+    return_info: Literal[True],
+    calib_ndisp: Optional[int] = None,
+) -> Tuple[_Map, _Map, dict[str, Any]]:
+    """The left view's disparity map of a rectified pair: float32 H×W, ``inf`` where invalid, exactly the map
+    ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings.
+
+    ``left``, ``right``: H×W (grey) or H×W×3 (RGB order; OpenCV loads BGR), uint8 or uint16, any strides.
+    ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair (up to half the width).
+    ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one. ``config``: a TOML path or a dict in
+    the TOML's shape. ``overrides``: ``{"section.key": value}`` as ``--set``. ``threads``: workers for this call.
+    ``max_memory``: bytes; larger runs go in tiles. With ``confidence=True`` also the confidence map, with
+    ``return_info=True`` also a dict (ndisp, ndisp_measured, tiled, noise, timings, seconds, memory_planned,
+    peak_rss). The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
+
+    Raises ValueError (shape, dtype, range, config), MemoryError (fits neither whole nor in tiles), OSError.
+    """
+
+def depth(disp: npt.NDArray[np.floating[Any]], f: float, baseline: float, doffs: float = 0.0) -> _Map:
+    """Metric depth Z = f·baseline / (disp + doffs), float32, ``inf`` where there is none."""
+
+def read_pfm(path: _Path) -> _Map:
+    """A PFM file as float32 H×W, top row first, ``inf`` kept."""
+
+def write_pfm(path: _Path, array: npt.NDArray[np.floating[Any]]) -> None:
+    """Writes a 2-D float array as a little-endian greyscale PFM (Middlebury rows bottom-up), atomically."""
+
+def read_image(path: _Path) -> _Image:
+    """A PNG, PPM/PGM or JPEG as uint8 or uint16, H×W (grey) or H×W×3 (RGB), as ``jem`` reads it."""
