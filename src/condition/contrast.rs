@@ -1,5 +1,5 @@
 //! Contrast (module doc of [`crate::condition`], items 1 and 2): the right view's histogram matched onto the
-//! left view's (`match_histograms`), and a low-contrast view stretched to [`TARGET_RANGE`] grey levels
+//! left view's (`experimental.match_histograms`), and a low-contrast view stretched to [`TARGET_RANGE`] grey levels
 //! (`stretch`).
 
 use std::borrow::Cow;

@@ -1,8 +1,8 @@
 //! Input conditioning and the coarse prior (our addition, not in the paper): measure the pair, then adapt to it,
 //! so that one configuration serves clean, noisy, dark and unevenly exposed pairs (issue 15).
 //!
-//! 1. **Photometric alignment** (`match_histograms`, off by default). The right view's channels are mapped onto
-//!    the left view's by histogram specification (a monotonic lookup per channel). Measured worse than without
+//! 1. **Photometric alignment** (`experimental.match_histograms`, off by default). The right view's channels are mapped
+//!    onto the left view's by histogram specification (a monotonic lookup per channel). Measured worse than without
 //!    once the rest is on (it hurts PianoL, whose views are lit differently on purpose).
 //! 2. **Contrast** (`stretch`). A view whose robust range (the 0.5th to the 99.5th percentile of grey) is below
 //!    [`TARGET_RANGE`] / `stretch_min_gain` is stretched by an affine map to span [`TARGET_RANGE`] grey levels,
@@ -22,7 +22,7 @@
 //! 4. **Coarse prior** (`prior_*`, in [`crate::pipeline`], prior.rs): the whole pipeline first runs on the
 //!    conditioned pair reduced 2× (noise halves, the range of labels too; a quarter of the plane segments, so
 //!    they keep their size in the scene), and the full-resolution cost of label d at pixel i
-//!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = max(`prior_base` + `prior_per_sigma`·σn,
+//!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = max(`experimental.prior_base` + `prior_per_sigma`·σn,
 //!    `prior_flat` × the flatness of the pixel's cost, [`crate::cost::flatness`]: an untextured surface follows
 //!    the coarse answer whatever the noise) × the coarse run's confidence at i (its max-marginal, with
 //!    `prior_confidence`) × `prior_untrusted` where the coarse left-right check failed (the fill guessed there),
@@ -32,11 +32,10 @@
 //!    instead of d_coarse: the coarse level places an edge only to within its own pixels, and fattens near
 //!    objects under noise. The coarse level removes the gross errors that fine-scale noise causes, the fine level
 //!    keeps the precision; the prior also places each pixel well enough that three full-resolution iterations do
-//!    the work of five. With `prior_levels` L
-//!    the coarse run has a coarse prior of its own, L − 1 levels deep (default 3: the half-resolution run is
-//!    guided by a quarter-resolution one, and that by an eighth-resolution one). With `prior_window` the full
-//!    resolution searches only the labels the coarse run found, widened by two coarse labels (off by default: as
-//!    accurate, and on MiddEval3's ranges hardly faster).
+//!    the work of five. With `prior_levels` L the coarse run has a coarse prior of its own, L − 1 levels deep (default
+//!    3: the half-resolution run is guided by a quarter-resolution one, and that by an eighth-resolution one). With
+//!    `experimental.prior_window` the full resolution searches only the labels the coarse run found, widened by two
+//!    coarse labels (off by default: as accurate, and on MiddEval3's ranges hardly faster).
 //! 5. **Vertical alignment** (`vertical_align`, in [`crate::run`] and the tiled run): with the coarse run's answer,
 //!    the right view's residual vertical offset (imperfect rectification) is measured and, where it reaches
 //!    `vertical_min_px`, removed from the guidance and the cost pair before the full-resolution cost
@@ -73,7 +72,7 @@ pub struct PairStats {
     /// Noise σ of the left and right view after the stretch, in grey levels (mean of the channels).
     pub noise: [f32; 2],
     /// Noise σ of the grey images the cost sees (after denoising; the larger view's); measured only when the
-    /// Census dead band needs it (`census_band` > 0), else 0.
+    /// Census dead band needs it (`experimental.census_band` > 0), else 0.
     pub residual_grey_noise: f32,
     /// The Gaussian blur σ (px) given to the left and the right view of the cost pair so that their sharpness
     /// matches ([`sharpness`]; 0 = none).
@@ -136,7 +135,7 @@ pub fn condition_pair<'a>(
     noise_ceiling: Option<[f32; 2]>,
 ) -> Conditioned<'a> {
     let mut guide = Cow::Borrowed(pair);
-    if p.match_histograms {
+    if p.experimental.match_histograms {
         let right = match_histograms(&pair.right, &pair.left);
         guide.to_mut().right = right;
     }
@@ -176,7 +175,7 @@ pub fn condition_pair<'a>(
         right: bilateral(&guide.right, p.denoise_sigma_xy, range(nr)),
         ndisp: pair.ndisp,
     });
-    let residual_grey_noise = if p.census_band > 0.0 {
+    let residual_grey_noise = if p.experimental.census_band > 0.0 {
         let c = cost.as_ref().unwrap_or(&guide);
         estimate_noise(&c.left.to_grey()).max(estimate_noise(&c.right.to_grey()))
     } else {

@@ -27,7 +27,7 @@ mod meanfield;
 mod sps;
 mod wmedian;
 
-pub use condition::ConditionParams;
+pub use condition::{ConditionParams, ExperimentalConditionParams};
 pub use cost::CostParams;
 pub use lrc::{LrcMode, LrcParams};
 pub use meanfield::{MeanFieldParams, Normalization, Schedule};

@@ -31,8 +31,8 @@ pub use output::{Measured, Output, Timings, VerticalMeasured};
 use prepared::Prepared;
 use prior::{CHAIN_FACTOR, CoarseLevel, Prior};
 
-/// The label window of `condition.prior_window` holds the coarse disparities widened by this many coarse labels
-/// either side.
+/// The label window of `condition.experimental.prior_window` holds the coarse disparities widened by this many coarse
+/// labels either side.
 const WINDOW_MARGIN_COARSE_LABELS: usize = 2;
 
 /// Runs the whole pipeline on a pair (at 1/`params.downscale` resolution if that is > 1; see [`scale`]).
@@ -87,7 +87,7 @@ fn run_level(
 }
 
 /// The pipeline at the pair's own resolution, appending its stage times to `t`: prepare, coarse prior, fine pass
-/// (within the coarse answer's label window with `condition.prior_window`).
+/// (within the coarse answer's label window with `condition.experimental.prior_window`).
 fn run_pipeline(
     params: &Params,
     pair: &StereoPair,
@@ -104,7 +104,7 @@ fn run_pipeline(
     let measured = input.measured();
     let (guide, cost_pair) = input.pairs(pair);
     let fine = FineInput { guide, cost_pair, cost_params: &input.cost_params, prior: None, left_from: 0 };
-    let window = prior.as_ref().filter(|_| params.condition.prior_window).and_then(|prior| {
+    let window = prior.as_ref().filter(|_| params.condition.experimental.prior_window).and_then(|prior| {
         window::label_window(&prior.disparity, guide.ndisp, WINDOW_MARGIN_COARSE_LABELS * CHAIN_FACTOR)
     });
     let mut out = match window {

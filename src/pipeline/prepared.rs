@@ -11,7 +11,7 @@ use super::output::{Measured, Output, Timings, VerticalMeasured};
 
 /// A pair after [`condition::condition_pair`] (when `[condition]` is active), with what follows from its
 /// measurements: the cost parameters (the Census dead band grows with the residual noise) and the coarse prior's
-/// weight λ = `prior_base` + `prior_per_sigma`·σn (0 when conditioning is off).
+/// weight λ = `experimental.prior_base` + `prior_per_sigma`·σn (0 when conditioning is off).
 pub(crate) struct Prepared<'a> {
     conditioned: Option<condition::Conditioned<'a>>,
     /// The cost parameters for this pair.
@@ -34,9 +34,9 @@ impl<'a> Prepared<'a> {
         let conditioned =
             c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c, noise_ceiling)));
         if let Some(cond) = &conditioned {
-            prior_weight = c.prior_base + c.prior_per_sigma * cond.stats.sigma();
+            prior_weight = c.experimental.prior_base + c.prior_per_sigma * cond.stats.sigma();
             prior_flat = c.prior_flat;
-            cost_params.census_dead_band += c.census_band * cond.stats.residual_grey_noise;
+            cost_params.census_dead_band += c.experimental.census_band * cond.stats.residual_grey_noise;
             // JPEG: steps no larger than the block grid's own are compression artefacts, not texture.
             cost_params.census_dead_band +=
                 cond.stats.block_band(c) * cond.stats.blocking[0].max(cond.stats.blocking[1]);
@@ -101,9 +101,9 @@ impl<'a> Prepared<'a> {
         })
     }
 
-    /// The noise ceiling of a level reduced `factor`× from this one
-    /// (the `noise_ceiling` of [`condition::condition_pair`]): each view's measured σn / `factor`, what an F × F box average
-    /// leaves of independent noise (`None` when conditioning is off).
+    /// The noise ceiling of a level reduced `factor`× from this one (the `noise_ceiling` of
+    /// [`condition::condition_pair`]): each view's measured σn / `factor`, what an F × F box average leaves of
+    /// independent noise (`None` when conditioning is off).
     pub(crate) fn noise_ceiling(&self, factor: usize) -> Option<[f32; 2]> {
         self.conditioned.as_ref().map(|cond| cond.stats.noise.map(|v| v / factor as f32))
     }

@@ -31,8 +31,8 @@ pub(crate) struct CoarseLevel {
     /// The stage its run is timed and reported under.
     pub stage: &'static str,
     /// The coarse run takes the pair as conditioned at this level, with the conditioning that is done already
-    /// (histogram matching, stretch, JPEG) off, this level's block band kept, and a coarse prior of its own one
-    /// level fewer (`prior_levels`; or while the pair is noisy enough, `prior_recurse_sigma`). Off (tiles), the
+    /// (histogram matching, stretch, JPEG) off, this level's block band kept, and a coarse prior of its own one level
+    /// fewer (`prior_levels`; or while the pair is noisy enough, `experimental.prior_recurse_sigma`). Off (tiles), the
     /// coarse level is an ordinary run on the input pair at its size, conditioned by itself.
     pub on_conditioned_pair: bool,
     /// The coarse run's plane segment count is scaled down with its area: the same segment size in the scene. Off
@@ -95,16 +95,20 @@ impl CoarseLevel {
             let c = &params.condition;
             let sigma = input.sigma();
             let deeper = c.prior_levels > 1;
-            let recurse = deeper || (c.prior_recurse_sigma > 0.0 && sigma >= c.prior_recurse_sigma);
+            let x = &c.experimental;
+            let recurse = deeper || (x.prior_recurse_sigma > 0.0 && sigma >= x.prior_recurse_sigma);
             coarse.condition = params::ConditionParams {
-                match_histograms: false,
                 stretch: false,
                 jpeg_noise: false,
                 block_band: input.block_band(c),
                 prior_per_sigma: if recurse { c.prior_per_sigma } else { 0.0 },
-                prior_base: if recurse { c.prior_base } else { 0.0 },
                 prior_flat: if recurse { c.prior_flat } else { 0.0 },
                 prior_levels: if deeper { c.prior_levels - 1 } else { 1 },
+                experimental: params::ExperimentalConditionParams {
+                    match_histograms: false,
+                    prior_base: if recurse { x.prior_base } else { 0.0 },
+                    ..*x
+                },
                 ..*c
             };
         }

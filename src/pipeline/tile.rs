@@ -508,7 +508,7 @@ mod tests {
         let pair = StereoPair::new(scene.left.clone(), scene.right.clone(), 150).unwrap();
         let full = crate::run(&Params::default(), &pair).unwrap();
         let mut p = Params::default();
-        p.condition.prior_window = true;
+        p.condition.experimental.prior_window = true;
         let windowed = crate::run(&p, &pair).unwrap();
         let (e_w, e_full, apart) = compare(&windowed.disparity, &full.disparity, &scene.gt, &scene.mask);
         assert!(apart <= 0.02, "{:.1} % apart", 100.0 * apart);

@@ -1,5 +1,5 @@
-//! Label windows: a pair whose disparities the coarse answer puts in a narrow part of the range is matched on
-//! those labels only, its right views shifted so that label d' is disparity lo + d' (`condition.prior_window`,
+//! Label windows: a pair whose disparities the coarse answer puts in a narrow part of the range is matched on those
+//! labels only, its right views shifted so that label d' is disparity lo + d' (`condition.experimental.prior_window`,
 //! and every tile of [`super::tile`]).
 
 use crate::error::Result;
