@@ -76,7 +76,7 @@ def match(
     ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings.
 
     ``left``, ``right``: H×W (grey) or H×W×3 (RGB order; OpenCV loads BGR), uint8 or uint16, any strides.
-    ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair (up to half the width).
+    ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair, as ``jem`` does without calib.txt.
     ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one. ``config``: a TOML path or a dict in
     the TOML's shape. ``overrides``: ``{"section.key": value}`` as ``--set``. ``threads``: workers for this call.
     ``max_memory``: bytes; larger runs go in tiles. With ``confidence=True`` also the confidence map, with

@@ -198,7 +198,7 @@ fn peak_rss_bytes() -> Option<u64> {
 /// ``left``, ``right``: numpy arrays H×W (grey) or H×W×3 (RGB order; OpenCV loads BGR: ``img[..., ::-1]``),
 /// uint8 or uint16 (16-bit values are divided by 257, as a 16-bit PNG is), any strides; grey and colour may be
 /// mixed. ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair as ``jem`` does without a
-/// calib.txt (up to half the width). ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one
+/// calib.txt (up to the width). ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one
 /// (measured instead, up to it, when it is half the width or more); ``ndisp`` wins. ``config``: a TOML file's
 /// path, or a dict in the TOML's shape (``{"meanfield": {"iterations": 5}}``). ``overrides``: a dict
 /// ``{"section.key": value}``, applied last, as ``--set``. ``threads``: worker threads for this call (default: one
