@@ -2,12 +2,17 @@
 //! data is present (`$JEM_DATA`, default `../shared/middlebury`), else on the shipped synthetic example.
 //!
 //! `cargo bench --bench stages` runs them all; `cargo bench --bench stages -- lattice` one group.
+//!
+//! Each kernel reports its throughput: cells per second for the stages over the cost volume's N × M cells (pixels ×
+//! labels; the lattice's per pixel × channel), pixels per second for the post-processing. The `machine` group
+//! measures what the roofline of docs/RESULTS.md compares them with: the memory bandwidth of a large copy and the
+//! rate of independent f32 multiply-adds on data in L1, as the kernels are compiled (AVX2, no FMA contraction).
 
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use jem::lattice::{Lattice, LatticeScratch};
 use jem::meanfield::{MeanField, PairwiseWeights};
 use jem::{Params, StereoPair, cost, post};
@@ -30,13 +35,57 @@ fn scene() -> (String, StereoPair) {
     (format!("{name} {}x{} nd{}", pair.left.width, pair.left.height, ndisp), pair)
 }
 
+/// Memory bandwidth and arithmetic rate of this machine, for the roofline.
+fn machine(c: &mut Criterion) {
+    let mut g = c.benchmark_group("machine");
+    g.sample_size(10);
+    // A copy of 256 MiB (read 256, write 256: the write-allocate read of the destination comes on top), far above
+    // any cache, in parallel as the kernels run.
+    let len = 64 << 20;
+    let src = vec![1.0f32; len];
+    let mut dst = vec![0.0f32; len];
+    g.throughput(Throughput::Bytes(2 * 4 * len as u64));
+    g.bench_function("copy 256 MiB (bytes read + written)", |b| {
+        b.iter(|| {
+            use rayon::prelude::*;
+            dst.par_chunks_mut(1 << 16).zip(src.par_chunks(1 << 16)).for_each(|(d, s)| d.copy_from_slice(s));
+            black_box(&dst);
+        })
+    });
+    // Multiply-adds on 4 KiB in L1, 16 independent chains per pass: the arithmetic peak the vectorised kernels
+    // can reach (2 FLOPs per element per pass).
+    let x = vec![0.999f32; 1024];
+    let mut acc = vec![0.0f32; 1024];
+    const PASSES: usize = 1000;
+    g.throughput(Throughput::Elements((2 * x.len() * PASSES) as u64));
+    g.bench_function("f32 multiply-add in L1, one thread (FLOPs)", |b| {
+        b.iter(|| {
+            for _ in 0..PASSES {
+                multiply_add(&mut acc, &x);
+            }
+            black_box(&acc);
+        })
+    });
+    g.finish();
+}
+
+/// `acc = acc · x + x`, compiled for AVX2 + FMA as the kernels are (without contraction: a multiply and an add).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
+fn multiply_add(acc: &mut [f32], x: &[f32]) {
+    for (a, v) in acc.iter_mut().zip(x) {
+        *a = *a * v + v;
+    }
+}
+
 fn stages(c: &mut Criterion) {
     let (name, pair) = scene();
     let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/default.toml");
     let params = Params::load(Some(&config), &[]).expect("configs/default.toml");
     let mf = &params.meanfield;
 
+    let (pixels, labels) = (pair.left.len() as u64, pair.ndisp as u64);
     let mut g = c.benchmark_group("cost");
+    g.throughput(Throughput::Elements(2 * pixels * labels));
     // As in the pipeline: the left volume in fresh memory, the right one in a spare buffer of the same size (the
     // left view's spent marginals there).
     let mut spare = vec![0.0f32; pair.left.len() * pair.ndisp];
@@ -52,12 +101,14 @@ fn stages(c: &mut Criterion) {
     g.finish();
 
     let mut g = c.benchmark_group("lattice");
+    g.throughput(Throughput::Elements(pixels));
     g.bench_function(BenchmarkId::new("build", &name), |b| {
         b.iter(|| black_box(Lattice::build(&pair.left, mf.sigma_xy, mf.sigma_rgb)))
     });
     let lattice = Lattice::build(&pair.left, mf.sigma_xy, mf.sigma_rgb);
     let n = pair.left.len();
     for channels in [1, pair.ndisp] {
+        g.throughput(Throughput::Elements(pixels * channels as u64));
         let input: Vec<f32> = (0..n * channels).map(|i| (i % 97) as f32 / 97.0).collect();
         let mut output = vec![0.0; input.len()];
         let mut scratch = LatticeScratch::default();
@@ -72,7 +123,7 @@ fn stages(c: &mut Criterion) {
 
     let cost_left = cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &params.cost);
     let mut g = c.benchmark_group("meanfield");
-    g.sample_size(10).measurement_time(Duration::from_secs(8));
+    g.sample_size(10).measurement_time(Duration::from_secs(8)).throughput(Throughput::Elements(pixels * labels));
     let weights = PairwiseWeights { fcm: params.effective_fcm_weight(), lcm: params.effective_lcm_weight() };
     g.bench_function(BenchmarkId::new("setup (lattice + init)", &name), |b| {
         b.iter(|| black_box(MeanField::new(&cost_left, &pair.left, mf, weights)))
@@ -83,6 +134,7 @@ fn stages(c: &mut Criterion) {
 
     // Post-processing on real inference output for both views.
     let mut g = c.benchmark_group("post");
+    g.throughput(Throughput::Elements(pixels));
     let infer = |image: &jem::RgbImage, cost: &jem::CostVolume| {
         jem::meanfield::decode_marginals(&jem::meanfield::infer_mean_field(cost, image, mf, weights), true).0
     };
@@ -116,7 +168,7 @@ fn stages(c: &mut Criterion) {
     g.finish();
 
     let mut g = c.benchmark_group("end-to-end");
-    g.sample_size(10).measurement_time(Duration::from_secs(20));
+    g.sample_size(10).measurement_time(Duration::from_secs(20)).throughput(Throughput::Elements(pixels));
     g.bench_function(BenchmarkId::new("default.toml", &name), |b| {
         b.iter(|| black_box(jem::run(&params, &pair).expect("pipeline")))
     });
@@ -130,5 +182,5 @@ fn stages(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, stages);
+criterion_group!(benches, machine, stages);
 criterion_main!(benches);
