@@ -30,6 +30,7 @@ pub use crate::dataset::SCENE_FILES;
 pub use crate::dataset::walk::{find_dirs_with, find_scenes};
 use crate::error::{Error, Result};
 use crate::io::calib;
+use crate::plan::NdispSource;
 use crate::{Params, StereoPair, Timings};
 
 /// Checks an algorithm name: 1–64 ASCII letters, digits, `_` or `-` (it becomes part of file names), and not
@@ -192,27 +193,38 @@ fn run_pair_in(
     let inputs: Vec<&Path> =
         [Some(pair.left.as_path()), Some(pair.right.as_path()), pair.calib.as_deref()].into_iter().flatten().collect();
     crate::io::check_outputs(&inputs, &[&files.disparity, &files.time])?;
-    let stated = match (opts.ndisp, &pair.calib) {
-        (Some(n), _) => Some(n),
-        (None, Some(c)) => Some(calib::read_ndisp(c)?),
-        (None, None) => pair.default_ndisp(),
+    let source = match (opts.ndisp, &pair.calib) {
+        (Some(n), _) => NdispSource::Given(n),
+        (None, Some(c)) => NdispSource::Stated(calib::read_ndisp(c)?),
+        (None, None) => pair.default_ndisp().map_or(NdispSource::Unknown, NdispSource::Stated),
     };
-    // The size from the image header: a pair too large for the budget is refused before it is decoded.
-    let (w, h) =
-        image::image_dimensions(&pair.left).map_err(|source| Error::Image { path: pair.left.clone(), source })?;
+    // Both headers, then the budget, before either image is decoded (issue 41): the loading, the range
+    // measurement when the range is measured, and the run with the smallest range it can give.
+    let header = crate::io::png::read_pair_header(&pair.left, &pair.right)?;
+    crate::plan::check_before_decode(&header, source, params, budget.total)?;
+    let (w, h) = (header.width, header.height);
     // No range, or a stated one of half the width or more, is no real bound: it is measured on the pair
-    // (crate::range), before the memory is checked and reserved for the measured one. --ndisp always wins.
-    let search = opts.ndisp.is_none() && crate::range::needs_search(stated, w as usize);
-    let mut ndisp = stated.unwrap_or(w as usize);
+    // (crate::range), within the budget, before the memory of the run is checked and reserved for the measured
+    // range. --ndisp always wins.
+    let (stated, search) = source.rule(w);
+    let mut ndisp = stated.unwrap_or(w);
     let mut loaded = None;
     if search {
+        let max = crate::range::search_limit(stated, w);
+        let within = budget.total.saturating_sub(crate::plan::pair_bytes(w, h));
+        let factor = crate::range::measure_factor(w, h, max, within)
+            .ok_or_else(|| crate::range::too_large(w, h, max, within))?;
+        let need =
+            header.load_bytes.max(crate::plan::pair_bytes(w, h) + crate::range::measure_bytes(w, h, max, factor));
+        on_stage("waiting for memory");
+        let _held = budget.reserve(need);
+        on_stage("loading");
         let (left, right) = crate::io::png::load_rgb_pair(&pair.left, &pair.right)?;
-        ndisp = crate::range::find_ndisp(&left, &right, crate::range::search_limit(stated, w as usize), &params.cost);
+        ndisp = crate::range::find_ndisp(&left, &right, max, &params.cost, within)?;
         loaded = Some((left, right));
     }
-    let (w, h) = (w as usize, h as usize);
     let strategy = crate::tile::Strategy::choose(w, h, ndisp, params, budget.total)?;
-    let need = strategy.memory_bytes(w, h, ndisp, params);
+    let need = strategy.memory_bytes(w, h, ndisp, params).max(header.load_bytes);
     on_stage("waiting for memory");
     let _held = budget.reserve(need);
     on_stage("loading");

@@ -20,6 +20,63 @@ pub enum NdispSource {
     Unknown,
 }
 
+impl NdispSource {
+    /// The range stated or given, and whether it is measured on a `width`-pixel-wide pair.
+    pub fn rule(self, width: usize) -> (Option<usize>, bool) {
+        match self {
+            NdispSource::Given(n) => (Some(n), false),
+            NdispSource::Stated(n) => (Some(n), crate::range::needs_search(Some(n), width)),
+            NdispSource::Unknown => (None, true),
+        }
+    }
+}
+
+/// The memory of a decoded `width × height` pair: two [`RgbImage`]s, 12 bytes a pixel each.
+pub fn pair_bytes(width: usize, height: usize) -> u64 {
+    24 * width as u64 * height as u64
+}
+
+/// Checks a pair against `limit_bytes` from its headers ([`crate::io::png::read_pair_header`]), before either image
+/// is decoded: the loading itself, the range measurement when the range is measured (beside the decoded pair:
+/// [`crate::range::find_ndisp`] then runs within the rest), and the run with the range given, or with the smallest
+/// range a measurement can give. [`plan_match`] checks the rest once the range is known.
+///
+/// # Errors
+/// [`Error::OutOfMemory`] when one of them does not fit, [`Error::InvalidParam`] for an impossible range.
+pub fn check_before_decode(
+    header: &crate::io::png::ImageHeader,
+    source: NdispSource,
+    params: &Params,
+    limit_bytes: u64,
+) -> Result<()> {
+    let (w, h) = (header.width, header.height);
+    let (stated, search) = source.rule(w);
+    match stated {
+        Some(n) if !search => {
+            Strategy::choose(w, h, n, params, limit_bytes)?;
+        }
+        _ => {
+            let max = crate::range::search_limit(stated, w);
+            Strategy::choose(w, h, crate::range::min_ndisp(max), params, limit_bytes)?;
+            let within = limit_bytes.saturating_sub(pair_bytes(w, h));
+            if crate::range::measure_factor(w, h, max, within).is_none() {
+                return Err(crate::range::too_large(w, h, max, within));
+            }
+        }
+    }
+    if header.load_bytes > limit_bytes {
+        return Err(Error::OutOfMemory {
+            needed: header.load_bytes,
+            limit: limit_bytes,
+            hint: format!(
+                "loading the {w}x{h} pair does not fit; use smaller images, or raise --max-memory if the machine \
+                 has the memory"
+            ),
+        });
+    }
+    Ok(())
+}
+
 /// A pair ready to run, and how.
 #[derive(Clone, Debug)]
 pub struct Plan {
@@ -37,7 +94,7 @@ pub struct Plan {
 /// # Errors
 /// [`Error::SizeMismatch`] or [`Error::Input`] for unequal or empty images (checked before the range is
 /// measured), [`Error::InvalidParam`] for an impossible range, [`Error::OutOfMemory`] when the run fits
-/// `limit_bytes` neither in one piece nor in tiles.
+/// `limit_bytes` neither in one piece nor in tiles, or the range measurement does not fit beside the pair.
 pub fn plan_match(
     left: RgbImage,
     right: RgbImage,
@@ -51,16 +108,14 @@ pub fn plan_match(
     if left.is_empty() {
         return Err(Error::Input("the images are empty (0 pixels)".into()));
     }
-    let w = left.width;
-    let stated = match source {
-        NdispSource::Given(n) => Some(n),
-        NdispSource::Stated(n) => Some(n),
-        NdispSource::Unknown => None,
-    };
-    let search = !matches!(source, NdispSource::Given(_)) && crate::range::needs_search(stated, w);
+    let (w, h) = left.dims();
+    let (stated, search) = source.rule(w);
     let ndisp = match stated {
         Some(n) if !search => n,
-        _ => crate::range::find_ndisp(&left, &right, crate::range::search_limit(stated, w), &params.cost),
+        _ => {
+            let within = limit_bytes.saturating_sub(pair_bytes(w, h));
+            crate::range::find_ndisp(&left, &right, crate::range::search_limit(stated, w), &params.cost, within)?
+        }
     };
     let pair = StereoPair::new(left, right, ndisp)?;
     let strategy = Strategy::choose(pair.left.width, pair.left.height, pair.ndisp, params, limit_bytes)?;

@@ -11,6 +11,7 @@
 //! rule of `jem` and `jem batch`.
 
 use crate::cost;
+use crate::error::{Error, Result};
 use crate::image::RgbImage;
 use crate::params::CostParams;
 use crate::scale::downsample_rgb;
@@ -39,12 +40,52 @@ pub fn search_limit(stated: Option<usize>, width: usize) -> usize {
     stated.unwrap_or(width).clamp(2, width.max(2))
 }
 
+/// The smallest range [`find_ndisp`] returns for a search up to `max_ndisp`.
+pub fn min_ndisp(max_ndisp: usize) -> usize {
+    16.min(max_ndisp)
+}
+
+/// The memory [`find_ndisp`] allocates for a `width × height` pair searched up to `max_ndisp` at 1/`factor`
+/// resolution: the two reduced images (12 bytes a pixel each), the cost volume and the right view's volume derived
+/// from it (both alive at once, 4 bytes a label), and the two winner-take-all maps and the list of consistent
+/// matches (4 bytes a pixel each).
+pub fn measure_bytes(width: usize, height: usize, max_ndisp: usize, factor: usize) -> u64 {
+    let n = crate::scale::reduced_len(width, factor) as u64 * crate::scale::reduced_len(height, factor) as u64;
+    let labels = max_ndisp.div_ceil(factor).clamp(2, crate::scale::reduced_len(width, factor).max(2)) as u64;
+    24 * n + 8 * n * labels + 12 * n
+}
+
+/// The resolution factor [`find_ndisp`] measures at within `limit_bytes`: 1/4 (but at least 32 × 16 pixels left to
+/// match), or, when that does not fit, the smallest coarser factor that does and leaves at least 8 × 4 pixels;
+/// `None` when none does.
+pub fn measure_factor(width: usize, height: usize, max_ndisp: usize, limit_bytes: u64) -> Option<usize> {
+    let first = first_factor(width, height);
+    std::iter::once(first)
+        .chain((first + 1..).take_while(|f| width / f >= 8 && height / f >= 4))
+        .find(|&f| measure_bytes(width, height, max_ndisp, f) <= limit_bytes)
+}
+
+/// 1/4 resolution, but at least 32 × 16 pixels left to match.
+fn first_factor(width: usize, height: usize) -> usize {
+    (1..=4).rev().find(|f| width / f >= 32 && height / f >= 16).unwrap_or(1)
+}
+
 /// The search range 0..N−1 for the pair, at most `max_ndisp` (and at least 16): see the module doc. Falls back
-/// to `max_ndisp` when fewer than 1 % of the pixels are consistent (no reliable measurement).
-pub fn find_ndisp(left: &RgbImage, right: &RgbImage, max_ndisp: usize, p: &CostParams) -> usize {
+/// to `max_ndisp` when fewer than 1 % of the pixels are consistent (no reliable measurement). What it allocates
+/// stays within `limit_bytes` ([`measure_bytes`]): a pair too large to measure at 1/4 resolution within it is
+/// measured coarser ([`measure_factor`]).
+///
+/// # Errors
+/// [`Error::OutOfMemory`] when the measurement fits `limit_bytes` at no resolution.
+pub fn find_ndisp(
+    left: &RgbImage,
+    right: &RgbImage,
+    max_ndisp: usize,
+    p: &CostParams,
+    limit_bytes: u64,
+) -> Result<usize> {
     let (w, h) = left.dims();
-    // 1/4 resolution, but at least 32 × 16 pixels left to match.
-    let factor = (1..=4).rev().find(|f| w / f >= 32 && h / f >= 16).unwrap_or(1);
+    let factor = measure_factor(w, h, max_ndisp, limit_bytes).ok_or_else(|| too_large(w, h, max_ndisp, limit_bytes))?;
     let (l, r) = (downsample_rgb(left, factor), downsample_rgb(right, factor));
     let labels = max_ndisp.div_ceil(factor).clamp(2, l.width.max(2));
     let vol = cost::build_cost_volume(&l, &r, labels, p);
@@ -81,7 +122,7 @@ pub fn find_ndisp(left: &RgbImage, right: &RgbImage, max_ndisp: usize, p: &CostP
     drop(vol);
     let dl_len = dl.data.len();
     if consistent.len() * 100 < dl_len {
-        return max_ndisp;
+        return Ok(max_ndisp);
     }
     // The largest disparity still held by a real surface: chance matches that pass both tests scatter thinly
     // over the whole range (a few pixels per label), a surface fills neighbouring labels densely. `top` is the
@@ -95,7 +136,19 @@ pub fn find_ndisp(left: &RgbImage, right: &RgbImage, max_ndisp: usize, p: &CostP
     let top = (0..labels).rev().find(|&d| hist[d] + hist[d + 1] + hist[d + 2] >= need).unwrap_or(labels - 1) as f32;
     // Two coarse labels and 8 px of margin, in full-resolution pixels.
     let n = ((f64::from(top) + 2.0) * factor as f64).ceil() as usize + 8;
-    n.clamp(16.min(max_ndisp), max_ndisp)
+    Ok(n.clamp(min_ndisp(max_ndisp), max_ndisp))
+}
+
+/// The error of a range measurement that fits `limit_bytes` at no resolution.
+pub fn too_large(width: usize, height: usize, max_ndisp: usize, limit_bytes: u64) -> Error {
+    Error::OutOfMemory {
+        needed: measure_bytes(width, height, max_ndisp, first_factor(width, height)),
+        limit: limit_bytes,
+        hint: format!(
+            "measuring the search range of {width}x{height} (up to {max_ndisp}) does not fit; give it with --ndisp N, \
+             or raise --max-memory if the machine has the memory"
+        ),
+    }
 }
 
 #[cfg(test)]
@@ -121,13 +174,29 @@ mod tests {
         assert!(!needs_search(Some(49), 100));
     }
 
+    /// Issue 41, item 1: the measurement stays within the memory limit. A limit just below what 1/4 resolution
+    /// needs measures coarser (and still covers the scene); a limit nothing fits is refused before allocating.
+    #[test]
+    fn the_measurement_stays_within_the_limit() {
+        let s = render_scene(&SynthParams { width: 320, height: 240, ndisp: 64, seed: 1 }).unwrap();
+        let at_4 = measure_bytes(320, 240, 320, 4);
+        assert_eq!(measure_factor(320, 240, 320, at_4), Some(4));
+        let coarser = measure_factor(320, 240, 320, at_4 - 1).unwrap();
+        assert!(coarser > 4 && measure_bytes(320, 240, 320, coarser) < at_4, "{coarser}");
+        let n = find_ndisp(&s.left, &s.right, 320, &CostParams::default(), at_4 - 1).unwrap();
+        let true_max = s.gt.data.iter().copied().fold(0.0f32, f32::max);
+        assert!(n as f32 > true_max + 1.0 && n <= 320, "found {n}, true max {true_max}");
+        let err = find_ndisp(&s.left, &s.right, 320, &CostParams::default(), 1000).unwrap_err();
+        assert!(matches!(err, Error::OutOfMemory { limit: 1000, .. }), "{err}");
+    }
+
     /// A rendered scene with a range stated as the whole width: the measured range covers every true disparity
     /// and is far smaller than the stated one.
     #[test]
     fn finds_a_range_that_covers_the_scene() {
         for seed in [1, 2, 3] {
             let s = render_scene(&SynthParams { width: 320, height: 240, ndisp: 64, seed }).unwrap();
-            let n = find_ndisp(&s.left, &s.right, 320, &CostParams::default());
+            let n = find_ndisp(&s.left, &s.right, 320, &CostParams::default(), u64::MAX).unwrap();
             let true_max = s.gt.data.iter().copied().fold(0.0f32, f32::max);
             assert!(n as f32 > true_max + 1.0 && n <= 100, "seed {seed}: found {n}, true max {true_max}");
         }
@@ -148,7 +217,7 @@ mod tests {
                     img.channels.iter_mut().for_each(|c| c[i] = v);
                 }
             }
-            let n = find_ndisp(&s.left, &s.right, w, &CostParams::default());
+            let n = find_ndisp(&s.left, &s.right, w, &CostParams::default(), u64::MAX).unwrap();
             let true_max = s.gt.data.iter().copied().fold(0.0f32, f32::max);
             assert!(n as f32 > true_max + 1.0 && n <= 72, "seed {seed}: found {n}, true max {true_max}");
         }

@@ -910,3 +910,43 @@ fn r38_jem_and_batch_search_up_to_the_same_limit() {
     let jem = std::fs::read(scene.join("match.pfm")).unwrap();
     assert!(jem == std::fs::read(scene.join("disp0T.pfm")).unwrap(), "jem and jem batch wrote different maps");
 }
+
+/// Issue 41, item 1: when the range is measured (no calib.txt, no `--ndisp`), the memory limit is checked from
+/// both headers before either image is decoded, in `jem` and `jem batch`: the loading, the range measurement
+/// (which then runs within the limit) and the run. 1ea02dd decoded first (here: a decoding error, as the files
+/// are headers only; on real images, a 2872 × 1984 pair peaked at 1.17 GB under `--max-memory 20M`).
+#[test]
+fn issue41_memory_checked_before_decoding_when_the_range_is_measured() {
+    let dir = tempfile::tempdir().unwrap();
+    let big = png_header_only(2872, 1984);
+    std::fs::write(dir.path().join("l.png"), &big).unwrap();
+    std::fs::write(dir.path().join("r.png"), &big).unwrap();
+    assert_clean_failure(dir.path(), &["--max-memory", "20M", "l.png", "r.png", "-o", "d.pfm"], &["needs about"]);
+    std::fs::create_dir_all(dir.path().join("set/S")).unwrap();
+    for name in ["im0.png", "im1.png"] {
+        std::fs::write(dir.path().join("set/S").join(name), &big).unwrap();
+    }
+    // ndisp = the width is no real bound: the range is measured.
+    std::fs::write(dir.path().join("set/S/calib.txt"), "ndisp=2872\n").unwrap();
+    let out = run_in(dir.path(), &["--max-memory", "20M", "batch", "set", "--alg", "A"]);
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), stderr(&out));
+    assert_eq!(out.status.code(), Some(2), "{text}");
+    assert!(text.contains("needs about"), "{text}");
+}
+
+/// Issue 41, item 2: both headers are read before either image is decoded, so a right image of another size is
+/// refused from its header (1ea02dd decoded it first: here a decoding error, as it is a header only); and with
+/// no range (no calib.txt, no `--ndisp`), views of different sizes are the same one-line error (1ea02dd: a panic
+/// in the cost volume, exit 101).
+#[test]
+fn issue41_right_header_read_before_decoding() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(example("im0.png"), dir.path().join("l.png")).unwrap();
+    std::fs::write(dir.path().join("big.png"), png_header_only(8000, 6000)).unwrap();
+    let mismatch = "left image is 320x240 but right image is 8000x6000";
+    assert_clean_failure(dir.path(), &["l.png", "big.png", "--ndisp", "16", "-o", "d.pfm"], &[mismatch]);
+    assert_clean_failure(dir.path(), &["l.png", "big.png", "-o", "d.pfm"], &[mismatch]);
+    synth_scene(dir.path(), &["S", "--width", "64", "--height", "48", "--ndisp", "16"]);
+    std::fs::copy(dir.path().join("S/im1.png"), dir.path().join("small.png")).unwrap();
+    assert_clean_failure(dir.path(), &["l.png", "small.png", "-o", "d.pfm"], &["320x240", "64x48"]);
+}

@@ -117,17 +117,16 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         (None, Some(c)) => Some(c.ndisp().map_err(|msg| Error::Calib { path: calib.clone(), msg })?),
         (None, None) => None,
     };
-    let header = image::image_dimensions(left).ok();
-    let search = args.ndisp.is_none() && header.is_some_and(|(w, _)| jem::range::needs_search(stated, w as usize));
-    if let (Some((w, h)), Some(n), false) = (header, stated, search) {
-        Strategy::choose(w as usize, h as usize, n, &params, global.memory_limit())?;
-    }
-    let (l, r) = jem::io::png::load_rgb_pair(left, right)?;
     let source = match (args.ndisp, stated) {
         (Some(n), _) => NdispSource::Given(n),
         (None, Some(n)) => NdispSource::Stated(n),
         (None, None) => NdispSource::Unknown,
     };
+    // Both headers, then the limit, before either image is decoded (issue 41: the loading and the range
+    // measurement are checked too, and the right image's size before it is decoded).
+    let header = jem::io::png::read_pair_header(left, right)?;
+    jem::plan::check_before_decode(&header, source, &params, global.memory_limit())?;
+    let (l, r) = jem::io::png::load_rgb_pair(left, right)?;
     // The range and the way to run: shared with the Python module (jem::plan), so both give the same map.
     let Plan { pair, strategy, ndisp_measured } = plan_match(l, r, source, &params, global.memory_limit())?;
     if ndisp_measured && !global.quiet {

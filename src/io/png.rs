@@ -11,6 +11,52 @@ use image::{DynamicImage, ImageEncoder, ImageReader};
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane, RgbImage};
 
+/// What an image file's header says, read without decoding the image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImageHeader {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// The memory [`load_rgb`] holds at its peak: the file, the decoded samples and the `f32` planes.
+    pub load_bytes: u64,
+}
+
+/// Reads the header of an image file (not the image).
+///
+/// # Errors
+/// As [`load_rgb`], for the header.
+pub fn read_header(path: &Path) -> Result<ImageHeader> {
+    use image::ImageDecoder;
+    let file_bytes = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
+    let reader = ImageReader::open(path).map_err(|e| Error::io(path, e))?;
+    let reader = reader.with_guessed_format().map_err(|e| Error::io(path, e))?;
+    if reader.format().is_none() {
+        return Err(Error::Input(format!("{}: not a PNG, PNM or JPEG image", path.display())));
+    }
+    let decoder = reader.into_decoder().map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
+    let (w, h) = decoder.dimensions();
+    let px = u64::from(w) * u64::from(h);
+    let load_bytes = file_bytes.saturating_add(decoder.total_bytes()).saturating_add(12 * px);
+    Ok(ImageHeader { width: w as usize, height: h as usize, load_bytes })
+}
+
+/// Reads the headers of both images of a pair, before either is decoded: their common size and the memory
+/// [`load_rgb_pair`] holds at its peak (both loads at once).
+///
+/// # Errors
+/// As [`read_header`]; [`Error::SizeMismatch`] for unequal sizes, [`Error::Input`] for empty images.
+pub fn read_pair_header(left: &Path, right: &Path) -> Result<ImageHeader> {
+    let (l, r) = (read_header(left)?, read_header(right)?);
+    if (l.width, l.height) != (r.width, r.height) {
+        return Err(Error::SizeMismatch { left: (l.width, l.height), right: (r.width, r.height) });
+    }
+    if l.width == 0 || l.height == 0 {
+        return Err(Error::Input(format!("{}: the images are empty (0 pixels)", left.display())));
+    }
+    Ok(ImageHeader { load_bytes: l.load_bytes.saturating_add(r.load_bytes), ..l })
+}
+
 /// Loads the two images of a pair at the same time (see [`load_rgb`]).
 ///
 /// # Errors
