@@ -950,3 +950,24 @@ fn issue41_right_header_read_before_decoding() {
     std::fs::copy(dir.path().join("S/im1.png"), dir.path().join("small.png")).unwrap();
     assert_clean_failure(dir.path(), &["l.png", "small.png", "-o", "d.pfm"], &["320x240", "64x48"]);
 }
+
+/// Issue 41, item 3: an output path that is an existing folder (`-o`, `--confidence`, `--depth`, `--cloud`) is
+/// refused before any work, and nothing is written (1ea02dd ran the pair, renamed `d.pfm` into place, then failed
+/// on the folder: exit 2 with `d.pfm` left). In batch, a time file that cannot be written (a folder in its
+/// place) leaves no disparity map that a later `--skip-existing` would trust.
+#[test]
+fn issue41_an_output_that_is_a_folder_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), &["S", "--width", "64", "--height", "48", "--ndisp", "16"]);
+    std::fs::create_dir(dir.path().join("k.pfm")).unwrap();
+    std::fs::create_dir(dir.path().join("c.ply")).unwrap();
+    let run = ["S/im0.png", "S/im1.png", "--set", "model=wta"];
+    for extra in [&["--confidence", "k.pfm"][..], &["--depth", "k.pfm"], &["--cloud", "c.ply"]] {
+        assert_clean_failure(dir.path(), &[&run[..], &["-o", "d.pfm"], extra].concat(), &[extra[1], "folder"]);
+    }
+    assert_clean_failure(dir.path(), &[&run[..], &["-o", "k.pfm"]].concat(), &["k.pfm", "folder"]);
+    std::fs::create_dir(dir.path().join("S/timeA.txt")).unwrap();
+    let out = run_in(dir.path(), &["batch", "S", "--alg", "A"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(!dir.path().join("S/disp0A.pfm").exists(), "a disparity map without its time file");
+}

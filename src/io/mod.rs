@@ -66,8 +66,9 @@ pub fn encode_disparity(path: &Path, map: &DisparityMap) -> Result<Vec<u8>> {
 
 /// Writes several files as one: each goes to its temporary file first; only when all of them are written and
 /// flushed are they renamed into place. If any write fails, no destination is touched and the temporary files
-/// are removed. (A rename within one folder does not fail in practice; if one did, the files renamed before it
-/// stay, and the error names the one that failed.)
+/// are removed. If a rename fails (a destination that is a folder, say), the files renamed before it are undone:
+/// a destination that existed gets its old file back (kept under a hidden name, a hard link, until all are
+/// renamed), one that did not is removed; the error names the file that failed.
 ///
 /// # Errors
 /// [`Error::Io`] naming the first file that could not be written.
@@ -85,10 +86,40 @@ pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
             }
         }
     }
+    // How to undo each rename: remove the new file (there was none), or put the old one back (kept by a hard link
+    // under a hidden name; `None` when it could not be kept, and the new file then stays).
+    enum Undo {
+        Remove,
+        Restore(Option<PathBuf>),
+    }
+    let mut done: Vec<(&Path, Undo)> = Vec::with_capacity(staged.len());
     for (i, (tmp, path)) in staged.iter().enumerate() {
+        let undo = match std::fs::symlink_metadata(path) {
+            Err(_) => Undo::Remove,
+            Ok(_) => {
+                let keep = temp_path(path);
+                Undo::Restore(std::fs::hard_link(path, &keep).is_ok().then_some(keep))
+            }
+        };
         if let Err(e) = std::fs::rename(tmp, path) {
             staged[i..].iter().for_each(|(tmp, _)| drop(std::fs::remove_file(tmp)));
+            if let Undo::Restore(Some(keep)) = &undo {
+                let _ = std::fs::remove_file(keep);
+            }
+            for (done_path, undo) in done.into_iter().rev() {
+                let _ = match undo {
+                    Undo::Remove => std::fs::remove_file(done_path),
+                    Undo::Restore(Some(keep)) => std::fs::rename(keep, done_path),
+                    Undo::Restore(None) => Ok(()),
+                };
+            }
             return Err(Error::io(path, e));
+        }
+        done.push((path, undo));
+    }
+    for (_, undo) in done {
+        if let Undo::Restore(Some(keep)) = undo {
+            let _ = std::fs::remove_file(keep);
         }
     }
     Ok(())
@@ -124,13 +155,16 @@ fn same_file(a: &Path, b: &Path) -> bool {
     false
 }
 
-/// Checks, before any work, that no output of a command is one of its inputs or another of its outputs (also
-/// through symbolic or hard links).
+/// Checks, before any work, that no output of a command is an existing folder, one of its inputs or another of
+/// its outputs (also through symbolic or hard links).
 ///
 /// # Errors
-/// [`Error::Input`] naming both paths.
+/// [`Error::Input`] naming the path (and the other path).
 pub fn check_outputs(inputs: &[&Path], outputs: &[&Path]) -> Result<()> {
     for (k, out) in outputs.iter().enumerate() {
+        if out.is_dir() {
+            return Err(Error::Input(format!("{}: is a folder; an output must be a file name", out.display())));
+        }
         if let Some(input) = inputs.iter().find(|i| same_file(out, i)) {
             return Err(Error::Input(format!(
                 "{}: this output would overwrite an input of the same command ({}); choose another name",
@@ -311,6 +345,29 @@ mod tests {
         let b = dir.path().join("b.txt");
         write_all_or_none(&[(&a, b"new"), (&b, b"b")]).unwrap();
         assert_eq!((std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap()), (b"new".to_vec(), b"b".to_vec()));
+    }
+
+    /// Issue 41, item 3: a rename that fails (the last destination is a folder) undoes the ones before it: a new
+    /// file is removed, a replaced one gets its old content back, and no hidden file is left.
+    #[test]
+    fn all_or_none_undoes_the_renames_when_one_fails() {
+        let dir = tempfile::tempdir().unwrap();
+        let (old, new, folder) = (dir.path().join("old.txt"), dir.path().join("new.txt"), dir.path().join("k.pfm"));
+        std::fs::write(&old, b"old").unwrap();
+        std::fs::create_dir(&folder).unwrap();
+        let e = write_all_or_none(&[(&old, b"replaced"), (&new, b"n"), (&folder, b"k")]).unwrap_err();
+        assert!(e.to_string().contains("k.pfm"), "{e}");
+        assert_eq!(std::fs::read(&old).unwrap(), b"old", "the replaced file is restored");
+        assert_eq!(files(dir.path()), ["k.pfm", "old.txt"], "the new file is removed, nothing hidden is left");
+        assert!(check_outputs(&[], &[&new, &folder]).unwrap_err().to_string().contains("is a folder"));
+    }
+
+    /// The names in a folder, sorted.
+    fn files(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> =
+            std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        names.sort();
+        names
     }
 
     #[test]
