@@ -971,3 +971,28 @@ fn issue41_an_output_that_is_a_folder_is_refused_before_any_work() {
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(!dir.path().join("S/disp0A.pfm").exists(), "a disparity map without its time file");
 }
+
+/// Issue 41, item 9: a closed stdout and stderr (`jem batch … 2>&1 | head -1`) do not stop the work: every scene
+/// is written and the exit code is 0 (1ea02dd panicked on its second progress line, exit 101, after one scene).
+#[test]
+fn issue41_a_closed_pipe_does_not_stop_the_batch() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["S1", "S2", "S3"] {
+        synth_scene(dir.path(), &[&format!("set/{name}"), "--width", "64", "--height", "48", "--ndisp", "16"]);
+    }
+    let mut child = common::jem()
+        .current_dir(dir.path())
+        .args(["batch", "set", "--alg", "A", "--set", "model=wta"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Both read ends closed at once: every line the batch prints goes to a closed pipe.
+    drop(child.stdout.take());
+    drop(child.stderr.take());
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(0));
+    for name in ["S1", "S2", "S3"] {
+        assert!(dir.path().join("set").join(name).join("disp0A.pfm").is_file(), "{name} not written");
+    }
+}

@@ -76,7 +76,7 @@ impl BatchDisplay {
     fn line(&self, msg: &str) {
         match &self.bar {
             Some(bar) => bar.println(msg),
-            None => eprintln!("{msg}"),
+            None => note!("{msg}"),
         }
     }
 
@@ -165,7 +165,7 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     if !global.quiet {
         let shard =
             args.shard.map(|s| format!(" (shard {}/{} of {})", s.index, s.count, all.len())).unwrap_or_default();
-        eprintln!("{} pair(s){shard}, alg {}, {} job(s)", scenes.len(), args.alg, args.jobs);
+        note!("{} pair(s){shard}, alg {}, {} job(s)", scenes.len(), args.alg, args.jobs);
         let dirs: std::collections::BTreeSet<(&str, PathBuf)> = scenes
             .iter()
             .filter(|p| p.layout != jem::dataset::Layout::Middlebury)
@@ -175,7 +175,7 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
             })
             .collect();
         for (layout, dir) in dirs {
-            eprintln!("{layout} results: {}", dir.display());
+            note!("{layout} results: {}", dir.display());
         }
     }
     let opts = BatchOptions {
@@ -205,7 +205,7 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
 
     let failed = reports.iter().filter(|r| matches!(r.status, SceneStatus::Failed(_))).count();
     if !global.quiet {
-        print!("{}", batch_summary(&reports, global.verbose));
+        out!("{}", batch_summary(&reports, global.verbose));
     }
     Ok(if failed > 0 { ExitCode::from(2) } else { ExitCode::SUCCESS })
 }

@@ -44,6 +44,6 @@ fn parse_downscale(text: &str) -> Result<usize> {
 
 /// Prints the effective configuration as TOML.
 pub(super) fn run(args: &ConfigArgs) -> Result<ExitCode> {
-    print!("{}", args.params()?.to_toml());
+    out!("{}", args.params()?.to_toml());
     Ok(ExitCode::SUCCESS)
 }

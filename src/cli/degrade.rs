@@ -30,7 +30,7 @@ pub(super) struct DegradeArgs {
 pub(super) fn run(args: &DegradeArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let scenes = jem::degrade::degrade_tree(&args.src, &args.out, &args.recipe, args.seed)?;
     if !global.quiet {
-        eprintln!("wrote {} scene(s) under {} ({}, seed {})", scenes.len(), args.out.display(), args.recipe, args.seed);
+        note!("wrote {} scene(s) under {} ({}, seed {})", scenes.len(), args.out.display(), args.recipe, args.seed);
     }
     Ok(ExitCode::SUCCESS)
 }

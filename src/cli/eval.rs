@@ -111,7 +111,7 @@ pub(super) fn run(args: &EvalArgs) -> Result<ExitCode> {
         .iter()
         .map(|alg| evaluate_dir(&dir, alg, args.mask, args.scale.0, &sources))
         .collect::<Result<Vec<_>>>()?;
-    print!("{}", render(&reports, &papers, args.format));
+    out!("{}", render(&reports, &papers, args.format));
     let excluded = reports.iter().any(|r| r.excluded().next().is_some());
     Ok(if excluded { ExitCode::from(2) } else { ExitCode::SUCCESS })
 }

@@ -131,12 +131,13 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let Plan { pair, strategy, ndisp_measured } = plan_match(l, r, source, &params, global.memory_limit())?;
     if ndisp_measured && !global.quiet {
         let was = stated.map_or("no range given".to_string(), |s| format!("calib.txt says {s}"));
-        eprintln!("ndisp {}, measured on the pair ({was}; --ndisp N sets it)", pair.ndisp);
+        note!("ndisp {}, measured on the pair ({was}; --ndisp N sets it)", pair.ndisp);
     }
     if let (Strategy::Tiled(plan), false) = (strategy, global.quiet) {
-        eprintln!(
+        note!(
             "running in tiles of {} px after a coarse level at 1/{} (bounded memory)",
-            plan.core_px, plan.coarse_factor
+            plan.core_px,
+            plan.coarse_factor
         );
     }
     let load_time = start.elapsed();
@@ -167,18 +168,18 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let refs: Vec<(&Path, &[u8])> = files.iter().map(|(p, b)| (*p, b.as_slice())).collect();
     jem::io::write_all_or_none(&refs)?;
     if global.verbose && !global.quiet {
-        eprintln!("{:<14} {:>9.1} ms", "load", load_time.as_secs_f64() * 1e3);
+        note!("{:<14} {:>9.1} ms", "load", load_time.as_secs_f64() * 1e3);
         for (name, d) in &out.timings.stages {
-            eprintln!("{name:<14} {:>9.1} ms", d.as_secs_f64() * 1e3);
+            note!("{name:<14} {:>9.1} ms", d.as_secs_f64() * 1e3);
         }
-        eprintln!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
+        note!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
         if let Some(m) = &out.measured {
-            eprintln!("{}", describe_measured(m));
+            note!("{}", describe_measured(m));
         }
         let (w, h) = pair.left.dims();
         let planned = strategy.memory_bytes(w, h, pair.ndisp, &params);
         if let Some(peak) = peak_rss_bytes() {
-            eprintln!("memory: peak {} (planned {})", human(peak), human(planned));
+            note!("memory: peak {} (planned {})", human(peak), human(planned));
         }
     }
     Ok(ExitCode::SUCCESS)

@@ -8,6 +8,27 @@
 //! [`print_error`]. One file per command: `match.rs` (also the default, `jem LEFT RIGHT -o OUT`), `config.rs`
 //! (and the `--config`/`--set`/`--downscale` flags that `match` and `batch` share), `synth.rs`, `batch.rs`,
 //! `eval.rs`, `viz.rs`.
+//!
+//! Everything the commands print goes through [`note!`] (stderr) and [`out!`] (stdout), which ignore a closed or
+//! failing stream: `jem batch … 2>&1 | head -1` must not stop the work (issue 41; `eprintln!` panics on a
+//! closed pipe).
+
+/// Writes a line to stderr, ignoring a closed or failing stderr.
+macro_rules! note {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr().lock(), $($arg)*);
+    }};
+}
+
+/// Writes text to stdout (no newline added), ignoring a closed or failing stdout.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let mut stdout = std::io::stdout().lock();
+        let _ = write!(stdout, $($arg)*).and_then(|()| stdout.flush());
+    }};
+}
 
 mod batch;
 mod config;
@@ -240,5 +261,5 @@ pub fn print_error(err: &Error) {
         msg.push_str(&s.to_string());
         source = s.source();
     }
-    eprintln!("{msg}");
+    note!("{msg}");
 }

@@ -34,7 +34,7 @@ pub(super) fn run(args: &SynthArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let scene = jem::synth::render_scene(&params)?;
     jem::synth::write_scene(&args.outdir, &scene)?;
     if !global.quiet {
-        eprintln!(
+        note!(
             "wrote {}/{{im0.png,im1.png,calib.txt,disp0GT.pfm,mask0nocc.png}}: {}x{}, ndisp {}, disparities {}..{}, \
              seed {}",
             args.outdir.display(),

@@ -71,11 +71,11 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         let sheet = viz::contact_sheet(&args.input, alg, args.scale, args.panel_width)?;
         sheet.canvas.write_png(&args.output)?;
         for (dir, e) in &sheet.skipped {
-            eprintln!("warning: {} left out: {e}", dir.display());
+            note!("warning: {} left out: {e}", dir.display());
         }
         if !global.quiet {
             let names: Vec<String> = sheet.rows.iter().map(|s| jem::batch::scene_name(s)).collect();
-            eprintln!("{}: {} rows ({})", args.output.display(), names.len(), names.join(", "));
+            note!("{}: {} rows ({})", args.output.display(), names.len(), names.join(", "));
         }
         return Ok(ExitCode::SUCCESS);
     }
@@ -110,7 +110,7 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     };
     picture.write_png(&args.output)?;
     if global.verbose && !global.quiet {
-        eprintln!("{}: range {vmin}..{vmax}", args.output.display());
+        note!("{}: range {vmin}..{vmax}", args.output.display());
     }
     Ok(ExitCode::SUCCESS)
 }
