@@ -996,3 +996,19 @@ fn issue41_a_closed_pipe_does_not_stop_the_batch() {
         assert!(dir.path().join("set").join(name).join("disp0A.pfm").is_file(), "{name} not written");
     }
 }
+
+/// Issue 41, item 10: global flags before every subcommand, `degrade` included (1ea02dd: "the subcommand 'OUT'
+/// cannot be used with --threads"): a degrade run, and each subcommand's help.
+#[test]
+fn issue41_global_flags_before_every_subcommand() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), &["src/S", "--width", "64", "--height", "48", "--ndisp", "16"]);
+    let out = run_in(dir.path(), &["--threads", "1", "-q", "degrade", "src", "out", "--recipe", "noise:2"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(dir.path().join("out/S/im0.png").is_file());
+    for sub in ["match", "config", "synth", "degrade", "batch", "eval", "viz"] {
+        let out = run_in(dir.path(), &["--threads", "1", "--max-memory", "1G", sub, "--help"]);
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success() && text.contains(&format!("Usage: jem {sub}")), "{sub}: {text}{}", stderr(&out));
+    }
+}

@@ -96,8 +96,11 @@ impl GlobalArgs {
 /// Moves global flags written before a subcommand to just after it: `jem --threads 1 batch …` becomes
 /// `jem batch --threads 1 …`. (The top-level command takes the match arguments too, so clap reads any flag before
 /// the subcommand as belonging to a match and then rejects the subcommand name as a stray argument.)
+///
+/// Every subcommand's name comes from the parser itself, so none is missed (issue 41: `degrade` was).
 pub fn global_flags_after_subcommand(mut args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsString> {
-    const SUBCOMMANDS: [&str; 7] = ["match", "config", "synth", "batch", "eval", "viz", "help"];
+    let command = <Cli as clap::CommandFactory>::command();
+    let is_subcommand = |arg: &str| arg == "help" || command.get_subcommands().any(|c| c.get_name() == arg);
     let mut i = 1;
     while i < args.len() {
         let Some(arg) = args[i].to_str() else { return args };
@@ -105,7 +108,7 @@ pub fn global_flags_after_subcommand(mut args: Vec<std::ffi::OsString>) -> Vec<s
             "-q" | "--quiet" | "-v" | "--verbose" => i += 1,
             "--threads" | "--max-memory" => i += 2,
             _ if arg.starts_with("--threads=") || arg.starts_with("--max-memory=") => i += 1,
-            _ if i > 1 && SUBCOMMANDS.contains(&arg) => {
+            _ if i > 1 && is_subcommand(arg) => {
                 let sub = args.remove(i);
                 args.insert(1, sub);
                 return args;
