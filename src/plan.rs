@@ -92,8 +92,8 @@ pub struct Plan {
 /// Run it with `plan.strategy.run(params, &plan.pair, on_stage)`.
 ///
 /// # Errors
-/// [`Error::SizeMismatch`] or [`Error::Input`] for unequal or empty images (checked before the range is
-/// measured), [`Error::InvalidParam`] for an impossible range, [`Error::OutOfMemory`] when the run fits
+/// [`Error::SizeMismatch`] or [`Error::Input`] for unequal or empty images, or images narrower than 2 pixels
+/// (checked before the range is measured), [`Error::InvalidParam`] for an impossible range, [`Error::OutOfMemory`] when the run fits
 /// `limit_bytes` neither in one piece nor in tiles, or the range measurement does not fit beside the pair.
 pub fn plan_match(
     left: RgbImage,
@@ -107,6 +107,10 @@ pub fn plan_match(
     }
     if left.is_empty() {
         return Err(Error::Input("the images are empty (0 pixels)".into()));
+    }
+    if left.width < 2 {
+        let (w, h) = left.dims();
+        return Err(Error::Input(format!("the images are {w}x{h}; a stereo pair must be at least 2 pixels wide")));
     }
     let (w, h) = left.dims();
     let (stated, search) = source.rule(w);

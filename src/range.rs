@@ -35,9 +35,10 @@ pub fn needs_search(stated: Option<usize>, width: usize) -> bool {
 
 /// The largest range [`find_ndisp`] considers for a `width`-pixel-wide pair whose stated range is `stated`: the
 /// stated range, or the whole width when none is stated (no range is no bound, as ETH3D's ndisp = width is not:
-/// README, "ndisp"), never more than the width (nor below 2). `jem` and `jem batch` both ask this.
+/// README, "ndisp"), never more than the largest range a pair of that width takes (width − 1: a disparity of
+/// width − 2 at most, as [`crate::StereoPair::new`] requires), nor below 1. `jem` and `jem batch` both ask this.
 pub fn search_limit(stated: Option<usize>, width: usize) -> usize {
-    stated.unwrap_or(width).clamp(2, width.max(2))
+    stated.unwrap_or(width).min(width.saturating_sub(1)).max(1)
 }
 
 /// The smallest range [`find_ndisp`] returns for a search up to `max_ndisp`.
@@ -159,11 +160,23 @@ mod tests {
     /// width (issue 38: `jem` searched up to half the width, `jem batch` up to the width).
     #[test]
     fn search_limit_is_the_stated_range_or_the_width() {
-        assert_eq!(search_limit(None, 640), 640);
-        assert_eq!(search_limit(Some(640), 640), 640);
-        assert_eq!(search_limit(Some(900), 640), 640);
+        assert_eq!(search_limit(None, 640), 639);
+        assert_eq!(search_limit(Some(640), 640), 639);
+        assert_eq!(search_limit(Some(900), 640), 639);
         assert_eq!(search_limit(Some(320), 640), 320);
-        assert_eq!(search_limit(None, 1), 2);
+        assert_eq!(search_limit(None, 3), 2);
+        assert_eq!(search_limit(None, 2), 1);
+    }
+
+    /// Issue 41, item 11: the limit is a range the pair takes, so a measurement that falls back to it (too few
+    /// consistent matches) or reaches it runs: a 3 × 2 pair with no range gave "invalid ndisp = 3".
+    #[test]
+    fn the_search_limit_is_a_valid_range() {
+        for w in [2, 3, 5, 40] {
+            let img = RgbImage::new(w, 2);
+            let n = find_ndisp(&img, &img, search_limit(None, w), &CostParams::default(), u64::MAX).unwrap();
+            assert!(crate::StereoPair::new(img.clone(), img, n).is_ok(), "width {w}: ndisp {n}");
+        }
     }
     use crate::synth::{SynthParams, render_scene};
 

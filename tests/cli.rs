@@ -195,7 +195,7 @@ fn tiny_images_never_panic() {
         let err = stderr(&out);
         if w == 1 {
             assert_eq!(out.status.code(), Some(2), "{w}x{h}: {err}");
-            assert!(err.contains("ndisp"), "{err}");
+            assert!(err.contains("at least 2 pixels wide"), "{err}");
         } else {
             assert!(out.status.success(), "{w}x{h}: {err}");
             let map = pfm::read_pfm(&d.join("o.pfm")).unwrap();
@@ -1010,5 +1010,32 @@ fn issue41_global_flags_before_every_subcommand() {
         let out = run_in(dir.path(), &["--threads", "1", "--max-memory", "1G", sub, "--help"]);
         let text = String::from_utf8_lossy(&out.stdout);
         assert!(out.status.success() && text.contains(&format!("Usage: jem {sub}")), "{sub}: {text}{}", stderr(&out));
+    }
+}
+
+/// Issue 41, item 11: with no range given, a 1-pixel-wide pair is refused for its width, not with "invalid
+/// ndisp = 2" (1ea02dd) for a range nobody gave; pairs 2 pixels wide and more run, their range measured.
+#[test]
+fn issue41_a_one_pixel_wide_pair_is_refused_for_its_width() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (w, h) in [(1u32, 1u32), (1, 5), (2, 1), (3, 2), (5, 40)] {
+        for name in ["a.png", "b.png"] {
+            image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 40) as u8, (y * 70) as u8, 9]))
+                .save(d.join(name))
+                .unwrap();
+        }
+        let out = run_in(d, &["a.png", "b.png", "-o", "o.pfm", "-q"]);
+        let err = stderr(&out);
+        if w == 1 {
+            assert_clean_failure(
+                d,
+                &["a.png", "b.png", "-o", "o.pfm"],
+                &["a.png", &format!("{w}x{h}"), "2 pixels wide"],
+            );
+            assert!(!err.contains("ndisp"), "{w}x{h}: {err}");
+        } else {
+            assert!(out.status.success(), "{w}x{h}: {err}");
+        }
     }
 }

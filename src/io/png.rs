@@ -45,7 +45,8 @@ pub fn read_header(path: &Path) -> Result<ImageHeader> {
 /// [`load_rgb_pair`] holds at its peak (both loads at once).
 ///
 /// # Errors
-/// As [`read_header`]; [`Error::SizeMismatch`] for unequal sizes, [`Error::Input`] for empty images.
+/// As [`read_header`]; [`Error::SizeMismatch`] for unequal sizes, [`Error::Input`] for empty images or images
+/// narrower than 2 pixels (no disparity range fits them).
 pub fn read_pair_header(left: &Path, right: &Path) -> Result<ImageHeader> {
     let (l, r) = (read_header(left)?, read_header(right)?);
     if (l.width, l.height) != (r.width, r.height) {
@@ -53,6 +54,14 @@ pub fn read_pair_header(left: &Path, right: &Path) -> Result<ImageHeader> {
     }
     if l.width == 0 || l.height == 0 {
         return Err(Error::Input(format!("{}: the images are empty (0 pixels)", left.display())));
+    }
+    if l.width < 2 {
+        return Err(Error::Input(format!(
+            "{}: the images are {}x{}; a stereo pair must be at least 2 pixels wide",
+            left.display(),
+            l.width,
+            l.height
+        )));
     }
     Ok(ImageHeader { load_bytes: l.load_bytes.saturating_add(r.load_bytes), ..l })
 }
