@@ -1039,3 +1039,18 @@ fn issue41_a_one_pixel_wide_pair_is_refused_for_its_width() {
         }
     }
 }
+
+/// Issue 41, item 11: `--max-memory 0.5` (half a byte) is refused with a clear error; 1ea02dd read it as a limit of
+/// 0 bytes ("the memory limit is 0 B").
+#[test]
+fn issue41_a_max_memory_below_one_byte_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    for size in ["0.5", "0.9B"] {
+        let out = run_in(dir.path(), &["--max-memory", size, "config"]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{size}: {err}");
+        assert!(err.contains("less than one byte") && err.contains("0.5G"), "{size}: {err}");
+    }
+    let out = run_in(dir.path(), &["--max-memory", "0.5G", "config"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+}

@@ -138,7 +138,11 @@ fn parse_size(text: &str) -> std::result::Result<u64, String> {
     if !(value.is_finite() && value > 0.0) {
         return Err(format!("{text:?} must be positive"));
     }
-    Ok((value * (1u64 << shift) as f64) as u64)
+    let bytes = value * (1u64 << shift) as f64;
+    if bytes < 1.0 {
+        return Err(format!("{text:?} is less than one byte (a number without a unit is bytes: 0.5G, 512M)"));
+    }
+    Ok(bytes as u64)
 }
 
 #[derive(Subcommand, Debug)]
