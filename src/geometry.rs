@@ -80,6 +80,13 @@ impl Camera {
                 camera.focal, camera.baseline, camera.doffs
             )));
         }
+        if !(camera.focal * camera.baseline).is_finite() {
+            return Err(Error::Input(format!(
+                "focal length {:?} times baseline {:?} overflows: no depth f·B / d could be written; check \
+                 calib.txt's cam0 and baseline (or --focal, --baseline)",
+                camera.focal, camera.baseline
+            )));
+        }
         Ok(camera)
     }
 
@@ -88,11 +95,26 @@ impl Camera {
         let denom = f64::from(d) + self.doffs;
         (d.is_finite() && denom > 0.0).then(|| self.focal * self.baseline / denom)
     }
+
+    /// The point (X, Y, Z) of pixel (`x`, `y`) with disparity `d` as written (`f32`), or `None` when it has no depth
+    /// or one of its coordinates is beyond `f32` (absurd but finite camera values): the depth map and the cloud
+    /// both use it, so a pixel has a finite depth exactly when it has a point.
+    pub fn point(&self, x: usize, y: usize, d: f32) -> Option<[f32; 3]> {
+        let z = self.depth(d)?;
+        let p = [(x as f64 - self.cx) * z / self.focal, (y as f64 - self.cy) * z / self.focal, z].map(|v| v as f32);
+        p.iter().all(|v| v.is_finite()).then_some(p)
+    }
 }
 
-/// The depth map of a disparity map (`inf` where there is none).
+/// The depth map of a disparity map (`inf` where there is none, as where the cloud has no point).
 pub fn depth_map(disparity: &DisparityMap, camera: &Camera) -> Plane<f32> {
-    let data = disparity.data.iter().map(|&d| camera.depth(d).map_or(f32::INFINITY, |z| z as f32)).collect();
+    let w = disparity.width;
+    let data = disparity
+        .data
+        .iter()
+        .enumerate()
+        .map(|(i, &d)| camera.point(i % w, i / w, d).map_or(f32::INFINITY, |p| p[2]))
+        .collect();
     Plane::from_vec(disparity.width, disparity.height, data)
 }
 
@@ -104,8 +126,8 @@ pub fn depth_map(disparity: &DisparityMap, camera: &Camera) -> Plane<f32> {
 pub fn encode_ply(disparity: &DisparityMap, image: &RgbImage, camera: &Camera) -> Vec<u8> {
     assert_eq!(disparity.dims(), image.dims(), "image and disparity map differ in size");
     let w = disparity.width;
-    let points: Vec<(usize, f64)> =
-        disparity.data.iter().enumerate().filter_map(|(i, &d)| camera.depth(d).map(|z| (i, z))).collect();
+    let points: Vec<(usize, [f32; 3])> =
+        disparity.data.iter().enumerate().filter_map(|(i, &d)| camera.point(i % w, i / w, d).map(|p| (i, p))).collect();
     let header = format!(
         "ply\nformat binary_little_endian 1.0\ncomment jem: left camera frame, baseline units\nelement vertex {}\n\
          property float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n\
@@ -114,10 +136,9 @@ pub fn encode_ply(disparity: &DisparityMap, image: &RgbImage, camera: &Camera) -
     );
     let mut out = Vec::with_capacity(header.len() + points.len() * 15);
     out.extend_from_slice(header.as_bytes());
-    for (i, z) in points {
-        let (x, y) = ((i % w) as f64, (i / w) as f64);
-        for v in [(x - camera.cx) * z / camera.focal, (y - camera.cy) * z / camera.focal, z] {
-            out.extend_from_slice(&(v as f32).to_le_bytes());
+    for (i, p) in points {
+        for v in p {
+            out.extend_from_slice(&v.to_le_bytes());
         }
         out.extend(image.rgb(i).map(|c| c.round().clamp(0.0, 255.0) as u8));
     }
@@ -147,6 +168,30 @@ mod tests {
         assert!(e.contains("--baseline"), "{e}");
         let bad = CameraOverrides { focal: Some(-1.0), cx: Some(0.0), cy: Some(0.0), baseline: Some(1.0), doffs: None };
         assert!(Camera::resolve(None, &bad).is_err());
+    }
+
+    /// Issue 41, item 7: a focal length times baseline that overflows is refused; absurd values whose products
+    /// stay finite give no non-finite point, and `inf` depth exactly where there is no point.
+    #[test]
+    fn overflowing_geometry_writes_no_infinite_point() {
+        let huge =
+            CameraOverrides { focal: Some(1e300), cx: Some(0.0), cy: Some(0.0), baseline: Some(1e300), doffs: None };
+        let e = Camera::resolve(None, &huge).unwrap_err().to_string();
+        assert!(e.contains("overflows") && e.contains("baseline"), "{e}");
+        let c = Camera { focal: 1e30, cx: 1.0, cy: 0.5, baseline: 1e30, doffs: 0.0 };
+        let disp = Plane::from_vec(3, 2, vec![1.0, 2.0, 3.0, 1e32, 2e32, f32::INFINITY]);
+        let depth = depth_map(&disp, &c);
+        let ply = encode_ply(&disp, &RgbImage::new(3, 2), &c);
+        let end = b"end_header\n";
+        let at = ply.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+        let body = &ply[at..];
+        let floats: Vec<f32> = body
+            .chunks(15)
+            .flat_map(|p| p[..12].chunks(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())))
+            .collect();
+        assert!(floats.iter().all(|v| v.is_finite()), "{floats:?}");
+        let with_depth = depth.data.iter().filter(|z| z.is_finite()).count();
+        assert_eq!((body.len() / 15, with_depth), (2, 2), "{:?}", depth.data);
     }
 
     /// Depth and points follow Z = f·B / (d + doffs), X = (x − cx)·Z / f, Y = (y − cy)·Z / f; invalid pixels and

@@ -1054,3 +1054,25 @@ fn issue41_a_max_memory_below_one_byte_is_refused() {
     let out = run_in(dir.path(), &["--max-memory", "0.5G", "config"]);
     assert!(out.status.success(), "{}", stderr(&out));
 }
+
+/// Issue 41, item 7: absurd but finite camera values. A focal length times baseline that overflows is refused
+/// before any work (1ea02dd: exit 0, a depth map of `inf` and a PLY of points at ±inf); products that stay finite
+/// but put every depth beyond `f32` give no point at all, and `inf` depth exactly where there is no point.
+#[test]
+fn issue41_overflowing_geometry_writes_no_infinite_point() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), &["S", "--width", "64", "--height", "48", "--ndisp", "16"]);
+    let run = ["S/im0.png", "S/im1.png", "-o", "d.pfm", "--depth", "z.pfm", "--cloud", "c.ply", "--set", "model=wta"];
+    let huge = ["--focal", "1e300", "--baseline", "1e300"];
+    assert_clean_failure(dir.path(), &[&run[..], &huge].concat(), &["overflows", "baseline"]);
+    let out = run_in(dir.path(), &[&run[..], &["--focal", "1e30", "--baseline", "1e30"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let ply = std::fs::read(dir.path().join("c.ply")).unwrap();
+    let end = b"end_header\n";
+    let at = ply.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+    let points: Vec<[f32; 3]> =
+        ply[at..].chunks(15).map(|p| [0, 4, 8].map(|k| f32::from_le_bytes(p[k..k + 4].try_into().unwrap()))).collect();
+    assert!(points.iter().flatten().all(|v| v.is_finite()), "a non-finite point");
+    let depth = pfm::read_pfm(&dir.path().join("z.pfm")).unwrap();
+    assert_eq!(depth.data.iter().filter(|z| z.is_finite()).count(), points.len(), "depth and cloud disagree");
+}
