@@ -219,7 +219,7 @@ fn run_pair_in(
         on_stage("waiting for memory");
         let _held = budget.reserve(need);
         on_stage("loading");
-        let (left, right) = crate::io::png::load_rgb_pair(&pair.left, &pair.right)?;
+        let (left, right) = crate::io::png::load_rgb_pair_within(&pair.left, &pair.right, budget.total)?;
         ndisp = crate::range::find_ndisp(&left, &right, max, &params.cost, within)?;
         loaded = Some((left, right));
     }
@@ -230,7 +230,7 @@ fn run_pair_in(
     on_stage("loading");
     let (left, right) = match loaded {
         Some(images) => images,
-        None => crate::io::png::load_rgb_pair(&pair.left, &pair.right)?,
+        None => crate::io::png::load_rgb_pair_within(&pair.left, &pair.right, budget.total)?,
     };
     let stereo = StereoPair::new(left, right, ndisp)?;
     let start = Instant::now();

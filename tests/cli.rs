@@ -1076,3 +1076,15 @@ fn issue41_overflowing_geometry_writes_no_infinite_point() {
     let depth = pfm::read_pfm(&dir.path().join("z.pfm")).unwrap();
     assert_eq!(depth.data.iter().filter(|z| z.is_finite()).count(), points.len(), "depth and cloud disagree");
 }
+
+/// Issue 41, item 11: the image decoder's own allocation limit is `--max-memory` (checked from the headers
+/// first), not its default of 512 MiB: a 20000 × 20000 header under `--max-memory 1T` reaches the decoder's
+/// real complaint (the data is missing) instead of 1ea02dd's "Memory limit exceeded".
+#[test]
+fn issue41_the_decoder_limit_is_the_memory_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("h.png"), png_header_only(20_000, 20_000)).unwrap();
+    let args = ["--max-memory", "1T", "h.png", "h.png", "--ndisp", "16", "-o", "d.pfm"];
+    assert_clean_failure(dir.path(), &args, &["h.png", "end of file"]);
+    assert!(!stderr(&run_in(dir.path(), &args)).contains("Memory limit exceeded"));
+}

@@ -126,7 +126,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     // measurement are checked too, and the right image's size before it is decoded).
     let header = jem::io::png::read_pair_header(left, right)?;
     jem::plan::check_before_decode(&header, source, &params, global.memory_limit())?;
-    let (l, r) = jem::io::png::load_rgb_pair(left, right)?;
+    let (l, r) = jem::io::png::load_rgb_pair_within(left, right, global.memory_limit())?;
     // The range and the way to run: shared with the Python module (jem::plan), so both give the same map.
     let Plan { pair, strategy, ndisp_measured } = plan_match(l, r, source, &params, global.memory_limit())?;
     if ndisp_measured && !global.quiet {

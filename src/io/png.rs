@@ -75,16 +75,37 @@ pub fn load_rgb_pair(left: &Path, right: &Path) -> Result<(RgbImage, RgbImage)> 
     Ok((l?, r?))
 }
 
+/// [`load_rgb_pair`] with the decoder's own allocation limit set to `max_bytes` (the memory limit the pair was
+/// checked against from its headers, [`read_pair_header`]), instead of the decoder's default of 512 MiB, which
+/// refused large images with "Memory limit exceeded" whatever `--max-memory` said.
+///
+/// # Errors
+/// As [`load_rgb_pair`].
+pub fn load_rgb_pair_within(left: &Path, right: &Path, max_bytes: u64) -> Result<(RgbImage, RgbImage)> {
+    let (l, r) = rayon::join(|| load_rgb_within(left, Some(max_bytes)), || load_rgb_within(right, Some(max_bytes)));
+    Ok((l?, r?))
+}
+
 /// Loads an image file as planar RGB `f32` in 0..=255.
 ///
 /// # Errors
 /// [`Error::Io`] if the file cannot be opened, [`Error::Image`] (naming the file and the decoder's reason) if it
 /// is not a readable PNG/PNM image.
 pub fn load_rgb(path: &Path) -> Result<RgbImage> {
+    load_rgb_within(path, None)
+}
+
+/// [`load_rgb`], with the decoder's allocation limit `max_bytes` (`None`: the decoder's default).
+fn load_rgb_within(path: &Path, max_bytes: Option<u64>) -> Result<RgbImage> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let reader = ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| Error::io(path, e))?;
+    let mut reader = ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| Error::io(path, e))?;
     if reader.format().is_none() {
         return Err(Error::Input(format!("{}: not a PNG, PNM or JPEG image", path.display())));
+    }
+    if let Some(max) = max_bytes {
+        let mut limits = image::Limits::default();
+        limits.max_alloc = Some(max);
+        reader.limits(limits);
     }
     let img = reader.decode().map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     Ok(to_rgb(&img))
