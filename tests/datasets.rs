@@ -278,3 +278,33 @@ fn slurm_array_tasks_cover_the_data_set() {
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(String::from_utf8(out.stdout).unwrap().contains("3 of 3 scenes evaluated"));
 }
+
+/// Issue 41, item 8: a KITTI tree with only `disp_occ_0/` (as many published samples ship) is scored with
+/// `--mask all`, which needs only that folder (1ea02dd: "no scene with ground truth"); the default mask lists the
+/// frame as missing its `disp_noc_0/` truth.
+#[test]
+fn issue41_kitti_with_only_disp_occ_is_scored_with_mask_all() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(dir.path(), &["synth", "S", "--width", "64", "--height", "48", "--ndisp", "16"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let tree = dir.path().join("k").join("training");
+    for sub in ["image_2", "image_3", "disp_occ_0"] {
+        std::fs::create_dir_all(tree.join(sub)).unwrap();
+    }
+    std::fs::copy(dir.path().join("S/im0.png"), tree.join("image_2/000000_10.png")).unwrap();
+    std::fs::copy(dir.path().join("S/im1.png"), tree.join("image_3/000000_10.png")).unwrap();
+    let truth = kitti_truth(&dir.path().join("S"), true);
+    png::write_disparity_png16(&tree.join("disp_occ_0/000000_10.png"), &truth).unwrap();
+    let results = dir.path().join("k/results/A/disp_0");
+    std::fs::create_dir_all(&results).unwrap();
+    let result = Plane::from_vec(64, 48, truth.data.iter().map(|g| if g.is_finite() { *g } else { 1.0 }).collect());
+    png::write_disparity_png16(&results.join("000000_10.png"), &result).unwrap();
+    let tree_arg = tree.to_str().unwrap();
+    let out = run_in(dir.path(), &["eval", tree_arg, "--alg", "A", "--mask", "all", "--format", "json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(json_value(&String::from_utf8(out.stdout).unwrap(), "000000_10", "d1"), 0.0);
+    let out = run_in(dir.path(), &["eval", tree_arg, "--alg", "A"]);
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), stderr(&out));
+    assert_eq!(out.status.code(), Some(2), "{text}");
+    assert!(text.contains("0 of 1 scenes evaluated") && text.contains("disp_noc_0"), "{text}");
+}

@@ -33,10 +33,12 @@ pub(super) fn recognise(dir: &Path) -> Option<Layout> {
 }
 
 /// The frames of the KITTI tree at `dir`: every `*_10.png` of the left folder with a twin in the right one,
-/// sorted by name. For [`Purpose::Score`], none unless the tree has its non-occluded truth folder.
+/// sorted by name. For [`Purpose::Score`], none unless the tree has a truth folder: the non-occluded one or the
+/// one of all pixels (many published samples ship only `disp_occ_0/`, which `--mask all` needs alone).
 pub(super) fn frames(dir: &Path, layout: Layout, purpose: Purpose) -> Vec<Pair> {
     let Some((_, left, right)) = image_folders(dir) else { return Vec::new() };
-    if purpose == Purpose::Score && !dir.join(truth_folders(layout).0).is_dir() {
+    let (noc, occ) = truth_folders(layout);
+    if purpose == Purpose::Score && !dir.join(noc).is_dir() && !dir.join(occ).is_dir() {
         return Vec::new();
     }
     let Ok(entries) = std::fs::read_dir(dir.join(left)) else { return Vec::new() };

@@ -157,7 +157,7 @@ pub fn evaluate_dir(
     let pairs = crate::dataset::discover(&[dir.to_path_buf()], Purpose::Score, &how)?;
     let Some(layout) = pairs.first().map(|p| p.layout) else {
         return Err(Error::Input(format!(
-            "no scene with ground truth under {} (MiddEval3 disp0GT.pfm, KITTI disp_noc*/, ETH3D *_gt/)",
+            "no scene with ground truth under {} (MiddEval3 disp0GT.pfm, KITTI disp_noc*/ or disp_occ*/, ETH3D *_gt/)",
             dir.display()
         )));
     };
