@@ -308,3 +308,33 @@ fn issue41_kitti_with_only_disp_occ_is_scored_with_mask_all() {
     assert_eq!(out.status.code(), Some(2), "{text}");
     assert!(text.contains("0 of 1 scenes evaluated") && text.contains("disp_noc_0"), "{text}");
 }
+
+/// Issue 41, item 4: a KITTI frame with a left image and ground truth but no right image is a failed scene in
+/// batch (exit 2, named; the other frames still run) and missing in eval (1ea02dd: batch exited 0 without listing
+/// it, and eval reported "1 of 1 evaluated" over the frames it kept).
+#[test]
+fn issue41_a_kitti_frame_without_its_right_image_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(dir.path(), &["synth", "S", "--width", "64", "--height", "48", "--ndisp", "16"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let tree = dir.path().join("k").join("training");
+    for sub in ["image_2", "image_3", "disp_noc_0"] {
+        std::fs::create_dir_all(tree.join(sub)).unwrap();
+    }
+    let truth = kitti_truth(&dir.path().join("S"), false);
+    for frame in ["000000_10.png", "000001_10.png"] {
+        std::fs::copy(dir.path().join("S/im0.png"), tree.join("image_2").join(frame)).unwrap();
+        png::write_disparity_png16(&tree.join("disp_noc_0").join(frame), &truth).unwrap();
+    }
+    std::fs::copy(dir.path().join("S/im1.png"), tree.join("image_3/000000_10.png")).unwrap();
+    let tree_arg = tree.to_str().unwrap();
+    let out = run_in(dir.path(), &["batch", tree_arg, "--alg", "A", "--set", "model=wta"]);
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), stderr(&out));
+    assert_eq!(out.status.code(), Some(2), "{text}");
+    assert!(text.contains("000001_10") && text.contains("image_3"), "{text}");
+    assert!(dir.path().join("k/results/A/disp_0/000000_10.png").is_file(), "the other frame runs");
+    let out = run_in(dir.path(), &["eval", tree_arg, "--alg", "A"]);
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), stderr(&out));
+    assert_eq!(out.status.code(), Some(2), "{text}");
+    assert!(text.contains("1 of 2 scenes evaluated") && text.contains("000001_10"), "{text}");
+}

@@ -32,8 +32,9 @@ pub(super) fn recognise(dir: &Path) -> Option<Layout> {
     image_folders(dir).map(|(layout, _, _)| layout)
 }
 
-/// The frames of the KITTI tree at `dir`: every `*_10.png` of the left folder with a twin in the right one,
-/// sorted by name. For [`Purpose::Score`], none unless the tree has a truth folder: the non-occluded one or the
+/// The frames of the KITTI tree at `dir`: every `*_10.png` of the left folder, sorted by name. A frame whose
+/// right image is missing is listed all the same, so that `jem batch` reports it as a failed scene and `jem eval`
+/// as missing its result (issue 41: it disappeared without a word). For [`Purpose::Score`], none unless the tree has a truth folder: the non-occluded one or the
 /// one of all pixels (many published samples ship only `disp_occ_0/`, which `--mask all` needs alone).
 pub(super) fn frames(dir: &Path, layout: Layout, purpose: Purpose) -> Vec<Pair> {
     let Some((_, left, right)) = image_folders(dir) else { return Vec::new() };
@@ -46,7 +47,6 @@ pub(super) fn frames(dir: &Path, layout: Layout, purpose: Purpose) -> Vec<Pair> 
         .filter_map(|e| e.ok())
         .filter_map(|e| e.file_name().to_str().map(str::to_owned))
         .filter(|n| n.ends_with("_10.png") && !n.starts_with('.'))
-        .filter(|n| dir.join(right).join(n).is_file())
         .collect();
     names.sort();
     names

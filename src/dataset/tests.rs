@@ -24,7 +24,7 @@ fn recognises_each_layout() {
             "kitti15/training/image_2/000000_11.png",
             "kitti15/training/image_3/000000_10.png",
             "kitti15/training/image_3/000000_11.png",
-            "kitti15/training/image_2/000001_10.png", // no right view: not a frame
+            "kitti15/training/image_2/000001_10.png", // no right view: listed, to fail loudly (issue 41)
             "kitti15/training/disp_noc_0/000000_10.png",
             "kitti12/training/colored_0/000007_10.png",
             "kitti12/training/colored_1/000007_10.png",
@@ -48,6 +48,7 @@ fn recognises_each_layout() {
             (Layout::Kitti2012, "000003_10".into()),
             (Layout::Kitti2012, "000007_10".into()),
             (Layout::Kitti2015, "000000_10".into()),
+            (Layout::Kitti2015, "000001_10".into()),
             (Layout::Middlebury, "Teddy".into()),
         ]
     );
@@ -67,6 +68,7 @@ fn recognises_each_layout() {
         [
             (Layout::Eth3d, "delivery_area_1l".into()),
             (Layout::Kitti2015, "000000_10".into()),
+            (Layout::Kitti2015, "000001_10".into()),
             (Layout::Middlebury, "Teddy".into())
         ]
     );
