@@ -1088,3 +1088,20 @@ fn issue41_the_decoder_limit_is_the_memory_limit() {
     assert_clean_failure(dir.path(), &args, &["h.png", "end of file"]);
     assert!(!stderr(&run_in(dir.path(), &args)).contains("Memory limit exceeded"));
 }
+
+/// Issue 41, item 11: a newline in a scene's folder name is shown escaped (`a\nb`), so it cannot break the batch
+/// table or the progress lines (1ea02dd printed the name as it is: the row split over two lines).
+#[test]
+fn issue41_a_newline_in_a_scene_name_keeps_the_batch_table_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["set/a\nb", "set/c"] {
+        synth_scene(dir.path(), &[name, "--width", "64", "--height", "48", "--ndisp", "16"]);
+    }
+    let out = run_in(dir.path(), &["batch", "set", "--alg", "A", "--set", "model=wta"]);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(table.lines().count(), 4, "header, two rows, the counts: {table}");
+    assert!(table.lines().any(|l| l.starts_with("a\\nb ") && l.ends_with("ok")), "{table}");
+    let progress = stderr(&out);
+    assert!(progress.lines().all(|l| l.starts_with('[') || l.contains("pair(s)")), "{progress}");
+}

@@ -93,7 +93,7 @@ impl BatchDisplay {
         match event {
             Event::Started { index, name } => {
                 if let Ok(mut a) = self.active.lock() {
-                    a.insert(index, (name.to_string(), "starting".into()));
+                    a.insert(index, (one_line(name), "starting".into()));
                 }
                 self.refresh();
             }
@@ -110,9 +110,9 @@ impl BatchDisplay {
                     a.remove(&index);
                 }
                 let n = self.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                let head = format!("[{n}/{}] {}", self.total, report.name);
+                let head = format!("[{n}/{}] {}", self.total, one_line(&report.name));
                 match &report.status {
-                    SceneStatus::Failed(e) => self.line(&format!("{head}: FAILED: {e}")),
+                    SceneStatus::Failed(e) => self.line(&format!("{head}: FAILED: {}", one_line(&e.to_string()))),
                     _ if self.quiet || self.bar.is_some() => {}
                     SceneStatus::Skipped => self.line(&format!("{head}: skipped (result exists)")),
                     SceneStatus::Done(r) => {
@@ -210,6 +210,16 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     Ok(if failed > 0 { ExitCode::from(2) } else { ExitCode::SUCCESS })
 }
 
+/// A scene name (or path, or message holding one) on one line: control characters (a newline in a folder name)
+/// are shown escaped (`\n`), so they cannot break the progress lines or the table (issue 41).
+fn one_line(text: &str) -> String {
+    if text.chars().any(char::is_control) {
+        text.chars().map(|c| if c.is_control() { c.escape_default().to_string() } else { c.to_string() }).collect()
+    } else {
+        text.to_string()
+    }
+}
+
 /// The end-of-run table: scene, size, ndisp, seconds (and per-stage seconds with -v), status; then counts, with -v
 /// what was measured on each pair (as `jem -v` prints it), and the failures.
 fn batch_summary(reports: &[jem::batch::SceneReport], verbose: bool) -> String {
@@ -232,7 +242,7 @@ fn batch_summary(reports: &[jem::batch::SceneReport], verbose: bool) -> String {
     let mut rows = vec![header];
     let (mut done, mut skipped, mut failed, mut total_s) = (0, 0, 0, 0.0);
     for r in reports {
-        let mut row = vec![r.name.clone()];
+        let mut row = vec![one_line(&r.name)];
         match &r.status {
             SceneStatus::Done(run) => {
                 done += 1;
@@ -274,7 +284,7 @@ fn batch_summary(reports: &[jem::batch::SceneReport], verbose: bool) -> String {
     if verbose {
         for r in reports {
             if let SceneStatus::Done(jem::batch::SceneRun { measured: Some(m), .. }) = &r.status {
-                out.push_str(&format!("{}: {}\n", r.name, super::r#match::describe_measured(m)));
+                out.push_str(&format!("{}: {}\n", one_line(&r.name), super::r#match::describe_measured(m)));
             }
         }
     }
@@ -282,7 +292,8 @@ fn batch_summary(reports: &[jem::batch::SceneReport], verbose: bool) -> String {
         out.push_str("failures:\n");
         for r in reports {
             if let SceneStatus::Failed(e) = &r.status {
-                out.push_str(&format!("  {} ({}): {e}\n", r.name, r.dir.display()));
+                let dir = one_line(&r.dir.display().to_string());
+                out.push_str(&format!("  {} ({dir}): {}\n", one_line(&r.name), one_line(&e.to_string())));
             }
         }
     }
