@@ -387,7 +387,8 @@ pub const COPIED_FILES: [&str; 5] = ["calib.txt", "disp0GT.pfm", "mask0nocc.png"
 /// is itself a scene becomes `out/NAME`), and writes `out/degrade.txt` with the recipe, seed and jem version.
 /// Each scene's noise comes from `seed` and the scene's relative path, so scenes differ and a rerun is
 /// byte-identical. The tree is built in a temporary sibling folder and renamed into place at the end: a failed
-/// run leaves nothing behind. Returns the degraded scene folders.
+/// run leaves nothing behind, and the temporary tree of a killed run on this machine is removed by the next run
+/// into the same `out` ([`sweep_stale`]). Returns the degraded scene folders.
 ///
 /// # Errors
 /// [`Error::Input`] if `out` exists and is not an empty folder, or `out` and `src` contain one another, or `src`
@@ -423,11 +424,9 @@ pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Resul
             src.display()
         )));
     }
-    let tmp = parent.join(format!(
-        ".{}.jem-tmp-{}",
-        out.file_name().unwrap_or_default().to_string_lossy(),
-        std::process::id()
-    ));
+    let prefix = format!(".{}.jem-tmp-{}-", out.file_name().unwrap_or_default().to_string_lossy(), host_name());
+    sweep_stale(&parent, &prefix);
+    let tmp = parent.join(format!("{prefix}{}", std::process::id()));
     let result = (|| {
         std::fs::create_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
         let rels: Vec<PathBuf> = scenes
@@ -453,6 +452,31 @@ pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Resul
         let _ = std::fs::remove_dir_all(&tmp);
     }
     result
+}
+
+/// This machine's name (`/proc/sys/kernel/hostname`; empty where there is none): the temporary tree's name holds
+/// it, so that a sweep never takes another machine's tree in a folder they share.
+fn host_name() -> String {
+    let name = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
+    name.trim().chars().filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '.')).collect()
+}
+
+/// Removes the temporary trees `parent/PREFIX<pid>` that an earlier run on this machine left when it was killed
+/// (SIGTERM, SIGKILL: it could not clean up): those whose process is gone (`/proc/<pid>` missing). Nothing is
+/// removed where `/proc` cannot tell (no `/proc/self`).
+fn sweep_stale(parent: &Path, prefix: &str) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(parent) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name.to_str().and_then(|n| n.strip_prefix(prefix)) else { continue };
+        let alive = pid.parse::<u32>().map_or(true, |pid| Path::new(&format!("/proc/{pid}")).exists());
+        if !alive && entry.file_type().is_ok_and(|t| t.is_dir()) {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
+    }
 }
 
 /// `path` made absolute through its deepest existing ancestor (links resolved), the missing components appended.

@@ -1105,3 +1105,29 @@ fn issue41_a_newline_in_a_scene_name_keeps_the_batch_table_whole() {
     let progress = stderr(&out);
     assert!(progress.lines().all(|l| l.starts_with('[') || l.contains("pair(s)")), "{progress}");
 }
+
+/// Issue 41, item 11: the hidden temporary tree of a killed `jem degrade` (SIGTERM, SIGKILL) is removed by the next
+/// run into the same folder when its process is gone; one whose process is alive is left alone (1ea02dd swept
+/// nothing: the leftover stayed for good).
+#[test]
+fn issue41_degrade_sweeps_the_tree_of_a_killed_run() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), &["src/S", "--width", "64", "--height", "48", "--ndisp", "16"]);
+    let host: String = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .unwrap_or_default()
+        .trim()
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '.'))
+        .collect();
+    // A pid above Linux's largest (2^22) belongs to no process; this test's own pid is alive.
+    let dead = dir.path().join(format!(".out.jem-tmp-{host}-4000000000"));
+    let alive = dir.path().join(format!(".out.jem-tmp-{host}-{}", std::process::id()));
+    for d in [&dead, &alive] {
+        std::fs::create_dir_all(d.join("S")).unwrap();
+        std::fs::write(d.join("S/im0.png"), b"partial").unwrap();
+    }
+    let out = run_in(dir.path(), &["degrade", "src", "out", "--recipe", "noise:2"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!dead.exists(), "the killed run's tree is left");
+    assert!(alive.is_dir(), "a running process's tree was removed");
+}
