@@ -4,6 +4,7 @@
 
 use super::keys::Key;
 use super::*;
+use crate::fastmath::integral_to_i32;
 
 /// Per-pixel result of embedding a feature vector: the enclosing simplex (its remainder-0 vertex and the ranking
 /// that orders the other vertices) and the barycentric weights.
@@ -152,7 +153,7 @@ pub(super) fn embed_lanes(f: &[[f32; LANES]; D], scales: &[f32; D]) -> [Embeddin
             total[l] += greedy[i][l];
         }
     }
-    let total: [i32; LANES] = std::array::from_fn(|l| (total[l] / d1) as i32);
+    let total: [i32; LANES] = std::array::from_fn(|l| integral_to_i32(total[l] / d1));
     let mut rank = [[0i32; LANES]; D1];
     for i in 0..D {
         for j in i + 1..D1 {
@@ -196,7 +197,7 @@ pub(super) fn embed_lanes(f: &[[f32; LANES]; D], scales: &[f32; D]) -> [Embeddin
         }
     }
     std::array::from_fn(|l| Embedding {
-        origin: std::array::from_fn(|i| greedy[i][l] as i32),
+        origin: std::array::from_fn(|i| integral_to_i32(greedy[i][l])),
         rank: std::array::from_fn(|i| rank[i][l]),
         weights: std::array::from_fn(|k| if k == 0 { bary[0][l] + (1.0 + bary[D1][l]) } else { bary[k][l] }),
     })

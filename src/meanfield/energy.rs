@@ -101,7 +101,7 @@ pub(super) fn pixel_energies(
         (Some(f), None) => {
             let (msg, own, k) = (&f.msg[..m], &f.own[..m], f.omega * f.out_scale);
             for d in 0..m {
-                en[d] = unary_scale * cost[d] - k * (msg[d] - f.self_weight * own[d]).max(0.0);
+                en[d] = unary_scale * cost[d] - k * non_negative(msg[d] - f.self_weight * own[d]);
             }
         }
         (None, Some(l)) => {
@@ -115,11 +115,17 @@ pub(super) fn pixel_energies(
             let (p, kb) = (&l.p_padded[..m + 2], 1.0 - l.beta);
             for d in 0..m {
                 en[d] = unary_scale * cost[d]
-                    - k * (msg[d] - f.self_weight * own[d]).max(0.0)
+                    - k * non_negative(msg[d] - f.self_weight * own[d])
                     - l.omega * (p[d + 1] + kb * (p[d] + p[d + 2]));
             }
         }
     }
+}
+
+/// max(v, 0) as a compare and a select (`f32::max` adds a NaN fix-up; NaN gives 0 either way).
+#[inline(always)]
+fn non_negative(v: f32) -> f32 {
+    if v > 0.0 { v } else { 0.0 }
 }
 
 /// Labels less likely than this, relative to a pixel's most likely label, get probability 0.

@@ -271,10 +271,20 @@ impl Prior {
         let weight = self.weight.max(floor);
         let lambda = if c.prior_confidence { weight * self.confidence.data[i] } else { weight };
         for (d, v) in costs.iter_mut().enumerate() {
-            // The distance from [low, high]: |d − d_coarse| where the two are one.
+            // The distance from [low, high]: |d − d_coarse| where the two are one. Compares and selects, the same
+            // values as `f32::max` and `clamp` for these (never NaN) operands, without their NaN fix-ups.
             let d = d as f32;
-            let off = if d < low { low - d } else { (d - high).max(0.0) };
-            *v += lambda * (off - margin).clamp(0.0, trunc);
+            let above = d - high;
+            let off = if d < low {
+                low - d
+            } else if above > 0.0 {
+                above
+            } else {
+                0.0
+            };
+            let over = off - margin;
+            let penalty = if over > 0.0 { over } else { 0.0 };
+            *v += lambda * if penalty < trunc { penalty } else { trunc };
         }
     }
 
