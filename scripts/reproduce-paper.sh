@@ -2,7 +2,7 @@
 # Reproduces the paper's Table 1 (LCM, FCM and JEM, each with LRC) and Table 3 (JEM + SPS; JEM + WMF + OF + SPS)
 # on MiddEval3 trainingQ: `jem batch` with each config, then `jem eval --format markdown --paper COLUMN`, and writes
 # the tables (ours beside the paper's avgErr, per scene and weighted, with the mean time per pair) into
-# docs/RESULTS.md between the markers `<!-- reproduce:begin -->` and `<!-- reproduce:end -->`; the rest of the
+# docs/paper-tables.md between the markers `<!-- reproduce:begin -->` and `<!-- reproduce:end -->`; the rest of the
 # file is kept (the block is appended, with the markers, if they are not there yet).
 #
 # Usage: scripts/reproduce-paper.sh [--jobs N] [--skip-existing] [--no-build]
@@ -18,7 +18,7 @@
 #   JEM_CONFIGS  folder with the configs (default: configs/)
 #   WORK         where the results go (default: target/reproduce): a mirror of trainingQ made of symbolic links to
 #                the inputs, so the data folder itself may be read-only
-#   RESULTS      the Markdown file to update (default: docs/RESULTS.md)
+#   RESULTS      the Markdown file to update (default: docs/paper-tables.md)
 set -euo pipefail
 
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -42,7 +42,7 @@ data=${JEM_DATA:-$root/../shared/middlebury}
 train=$data/MiddEval3/trainingQ
 paper=$data/paper-results.tsv
 configs=${JEM_CONFIGS:-$root/configs}
-results=${RESULTS:-$root/docs/RESULTS.md}
+results=${RESULTS:-$root/docs/paper-tables.md}
 
 # alg name | config | paper column | table
 runs=(
