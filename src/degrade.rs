@@ -388,7 +388,7 @@ pub const COPIED_FILES: [&str; 5] = ["calib.txt", "disp0GT.pfm", "mask0nocc.png"
 /// Each scene's noise comes from `seed` and the scene's relative path, so scenes differ and a rerun is
 /// byte-identical. The tree is built in a temporary sibling folder and renamed into place at the end: a failed
 /// run leaves nothing behind, and the temporary tree of a killed run on this machine is removed by the next run
-/// into the same `out` ([`sweep_stale`]). Returns the degraded scene folders.
+/// into the same `out` (`sweep_stale`). Returns the degraded scene folders.
 ///
 /// # Errors
 /// [`Error::Input`] if `out` exists and is not an empty folder, or `out` and `src` contain one another, or `src`
