@@ -211,7 +211,7 @@ fn run_pair_in(
     let mut loaded = None;
     if search {
         let max = crate::range::search_limit(stated, w);
-        let within = budget.total.saturating_sub(crate::plan::pair_bytes(w, h));
+        let within = crate::plan::measure_budget(w, h, budget.total);
         let factor = crate::range::measure_factor(w, h, max, within)
             .ok_or_else(|| crate::range::too_large(w, h, max, within))?;
         let need =
@@ -220,7 +220,7 @@ fn run_pair_in(
         let _held = budget.reserve(need);
         on_stage("loading");
         let (left, right) = crate::io::png::load_rgb_pair_within(&pair.left, &pair.right, budget.total)?;
-        ndisp = crate::range::find_ndisp(&left, &right, max, &params.cost, within)?;
+        ndisp = crate::plan::search_range(&left, &right, source, params, budget.total)?.0;
         loaded = Some((left, right));
     }
     let strategy = crate::tile::Strategy::choose(w, h, ndisp, params, budget.total)?;

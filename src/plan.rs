@@ -58,7 +58,7 @@ pub fn check_before_decode(
         _ => {
             let max = crate::range::search_limit(stated, w);
             Strategy::choose(w, h, crate::range::min_ndisp(max), params, limit_bytes)?;
-            let within = limit_bytes.saturating_sub(pair_bytes(w, h));
+            let within = measure_budget(w, h, limit_bytes);
             if crate::range::measure_factor(w, h, max, within).is_none() {
                 return Err(crate::range::too_large(w, h, max, within));
             }
@@ -112,18 +112,41 @@ pub fn plan_match(
         let (w, h) = left.dims();
         return Err(Error::Input(format!("the images are {w}x{h}; a stereo pair must be at least 2 pixels wide")));
     }
-    let (w, h) = left.dims();
-    let (stated, search) = source.rule(w);
-    let ndisp = match stated {
-        Some(n) if !search => n,
-        _ => {
-            let within = limit_bytes.saturating_sub(pair_bytes(w, h));
-            crate::range::find_ndisp(&left, &right, crate::range::search_limit(stated, w), &params.cost, within)?
-        }
-    };
+    let (ndisp, ndisp_measured) = search_range(&left, &right, source, params, limit_bytes)?;
     let pair = StereoPair::new(left, right, ndisp)?;
     let strategy = Strategy::choose(pair.left.width, pair.left.height, pair.ndisp, params, limit_bytes)?;
-    Ok(Plan { pair, strategy, ndisp_measured: search })
+    Ok(Plan { pair, strategy, ndisp_measured })
+}
+
+/// The search range of a decoded pair: `source`'s when it is a real bound ([`NdispSource::rule`]), else measured
+/// on the pair ([`crate::range::find_ndisp`]) within `limit_bytes` less the decoded pair's own bytes
+/// ([`measure_budget`]). Returns it and whether it was measured. `jem`, the Python module and `jem batch` all take
+/// their range from here.
+///
+/// # Errors
+/// As [`crate::range::find_ndisp`].
+pub fn search_range(
+    left: &RgbImage,
+    right: &RgbImage,
+    source: NdispSource,
+    params: &Params,
+    limit_bytes: u64,
+) -> Result<(usize, bool)> {
+    let (w, h) = left.dims();
+    match source.rule(w) {
+        (Some(n), false) => Ok((n, false)),
+        (stated, _) => {
+            let max = crate::range::search_limit(stated, w);
+            let ndisp = crate::range::find_ndisp(left, right, max, &params.cost, measure_budget(w, h, limit_bytes))?;
+            Ok((ndisp, true))
+        }
+    }
+}
+
+/// What the range measurement of a `width` × `height` pair may use of `limit_bytes`: the rest beside the decoded
+/// pair ([`pair_bytes`]).
+pub fn measure_budget(width: usize, height: usize, limit_bytes: u64) -> u64 {
+    limit_bytes.saturating_sub(pair_bytes(width, height))
 }
 
 #[cfg(test)]
