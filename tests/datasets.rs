@@ -129,8 +129,11 @@ fn kitti2015_batch_and_eval() {
     let gt = png::read_disparity_png16(&tree.join("disp_occ_0").join("000001_10.png")).unwrap();
     let w = gt.width;
     let truth_or_zero: Vec<f32> = gt.data.iter().map(|g| if g.is_finite() { *g } else { 10.0 }).collect();
-    let mut made: Vec<f32> =
-        truth_or_zero.iter().enumerate().map(|(i, &g)| if i % w % 4 == 0 { g + 4.0 } else { g + 1.5 }).collect();
+    let mut made: Vec<f32> = truth_or_zero
+        .iter()
+        .enumerate()
+        .map(|(i, &g)| if (i % w).is_multiple_of(4) { g + 4.0 } else { g + 1.5 })
+        .collect();
     let filled: Vec<f32> = (0..made.len()).map(|i| if i % w == 0 { made[i + 1] } else { made[i] }).collect();
     for i in (0..made.len()).step_by(w) {
         made[i] = f32::INFINITY;

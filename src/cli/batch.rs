@@ -9,8 +9,8 @@ use clap::Args;
 use jem::table::Table;
 use jem::{Error, Result};
 
-use super::GlobalArgs;
 use super::config::ConfigArgs;
+use super::{GlobalArgs, MemoryArg, ThreadsArg};
 
 /// Arguments of `jem batch` (the help text is on [`Command::Batch`](super::Command::Batch)).
 #[derive(Args, Debug, Clone)]
@@ -47,6 +47,10 @@ pub(super) struct BatchArgs {
     /// Skip pairs whose result is already there and complete (to resume an interrupted run).
     #[arg(long)]
     skip_existing: bool,
+    #[command(flatten)]
+    pub(super) threads: ThreadsArg,
+    #[command(flatten)]
+    memory: MemoryArg,
 }
 
 /// What the batch display shows while scenes run.
@@ -98,10 +102,10 @@ impl BatchDisplay {
                 self.refresh();
             }
             Event::Stage { index, stage } => {
-                if let Ok(mut a) = self.active.lock() {
-                    if let Some(entry) = a.get_mut(&index) {
-                        entry.1 = stage.to_string();
-                    }
+                if let Ok(mut a) = self.active.lock()
+                    && let Some(entry) = a.get_mut(&index)
+                {
+                    entry.1 = stage.to_string();
                 }
                 self.refresh();
             }
@@ -184,7 +188,7 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         ndisp: args.ndisp,
         jobs: args.jobs,
         skip_existing: args.skip_existing,
-        max_memory_bytes: global.memory_limit(),
+        max_memory_bytes: args.memory.memory_limit(),
     };
     let display = BatchDisplay::new(scenes.len(), global.quiet);
 

@@ -45,10 +45,10 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     if ext.as_deref() != Some("png") {
         return Err(Error::Input(format!("{}: viz writes PNG (use a .png name)", args.output.display())));
     }
-    if let Some(s) = args.scale {
-        if ![1, 2, 4].contains(&s) {
-            return Err(Error::param("--scale", s, "1, 2 or 4"));
-        }
+    if let Some(s) = args.scale
+        && ![1, 2, 4].contains(&s)
+    {
+        return Err(Error::param("--scale", s, "1, 2 or 4"));
     }
     if args.input.is_dir() {
         let Some(alg) = &args.alg else {

@@ -165,10 +165,10 @@ pub fn evaluate(
         if !g.is_finite() {
             continue;
         }
-        if let Some(m) = mask {
-            if !mask_mode.selects(m.data[i]) {
-                continue;
-            }
+        if let Some(m) = mask
+            && !mask_mode.selects(m.data[i])
+        {
+            continue;
         }
         n += 1;
         if !d.is_finite() {

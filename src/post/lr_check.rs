@@ -65,10 +65,10 @@ pub fn left_right_check(
             out.data.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
                 let (mrow, rrow) = (mask.row(y), right.row(y));
                 for (x, d) in row.iter_mut().enumerate() {
-                    if !mrow[x] {
-                        if let Some(xr) = matching_x(x, *d, w) {
-                            *d = d.min(rrow[xr]);
-                        }
+                    if !mrow[x]
+                        && let Some(xr) = matching_x(x, *d, w)
+                    {
+                        *d = d.min(rrow[xr]);
                     }
                 }
             });
