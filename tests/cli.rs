@@ -460,7 +460,7 @@ fn memory_guard_suggests_a_downscale() {
 #[test]
 fn global_flags_before_a_subcommand() {
     let dir = tempfile::tempdir().unwrap();
-    for args in [&["--threads", "1", "-q", "config"][..], &["-v", "--max-memory=2G", "config"], &["config", "-q"]] {
+    for args in [&["-q", "config"][..], &["-v", "config"], &["config", "-q"]] {
         let out = run_in(dir.path(), args);
         assert!(out.status.success(), "{args:?}: {}", stderr(&out));
         assert!(String::from_utf8_lossy(&out.stdout).contains("model = \"jem\""), "{args:?} printed no config");
@@ -1006,10 +1006,53 @@ fn issue41_global_flags_before_every_subcommand() {
     let out = run_in(dir.path(), &["--threads", "1", "-q", "degrade", "src", "out", "--recipe", "noise:2"]);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(dir.path().join("out/S/im0.png").is_file());
-    for sub in ["match", "config", "synth", "degrade", "batch", "eval", "viz"] {
-        let out = run_in(dir.path(), &["--threads", "1", "--max-memory", "1G", sub, "--help"]);
+    for (sub, flags) in [
+        ("match", &["--threads", "1", "--max-memory", "1G"][..]),
+        ("batch", &["--threads", "1", "--max-memory=1G", "-q"]),
+        ("synth", &["--threads", "1", "-v"]),
+        ("degrade", &["--threads=1"]),
+        ("eval", &["--threads", "1"]),
+        ("config", &["-q"]),
+        ("viz", &["-v"]),
+    ] {
+        let out = run_in(dir.path(), &[flags, &[sub, "--help"]].concat());
         let text = String::from_utf8_lossy(&out.stdout);
         assert!(out.status.success() && text.contains(&format!("Usage: jem {sub}")), "{sub}: {text}{}", stderr(&out));
+    }
+}
+
+/// Issue 42, item 6: `--threads` and `--max-memory` are offered only where they mean something: `--threads` on the
+/// commands that share work out (match, batch, synth, degrade, eval), `--max-memory` on those that run the pipeline
+/// (match, batch); `config` and `viz` refuse both, before or after the subcommand, naming the flag. And `degrade
+/// --recipe`'s short help lists every recipe.
+#[test]
+fn issue42_resource_flags_only_where_they_mean_something() {
+    let dir = tempfile::tempdir().unwrap();
+    for (sub, threads, memory) in [
+        ("match", true, true),
+        ("batch", true, true),
+        ("synth", true, false),
+        ("degrade", true, false),
+        ("eval", true, false),
+        ("config", false, false),
+        ("viz", false, false),
+    ] {
+        let help = String::from_utf8_lossy(&run_in(dir.path(), &[sub, "--help"]).stdout).into_owned();
+        assert_eq!(help.contains("--threads"), threads, "{sub} --help: {help}");
+        assert_eq!(help.contains("--max-memory"), memory, "{sub} --help: {help}");
+    }
+    for args in
+        [&["--threads", "1", "config"][..], &["config", "--threads", "1"], &["--max-memory", "1G", "viz", "d.pfm"]]
+    {
+        let out = run_in(dir.path(), args);
+        let flag = args.iter().find(|a| a.starts_with("--")).unwrap();
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(stderr(&out).contains(&format!("unexpected argument '{flag}'")), "{args:?}: {}", stderr(&out));
+    }
+    let help = String::from_utf8_lossy(&run_in(dir.path(), &["degrade", "-h"]).stdout).into_owned();
+    let recipe = help.lines().find(|l| l.trim_start().starts_with("--recipe")).unwrap_or_default();
+    for kind in ["noise:", "lowlight:", "exposure:", "blur:", "misalign:", "jpeg:"] {
+        assert!(recipe.contains(kind), "degrade -h: --recipe omits {kind}: {recipe}");
     }
 }
 
@@ -1046,12 +1089,12 @@ fn issue41_a_one_pixel_wide_pair_is_refused_for_its_width() {
 fn issue41_a_max_memory_below_one_byte_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     for size in ["0.5", "0.9B"] {
-        let out = run_in(dir.path(), &["--max-memory", size, "config"]);
+        let out = run_in(dir.path(), &["--max-memory", size, "batch", "--help"]);
         let err = stderr(&out);
         assert_eq!(out.status.code(), Some(2), "{size}: {err}");
         assert!(err.contains("less than one byte") && err.contains("0.5G"), "{size}: {err}");
     }
-    let out = run_in(dir.path(), &["--max-memory", "0.5G", "config"]);
+    let out = run_in(dir.path(), &["--max-memory", "0.5G", "batch", "--help"]);
     assert!(out.status.success(), "{}", stderr(&out));
 }
 

@@ -8,7 +8,7 @@ use clap::Args;
 use jem::Result;
 use jem::degrade::Recipe;
 
-use super::GlobalArgs;
+use super::{GlobalArgs, ThreadsArg};
 
 /// Arguments of `jem degrade` (the help text is on [`Command::Degrade`](super::Command::Degrade)).
 #[derive(Args, Debug, Clone)]
@@ -17,13 +17,15 @@ pub(super) struct DegradeArgs {
     src: PathBuf,
     /// The new folder to write (must not exist, or be empty; never inside SRC).
     out: PathBuf,
-    /// What to do: noise:SIGMA, lowlight:GAIN:READ_SIGMA, exposure:GAIN:GAMMA (right view), blur:SIGMA, or several
-    /// joined by `+`.
+    /// What to do: noise:SIGMA, lowlight:GAIN:READ_SIGMA, exposure:GAIN:GAMMA (right view), blur:SIGMA,
+    /// misalign:SHIFT:DEGREES (right view), jpeg:QUALITY, or several joined by `+` (each explained in --help).
     #[arg(long, value_name = "RECIPE")]
     recipe: Recipe,
     /// Random seed: the same seed gives byte-identical files.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    #[command(flatten)]
+    pub(super) threads: ThreadsArg,
 }
 
 /// Degrades the tree and says what was written.

@@ -8,6 +8,8 @@ use std::process::ExitCode;
 use clap::Args;
 use jem::{Error, Result};
 
+use super::ThreadsArg;
+
 /// `auto`, 1, 2 or 4.
 #[derive(Clone, Copy, Debug)]
 struct ScaleArg(Option<u32>);
@@ -60,6 +62,8 @@ pub(super) struct EvalArgs {
     /// The paper's numbers (default: $JEM_DATA/paper-results.tsv, else ../shared/middlebury/paper-results.tsv).
     #[arg(long, value_name = "PATH")]
     paper_file: Option<PathBuf>,
+    #[command(flatten)]
+    pub(super) threads: ThreadsArg,
 }
 
 /// Where the paper's TSV is: --paper-file, else $JEM_DATA/paper-results.tsv, else ../shared/middlebury/.

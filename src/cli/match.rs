@@ -13,8 +13,8 @@ use jem::plan::{NdispSource, Plan, plan_match};
 use jem::tile::Strategy;
 use jem::{Error, Result};
 
-use super::GlobalArgs;
 use super::config::ConfigArgs;
+use super::{GlobalArgs, MemoryArg, ThreadsArg};
 
 /// Arguments of `jem match` and of the default command (the help text is on [`Cli`](super::Cli)).
 #[derive(Args, Debug, Clone)]
@@ -58,6 +58,10 @@ pub(super) struct MatchArgs {
     doffs: Option<f64>,
     #[command(flatten)]
     config: ConfigArgs,
+    #[command(flatten)]
+    pub(super) threads: ThreadsArg,
+    #[command(flatten)]
+    memory: MemoryArg,
 }
 
 /// Matches one pair.
@@ -125,10 +129,10 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     // Both headers, then the limit, before either image is decoded (issue 41: the loading and the range
     // measurement are checked too, and the right image's size before it is decoded).
     let header = jem::io::png::read_pair_header(left, right)?;
-    jem::plan::check_before_decode(&header, source, &params, global.memory_limit())?;
-    let (l, r) = jem::io::png::load_rgb_pair_within(left, right, global.memory_limit())?;
+    jem::plan::check_before_decode(&header, source, &params, args.memory.memory_limit())?;
+    let (l, r) = jem::io::png::load_rgb_pair_within(left, right, args.memory.memory_limit())?;
     // The range and the way to run: shared with the Python module (jem::plan), so both give the same map.
-    let Plan { pair, strategy, ndisp_measured } = plan_match(l, r, source, &params, global.memory_limit())?;
+    let Plan { pair, strategy, ndisp_measured } = plan_match(l, r, source, &params, args.memory.memory_limit())?;
     if ndisp_measured && !global.quiet {
         let was = stated.map_or("no range given".to_string(), |s| format!("calib.txt says {s}"));
         note!("ndisp {}, measured on the pair ({was}; --ndisp N sets it)", pair.ndisp);

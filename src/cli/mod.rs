@@ -3,7 +3,8 @@
 //! Raw flags are merged with the defaults and `--config FILE` into one validated [`jem::Params`] (flags win);
 //! the pipeline only ever sees `Params`.
 //!
-//! This file holds the parser ([`Cli`], the [`GlobalArgs`] every command takes, and `Command`, whose doc
+//! This file holds the parser ([`Cli`], the [`GlobalArgs`] every command takes, `--threads` ([`ThreadsArg`]) and
+//! `--max-memory` ([`MemoryArg`]) for the commands they mean something to, and `Command`, whose doc
 //! comments are the subcommands' help), [`run`], which hands each command to its own file, and
 //! [`print_error`]. One file per command: `match.rs` (also the default, `jem LEFT RIGHT -o OUT`), `config.rs`
 //! (and the `--config`/`--set`/`--downscale` flags that `match` and `batch` share), `synth.rs`, `batch.rs`,
@@ -71,31 +72,44 @@ pub struct Cli {
 /// Options every command takes.
 #[derive(Args, Debug, Clone)]
 pub struct GlobalArgs {
-    /// Worker threads (default: one per core).
-    #[arg(long, global = true, value_name = "N", help_heading = "Global")]
-    threads: Option<usize>,
-    /// Print nothing but errors.
+    /// Print nothing but errors (not even the last line saying what was written).
     #[arg(long, short, global = true, help_heading = "Global")]
     quiet: bool,
     /// Print per-stage timings to stderr.
     #[arg(long, short, global = true, help_heading = "Global")]
     verbose: bool,
+}
+
+/// `--threads`, for the commands that run work in parallel (`match`, `batch`, `synth`, `degrade`, `eval`; not
+/// `config` or `viz`, which have nothing to share out).
+#[derive(Args, Debug, Clone, Default)]
+pub struct ThreadsArg {
+    /// Worker threads (default: one per core). The output does not depend on it.
+    #[arg(long, value_name = "N", help_heading = "Resources")]
+    threads: Option<usize>,
+}
+
+/// `--max-memory`, for the commands that run the pipeline (`match`, `batch`).
+#[derive(Args, Debug, Clone, Default)]
+pub struct MemoryArg {
     /// Refuse runs estimated to need more memory than this, before allocating (e.g. 1500M, 8G; default: 80% of
-    /// physical memory).
-    #[arg(long, global = true, value_name = "SIZE", value_parser = parse_size, help_heading = "Global")]
+    /// physical memory); a pair that does not fit whole runs in tiles.
+    #[arg(long, value_name = "SIZE", value_parser = parse_size, help_heading = "Resources")]
     max_memory: Option<u64>,
 }
 
-impl GlobalArgs {
+impl MemoryArg {
     /// The memory limit in bytes.
     fn memory_limit(&self) -> u64 {
         self.max_memory.unwrap_or_else(jem::default_memory_limit)
     }
 }
 
-/// Moves global flags written before a subcommand to just after it: `jem --threads 1 batch …` becomes
+/// Moves the flags written before a subcommand to just after it: `jem --threads 1 batch …` becomes
 /// `jem batch --threads 1 …`. (The top-level command takes the match arguments too, so clap reads any flag before
-/// the subcommand as belonging to a match and then rejects the subcommand name as a stray argument.)
+/// the subcommand as belonging to a match and then rejects the subcommand name as a stray argument.) `--quiet` and
+/// `--verbose` are taken by every subcommand, `--threads` and `--max-memory` only by those where they mean something
+/// ([`ThreadsArg`], [`MemoryArg`]): `jem --threads 1 config` is refused as `jem config --threads 1` is.
 ///
 /// Every subcommand's name comes from the parser itself, so none is missed (issue 41: `degrade` was).
 pub fn global_flags_after_subcommand(mut args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsString> {
@@ -230,7 +244,16 @@ const MIN_THREAD_CAP: usize = 16;
 
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> Result<ExitCode> {
-    if let Some(n) = cli.global.threads {
+    let threads = match &cli.command {
+        None => &cli.match_args.threads,
+        Some(Command::Match(a)) => &a.threads,
+        Some(Command::Synth(a)) => &a.threads,
+        Some(Command::Degrade(a)) => &a.threads,
+        Some(Command::Batch(a)) => &a.threads,
+        Some(Command::Eval(a)) => &a.threads,
+        Some(Command::Config(_) | Command::Viz(_)) => &ThreadsArg::default(),
+    };
+    if let Some(n) = threads.threads {
         // More threads than cores only adds switching (1000 threads took 73 s for a 0.4 s run); allow a few per
         // core for machines that under-report, and refuse the rest before starting any.
         let cores = std::thread::available_parallelism().map_or(1, |c| c.get());

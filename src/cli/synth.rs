@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use clap::Args;
 use jem::Result;
 
-use super::GlobalArgs;
+use super::{GlobalArgs, ThreadsArg};
 
 /// Arguments of `jem synth` (the help text is on [`Command::Synth`](super::Command::Synth)).
 #[derive(Args, Debug, Clone)]
@@ -26,6 +26,8 @@ pub(super) struct SynthArgs {
     /// Disparity search range written to calib.txt (16..=W/2); the scene's disparities span about 6-92 % of it.
     #[arg(long, default_value_t = 48, value_name = "N")]
     ndisp: usize,
+    #[command(flatten)]
+    pub(super) threads: ThreadsArg,
 }
 
 /// Renders and writes one scene.
