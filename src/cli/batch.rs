@@ -210,8 +210,44 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let failed = reports.iter().filter(|r| matches!(r.status, SceneStatus::Failed(_))).count();
     if !global.quiet {
         out!("{}", batch_summary(&reports, global.verbose));
+        note!("{}", results_line(&scenes, &reports, args));
     }
     Ok(if failed > 0 { ExitCode::from(2) } else { ExitCode::SUCCESS })
+}
+
+/// The last line of a batch: how many pairs were written, skipped and failed, and where the results are
+/// (MiddEval3: the file names in each scene folder; KITTI, ETH3D: the results folders).
+fn results_line(scenes: &[jem::dataset::Pair], reports: &[jem::batch::SceneReport], args: &BatchArgs) -> String {
+    use jem::batch::SceneStatus;
+    use jem::dataset::Layout;
+    let count = |f: fn(&SceneStatus) -> bool| reports.iter().filter(|r| f(&r.status)).count();
+    let written = count(|s| matches!(s, SceneStatus::Done(_)));
+    let skipped = count(|s| matches!(s, SceneStatus::Skipped));
+    let failed = count(|s| matches!(s, SceneStatus::Failed(_)));
+    let mut places: Vec<String> = Vec::new();
+    let middlebury: std::collections::BTreeSet<PathBuf> = scenes
+        .iter()
+        .filter(|p| p.layout == Layout::Middlebury)
+        .map(|p| p.root.parent().map_or_else(|| PathBuf::from("."), std::path::Path::to_path_buf))
+        .collect();
+    if !middlebury.is_empty() {
+        let under: Vec<String> = middlebury.iter().map(|d| d.display().to_string()).collect();
+        places.push(format!(
+            "disp0{alg}.pfm and time{alg}.txt in each MiddEval3 scene folder (under {})",
+            one_line(&under.join(", ")),
+            alg = args.alg
+        ));
+    }
+    let others: std::collections::BTreeSet<PathBuf> = scenes
+        .iter()
+        .filter(|p| p.layout != Layout::Middlebury)
+        .filter_map(|p| p.results_dir(&args.alg, args.results.as_deref()))
+        .collect();
+    for dir in others {
+        places.push(format!("{}/", one_line(&dir.display().to_string())));
+    }
+    let failed = if failed > 0 { format!("{failed} FAILED (listed above)") } else { "0 failed".into() };
+    format!("{} pair(s): {written} written, {skipped} skipped, {failed}; results: {}", reports.len(), places.join("; "))
 }
 
 /// A scene name (or path, or message holding one) on one line: control characters (a newline in a folder name)

@@ -34,6 +34,25 @@ impl ConfigArgs {
     }
 }
 
+impl ConfigArgs {
+    /// What the configuration is made of: `built-in defaults ← fast.toml ← 2 --set ← --downscale 2`.
+    fn describe(&self) -> String {
+        let mut parts = vec!["built-in defaults".to_string()];
+        if let Some(c) = &self.config {
+            parts.push(c.display().to_string());
+        }
+        match self.overrides.len() {
+            0 => {}
+            1 => parts.push("1 --set".into()),
+            n => parts.push(format!("{n} --set")),
+        }
+        if let Some(d) = &self.downscale {
+            parts.push(format!("--downscale {}", d.trim()));
+        }
+        parts.join(" ← ")
+    }
+}
+
 /// The `--downscale` value: an integer ≥ 1 (parsed here rather than by clap, for a one-line error).
 fn parse_downscale(text: &str) -> Result<usize> {
     match text.trim().parse::<usize>() {
@@ -42,8 +61,11 @@ fn parse_downscale(text: &str) -> Result<usize> {
     }
 }
 
-/// Prints the effective configuration as TOML.
-pub(super) fn run(args: &ConfigArgs) -> Result<ExitCode> {
+/// Prints the effective configuration as TOML (stdout), then what it was made of (stderr).
+pub(super) fn run(args: &ConfigArgs, global: &super::GlobalArgs) -> Result<ExitCode> {
     out!("{}", args.params()?.to_toml());
+    if !global.quiet {
+        note!("printed the effective configuration: {}", args.describe());
+    }
     Ok(ExitCode::SUCCESS)
 }

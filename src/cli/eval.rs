@@ -78,7 +78,7 @@ fn paper_file(flag: Option<&Path>) -> PathBuf {
 }
 
 /// Scores every --alg over the folder and prints the reports.
-pub(super) fn run(args: &EvalArgs) -> Result<ExitCode> {
+pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCode> {
     use jem::eval::{PaperResults, evaluate_dir, render};
     for a in &args.algs {
         jem::batch::validate_alg_name(a)?;
@@ -117,7 +117,33 @@ pub(super) fn run(args: &EvalArgs) -> Result<ExitCode> {
         .collect::<Result<Vec<_>>>()?;
     out!("{}", render(&reports, &papers, args.format));
     let excluded = reports.iter().any(|r| r.excluded().next().is_some());
+    if !global.quiet {
+        note!("{}", scored_line(&reports));
+    }
     Ok(if excluded { ExitCode::from(2) } else { ExitCode::SUCCESS })
+}
+
+/// The last line of an eval: `scored 15 scenes of JEM (middlebury, nonocc, errors ×4)`, and how many had no
+/// usable result.
+fn scored_line(reports: &[jem::eval::AlgReport]) -> String {
+    let parts: Vec<String> = reports
+        .iter()
+        .map(|r| {
+            let total = r.scenes.len();
+            let missing = r.excluded().count();
+            let scale = if r.scale == 1 { String::new() } else { format!(", errors ×{}", r.scale) };
+            let missing =
+                if missing > 0 { format!("; {missing} without a usable result (listed above)") } else { String::new() };
+            format!(
+                "scored {} of {total} scene(s) of {} ({}, {}{scale}){missing}",
+                total - r.excluded().count(),
+                r.alg,
+                r.layout.name(),
+                r.mask.name()
+            )
+        })
+        .collect();
+    parts.join("; ")
 }
 
 /// The image tree of an ETH3D ground-truth tree: `X` for a folder `X_gt` without images of its own, when `X`

@@ -186,7 +186,39 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
             note!("memory: peak {} (planned {})", human(peak), human(planned));
         }
     }
+    if !global.quiet {
+        let seconds = start.elapsed().as_secs_f64();
+        note!("{}", wrote_line(args, &out.disparity, pair.ndisp, ndisp_measured, seconds, camera.as_ref()));
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The last line of a match: `wrote d.pfm (741×497, 96 % valid, ndisp 70, 2.8 s)`, then the other files written.
+fn wrote_line(
+    args: &MatchArgs,
+    disparity: &jem::DisparityMap,
+    ndisp: usize,
+    measured: bool,
+    seconds: f64,
+    camera: Option<&jem::geometry::Camera>,
+) -> String {
+    let (w, h) = disparity.dims();
+    let valid = disparity.data.iter().filter(|d| d.is_finite()).count();
+    let percent = 100.0 * valid as f64 / disparity.data.len().max(1) as f64;
+    let measured = if measured { " measured" } else { "" };
+    let output = args.output.as_deref().unwrap_or(Path::new("?")).display();
+    let mut line = format!("wrote {output} ({w}×{h}, {percent:.0} % valid, ndisp {ndisp}{measured}, {seconds:.1} s)");
+    if let Some(c) = &args.confidence {
+        line.push_str(&format!(", confidence {}", c.display()));
+    }
+    if let Some(d) = &args.depth {
+        line.push_str(&format!(", depth {}", d.display()));
+    }
+    if let (Some(c), Some(camera)) = (&args.cloud, camera) {
+        let points = disparity.data.iter().enumerate().filter(|&(i, &d)| camera.point(i % w, i / w, d).is_some());
+        line.push_str(&format!(", point cloud {} ({} points)", c.display(), points.count()));
+    }
+    line
 }
 
 /// One line: what the adaptive front end measured on the pair and set from it.

@@ -273,11 +273,11 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
         None => r#match::run(&cli.match_args, &cli.global),
         Some(Command::Match(args)) => r#match::run(&args, &cli.global),
-        Some(Command::Config(args)) => config::run(&args),
+        Some(Command::Config(args)) => config::run(&args, &cli.global),
         Some(Command::Synth(args)) => synth::run(&args, &cli.global),
         Some(Command::Degrade(args)) => degrade::run(&args, &cli.global),
         Some(Command::Batch(args)) => batch::run(&args, &cli.global),
-        Some(Command::Eval(args)) => eval::run(&args),
+        Some(Command::Eval(args)) => eval::run(&args, &cli.global),
         Some(Command::Viz(args)) => viz::run(&args, &cli.global),
     }
 }

@@ -75,7 +75,8 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         }
         if !global.quiet {
             let names: Vec<String> = sheet.rows.iter().map(|s| jem::batch::scene_name(s)).collect();
-            note!("{}: {} rows ({})", args.output.display(), names.len(), names.join(", "));
+            let (w, h) = (sheet.canvas.width, sheet.canvas.height);
+            note!("wrote {} ({w}×{h}): {} rows ({})", args.output.display(), names.len(), names.join(", "));
         }
         return Ok(ExitCode::SUCCESS);
     }
@@ -100,17 +101,19 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         return Err(Error::param("--vmin / --vmax", format!("{vmin} / {vmax}"), "a range with --vmin below --vmax"));
     }
     let colour = viz::colorize(&disp, vmin, vmax);
-    let picture = match &args.gt {
-        None => colour,
+    let (picture, error) = match &args.gt {
+        None => (colour, String::new()),
         Some(gt_path) => {
             let (gt, mask) = viz::load_gt_for(&disp, gt_path)?;
             let scale = args.scale.or_else(|| viz::resolved_scale(gt_path)).unwrap_or(1);
-            viz::hstack(&[colour, viz::error_map(&disp, &gt, mask.as_ref(), scale)], 4)
+            let error = format!(" | error map against {} (red: error > 2 px ×{scale})", gt_path.display());
+            (viz::hstack(&[colour, viz::error_map(&disp, &gt, mask.as_ref(), scale)], 4), error)
         }
     };
     picture.write_png(&args.output)?;
-    if global.verbose && !global.quiet {
-        note!("{}: range {vmin}..{vmax}", args.output.display());
+    if !global.quiet {
+        let (w, h) = (picture.width, picture.height);
+        note!("wrote {} ({w}×{h}): disparity coloured over {vmin}..{vmax}{error}", args.output.display());
     }
     Ok(ExitCode::SUCCESS)
 }
