@@ -265,13 +265,23 @@ fn scene(dir: &Path, purpose: Purpose, how: &Discovery) -> Option<Option<Pair>> 
     let has = |f: &str| dir.join(f).is_file();
     let inputs = SCENE_FILES.iter().all(|f| has(f));
     let truth_here = purpose == Purpose::Score && has("disp0GT.pfm");
-    if !(inputs || truth_here) {
+    let parent = dir.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let eth3d = || how.gt.is_some() || is_eth3d_tree(parent);
+    // In an ETH3D tree a folder with any of the scene files is a scene, listed even when one is missing, so that
+    // `jem batch` fails it naming the file and `jem eval` counts it as missing (issue 41: it disappeared).
+    let partial_eth3d = || {
+        SCENE_FILES.iter().any(|f| has(f))
+            && match how.layout {
+                Some(l) => l == Layout::Eth3d,
+                None => eth3d(),
+            }
+    };
+    if !(inputs || truth_here || partial_eth3d()) {
         return None;
     }
-    let parent = dir.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let layout = match how.layout {
         Some(l @ (Layout::Middlebury | Layout::Eth3d)) => l,
-        _ if how.gt.is_some() || is_eth3d_tree(parent) => Layout::Eth3d,
+        _ if eth3d() => Layout::Eth3d,
         _ => Layout::Middlebury,
     };
     let name = dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
@@ -287,7 +297,7 @@ fn scene(dir: &Path, purpose: Purpose, how: &Discovery) -> Option<Option<Pair>> 
         pair.root = parent.to_path_buf();
     }
     let usable = match purpose {
-        Purpose::Run => inputs,
+        Purpose::Run => inputs || layout == Layout::Eth3d,
         Purpose::Score => pair.truth(false, how.gt.as_deref()).disparity.is_file(),
     };
     Some(usable.then_some(pair))

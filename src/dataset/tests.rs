@@ -34,6 +34,10 @@ fn recognises_each_layout() {
             "eth/two_view_training/delivery_area_1l/im1.png",
             "eth/two_view_training/delivery_area_1l/calib.txt",
             "eth/two_view_training_gt/delivery_area_1l/disp0GT.pfm",
+            "eth/two_view_training/forest_1s/im0.png", // no right view: listed, to fail loudly (issue 41)
+            "eth/two_view_training/forest_1s/calib.txt",
+            "eth/two_view_training_gt/forest_1s/disp0GT.pfm",
+            "mid/trainingQ/Lone/im0.png", // no right view, outside an ETH3D tree: no scene
             "mid/trainingQ/Teddy/im0.png",
             "mid/trainingQ/Teddy/im1.png",
             "mid/trainingQ/Teddy/calib.txt",
@@ -45,6 +49,7 @@ fn recognises_each_layout() {
         names(&pairs),
         [
             (Layout::Eth3d, "delivery_area_1l".into()),
+            (Layout::Eth3d, "forest_1s".into()),
             (Layout::Kitti2012, "000003_10".into()),
             (Layout::Kitti2012, "000007_10".into()),
             (Layout::Kitti2015, "000000_10".into()),
@@ -52,12 +57,12 @@ fn recognises_each_layout() {
             (Layout::Middlebury, "Teddy".into()),
         ]
     );
-    let kitti = &pairs[3];
+    let kitti = &pairs[4];
     assert_eq!(kitti.root, root.join("kitti15/training"));
     assert_eq!(kitti.left, root.join("kitti15/training/image_2/000000_10.png"));
     assert_eq!(kitti.right, root.join("kitti15/training/image_3/000000_10.png"));
     assert_eq!((kitti.calib.as_ref(), kitti.default_ndisp()), (None, Some(KITTI_NDISP)));
-    assert_eq!(pairs[1].left, root.join("kitti12/grey/image_0/000003_10.png"));
+    assert_eq!(pairs[2].left, root.join("kitti12/grey/image_0/000003_10.png"));
     assert_eq!(pairs[0].root, root.join("eth/two_view_training"));
     assert_eq!(pairs[0].default_ndisp(), None);
 
@@ -67,6 +72,7 @@ fn recognises_each_layout() {
         names(&scored),
         [
             (Layout::Eth3d, "delivery_area_1l".into()),
+            (Layout::Eth3d, "forest_1s".into()),
             (Layout::Kitti2015, "000000_10".into()),
             (Layout::Kitti2015, "000001_10".into()),
             (Layout::Middlebury, "Teddy".into())
