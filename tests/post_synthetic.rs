@@ -411,3 +411,26 @@ fn motorcycle_timings() {
         eprintln!("{name:>24}: avgErr {avg:.3} (x4 px), bad2.0 {bad:.2}% (nonocc)");
     }
 }
+
+/// Issue 41, item 6: more segments than the image can hold (`SpsParams::max_segments`: pixels / min_support) are
+/// held to that bound, so 2^24 segments give exactly the map of the bound and still recover the planes (1a367fa:
+/// 2^24 segments on this 200 × 150 scene gave 1-px cells, none able to fit a plane alone; the map was wrecked).
+#[test]
+fn issue41_absurd_segment_counts_are_held_to_the_image() {
+    let (w, h) = (200, 150);
+    let s = synthetic(w, h, 0.3, 42);
+    let bound = sps(1).max_segments(w * h);
+    assert_eq!(bound, w * h / 10, "pixels / min_support (10)");
+    assert_eq!(SpsParams { min_support: 0.0, ..sps(1) }.max_segments(w * h), w * h / 3, "3 points a plane");
+    let at_bound = fit_slanted_planes(&s.image, &s.disp, &s.trusted, &sps(bound));
+    let absurd = fit_slanted_planes(&s.image, &s.disp, &s.trusted, &sps(1 << 24));
+    let differ = absurd.data.iter().zip(&at_bound.data).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+    assert_eq!(differ, 0, "held to the bound: {differ} of {} pixels differ", w * h);
+    let e = errors(&s, &absurd, 3, 0.5);
+    assert!(
+        e.mean_all < 0.3 && e.frac_interior_within > 0.95,
+        "mean {}, within {}",
+        e.mean_all,
+        e.frac_interior_within
+    );
+}

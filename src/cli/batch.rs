@@ -55,6 +55,8 @@ pub(super) struct BatchArgs {
 
 /// What the batch display shows while scenes run.
 struct BatchDisplay {
+    /// The run's parameters, for the warnings about values too large for a scene's image.
+    params: jem::Params,
     bar: Option<indicatif::ProgressBar>,
     quiet: bool,
     total: usize,
@@ -63,7 +65,7 @@ struct BatchDisplay {
 }
 
 impl BatchDisplay {
-    fn new(total: usize, quiet: bool) -> Self {
+    fn new(total: usize, quiet: bool, params: jem::Params) -> Self {
         let bar = (!quiet && std::io::stderr().is_terminal()).then(|| {
             let style = indicatif::ProgressStyle::with_template(
                 "{spinner} [{elapsed_precise}] [{bar:30}] {pos}/{len} scenes, ETA {eta}  {wide_msg}",
@@ -74,7 +76,7 @@ impl BatchDisplay {
             bar.enable_steady_tick(std::time::Duration::from_millis(200));
             bar
         });
-        BatchDisplay { bar, quiet, total, done: 0.into(), active: Default::default() }
+        BatchDisplay { params, bar, quiet, total, done: 0.into(), active: Default::default() }
     }
 
     fn line(&self, msg: &str) {
@@ -121,6 +123,12 @@ impl BatchDisplay {
                     SceneStatus::Skipped => self.line(&format!("{head}: skipped (result exists)")),
                     SceneStatus::Done(r) => {
                         self.line(&format!("{head}: {}x{}, ndisp {}, {:.3} s", r.size.0, r.size.1, r.ndisp, r.seconds))
+                    }
+                }
+                // A value too large for this scene's image (held to its bound), whatever -q says.
+                if let SceneStatus::Done(r) = &report.status {
+                    for warning in self.params.image_warnings(r.size.0, r.size.1) {
+                        self.line(&format!("{head}: warning: {warning}"));
                     }
                 }
                 if let Some(bar) = &self.bar {
@@ -190,7 +198,7 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         skip_existing: args.skip_existing,
         max_memory_bytes: args.memory.memory_limit(),
     };
-    let display = BatchDisplay::new(scenes.len(), global.quiet);
+    let display = BatchDisplay::new(scenes.len(), global.quiet, params.clone());
 
     // Panics inside the pipeline are caught and reported per scene; keep the default hook's message and
     // backtrace note off the terminal unless -v.

@@ -129,6 +129,9 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     // Both headers, then the limit, before either image is decoded (issue 41: the loading and the range
     // measurement are checked too, and the right image's size before it is decoded).
     let header = jem::io::png::read_pair_header(left, right)?;
+    for warning in params.image_warnings(header.width, header.height) {
+        note!("warning: {warning}");
+    }
     jem::plan::check_before_decode(&header, source, &params, args.memory.memory_limit())?;
     let (l, r) = jem::io::png::load_rgb_pair_within(left, right, args.memory.memory_limit())?;
     // The range and the way to run: shared with the Python module (jem::plan), so both give the same map.

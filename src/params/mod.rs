@@ -185,6 +185,26 @@ impl Params {
         self.post.validate()
     }
 
+    /// The values too large for an image of `width` × `height` pixels (the input; the pipeline runs at
+    /// 1/`downscale` of it), each as a one-line warning naming the key and the bound the pipeline holds it to.
+    /// So far one key's sane range depends on the image: `post.sps.segments` ([`SpsParams::max_segments`]).
+    pub fn image_warnings(&self, width: usize, height: usize) -> Vec<String> {
+        // As `scale::reduced_len`: the reduced image keeps a partial last block.
+        let ds = self.downscale.max(1);
+        let (w, h) = (width.div_ceil(ds), height.div_ceil(ds));
+        let sps = &self.post.sps;
+        let max = sps.max_segments(w * h);
+        let mut warnings = Vec::new();
+        if sps.enabled && sps.segments > max {
+            warnings.push(format!(
+                "post.sps.segments = {} is more than a {w}x{h} image holds; using {max} (at most pixels / \
+                 post.sps.min_support, and at least 3 pixels a segment)",
+                sps.segments
+            ));
+        }
+        warnings
+    }
+
     /// The fully connected weight ω the model actually uses (0 for `lcm` and `wta`).
     pub fn effective_fcm_weight(&self) -> f32 {
         match self.model {

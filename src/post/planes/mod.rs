@@ -161,7 +161,9 @@ pub fn fit_slanted_planes(image: &RgbImage, disp: &DisparityMap, trusted: &Plane
 /// The alternation of the module doc: returns the final segment labels (row-major) and one plane per segment.
 fn segment_and_fit(scene: &Scene, p: &SpsParams) -> (Vec<u32>, Vec<[f64; 3]>) {
     let (w, h) = (scene.width, scene.height);
-    let step = ((w * h) as f64 / p.segments as f64).sqrt().max(1.0);
+    // More segments than the image can hold are absurd (see `max_segments`); the caller warns about it.
+    let segments = p.segments.min(p.max_segments(w * h));
+    let step = ((w * h) as f64 / segments as f64).sqrt().max(1.0);
     let (mut labels, nseg) = grid_labels(w, h, step);
     let mut adj = Adjacency::new(nseg);
 
