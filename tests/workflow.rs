@@ -517,11 +517,11 @@ fn issue41_absurd_segment_counts_are_held_to_the_image_with_a_warning() {
         let out_file = dir.path().join(format!("d{segments}.pfm"));
         let set = format!("post.sps.segments={segments}");
         let args = [pair[0].to_str().unwrap(), pair[1].to_str().unwrap(), "-o", out_file.to_str().unwrap()];
-        let out = jem_in(&[&args[..], &["--set", &set, "-q"]].concat());
+        let out = jem_in(&[&args[..], &["--set", &set]].concat());
         let err = stderr(&out);
         assert!(out.status.success(), "{err}");
         assert_eq!(err.contains("warning: post.sps.segments = 50000") && err.contains("using 307"), warned, "{err}");
-        assert_eq!(err.lines().count(), usize::from(warned), "one line: {err}");
+        assert_eq!(err.lines().filter(|l| l.contains("warning")).count(), usize::from(warned), "one line: {err}");
         maps.push(std::fs::read(&out_file).unwrap());
     }
     assert_eq!(maps[0], maps[1], "the map of the bound");

@@ -125,8 +125,10 @@ impl BatchDisplay {
                         self.line(&format!("{head}: {}x{}, ndisp {}, {:.3} s", r.size.0, r.size.1, r.ndisp, r.seconds))
                     }
                 }
-                // A value too large for this scene's image (held to its bound), whatever -q says.
-                if let SceneStatus::Done(r) = &report.status {
+                // A value too large for this scene's image (held to its bound); -q silences it.
+                if let SceneStatus::Done(r) = &report.status
+                    && !self.quiet
+                {
                     for warning in self.params.image_warnings(r.size.0, r.size.1) {
                         self.line(&format!("{head}: warning: {warning}"));
                     }

@@ -129,7 +129,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     // Both headers, then the limit, before either image is decoded (issue 41: the loading and the range
     // measurement are checked too, and the right image's size before it is decoded).
     let header = jem::io::png::read_pair_header(left, right)?;
-    for warning in params.image_warnings(header.width, header.height) {
+    for warning in params.image_warnings(header.width, header.height).iter().filter(|_| !global.quiet) {
         note!("warning: {warning}");
     }
     jem::plan::check_before_decode(&header, source, &params, args.memory.memory_limit())?;
