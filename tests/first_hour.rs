@@ -40,8 +40,12 @@ fn issue42_every_command_ends_with_what_it_did() {
     assert_eq!(line, "scored 1 of 1 scene(s) of T (middlebury, nonocc)");
     let line = last_line(d, &["viz", "d.pfm", "-o", "v.png"]);
     assert!(line.starts_with("wrote v.png (96×64): disparity coloured over "), "{line}");
-    let line = last_line(d, &["viz", "set", "--alg", "T", "-o", "sheet.png"]);
-    assert!(line.starts_with("wrote sheet.png (") && line.ends_with("1 rows (S)"), "{line}");
+    let line = last_line(d, &["viz", "set", "--alg", "T", "-o", "sheet.png", "--scale", "1"]);
+    assert!(
+        line.starts_with("wrote sheet.png (")
+            && line.ends_with("1 rows (S); error maps: MiddEval3 bad-2 (error > 2 px)"),
+        "{line}"
+    );
     let line = last_line(d, &["config", "--set", "meanfield.iterations=2"]);
     assert_eq!(line, "printed the effective configuration: built-in defaults ← 1 --set");
     let line = last_line(d, &["degrade", "set", "noisy", "--recipe", "noise:2"]);
@@ -64,7 +68,7 @@ fn issue42_every_command_ends_with_what_it_did() {
         &["batch", "q", "--alg", "T", "-q"],
         &["-q", "eval", "q", "--alg", "T", "--scale", "1"],
         &["-q", "viz", "q.pfm", "-o", "q.png"],
-        &["-q", "viz", "q", "--alg", "T", "-o", "qsheet.png"],
+        &["-q", "viz", "q", "--alg", "T", "-o", "qsheet.png", "--scale", "1"],
         &["-q", "config"],
         &["-q", "degrade", "q", "qnoisy", "--recipe", "noise:2"],
     ] {
@@ -75,4 +79,133 @@ fn issue42_every_command_ends_with_what_it_did() {
     for f in ["q/S/disp0GT.pfm", "q.pfm", "q/S/disp0T.pfm", "q.png", "qsheet.png", "qnoisy/S/im0.png"] {
         assert!(d.join(f).is_file(), "{f} missing after -q");
     }
+}
+
+const INF: f32 = f32::INFINITY;
+
+/// Writes a disparity map in the format its extension names (16-bit PNG for KITTI, PFM).
+fn write_map(path: &Path, w: usize, h: usize, data: Vec<f32>) {
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let bytes = jem::io::encode_disparity(path, &jem::Plane::from_vec(w, h, data)).unwrap();
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// Writes a flat grey 8-bit RGB image.
+fn write_image(path: &Path, w: u32, h: u32) {
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    image::RgbImage::from_pixel(w, h, image::Rgb([9, 9, 9])).save(path).unwrap();
+}
+
+/// The colour at (x, y) of a PNG, and its size.
+fn pixel(path: &Path, x: u32, y: u32) -> ((u32, u32), [u8; 3]) {
+    let img = image::open(path).unwrap().to_rgb8();
+    (img.dimensions(), img.get_pixel(x, y).0)
+}
+
+/// An occluded pixel that is not bad, with error 0 (the module doc of jem::viz).
+fn occluded_exact() -> [u8; 3] {
+    [0.5f32 * 255.0, 0.55 * 255.0, 0.7 * 255.0].map(|v| v.round() as u8)
+}
+
+/// Issue 42, item 4: a KITTI tree's contact sheet and a single KITTI map's error map use D1 (error > 3 px and > 5 %
+/// of the true disparity), not MiddEval3's 2 px: 4 px off a true 100 is fine, 4 px off a true 20 is bad. Pixels in
+/// disp_occ_0 but not in disp_noc_0 are shaded as occluded. (Before: "no scene folder with im0.png and
+/// disp0T.pfm", and a single map's error map used the 2 px rule.)
+#[test]
+fn issue42_viz_kitti_tree_with_d1() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let frame = "000000_10.png";
+    for side in ["image_2", "image_3"] {
+        write_image(&d.join("kitti/training").join(side).join(frame), 8, 2);
+    }
+    //                  0      1      2     3     4      5      6    7
+    let all = vec![100.0, 100.0, 20.0, 20.0, 50.0, 50.0, INF, 60.0];
+    let nonocc = vec![100.0, 100.0, 20.0, 20.0, INF, 50.0, INF, 60.0];
+    let result = vec![104.0, 100.0, 24.0, 20.0, 50.0, INF, 9.0, 61.0];
+    let second = |row: &[f32]| [row, row].concat();
+    write_map(&d.join("kitti/training/disp_occ_0").join(frame), 8, 2, second(&all));
+    write_map(&d.join("kitti/training/disp_noc_0").join(frame), 8, 2, second(&nonocc));
+    write_map(&d.join("kitti/results/T/disp_0").join(frame), 8, 2, second(&result));
+    let want = |x0: u32, sheet: &Path| {
+        let grey = (255.0f32 - 50.0 * 4.0 / 5.0).round() as u8;
+        let colours: Vec<[u8; 3]> = (0..8).map(|x| pixel(sheet, x0 + x, 1).1).collect();
+        assert_eq!(colours[0], [grey; 3], "4 px off 100: within D1");
+        assert_eq!(colours[1], [255; 3]);
+        assert_eq!(colours[2], [230, 30, 30], "4 px off 20: a D1 outlier");
+        assert_eq!(colours[4], occluded_exact(), "in disp_occ_0 only: occluded");
+        assert_eq!(colours[5], [0, 0, 0], "invalid result");
+        assert_eq!(colours[6], [48, 48, 48], "no ground truth");
+    };
+    let out = run_in(d, &["viz", "kitti/training", "--alg", "T", "-o", "sheet.png"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(err.contains("1 rows (000000_10); error maps: KITTI D1 (error > 3 px and > 5 % of the true"), "{err}");
+    assert_eq!(pixel(&d.join("sheet.png"), 0, 0).0, (3 * 8 + 2 * 4, 2));
+    want(24, &d.join("sheet.png"));
+    // One map against disp_noc_0 (its sibling disp_occ_0 is the truth of all pixels).
+    let args = ["viz", "kitti/results/T/disp_0/000000_10.png", "--gt", "kitti/training/disp_noc_0/000000_10.png"];
+    let out = run_in(d, &[&args[..], &["-o", "one.png"]].concat());
+    assert!(out.status.success() && stderr(&out).contains("red: KITTI D1"), "{}", stderr(&out));
+    want(12, &d.join("one.png"));
+    // A sheet of a tree without results says where it looked.
+    let out = run_in(d, &["viz", "kitti/training", "--alg", "U", "-o", "none.png"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("no result of U") && stderr(&out).contains("results/U/disp_0"), "{}", stderr(&out));
+}
+
+/// Issue 42, item 4: an ETH3D tree's contact sheet uses bad-1 (error > 1 px, native pixels; MiddEval3's rule would
+/// let 1.5 px pass) with the ground truth of the `_gt` tree, and ETH3D's mask: anything but 255 is occluded.
+#[test]
+fn issue42_viz_eth3d_tree_with_bad1() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = d.join("two_view_training/S");
+    write_image(&scene.join("im0.png"), 4, 1);
+    write_image(&scene.join("im1.png"), 4, 1);
+    std::fs::write(scene.join("calib.txt"), "ndisp=4\n").unwrap();
+    write_map(&d.join("two_view_training_gt/S/disp0GT.pfm"), 4, 1, vec![10.0, 10.0, 10.0, 10.0]);
+    image::GrayImage::from_raw(4, 1, vec![255, 255, 0, 255])
+        .unwrap()
+        .save(d.join("two_view_training_gt/S/mask0nocc.png"))
+        .unwrap();
+    write_map(&d.join("results/T/low_res_two_view/S.pfm"), 4, 1, vec![11.5, 10.5, 10.0, 10.0]);
+    let out = run_in(d, &["viz", "two_view_training", "--alg", "T", "-o", "sheet.png"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("1 rows (S); error maps: ETH3D bad-1 (error > 1 px)"), "{}", stderr(&out));
+    let sheet = d.join("sheet.png");
+    let colours: Vec<[u8; 3]> = (0..4).map(|x| pixel(&sheet, 16 + x, 0).1).collect();
+    assert_eq!(colours, vec![[230, 30, 30], [230; 3], occluded_exact(), [255; 3]]);
+    // One map: the rule follows from the ground truth's place in a *_gt tree.
+    let args = ["viz", "results/T/low_res_two_view/S.pfm", "--gt", "two_view_training_gt/S/disp0GT.pfm", "-o", "o.png"];
+    let out = run_in(d, &args);
+    assert!(out.status.success() && stderr(&out).contains("red: ETH3D bad-1"), "{}", stderr(&out));
+    assert_eq!(pixel(&d.join("o.png"), 8, 0).1, [230, 30, 30]);
+}
+
+/// Issue 42, item 6 (`viz --scale`): a MiddEval3 error map outside a trainingQ/H/F folder no longer takes 1
+/// silently: the error asks for --scale, and --scale 4 makes 0.75 px (3 full-resolution px) bad.
+#[test]
+fn issue42_viz_scale_is_asked_for_when_the_path_does_not_tell() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write_map(&d.join("S/disp0GT.pfm"), 2, 1, vec![10.0, 10.0]);
+    write_map(&d.join("S/disp0T.pfm"), 2, 1, vec![10.75, 10.0]);
+    write_image(&d.join("S/im0.png"), 2, 1);
+    for args in [
+        &["viz", "S/disp0T.pfm", "--gt", "S/disp0GT.pfm", "-o", "o.png"][..],
+        &["viz", ".", "--alg", "T", "-o", "s.png"],
+    ] {
+        let out = run_in(d, args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = stderr(&out);
+        assert!(err.contains("cannot tell the resolution of") && err.contains("pass --scale 1, 2 or 4"), "{err}");
+        assert!(!d.join(args[args.len() - 1]).exists());
+    }
+    let out = run_in(d, &["viz", "S/disp0T.pfm", "--gt", "S/disp0GT.pfm", "-o", "o.png", "--scale", "4"]);
+    assert!(out.status.success() && stderr(&out).contains("×4"), "{}", stderr(&out));
+    assert_eq!(pixel(&d.join("o.png"), 6, 0).1, [230, 30, 30]);
+    let out = run_in(d, &["viz", "S/disp0T.pfm", "--gt", "S/disp0GT.pfm", "-o", "o.png", "--scale", "1"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_ne!(pixel(&d.join("o.png"), 6, 0).1, [230, 30, 30]);
 }

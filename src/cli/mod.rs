@@ -225,16 +225,24 @@ enum Command {
     /// is not given; otherwise ../shared/middlebury/paper-results.tsv relative to the current folder).
     #[command(verbatim_doc_comment)]
     Eval(EvalArgs),
-    /// Draw a disparity map (colour, error map against --gt) or a contact sheet of a folder.
+    /// Draw a disparity map (colour, error map against --gt) or a contact sheet of a data set's folder.
     ///
-    /// `jem viz DISP -o OUT.png [--gt GT.pfm]` or `jem viz DIR --alg NAME -o SHEET.png`.
+    /// `jem viz DISP -o OUT.png [--gt GT]` or `jem viz DIR --alg NAME -o SHEET.png`.
     /// The disparity is colour-mapped (dark indigo = low, through blue, green, yellow to dark red = high; invalid
     /// pixels black) over --vmin..--vmax, else vmin/vmax from calib.txt beside DISP, else the finite data range.
-    /// With --gt the picture is the colour map and the error map side by side (disparity | error): error ≤ 2
-    /// full-resolution px in grey (white = exact), > 2 px in red, occluded pixels (mask0nocc.png beside GT == 128)
+    /// With --gt the picture is the colour map and the error map side by side (disparity | error), under the
+    /// benchmark's own rule, recognised from where GT is (--layout says otherwise):
+    ///   MiddEval3  bad-2: error > 2 full-resolution px (errors × --scale, else from the path: trainingQ = 4, *H = 2,
+    ///              *F = 1; a path that tells nothing needs --scale)
+    ///   KITTI      D1: error > 3 px and > 5 % of the true disparity (GT a 16-bit .png in disp_noc*/ or disp_occ*/;
+    ///              the sibling map marks occlusions)
+    ///   ETH3D      bad-1: error > 1 px (GT in a scene folder of a *_gt/ tree)
+    /// Not bad: grey (white = exact), bad: red; occluded pixels (mask0nocc.png beside GT, or KITTI's disp_noc*)
     /// shaded darker, no ground truth dark grey, invalid result black.
-    /// For a folder, a contact sheet with one row per scene (sorted by path): left image | result | error map,
-    /// each panel downscaled to at most --panel-width px.
+    /// For a folder, a contact sheet with one row per scene or frame (sorted): left image | result | error map, each
+    /// panel downscaled to at most --panel-width px. MiddEval3 scenes with disp0NAME.pfm; KITTI and ETH3D trees with
+    /// their results where `jem batch --alg NAME` writes them (--results as for batch; ETH3D's ground truth from its
+    /// *_gt/ sibling or --gt DIR).
     #[command(verbatim_doc_comment)]
     Viz(VizArgs),
 }

@@ -12,14 +12,16 @@ use super::GlobalArgs;
 /// Arguments of `jem viz` (the help text is on [`Command::Viz`](super::Command::Viz)).
 #[derive(Args, Debug, Clone)]
 pub(super) struct VizArgs {
-    /// A disparity map (.pfm, .exr or 16-bit .png), or a folder of scenes (with --alg).
+    /// A disparity map (.pfm, .exr or 16-bit .png), or a data set's folder (with --alg): MiddEval3 scenes, a KITTI
+    /// or an ETH3D tree.
     #[arg(value_name = "DISP|DIR")]
     input: PathBuf,
     /// Output PNG.
     #[arg(long, short, value_name = "OUT.png")]
     output: PathBuf,
-    /// Ground truth for the error map (.pfm); mask0nocc.png beside it marks occlusions.
-    #[arg(long, value_name = "GT.pfm")]
+    /// Ground truth for the error map: a file (.pfm, or KITTI's 16-bit .png) beside DISP; with a folder, ETH3D's
+    /// ground-truth tree (default: its sibling *_gt/).
+    #[arg(long, value_name = "GT")]
     gt: Option<PathBuf>,
     /// Low end of the colour range (disparity px).
     #[arg(long, value_name = "A", allow_negative_numbers = true)]
@@ -27,12 +29,21 @@ pub(super) struct VizArgs {
     /// High end of the colour range (disparity px).
     #[arg(long, value_name = "B", allow_negative_numbers = true)]
     vmax: Option<f32>,
-    /// With a folder: draw disp0NAME.pfm of each scene.
+    /// With a folder: draw NAME's results (MiddEval3 disp0NAME.pfm; KITTI and ETH3D where `jem batch --alg NAME`
+    /// writes them).
     #[arg(long, value_name = "NAME")]
     alg: Option<String>,
-    /// Factor to full-resolution px for the error threshold (default: from the path, trainingQ = 4; else 1).
+    /// MiddEval3: factor to full-resolution px for the bad-2 rule (default: from the path, trainingQ = 4, *H = 2,
+    /// *F = 1; required when the path does not tell). KITTI and ETH3D are in native pixels.
     #[arg(long, value_name = "1|2|4")]
     scale: Option<u32>,
+    /// Read the data as this layout (middlebury, eth3d, kitti2015, kitti2012) instead of recognising it; sets the
+    /// error rule.
+    #[arg(long, value_name = "LAYOUT")]
+    layout: Option<jem::dataset::Layout>,
+    /// Where KITTI and ETH3D results are: RESULTS/NAME/ (default: results/ beside the data set, as batch).
+    #[arg(long, value_name = "RESULTS")]
+    results: Option<PathBuf>,
     /// Largest panel width of a contact sheet, in pixels.
     #[arg(long, value_name = "PX", default_value_t = 320)]
     panel_width: usize,
@@ -51,34 +62,7 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         return Err(Error::param("--scale", s, "1, 2 or 4"));
     }
     if args.input.is_dir() {
-        let Some(alg) = &args.alg else {
-            return Err(Error::Input(format!(
-                "{} is a folder: give --alg NAME for a contact sheet",
-                args.input.display()
-            )));
-        };
-        jem::batch::validate_alg_name(alg)?;
-        if args.panel_width < 16 {
-            return Err(Error::param("--panel-width", args.panel_width, "at least 16"));
-        }
-        // The sheet reads these files of every scene: the output must be none of them.
-        let result = format!("disp0{alg}.pfm");
-        let names = ["im0.png", result.as_str(), "disp0GT.pfm", "mask0nocc.png", "calib.txt"];
-        let scenes = jem::batch::find_dirs_with(std::slice::from_ref(&args.input), &["im0.png", &result])?;
-        let read: Vec<PathBuf> = scenes.iter().flat_map(|s| names.iter().map(move |n| s.join(n))).collect();
-        let read_refs: Vec<&Path> = read.iter().map(PathBuf::as_path).collect();
-        jem::io::check_outputs(&read_refs, &[&args.output])?;
-        let sheet = viz::contact_sheet(&args.input, alg, args.scale, args.panel_width)?;
-        sheet.canvas.write_png(&args.output)?;
-        for (dir, e) in &sheet.skipped {
-            note!("warning: {} left out: {e}", dir.display());
-        }
-        if !global.quiet {
-            let names: Vec<String> = sheet.rows.iter().map(|s| jem::batch::scene_name(s)).collect();
-            let (w, h) = (sheet.canvas.width, sheet.canvas.height);
-            note!("wrote {} ({w}×{h}): {} rows ({})", args.output.display(), names.len(), names.join(", "));
-        }
-        return Ok(ExitCode::SUCCESS);
+        return sheet(args, global);
     }
     for (flag, v) in [("--vmin", args.vmin), ("--vmax", args.vmax)] {
         if v.is_some_and(|v| !v.is_finite()) {
@@ -86,14 +70,27 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         }
     }
     let dir = args.input.parent().unwrap_or(Path::new("."));
-    let mut read = vec![args.input.clone(), dir.join("calib.txt")];
-    if let Some(gt) = &args.gt {
-        read.extend([gt.clone(), gt.parent().unwrap_or(Path::new(".")).join("mask0nocc.png")]);
+    let truth = args.gt.as_deref().map(|gt| (gt, viz::gt_rule(gt, args.layout, args.scale)));
+    let mut read = vec![args.input.as_path().to_path_buf(), dir.join("calib.txt")];
+    if let Some((gt, rule)) = &truth {
+        read.push(gt.to_path_buf());
+        if let Ok((files, _)) = rule {
+            read.extend(files.paths().into_iter().map(Path::to_path_buf));
+        }
     }
     let read_refs: Vec<&Path> = read.iter().map(PathBuf::as_path).collect();
     jem::io::check_outputs(&read_refs, &[&args.output])?;
     let disp = jem::io::read_disparity(&args.input)?;
-    let calib = viz::calib_range(&args.input.parent().unwrap_or(Path::new(".")).join("calib.txt"));
+    let truth = match truth {
+        None => None,
+        Some((_, Ok(t))) => Some(t),
+        // A ground truth that cannot be read is the first thing to say; then that its resolution is unknown.
+        Some((gt, Err(e))) => {
+            jem::io::read_disparity(gt)?;
+            return Err(e);
+        }
+    };
+    let calib = viz::calib_range(&dir.join("calib.txt"));
     let data = viz::finite_range(&disp);
     let vmin = args.vmin.or(calib.map(|c| c.0)).or(data.map(|d| d.0)).unwrap_or(0.0);
     let vmax = args.vmax.or(calib.map(|c| c.1)).or(data.map(|d| d.1)).unwrap_or(1.0);
@@ -101,19 +98,63 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         return Err(Error::param("--vmin / --vmax", format!("{vmin} / {vmax}"), "a range with --vmin below --vmax"));
     }
     let colour = viz::colorize(&disp, vmin, vmax);
-    let (picture, error) = match &args.gt {
+    let (picture, error) = match &truth {
         None => (colour, String::new()),
-        Some(gt_path) => {
-            let (gt, mask) = viz::load_gt_for(&disp, gt_path)?;
-            let scale = args.scale.or_else(|| viz::resolved_scale(gt_path)).unwrap_or(1);
-            let error = format!(" | error map against {} (red: error > 2 px ×{scale})", gt_path.display());
-            (viz::hstack(&[colour, viz::error_map(&disp, &gt, mask.as_ref(), scale)], 4), error)
+        Some((files, rule)) => {
+            let (gt, mask) = viz::load_truth(&disp, files, *rule)?;
+            let error = format!(" | error map against {}, red: {}", files.disparity.display(), rule.describe());
+            (viz::hstack(&[colour, viz::error_map(&disp, &gt, mask.as_ref(), *rule)], 4), error)
         }
     };
     picture.write_png(&args.output)?;
     if !global.quiet {
         let (w, h) = (picture.width, picture.height);
-        note!("wrote {} ({w}×{h}): disparity coloured over {vmin}..{vmax}{error}", args.output.display());
+        note!("wrote {} ({w}×{h}): disparity coloured over {vmin:.2}..{vmax:.2}{error}", args.output.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A contact sheet of a data set's folder.
+fn sheet(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
+    use jem::viz;
+    let Some(alg) = &args.alg else {
+        return Err(Error::Input(format!("{} is a folder: give --alg NAME for a contact sheet", args.input.display())));
+    };
+    jem::batch::validate_alg_name(alg)?;
+    if args.panel_width < 16 {
+        return Err(Error::param("--panel-width", args.panel_width, "at least 16"));
+    }
+    let opts = viz::SheetOptions {
+        scale: args.scale,
+        layout: args.layout,
+        results: args.results.clone(),
+        gt: args.gt.clone(),
+    };
+    let rows = viz::sheet_rows(&args.input, alg, &opts)?;
+    // The sheet reads these files of every row: the output must be none of them.
+    let read: Vec<&Path> = rows.iter().flat_map(viz::SheetRow::paths).collect();
+    jem::io::check_outputs(&read, &[&args.output])?;
+    let sheet = viz::contact_sheet(rows, args.panel_width)?;
+    sheet.canvas.write_png(&args.output)?;
+    for (row, e) in &sheet.skipped {
+        note!("warning: {} left out: {e}", row.location.display());
+    }
+    if !global.quiet {
+        let names: Vec<&str> = sheet.rows.iter().map(|r| r.name.as_str()).collect();
+        let (w, h) = (sheet.canvas.width, sheet.canvas.height);
+        let rules: std::collections::BTreeSet<String> =
+            sheet.rows.iter().filter(|r| r.truth.is_some()).map(|r| r.rule.describe()).collect();
+        let rules = if rules.is_empty() {
+            "none (no ground truth)".into()
+        } else {
+            rules.into_iter().collect::<Vec<_>>().join(", ")
+        };
+        note!(
+            "wrote {} ({w}×{h}): {} rows ({}); error maps: {rules}",
+            args.output.display(),
+            names.len(),
+            names.join(", ")
+        );
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -61,6 +61,8 @@ mod report;
 
 pub use format::{Format, render};
 pub(crate) use metrics::check_size;
-pub use metrics::{BAD_THRESHOLDS_PX, MaskMode, Metrics, evaluate, evaluate_files, evaluate_scene};
+pub use metrics::{
+    BAD_THRESHOLDS_PX, D1_RELATIVE, D1_THRESHOLD_PX, MaskMode, Metrics, evaluate, evaluate_files, evaluate_scene,
+};
 pub use paper::{PaperColumn, PaperResults};
 pub use report::{AlgReport, SceneResult, Sources, evaluate_dir, find_gt_scenes, scale_from_path, scene_weight};

@@ -5,36 +5,98 @@
 //!   far) through blue, cyan, green, yellow and orange to dark red (high disparity, near), piecewise linear between
 //!   nine hand-picked stops (our own, not a copy of turbo's or jet's tables). Values are clamped to
 //!   `[vmin, vmax]`; invalid (non-finite) pixels are black.
-//! - [`error_map`]: per pixel, `err = s·|d − gt|` in full-resolution pixels (s = 4 for Q, 2 for H), with the
-//!   MiddEval3 bad-2 threshold ([`ERROR_THRESHOLD_PX`]):
+//! - [`error_map`]: per pixel, the error `|d − gt|` against the threshold of the benchmark's own rule
+//!   ([`ErrorRule`]): MiddEval3 bad-2 (`s·|d − gt| > 2` full-resolution pixels, s = 4 for Q, 2 for H), KITTI D1
+//!   (`> 3 px` and `> 5 %` of the true disparity), ETH3D bad-1 (`> 1 px`, its usual headline):
 //!
 //!   | pixel                                        | colour                                       |
 //!   |----------------------------------------------|----------------------------------------------|
 //!   | no ground truth (GT not finite, or mask 0)   | dark grey (48, 48, 48)                       |
 //!   | result invalid (not finite)                  | black                                        |
-//!   | non-occluded (mask 255 or no mask), err ≤ 2  | grey from white (err 0) to 205 (err 2)       |
-//!   | non-occluded, err > 2                        | red (230, 30, 30)                            |
-//!   | occluded (mask 128), err ≤ 2                 | the same grey, shaded darker and bluish       |
-//!   | occluded, err > 2                            | dark red (140, 40, 40)                       |
+//!   | non-occluded (mask 255 or no mask), not bad  | grey from white (err 0) to 205 (err = threshold) |
+//!   | non-occluded, bad                            | red (230, 30, 30)                            |
+//!   | occluded (mask 128), not bad                 | the same grey, shaded darker and bluish       |
+//!   | occluded, bad                                | dark red (140, 40, 40)                       |
 //!
-//! - [`contact_sheet`]: one row per scene, `left image | colour result | error map` (a dark panel where a scene has
-//!   no ground truth), each panel downscaled (area average) to at most `panel_width` pixels wide.
+//!   Invalid pixels stay black in every rule (KITTI's devkit fills them before it scores; the map shows where they
+//!   were).
+//! - [`contact_sheet`]: one row per scene or frame of a MiddEval3, KITTI or ETH3D tree, `left image | colour
+//!   result | error map` (a dark panel where there is no ground truth), each panel downscaled (area average) to at
+//!   most `panel_width` pixels wide; `sheet.rs` finds the rows where the [`dataset`](crate::dataset) layout puts
+//!   the files.
 //!
 //! Images are [`Canvas`]es: interleaved 8-bit RGB, row-major, `data[(y·w + x)·3 + c]`. Everything is O(pixels).
 
-use std::path::{Path, PathBuf};
+mod sheet;
 
-use crate::error::{Error, Result};
+pub use sheet::{
+    Occlusion, Sheet, SheetOptions, SheetRow, TruthFiles, contact_sheet, draw_row, gt_rule, load_truth, resolved_scale,
+    sheet_rows,
+};
+
+use std::path::Path;
+
+use crate::error::Result;
 use crate::image::{DisparityMap, Plane, RgbImage};
 use crate::io::calib::Calib;
 
-/// Errors above this many full-resolution pixels are "bad" in [`error_map`] (MiddEval3's bad-2).
+/// Errors above this many full-resolution pixels are "bad" in a MiddEval3 [`error_map`] (its bad-2).
 pub const ERROR_THRESHOLD_PX: f32 = 2.0;
+
+/// Which benchmark's rule makes a pixel "bad" in an [`error_map`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ErrorRule {
+    /// MiddEval3 bad-2: `scale·|d − gt| > 2` full-resolution pixels (`scale` = 4 for Q, 2 for H, 1 for F).
+    Middlebury {
+        /// Factor from the map's pixels to full-resolution pixels.
+        scale: u32,
+    },
+    /// KITTI D1: `|d − gt| > 3` px and `> 5 %` of the true disparity (the devkit's outlier).
+    KittiD1,
+    /// ETH3D bad-1: `|d − gt| > 1` px, the benchmark's usual headline.
+    Eth3d,
+}
+
+impl ErrorRule {
+    /// The rule of a data set's layout (`scale` is used by MiddEval3 only).
+    pub fn for_layout(layout: crate::dataset::Layout, scale: u32) -> Self {
+        use crate::dataset::Layout;
+        match layout {
+            Layout::Middlebury => ErrorRule::Middlebury { scale },
+            Layout::Kitti2015 | Layout::Kitti2012 => ErrorRule::KittiD1,
+            Layout::Eth3d => ErrorRule::Eth3d,
+        }
+    }
+
+    /// The error of `d` against `g` and the threshold above which it is bad, in the same unit (full-resolution
+    /// pixels for MiddEval3, the map's pixels otherwise).
+    #[inline]
+    fn error_and_threshold(self, d: f32, g: f32) -> (f32, f32) {
+        match self {
+            ErrorRule::Middlebury { scale } => (scale as f32 * (d - g).abs(), ERROR_THRESHOLD_PX),
+            ErrorRule::KittiD1 => {
+                let t = (crate::eval::D1_THRESHOLD_PX as f32).max(crate::eval::D1_RELATIVE as f32 * g.abs());
+                ((d - g).abs(), t)
+            }
+            ErrorRule::Eth3d => ((d - g).abs(), 1.0),
+        }
+    }
+
+    /// The rule in words: `MiddEval3 bad-2 (error > 2 px at full resolution, ×4)`.
+    pub fn describe(self) -> String {
+        match self {
+            ErrorRule::Middlebury { scale: 1 } => "MiddEval3 bad-2 (error > 2 px)".into(),
+            ErrorRule::Middlebury { scale } => format!("MiddEval3 bad-2 (error > 2 px at full resolution, ×{scale})"),
+            ErrorRule::KittiD1 => "KITTI D1 (error > 3 px and > 5 % of the true disparity)".into(),
+            ErrorRule::Eth3d => "ETH3D bad-1 (error > 1 px)".into(),
+        }
+    }
+}
 
 /// Background of sheets and panels without content.
 const BACKGROUND: [u8; 3] = [24, 24, 24];
 /// Pixels without ground truth in an error map.
-const NO_GT: [u8; 3] = [48, 48, 48];
+pub(crate) const NO_GT: [u8; 3] = [48, 48, 48];
 
 /// An 8-bit RGB image, interleaved, row-major: `data[(y * width + x) * 3 + c]`.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -78,7 +140,7 @@ impl Canvas {
     /// Writes the canvas as a PNG, atomically.
     ///
     /// # Errors
-    /// [`Error::Image`] or [`Error::Io`] naming the path.
+    /// [`Error::Image`](crate::Error::Image) or [`Error::Io`](crate::Error::Io) naming the path.
     pub fn write_png(&self, path: &Path) -> Result<()> {
         crate::io::png::write_rgb8_png(path, self.width, self.height, &self.data)
     }
@@ -145,16 +207,15 @@ pub fn colorize(disp: &DisparityMap, vmin: f32, vmax: f32) -> Canvas {
     Canvas { width: disp.width, height: disp.height, data }
 }
 
-/// The benchmark-style error map (colours in the module doc); `scale` converts to full-resolution pixels.
+/// The benchmark-style error map under `rule` (colours in the module doc).
 ///
 /// # Panics
 /// If the result, the GT and the mask differ in size.
-pub fn error_map(result: &DisparityMap, gt: &DisparityMap, mask: Option<&Plane<u8>>, scale: u32) -> Canvas {
+pub fn error_map(result: &DisparityMap, gt: &DisparityMap, mask: Option<&Plane<u8>>, rule: ErrorRule) -> Canvas {
     assert_eq!(result.dims(), gt.dims(), "result and ground truth sizes differ");
     if let Some(m) = mask {
         assert_eq!(m.dims(), gt.dims(), "mask and ground truth sizes differ");
     }
-    let s = scale as f32;
     let mut data = Vec::with_capacity(gt.data.len() * 3);
     for (i, (&d, &g)) in result.data.iter().zip(&gt.data).enumerate() {
         let m = mask.map_or(255, |m| m.data[i]);
@@ -163,13 +224,13 @@ pub fn error_map(result: &DisparityMap, gt: &DisparityMap, mask: Option<&Plane<u
         } else if !d.is_finite() {
             [0, 0, 0]
         } else {
-            let err = s * (d - g).abs();
+            let (err, threshold) = rule.error_and_threshold(d, g);
             let occluded = m != 255;
-            match (err > ERROR_THRESHOLD_PX, occluded) {
+            match (err > threshold, occluded) {
                 (true, false) => [230, 30, 30],
                 (true, true) => [140, 40, 40],
                 (false, occ) => {
-                    let grey = 255.0 - 50.0 * err / ERROR_THRESHOLD_PX;
+                    let grey = 255.0 - 50.0 * err / threshold;
                     if occ {
                         [0.5 * grey, 0.55 * grey, 0.7 * grey].map(|v| v.round() as u8)
                     } else {
@@ -222,7 +283,7 @@ pub fn resize_area(src: &Canvas, width: usize, height: usize) -> Canvas {
 }
 
 /// Downscales to at most `max_width` wide, keeping the aspect ratio (no upscaling).
-fn fit_width(src: &Canvas, max_width: usize) -> Canvas {
+pub(crate) fn fit_width(src: &Canvas, max_width: usize) -> Canvas {
     if src.width <= max_width {
         return src.clone();
     }
@@ -263,102 +324,6 @@ pub fn calib_range(calib: &Path) -> Option<(f32, f32)> {
     (lo < hi).then_some((lo, hi))
 }
 
-/// Loads `mask0nocc.png` beside a GT file, if present and of the GT's size.
-fn mask_beside(gt_path: &Path, gt: &DisparityMap) -> Result<Option<Plane<u8>>> {
-    let path = gt_path.parent().unwrap_or(Path::new(".")).join("mask0nocc.png");
-    if !path.is_file() {
-        return Ok(None);
-    }
-    let m = crate::io::png::load_grey8(&path)?;
-    crate::eval::check_size(&path, "mask", m.dims(), "the ground truth", gt.dims())?;
-    Ok(Some(m))
-}
-
-/// Loads a GT map (and the `mask0nocc.png` beside it) and checks its size against `result`.
-///
-/// # Errors
-/// Unreadable files or unequal sizes.
-pub fn load_gt_for(result: &DisparityMap, gt_path: &Path) -> Result<(DisparityMap, Option<Plane<u8>>)> {
-    let gt = crate::io::read_disparity(gt_path)?;
-    crate::eval::check_size(gt_path, "ground truth", gt.dims(), "the result", result.dims())?;
-    let mask = mask_beside(gt_path, &gt)?;
-    Ok((gt, mask))
-}
-
-/// One contact-sheet row for a scene folder: `im0.png | disp0<alg>.pfm coloured | error map` (a dark panel when
-/// the scene has no `disp0GT.pfm`). The colour range is `vmin`/`vmax` from `calib.txt`, else the GT's finite
-/// range, else the result's. `scale = None` infers it from the path ([`crate::eval::scale_from_path`]), else 1.
-///
-/// # Errors
-/// Unreadable files or unequal sizes.
-pub fn scene_row(dir: &Path, alg: &str, scale: Option<u32>, panel_width: usize) -> Result<Canvas> {
-    let result = crate::io::read_disparity(&dir.join(format!("disp0{alg}.pfm")))?;
-    let left = Canvas::from_rgb_image(&crate::io::png::load_rgb(&dir.join("im0.png"))?);
-    if (left.width, left.height) != result.dims() {
-        return Err(Error::Input(format!("{}: result and im0.png differ in size", dir.display())));
-    }
-    let gt_path = dir.join("disp0GT.pfm");
-    let gt = if gt_path.is_file() { Some(load_gt_for(&result, &gt_path)?) } else { None };
-    let range = calib_range(&dir.join("calib.txt"))
-        .or_else(|| gt.as_ref().and_then(|(g, _)| finite_range(g)))
-        .or_else(|| finite_range(&result))
-        .unwrap_or((0.0, 1.0));
-    let scale = scale.or_else(|| resolved_scale(dir)).unwrap_or(1);
-    let colour = colorize(&result, range.0, range.1);
-    let error = match &gt {
-        Some((g, m)) => error_map(&result, g, m.as_ref(), scale),
-        None => Canvas::new(result.width, result.height, NO_GT),
-    };
-    let panels: Vec<Canvas> = [left, colour, error].iter().map(|c| fit_width(c, panel_width)).collect();
-    Ok(hstack(&panels, 4))
-}
-
-/// The scale implied by a path after resolving it (so `.` inside `trainingQ` works).
-pub fn resolved_scale(path: &Path) -> Option<u32> {
-    let p = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
-    crate::eval::scale_from_path(&p)
-}
-
-/// What [`contact_sheet`] drew.
-#[derive(Clone, Debug)]
-pub struct Sheet {
-    /// The picture.
-    pub canvas: Canvas,
-    /// The scene folders drawn, in row order.
-    pub rows: Vec<PathBuf>,
-    /// Scenes left out because their files could not be drawn, with the reason.
-    pub skipped: Vec<(PathBuf, String)>,
-}
-
-/// A contact sheet of every scene folder under `dir` that has `im0.png` and `disp0<alg>.pfm`, sorted by path,
-/// one [`scene_row`] per scene, 8 pixels apart. A scene whose files cannot be drawn is left out and listed in
-/// [`Sheet::skipped`].
-///
-/// # Errors
-/// No such scene under `dir`, or none of them could be drawn.
-pub fn contact_sheet(dir: &Path, alg: &str, scale: Option<u32>, panel_width: usize) -> Result<Sheet> {
-    let result_name = format!("disp0{alg}.pfm");
-    let scenes = crate::batch::find_dirs_with(&[dir.to_path_buf()], &["im0.png", &result_name])?;
-    if scenes.is_empty() {
-        return Err(Error::Input(format!("no scene folder with im0.png and {result_name} under {}", dir.display())));
-    }
-    let (mut canvases, mut rows, mut skipped) = (Vec::new(), Vec::new(), Vec::new());
-    for s in scenes {
-        match scene_row(&s, alg, scale, panel_width) {
-            Ok(c) => {
-                canvases.push(c);
-                rows.push(s);
-            }
-            Err(e) => skipped.push((s, e.to_string())),
-        }
-    }
-    if canvases.is_empty() {
-        let why: Vec<String> = skipped.iter().map(|(_, e)| e.clone()).collect();
-        return Err(Error::Input(format!("no scene could be drawn: {}", why.join("; "))));
-    }
-    Ok(Sheet { canvas: vstack(&canvases, 8), rows, skipped })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -395,13 +360,29 @@ mod tests {
         let gt = Plane::from_vec(6, 1, vec![1.0, 1.0, 1.0, 1.0, f32::INFINITY, 1.0]);
         let r = Plane::from_vec(6, 1, vec![1.0, 1.5, 1.75, f32::INFINITY, 3.0, 1.75]);
         let mask = Plane::from_vec(6, 1, vec![255, 255, 255, 255, 255, 128]);
-        let e = error_map(&r, &gt, Some(&mask), 4);
+        let e = error_map(&r, &gt, Some(&mask), ErrorRule::Middlebury { scale: 4 });
         assert_eq!(e.get(0, 0), [255; 3]);
         assert_eq!(e.get(1, 0), [205; 3]); // err exactly 2: not bad
         assert_eq!(e.get(2, 0), [230, 30, 30]);
         assert_eq!(e.get(3, 0), [0, 0, 0]);
         assert_eq!(e.get(4, 0), NO_GT);
         assert_eq!(e.get(5, 0), [140, 40, 40]);
+    }
+
+    #[test]
+    fn error_rules_of_each_benchmark() {
+        // KITTI D1: bad only above 3 px *and* 5 % of the truth (strict); ETH3D: above 1 px; MiddEval3 ×1: above 2.
+        let gt = Plane::from_vec(5, 1, vec![20.0, 100.0, 100.0, 20.0, 20.0]);
+        let r = Plane::from_vec(5, 1, vec![23.0, 105.0, 105.5, 21.0, 21.5]);
+        let kitti = error_map(&r, &gt, None, ErrorRule::KittiD1);
+        let bad = |c: &Canvas| (0..5).map(|x| c.get(x, 0) == [230, 30, 30]).collect::<Vec<_>>();
+        assert_eq!(bad(&kitti), [false, false, true, false, false]);
+        assert_eq!(kitti.get(0, 0), [205; 3]); // err 3 = the threshold
+        let eth3d = error_map(&r, &gt, None, ErrorRule::Eth3d);
+        assert_eq!(bad(&eth3d), [true, true, true, false, true]);
+        let middlebury = error_map(&r, &gt, None, ErrorRule::Middlebury { scale: 1 });
+        assert_eq!(bad(&middlebury), [true, true, true, false, false]);
+        assert_eq!(ErrorRule::for_layout(crate::dataset::Layout::Kitti2012, 4), ErrorRule::KittiD1);
     }
 
     #[test]

@@ -1,0 +1,374 @@
+//! Where a picture's files are, for each benchmark layout: the rows of a contact sheet ([`sheet_rows`]: MiddEval3
+//! scene folders, KITTI frames, ETH3D scenes, with their results where `jem batch` writes them), the ground truth
+//! of one map and its benchmark's [`ErrorRule`] ([`gt_rule`]), and drawing them ([`draw_row`],
+//! [`contact_sheet`]).
+//!
+//! Occlusions: MiddEval3's `mask0nocc.png` is used as it is (255 visible, 128 occluded, 0 no truth); ETH3D's marks
+//! visible pixels with 255 and every other ground-truth pixel is occluded; KITTI has no mask, so the map of all
+//! pixels (`disp_occ*`) is the truth and the pixels missing from the non-occluded map (`disp_noc*`) are occluded.
+
+use std::path::{Path, PathBuf};
+
+use super::{Canvas, ErrorRule, NO_GT, calib_range, colorize, error_map, finite_range, fit_width, hstack, vstack};
+use crate::dataset::{Discovery, Layout, Pair, Purpose};
+use crate::error::{Error, Result};
+use crate::image::{DisparityMap, Plane};
+
+/// How [`sheet_rows`] finds the rows.
+#[derive(Clone, Debug, Default)]
+pub struct SheetOptions {
+    /// MiddEval3's factor to full-resolution pixels (default: from each scene's path, `trainingQ` = 4; required
+    /// when the path does not tell and a scene has ground truth).
+    pub scale: Option<u32>,
+    /// Read the tree as this layout instead of recognising it (as `jem batch --layout`).
+    pub layout: Option<Layout>,
+    /// Where KITTI and ETH3D results are (`RESULTS/NAME/`; default: `results/` beside the data set).
+    pub results: Option<PathBuf>,
+    /// ETH3D's ground-truth tree (default: the sibling `<name>_gt/`).
+    pub gt: Option<PathBuf>,
+}
+
+/// What marks the occluded pixels of a ground truth.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Occlusion {
+    /// A mask: MiddEval3's `mask0nocc.png` (used as it is) or ETH3D's (255 visible, any other value occluded).
+    Mask(PathBuf),
+    /// KITTI's non-occluded map (`disp_noc*`): a pixel with truth that this map lacks is occluded.
+    NonOccludedMap(PathBuf),
+}
+
+/// A ground truth's files.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TruthFiles {
+    /// The ground-truth disparities (KITTI: the map of all pixels when there is one).
+    pub disparity: PathBuf,
+    /// What marks occlusions, if anything.
+    pub occlusion: Option<Occlusion>,
+}
+
+impl TruthFiles {
+    /// Every file it reads.
+    pub fn paths(&self) -> Vec<&Path> {
+        let occ = self.occlusion.as_ref().map(|o| match o {
+            Occlusion::Mask(p) | Occlusion::NonOccludedMap(p) => p.as_path(),
+        });
+        std::iter::once(self.disparity.as_path()).chain(occ).collect()
+    }
+}
+
+/// One row of a contact sheet: its files and its error rule.
+#[derive(Clone, Debug)]
+pub struct SheetRow {
+    /// The scene or frame name.
+    pub name: String,
+    /// Where the pair is (for messages): its scene folder, or a KITTI frame's left image.
+    pub location: PathBuf,
+    /// The left image.
+    pub left: PathBuf,
+    /// The result.
+    pub result: PathBuf,
+    /// The ground truth, if the data set has it.
+    pub truth: Option<TruthFiles>,
+    /// A `calib.txt` whose `vmin`/`vmax` set the colour range.
+    pub calib: Option<PathBuf>,
+    /// The benchmark's rule for the error map.
+    pub rule: ErrorRule,
+}
+
+impl SheetRow {
+    /// Every file the row reads.
+    pub fn paths(&self) -> Vec<&Path> {
+        let mut p = vec![self.left.as_path(), self.result.as_path()];
+        p.extend(self.truth.iter().flat_map(TruthFiles::paths));
+        p.extend(self.calib.as_deref());
+        p
+    }
+}
+
+/// The scale implied by a path after resolving it (so `.` inside `trainingQ` works).
+pub fn resolved_scale(path: &Path) -> Option<u32> {
+    let p = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+    crate::eval::scale_from_path(&p)
+}
+
+/// The MiddEval3 scale of `path`: `scale`, else the one its path implies.
+fn middlebury_scale(path: &Path, scale: Option<u32>) -> Result<u32> {
+    scale.or_else(|| resolved_scale(path)).ok_or_else(|| {
+        Error::Input(format!(
+            "cannot tell the resolution of {} from its path (no trainingQ/H/F-like folder), which the error map's \
+             MiddEval3 rule (bad-2 at full resolution) needs: pass --scale 1, 2 or 4 (or --layout for a KITTI or ETH3D \
+             tree)",
+            path.display()
+        ))
+    })
+}
+
+/// The KITTI ground truth of a frame: the map of all pixels with the non-occluded map marking occlusions, or the
+/// one that exists.
+fn kitti_truth(all: PathBuf, nonocc: PathBuf) -> Option<TruthFiles> {
+    match (all.is_file(), nonocc.is_file()) {
+        (true, true) => Some(TruthFiles { disparity: all, occlusion: Some(Occlusion::NonOccludedMap(nonocc)) }),
+        (true, false) => Some(TruthFiles { disparity: all, occlusion: None }),
+        (false, true) => Some(TruthFiles { disparity: nonocc, occlusion: None }),
+        (false, false) => None,
+    }
+}
+
+/// The ground truth of one map at `gt` and its benchmark's error rule: KITTI D1 for a `.png` in a `disp_noc*` or
+/// `disp_occ*` folder (its sibling map marks occlusions), ETH3D bad-1 in a scene folder of a `*_gt` tree, else
+/// MiddEval3 bad-2 at the scale `scale` or the path gives (an error when neither does). `layout` overrides the
+/// recognition.
+///
+/// # Errors
+/// A MiddEval3 ground truth whose resolution is unknown.
+pub fn gt_rule(gt: &Path, layout: Option<Layout>, scale: Option<u32>) -> Result<(TruthFiles, ErrorRule)> {
+    let folder = gt.parent().unwrap_or(Path::new("."));
+    let folder_name = folder.file_name().and_then(|n| n.to_str()).unwrap_or("");
+    let scene_parent = std::fs::canonicalize(folder).ok().and_then(|f| f.parent().map(Path::to_path_buf));
+    let in_gt_tree =
+        scene_parent.as_deref().and_then(Path::file_name).and_then(|n| n.to_str()).is_some_and(|n| n.ends_with("_gt"));
+    let layout = layout.unwrap_or(if folder_name.starts_with("disp_noc") || folder_name.starts_with("disp_occ") {
+        Layout::Kitti2015
+    } else if in_gt_tree {
+        Layout::Eth3d
+    } else {
+        Layout::Middlebury
+    });
+    let mask = folder.join("mask0nocc.png");
+    let mask = mask.is_file().then_some(Occlusion::Mask(mask));
+    Ok(match layout {
+        Layout::Kitti2015 | Layout::Kitti2012 => {
+            // The sibling map (disp_noc_0 <-> disp_occ_0) with the same file name, if there is one.
+            let file = gt.file_name().unwrap_or_default();
+            let sibling = |from: &str, to: &str| {
+                let rest = folder_name.strip_prefix(from)?;
+                Some(folder.with_file_name(format!("{to}{rest}")).join(file)).filter(|p| p.is_file())
+            };
+            let given = gt.to_path_buf();
+            let truth = match (sibling("disp_noc", "disp_occ"), sibling("disp_occ", "disp_noc")) {
+                (Some(all), _) => TruthFiles { disparity: all, occlusion: Some(Occlusion::NonOccludedMap(given)) },
+                (None, Some(nonocc)) => {
+                    TruthFiles { disparity: given, occlusion: Some(Occlusion::NonOccludedMap(nonocc)) }
+                }
+                (None, None) => TruthFiles { disparity: given, occlusion: None },
+            };
+            (truth, ErrorRule::KittiD1)
+        }
+        Layout::Eth3d => (TruthFiles { disparity: gt.to_path_buf(), occlusion: mask }, ErrorRule::Eth3d),
+        Layout::Middlebury => {
+            let scale = middlebury_scale(gt, scale)?;
+            (TruthFiles { disparity: gt.to_path_buf(), occlusion: mask }, ErrorRule::Middlebury { scale })
+        }
+    })
+}
+
+/// Loads a ground truth for `result` (sizes checked) and its occlusion mask in MiddEval3's values (255 visible,
+/// 128 occluded, 0 no truth).
+///
+/// # Errors
+/// Unreadable files or unequal sizes.
+pub fn load_truth(
+    result: &DisparityMap,
+    truth: &TruthFiles,
+    rule: ErrorRule,
+) -> Result<(DisparityMap, Option<Plane<u8>>)> {
+    let gt = crate::io::read_disparity(&truth.disparity)?;
+    crate::eval::check_size(&truth.disparity, "ground truth", gt.dims(), "the result", result.dims())?;
+    let mask = match &truth.occlusion {
+        None => None,
+        Some(Occlusion::Mask(path)) => {
+            let mut m = crate::io::png::load_grey8(path)?;
+            crate::eval::check_size(path, "mask", m.dims(), "the ground truth", gt.dims())?;
+            if rule == ErrorRule::Eth3d {
+                m.data.iter_mut().for_each(|v| *v = if *v == 255 { 255 } else { 128 });
+            }
+            Some(m)
+        }
+        Some(Occlusion::NonOccludedMap(path)) => {
+            let nonocc = crate::io::read_disparity(path)?;
+            crate::eval::check_size(path, "non-occluded map", nonocc.dims(), "the ground truth", gt.dims())?;
+            let data = nonocc.data.iter().map(|d| if d.is_finite() { 255 } else { 128 }).collect();
+            Some(Plane::from_vec(gt.width, gt.height, data))
+        }
+    };
+    Ok((gt, mask))
+}
+
+/// The rows of a contact sheet of `alg`'s results under `dir`, sorted: the KITTI frames or ETH3D scenes that have a
+/// result where `jem batch` writes it, or, when the tree holds neither, every MiddEval3 scene folder with
+/// `im0.png` and `disp0<alg>.pfm`.
+///
+/// # Errors
+/// Nothing to draw, data sets of two layouts, a results folder holding another data set's results, or a MiddEval3
+/// scene with ground truth whose resolution is unknown (see [`gt_rule`]).
+pub fn sheet_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<SheetRow>> {
+    let how = Discovery { layout: opts.layout, gt: opts.gt.clone() };
+    let pairs: Vec<Pair> = crate::dataset::discover(&[dir.to_path_buf()], Purpose::Run, &how)?
+        .into_iter()
+        .filter(|p| p.layout != Layout::Middlebury)
+        .collect();
+    if pairs.is_empty() {
+        return middlebury_rows(dir, alg, opts);
+    }
+    if let Some(other) = pairs.iter().find(|p| p.layout != pairs[0].layout) {
+        return Err(Error::Input(format!(
+            "{} holds {} and {} data ({} and {}); draw one data set at a time",
+            dir.display(),
+            pairs[0].layout.name(),
+            other.layout.name(),
+            pairs[0].root.display(),
+            other.root.display()
+        )));
+    }
+    crate::dataset::check_results_dirs(&pairs, alg, opts.results.as_deref(), false)?;
+    let rows: Vec<SheetRow> = pairs
+        .iter()
+        .filter_map(|pair| {
+            let result = pair.result_files(alg, opts.results.as_deref()).disparity;
+            result.is_file().then(|| pair_row(pair, result, opts))
+        })
+        .collect();
+    if rows.is_empty() {
+        let dirs: std::collections::BTreeSet<String> = pairs
+            .iter()
+            .filter_map(|p| {
+                p.result_files(alg, opts.results.as_deref()).disparity.parent().map(|d| d.display().to_string())
+            })
+            .collect();
+        return Err(Error::Input(format!(
+            "no result of {alg} for the {} {} pair(s) under {} (looked in {}; run `jem batch` first, or give --results)",
+            pairs.len(),
+            pairs[0].layout.name(),
+            dir.display(),
+            dirs.into_iter().collect::<Vec<_>>().join(", ")
+        )));
+    }
+    Ok(rows)
+}
+
+/// A KITTI or ETH3D pair's row.
+fn pair_row(pair: &Pair, result: PathBuf, opts: &SheetOptions) -> SheetRow {
+    let truth = if pair.layout.is_kitti() {
+        kitti_truth(pair.truth(true, None).disparity, pair.truth(false, None).disparity)
+    } else {
+        let t = pair.truth(false, opts.gt.as_deref());
+        t.disparity.is_file().then(|| TruthFiles {
+            occlusion: t.mask.filter(|m| m.is_file()).map(Occlusion::Mask),
+            disparity: t.disparity,
+        })
+    };
+    let calib = pair.calib.clone().filter(|c| c.is_file());
+    SheetRow {
+        name: pair.name.clone(),
+        location: pair.location(),
+        left: pair.left.clone(),
+        result,
+        truth,
+        calib,
+        rule: ErrorRule::for_layout(pair.layout, 1),
+    }
+}
+
+/// Every MiddEval3 scene folder under `dir` with `im0.png` and `disp0<alg>.pfm`.
+fn middlebury_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<SheetRow>> {
+    let result_name = format!("disp0{alg}.pfm");
+    let scenes = crate::batch::find_dirs_with(&[dir.to_path_buf()], &["im0.png", &result_name])?;
+    if scenes.is_empty() {
+        return Err(Error::Input(format!(
+            "no scene folder with im0.png and {result_name} (MiddEval3), nor a KITTI or ETH3D tree, under {}",
+            dir.display()
+        )));
+    }
+    scenes
+        .into_iter()
+        .map(|s| {
+            let gt = s.join("disp0GT.pfm");
+            let (truth, rule) = if gt.is_file() {
+                let (truth, rule) = gt_rule(&gt, Some(Layout::Middlebury), opts.scale)?;
+                (Some(truth), rule)
+            } else {
+                (None, ErrorRule::Middlebury { scale: opts.scale.unwrap_or(1) })
+            };
+            Ok(SheetRow {
+                name: crate::batch::scene_name(&s),
+                location: s.clone(),
+                left: s.join("im0.png"),
+                result: s.join(&result_name),
+                truth,
+                calib: Some(s.join("calib.txt")),
+                rule,
+            })
+        })
+        .collect()
+}
+
+/// One contact-sheet row: `left image | result coloured | error map` (a dark panel without ground truth), each
+/// panel at most `panel_width` wide. The colour range is `vmin`/`vmax` from the row's `calib.txt`, else the ground
+/// truth's finite range, else the result's.
+///
+/// # Errors
+/// Unreadable files or unequal sizes.
+pub fn draw_row(row: &SheetRow, panel_width: usize) -> Result<Canvas> {
+    let result = crate::io::read_disparity(&row.result)?;
+    let left = Canvas::from_rgb_image(&crate::io::png::load_rgb(&row.left)?);
+    if (left.width, left.height) != result.dims() {
+        return Err(Error::Input(format!(
+            "{}: the result is {}x{} but the left image {} is {}x{}",
+            row.result.display(),
+            result.width,
+            result.height,
+            row.left.display(),
+            left.width,
+            left.height
+        )));
+    }
+    let gt = row.truth.as_ref().map(|t| load_truth(&result, t, row.rule)).transpose()?;
+    let range = row
+        .calib
+        .as_deref()
+        .and_then(calib_range)
+        .or_else(|| gt.as_ref().and_then(|(g, _)| finite_range(g)))
+        .or_else(|| finite_range(&result))
+        .unwrap_or((0.0, 1.0));
+    let colour = colorize(&result, range.0, range.1);
+    let error = match &gt {
+        Some((g, m)) => error_map(&result, g, m.as_ref(), row.rule),
+        None => Canvas::new(result.width, result.height, NO_GT),
+    };
+    let panels: Vec<Canvas> = [left, colour, error].iter().map(|c| fit_width(c, panel_width)).collect();
+    Ok(hstack(&panels, 4))
+}
+
+/// What [`contact_sheet`] drew.
+#[derive(Clone, Debug)]
+pub struct Sheet {
+    /// The picture.
+    pub canvas: Canvas,
+    /// The rows drawn, in order.
+    pub rows: Vec<SheetRow>,
+    /// Rows left out because their files could not be drawn, with the reason.
+    pub skipped: Vec<(SheetRow, String)>,
+}
+
+/// A contact sheet of `rows` (from [`sheet_rows`]), one [`draw_row`] each, 8 pixels apart. A row whose files
+/// cannot be drawn is left out and listed in [`Sheet::skipped`].
+///
+/// # Errors
+/// None of the rows could be drawn.
+pub fn contact_sheet(rows: Vec<SheetRow>, panel_width: usize) -> Result<Sheet> {
+    let (mut canvases, mut drawn, mut skipped) = (Vec::new(), Vec::new(), Vec::new());
+    for row in rows {
+        match draw_row(&row, panel_width) {
+            Ok(c) => {
+                canvases.push(c);
+                drawn.push(row);
+            }
+            Err(e) => skipped.push((row, e.to_string())),
+        }
+    }
+    if canvases.is_empty() {
+        let why: Vec<String> = skipped.iter().map(|(_, e)| e.clone()).collect();
+        return Err(Error::Input(format!("no scene could be drawn: {}", why.join("; "))));
+    }
+    Ok(Sheet { canvas: vstack(&canvases, 8), rows: drawn, skipped })
+}
