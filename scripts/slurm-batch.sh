@@ -3,7 +3,8 @@
 # sorted pair list (pair k goes to shard k mod N + 1), so the tasks share nothing and need no coordination.
 # --skip-existing is always on: resubmitting the same array after a failure or a timeout only runs the pairs
 # whose result is missing or incomplete. Results land where `jem batch` puts them (MiddEval3: in each scene
-# folder; KITTI/ETH3D: results/NAME/ beside the data set, or --results), so one `jem eval` scores them all.
+# folder; KITTI/ETH3D: results/NAME/SPLIT/ beside the data set, or --results, which the tasks share, each with its
+# own lock), so one `jem eval` scores them all.
 #
 # Usage:  sbatch --array=1-N [sbatch options] scripts/slurm-batch.sh DIR... --alg NAME [jem batch options]
 #   e.g.  sbatch --array=1-15 --cpus-per-task=4 --mem=4G scripts/slurm-batch.sh MiddEval3/trainingQ --alg Jem

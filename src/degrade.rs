@@ -456,7 +456,7 @@ pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Resul
 
 /// This machine's name (`/proc/sys/kernel/hostname`; empty where there is none): the temporary tree's name holds
 /// it, so that a sweep never takes another machine's tree in a folder they share.
-fn host_name() -> String {
+pub(crate) fn host_name() -> String {
     let name = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
     name.trim().chars().filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '.')).collect()
 }

@@ -20,12 +20,12 @@ pub(super) struct BatchArgs {
     #[arg(required = true, value_name = "DIR")]
     dirs: Vec<PathBuf>,
     /// Algorithm name (letters, digits, _ and - only): MiddEval3 results are disp0NAME.pfm and timeNAME.txt in
-    /// each scene; KITTI and ETH3D results go to RESULTS/NAME/ (KITTI disp_0/FRAME.png, ETH3D
-    /// low_res_two_view/SCENE.pfm + SCENE.txt).
+    /// each scene; KITTI and ETH3D results go to RESULTS/NAME/SPLIT/, SPLIT the data set's folder name (KITTI
+    /// disp_0/FRAME.png, ETH3D low_res_two_view/SCENE.pfm + SCENE.txt).
     #[arg(long, value_name = "NAME")]
     alg: String,
-    /// Where KITTI and ETH3D results go: RESULTS/NAME/ (default: the folder results/ beside each data set, e.g.
-    /// kitti/results/ for kitti/training/). Never inside a data set.
+    /// Where KITTI and ETH3D results go: RESULTS/NAME/SPLIT/ (default: the folder results/ beside each data set,
+    /// e.g. kitti/results/ for kitti/training/). Never inside a data set.
     #[arg(long, value_name = "RESULTS")]
     results: Option<PathBuf>,
     /// Read the scenes as this layout (middlebury, eth3d, kitti2012, kitti2015) instead of recognising it; only
@@ -175,6 +175,13 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     // Every results folder is checked for the whole data set (another shard may claim it), then claimed for
     // this shard's pairs, before any work.
     jem::dataset::check_results_dirs(&all, &args.alg, args.results.as_deref(), false)?;
+    // A second batch writing the same results is kept out until this one ends (issue 41); checked again under
+    // the lock, which is when the source files are written.
+    let shard = args.shard.map(|s| (s.index, s.count));
+    let lock = jem::dataset::lock_results(&scenes, &args.alg, args.results.as_deref(), shard)?;
+    for line in lock.taken_over().iter().filter(|_| !global.quiet) {
+        note!("note: {line}");
+    }
     jem::dataset::check_results_dirs(&scenes, &args.alg, args.results.as_deref(), true)?;
     if !global.quiet {
         let shard =
@@ -210,6 +217,7 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         prev
     });
     let reports = jem::batch::run_batch(&scenes, &params, &opts, &|e| display.on_event(e));
+    drop(lock);
     if let Some(prev) = previous_hook {
         std::panic::set_hook(prev);
     }

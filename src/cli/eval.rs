@@ -37,7 +37,7 @@ pub(super) struct EvalArgs {
     /// Result to score, as `jem batch --alg NAME` wrote it (repeatable).
     #[arg(long = "alg", required = true, value_name = "NAME")]
     algs: Vec<String>,
-    /// Where KITTI and ETH3D results are: RESULTS/NAME/ (default: results/ beside the data set, as batch).
+    /// Where KITTI and ETH3D results are: RESULTS/NAME/SPLIT/ (default: results/ beside the data set, as batch).
     #[arg(long, value_name = "RESULTS")]
     results: Option<PathBuf>,
     /// ETH3D ground truth: the tree with SCENE/disp0GT.pfm and mask0nocc.png (default: DIR's sibling DIR_gt/).

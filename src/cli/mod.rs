@@ -187,14 +187,16 @@ enum Command {
     ///
     /// The layout is recognised from the folders (--layout forces it):
     ///   MiddEval3   a scene folder with im0.png, im1.png, calib.txt -> disp0NAME.pfm + timeNAME.txt in it
-    ///   KITTI 2015  image_2/ + image_3/ (frames *_10.png)          -> RES/NAME/disp_0/FRAME.png (16-bit, ×256, 0 = invalid)
+    ///   KITTI 2015  image_2/ + image_3/ (frames *_10.png)          -> RES/NAME/SPLIT/disp_0/FRAME.png (16-bit, ×256, 0 = invalid)
     ///   KITTI 2012  colored_0/ + colored_1/ (or image_0/ + image_1/) -> as 2015
-    ///   ETH3D       scene folders in two_view_*/ (or with a sibling *_gt/) -> RES/NAME/low_res_two_view/SCENE.pfm + SCENE.txt
-    /// RES is --results, else results/ beside the data set's folder (kitti/training -> kitti/results); it is never
-    /// inside a data set, and a results folder holding another data set's results (source.txt) is refused.
+    ///   ETH3D       scene folders in two_view_*/ (or with a sibling *_gt/) -> RES/NAME/SPLIT/low_res_two_view/SCENE.pfm + SCENE.txt
+    /// RES is --results, else results/ beside the data set's folder (kitti/training -> kitti/results); SPLIT is the
+    /// data set's folder name (training, testing). It is never inside a data set, a results folder holding another
+    /// data set's results (source.txt) is refused, and one a batch is writing is locked against a second batch.
     /// ndisp: --ndisp, else calib.txt, else 192 for KITTI; a missing range, or one of half the width or more (ETH3D
     /// states the width), is measured on the pair. Run times (seconds in the pipeline, loading and writing
-    /// excluded) go beside each result (KITTI: RES/NAME/time/FRAME.txt). Each pair's files are written all or none.
+    /// excluded) go beside each result (KITTI: RES/NAME/SPLIT/time/FRAME.txt). Each pair's files are written all or
+    /// none.
     /// Pairs run in path order; a failing pair is reported and the others still run; the exit code is 2 if any
     /// failed.
     #[command(verbatim_doc_comment)]

@@ -6,28 +6,34 @@
 //! | layout | a folder holding | pairs | ground truth | results of `--alg NAME` |
 //! |---|---|---|---|---|
 //! | MiddEval3 | `im0.png`, `im1.png`, `calib.txt` (one scene) | the scene | `disp0GT.pfm`, `mask0nocc.png` in the scene | `disp0NAME.pfm`, `timeNAME.txt` in the scene (the MiddEval3 submission layout) |
-//! | KITTI 2015 | `image_2/`, `image_3/` | `image_2/NNNNNN_10.png` + `image_3/…` | `disp_noc_0/`, `disp_occ_0/` | `RES/NAME/disp_0/NNNNNN_10.png` |
+//! | KITTI 2015 | `image_2/`, `image_3/` | `image_2/NNNNNN_10.png` + `image_3/…` | `disp_noc_0/`, `disp_occ_0/` | `RES/NAME/SPLIT/disp_0/NNNNNN_10.png` |
 //! | KITTI 2012 | `colored_0/`, `colored_1/` (or grey `image_0/`, `image_1/`) | `*_10.png` | `disp_noc/`, `disp_occ/` | as 2015 |
-//! | ETH3D two-view | scene folders as MiddEval3, in a folder named `two_view_*` or with a sibling `<name>_gt/` | each scene | `<name>_gt/SCENE/disp0GT.pfm`, `mask0nocc.png` | `RES/NAME/low_res_two_view/SCENE.pfm` and `SCENE.txt` (`runtime <s>`) |
+//! | ETH3D two-view | scene folders as MiddEval3, in a folder named `two_view_*` or with a sibling `<name>_gt/` | each scene | `<name>_gt/SCENE/disp0GT.pfm`, `mask0nocc.png` | `RES/NAME/SPLIT/low_res_two_view/SCENE.pfm` and `SCENE.txt` (`runtime <s>`) |
 //!
 //! `RES` is `--results DIR` when given, else the folder `results/` beside the data set's folder (for
-//! `kitti/training/`, `kitti/results/`). KITTI and ETH3D results are in the benchmarks' submission forms (KITTI:
-//! 16-bit PNG, disparity × 256, 0 = invalid; its per-frame run times go to `RES/NAME/time/FRAME.txt`), and are
-//! never written inside the data set's folder. Because a training and a test split share frame names, a
-//! results folder records which data set it holds ([`SOURCE_FILE`]); results of another data set under the
-//! same name are refused instead of mixed.
+//! `kitti/training/`, `kitti/results/`); `SPLIT` is the data set's folder name (`training`, `testing`), so a
+//! training and a test split, which share frame names, never share a results folder. KITTI and ETH3D results are
+//! in the benchmarks' submission forms (KITTI: 16-bit PNG, disparity × 256, 0 = invalid; its per-frame run times
+//! go to `RES/NAME/SPLIT/time/FRAME.txt`), and are never written inside the data set's folder. A results folder
+//! records which data set it holds ([`SOURCE_FILE`], relative to itself and by a fingerprint, so the two can
+//! move); results of another data set under the same name are refused instead of mixed. While `jem batch` writes
+//! results, a lock keeps a second writer out ([`lock_results`]).
 //!
 //! A MiddEval3 scene and an ETH3D scene look the same; the folder around it decides, or `--layout`.
 
 mod kitti;
+mod lock;
+mod results;
 pub mod walk;
 
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 
 pub use kitti::interpolate_background;
+pub use lock::{ResultsLock, lock_results};
+pub use results::check_results_dirs;
 
 /// The search range of a KITTI frame when nothing else gives one (0..191, the usual choice for KITTI).
 pub const KITTI_NDISP: usize = 192;
@@ -133,8 +139,10 @@ impl Pair {
         self.layout.is_kitti().then_some(KITTI_NDISP)
     }
 
-    /// The results folder of `alg` for this pair's data set (`base/alg`, `base` = `results` or the folder
-    /// `results/` beside the data set); `None` for MiddEval3, whose results go into the scene folder.
+    /// The results folder of `alg` for this pair's data set: `base/alg/SPLIT`, `base` = `results` or the folder
+    /// `results/` beside the data set, `SPLIT` the data set's folder name (`training`, `testing`,
+    /// `two_view_training`: each split its own folder, issue 41); `None` for MiddEval3, whose results go into the
+    /// scene folder.
     pub fn results_dir(&self, alg: &str, results: Option<&Path>) -> Option<PathBuf> {
         if self.layout == Layout::Middlebury {
             return None;
@@ -146,7 +154,15 @@ impl Pair {
                 _ => PathBuf::from("results"),
             },
         };
-        Some(base.join(alg))
+        Some(base.join(alg).join(self.split_name()))
+    }
+
+    /// The data set's folder name (of its resolved path when the given one has none, as `.`).
+    fn split_name(&self) -> std::ffi::OsString {
+        let name = |p: &Path| p.file_name().map(|n| n.to_os_string());
+        name(&self.root)
+            .or_else(|| std::fs::canonicalize(&self.root).ok().as_deref().and_then(name))
+            .unwrap_or_else(|| "data".into())
     }
 
     /// The files `alg`'s result for this pair is written to (see the module doc).
@@ -234,8 +250,8 @@ pub struct Discovery {
 /// are skipped; a folder reached twice (symbolic links) is read once.
 ///
 /// # Errors
-/// [`Error::Io`] if a root cannot be read, [`Error::Input`] if one is not a folder. Unreadable sub-folders are
-/// skipped.
+/// [`Error::Io`](crate::Error::Io) if a root cannot be read, [`Error::Input`](crate::Error::Input) if one is not
+/// a folder. Unreadable sub-folders are skipped.
 pub fn discover(roots: &[PathBuf], purpose: Purpose, how: &Discovery) -> Result<Vec<Pair>> {
     let mut found = Vec::new();
     walk::walk_folders(roots, &mut |dir| {
@@ -301,86 +317,6 @@ fn scene(dir: &Path, purpose: Purpose, how: &Discovery) -> Option<Option<Pair>> 
         Purpose::Score => pair.truth(false, how.gt.as_deref()).disparity.is_file(),
     };
     Some(usable.then_some(pair))
-}
-
-/// What a results folder's [`SOURCE_FILE`] says: the layout and the data set's folder (canonical).
-fn source_text(pair: &Pair) -> String {
-    let root = std::fs::canonicalize(&pair.root).unwrap_or_else(|_| pair.root.clone());
-    format!("layout {}\nroot {}\n", pair.layout.name(), root.display())
-}
-
-/// Checks that the results folders of `alg` for these pairs are free for them: no folder is claimed by two data
-/// sets, none holds another data set's results (its [`SOURCE_FILE`] names another), none lies inside a data
-/// set's folder. With `claim`, creates the folders and writes the missing source files.
-///
-/// # Errors
-/// [`Error::Input`] naming the folder and the data sets; [`Error::Io`] if a folder or file cannot be made.
-pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, claim: bool) -> Result<()> {
-    let mut claimed: std::collections::BTreeMap<PathBuf, &Pair> = Default::default();
-    for pair in pairs {
-        let Some(dir) = pair.results_dir(alg, results) else { continue };
-        match claimed.get(&dir) {
-            Some(other) if other.root != pair.root => {
-                return Err(Error::Input(format!(
-                    "{}: the results of {} and of {} would share this folder (same frame names); run them one at a \
-                     time with different --alg or --results",
-                    dir.display(),
-                    other.root.display(),
-                    pair.root.display()
-                )));
-            }
-            Some(_) => continue,
-            None => {}
-        }
-        claimed.insert(dir.clone(), pair);
-        if let (Ok(d), Ok(r)) = (resolve_to_existing(&dir), std::fs::canonicalize(&pair.root))
-            && d.starts_with(&r)
-        {
-            return Err(Error::Input(format!(
-                "{}: results would go inside the data set {} (never written to); choose another --results",
-                dir.display(),
-                pair.root.display()
-            )));
-        }
-        if let Ok(have) = std::fs::read(dir.join(SOURCE_FILE))
-            && have != source_text(pair).as_bytes()
-        {
-            let have = String::from_utf8_lossy(&have);
-            let other = have.lines().find_map(|l| l.strip_prefix("root ")).unwrap_or("another data set");
-            return Err(Error::Input(format!(
-                "{}: holds the results of {other}, not of {} (see {SOURCE_FILE}); choose another --alg or --results",
-                dir.display(),
-                pair.root.display()
-            )));
-        }
-    }
-    // Everything checked: only now is anything made.
-    for (dir, pair) in claimed.iter().filter(|_| claim) {
-        let source = dir.join(SOURCE_FILE);
-        if !source.is_file() {
-            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-            crate::io::write_atomic(&source, source_text(pair).as_bytes())?;
-        }
-    }
-    Ok(())
-}
-
-/// The canonical form of `path`, or of its nearest existing ancestor joined with the rest.
-fn resolve_to_existing(path: &Path) -> std::io::Result<PathBuf> {
-    let mut rest = Vec::new();
-    let mut cur = path.to_path_buf();
-    loop {
-        if let Ok(c) = std::fs::canonicalize(&cur) {
-            return Ok(rest.iter().rev().fold(c, |acc: PathBuf, part: &std::ffi::OsString| acc.join(part)));
-        }
-        match (cur.file_name().map(|n| n.to_os_string()), cur.parent()) {
-            (Some(name), Some(parent)) => {
-                rest.push(name);
-                cur = if parent.as_os_str().is_empty() { PathBuf::from(".") } else { parent.to_path_buf() };
-            }
-            _ => return std::fs::canonicalize(path),
-        }
-    }
 }
 
 #[cfg(test)]

@@ -98,11 +98,11 @@ fn results_and_truth_paths() {
         calib: None,
     };
     let files = kitti.result_files("Jem", None);
-    assert_eq!(files.disparity, Path::new("/d/kitti/results/Jem/disp_0/000042_10.png"));
-    assert_eq!(files.time, Path::new("/d/kitti/results/Jem/time/000042_10.txt"));
+    assert_eq!(files.disparity, Path::new("/d/kitti/results/Jem/training/disp_0/000042_10.png"));
+    assert_eq!(files.time, Path::new("/d/kitti/results/Jem/training/time/000042_10.txt"));
     assert_eq!(
         kitti.result_files("Jem", Some(Path::new("/out"))).disparity,
-        Path::new("/out/Jem/disp_0/000042_10.png")
+        Path::new("/out/Jem/training/disp_0/000042_10.png")
     );
     assert_eq!(kitti.truth(false, None).disparity, Path::new("/d/kitti/training/disp_noc_0/000042_10.png"));
     assert_eq!(kitti.truth(true, None).disparity, Path::new("/d/kitti/training/disp_occ_0/000042_10.png"));
@@ -118,8 +118,8 @@ fn results_and_truth_paths() {
         calib: Some(PathBuf::from("/d/two_view_training/playground_1l/calib.txt")),
     };
     let files = eth.result_files("Jem", None);
-    assert_eq!(files.disparity, Path::new("/d/results/Jem/low_res_two_view/playground_1l.pfm"));
-    assert_eq!(files.time, Path::new("/d/results/Jem/low_res_two_view/playground_1l.txt"));
+    assert_eq!(files.disparity, Path::new("/d/results/Jem/two_view_training/low_res_two_view/playground_1l.pfm"));
+    assert_eq!(files.time, Path::new("/d/results/Jem/two_view_training/low_res_two_view/playground_1l.txt"));
     assert_eq!(eth.time_text(1.5), "runtime 1.500000\n");
     let truth = eth.truth(false, None);
     assert_eq!(truth.disparity, Path::new("/d/two_view_training_gt/playground_1l/disp0GT.pfm"));
@@ -139,22 +139,30 @@ fn a_results_folder_belongs_to_one_data_set() {
     for split in ["training", "testing"] {
         touch(root, &[&format!("k/{split}/image_2/000000_10.png"), &format!("k/{split}/image_3/000000_10.png")]);
     }
+    std::fs::write(root.join("k/testing/image_2/000000_10.png"), b"other").unwrap();
     let all = discover(&[root.join("k")], Purpose::Run, &Discovery::default()).unwrap();
     assert_eq!(all.len(), 2);
-    // Both splits at once would share k/results/A.
-    let e = check_results_dirs(&all, "A", None, true).unwrap_err().to_string();
-    assert!(e.contains("would share this folder"), "{e}");
-    assert!(!root.join("k/results").exists(), "nothing made before the check passed");
+    // Each split its own folder (issue 41): both at once are fine.
+    check_results_dirs(&all, "A", None, true).unwrap();
+    let source = std::fs::read_to_string(root.join("k/results/A/training").join(SOURCE_FILE)).unwrap();
+    assert!(source.starts_with("layout kitti2015\nroot ../../../training\ndata 1 pairs, fingerprint "), "{source}");
+    check_results_dirs(&all, "A", None, true).unwrap();
 
+    // The same split name under one --results: the second data set is refused (another fingerprint).
     let training: Vec<Pair> = all.iter().filter(|p| p.root.ends_with("training")).cloned().collect();
-    let testing: Vec<Pair> = all.iter().filter(|p| p.root.ends_with("testing")).cloned().collect();
-    check_results_dirs(&training, "A", None, true).unwrap();
-    let source = std::fs::read_to_string(root.join("k/results/A").join(SOURCE_FILE)).unwrap();
-    assert!(source.starts_with("layout kitti2015\nroot ") && source.trim_end().ends_with("training"), "{source}");
-    check_results_dirs(&training, "A", None, true).unwrap();
-    let e = check_results_dirs(&testing, "A", None, true).unwrap_err().to_string();
-    assert!(e.contains("holds the results of") && e.contains("training"), "{e}");
-    check_results_dirs(&testing, "B", None, true).unwrap();
+    let other = root.join("o/training");
+    touch(root, &["o/training/image_2/000000_10.png", "o/training/image_3/000000_10.png"]);
+    std::fs::write(other.join("image_3/000000_10.png"), b"another right view").unwrap();
+    let others = discover(&[other], Purpose::Run, &Discovery::default()).unwrap();
+    let r = root.join("R");
+    check_results_dirs(&training, "A", Some(&r), true).unwrap();
+    let e = check_results_dirs(&others, "A", Some(&r), true).unwrap_err().to_string();
+    assert!(e.contains("holds the results of") && e.contains("k/training"), "{e}");
+    // Both in one call would share R/A/training.
+    let both = [training.clone(), others].concat();
+    let e = check_results_dirs(&both, "B", Some(&r), true).unwrap_err().to_string();
+    assert!(e.contains("would share this folder"), "{e}");
+    assert!(!r.join("B").exists(), "nothing made before the check passed");
 
     // Results inside the data set are refused.
     let inside = root.join("k/training/out");

@@ -1,0 +1,180 @@
+//! Which data set a KITTI or ETH3D results folder holds ([`SOURCE_FILE`]), so that results are never mixed and
+//! a moved or copied tree still evaluates.
+//!
+//! The file names the layout, the data set's folder relative to the results folder (both with links resolved),
+//! and a fingerprint of the data set: its pair names and the byte sizes of their images (metadata only; KITTI's
+//! training and testing frames share names but not sizes). A results folder holds a data set's results when the
+//! layouts agree and either the recorded folder is the data set's folder, or the fingerprints agree (the data set
+//! was moved or copied away from its results, issue 42). Anything else is refused. A file of an older jem, with an
+//! absolute `root` and no fingerprint, still matches its folder.
+
+use std::path::{Component, Path, PathBuf};
+
+use super::{Discovery, Pair, Purpose, SOURCE_FILE, discover};
+use crate::error::{Error, Result};
+
+/// What a results folder's [`SOURCE_FILE`] says for `pair`'s data set, written from the results folder `dir`.
+fn source_text(pair: &Pair, dir: &Path) -> String {
+    let root = std::fs::canonicalize(&pair.root).unwrap_or_else(|_| pair.root.clone());
+    let rel = std::fs::canonicalize(dir).map_or_else(|_| root.clone(), |d| relative_path(&d, &root));
+    format!("layout {}\nroot {}\ndata {}\n", pair.layout.name(), rel.display(), fingerprint(pair))
+}
+
+/// The pairs of `pair`'s data set, and FNV-1a (64 bits) over their names and image sizes in bytes (0 for a
+/// missing image), as `N pairs, fingerprint HEX`.
+fn fingerprint(pair: &Pair) -> String {
+    let how = Discovery { layout: Some(pair.layout), gt: None };
+    let pairs = discover(std::slice::from_ref(&pair.root), Purpose::Run, &how).unwrap_or_default();
+    let mut hash = 0xcbf2_9ce4_8422_2325u64;
+    let mut add = |bytes: &[u8]| {
+        for &b in bytes {
+            hash = (hash ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
+        }
+    };
+    for p in &pairs {
+        add(p.name.as_bytes());
+        for image in [&p.left, &p.right] {
+            add(&[0]);
+            add(&std::fs::metadata(image).map_or(0, |m| m.len()).to_le_bytes());
+        }
+        add(&[0xff]);
+    }
+    format!("{} pairs, fingerprint {hash:016x}", pairs.len())
+}
+
+/// `to` relative to `from` (both absolute, links resolved): `..` up to their common ancestor, then down.
+fn relative_path(from: &Path, to: &Path) -> PathBuf {
+    let (a, b): (Vec<Component>, Vec<Component>) = (from.components().collect(), to.components().collect());
+    let common = a.iter().zip(&b).take_while(|(x, y)| x == y).count();
+    let mut rel: PathBuf = std::iter::repeat_n(Component::ParentDir, a.len() - common).collect();
+    rel.extend(&b[common..]);
+    if rel.as_os_str().is_empty() { PathBuf::from(".") } else { rel }
+}
+
+/// `path` with `.` and `name/..` removed lexically (for messages).
+fn tidy(path: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir if matches!(out.components().next_back(), Some(Component::Normal(_))) => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
+}
+
+/// Whether the [`SOURCE_FILE`] text `have` of the results folder `dir` is `pair`'s data set (see the module
+/// doc); otherwise `Err` with the data set it names.
+fn holds(have: &str, pair: &Pair, dir: &Path) -> std::result::Result<(), String> {
+    let field = |key: &str| have.lines().find_map(|l| l.strip_prefix(key).map(str::trim));
+    let named = field("root ").map(|root| {
+        let root = Path::new(root);
+        if root.is_absolute() {
+            root.to_path_buf()
+        } else {
+            std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()).join(root)
+        }
+    });
+    let other = || named.as_deref().map_or("another data set".to_string(), |n| tidy(n).display().to_string());
+    if field("layout ") != Some(pair.layout.name()) {
+        return Err(other());
+    }
+    if let (Some(n), Ok(root)) = (&named, std::fs::canonicalize(&pair.root))
+        && std::fs::canonicalize(n).is_ok_and(|n| n == root)
+    {
+        return Ok(());
+    }
+    match field("data ") {
+        Some(data) if data == fingerprint(pair) => Ok(()),
+        _ => Err(other()),
+    }
+}
+
+/// Checks that the results folders of `alg` for these pairs are free for them: no folder is claimed by two data
+/// sets, none holds another data set's results (its [`SOURCE_FILE`] names another, see the module doc), none lies
+/// inside a data set's folder. With `claim`, creates the folders and writes the missing source files.
+///
+/// # Errors
+/// [`Error::Input`] naming the folder and the data sets; [`Error::Io`] if a folder or file cannot be made.
+pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, claim: bool) -> Result<()> {
+    let mut claimed: std::collections::BTreeMap<PathBuf, &Pair> = Default::default();
+    for pair in pairs {
+        let Some(dir) = pair.results_dir(alg, results) else { continue };
+        match claimed.get(&dir) {
+            Some(other) if other.root != pair.root => {
+                return Err(Error::Input(format!(
+                    "{}: the results of {} and of {} would share this folder (same frame names); run them one at a \
+                     time with different --alg or --results",
+                    dir.display(),
+                    other.root.display(),
+                    pair.root.display()
+                )));
+            }
+            Some(_) => continue,
+            None => {}
+        }
+        claimed.insert(dir.clone(), pair);
+        if let (Ok(d), Ok(r)) = (resolve_to_existing(&dir), std::fs::canonicalize(&pair.root))
+            && d.starts_with(&r)
+        {
+            return Err(Error::Input(format!(
+                "{}: results would go inside the data set {} (never written to); choose another --results",
+                dir.display(),
+                pair.root.display()
+            )));
+        }
+        if let Ok(have) = std::fs::read(dir.join(SOURCE_FILE))
+            && let Err(other) = holds(&String::from_utf8_lossy(&have), pair, &dir)
+        {
+            return Err(Error::Input(format!(
+                "{}: holds the results of {other}, not of {} (see {SOURCE_FILE}); choose another --alg or --results",
+                dir.display(),
+                pair.root.display()
+            )));
+        }
+    }
+    // Everything checked: only now is anything made.
+    for (dir, pair) in claimed.iter().filter(|_| claim) {
+        let source = dir.join(SOURCE_FILE);
+        if !source.is_file() {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            crate::io::write_atomic(&source, source_text(pair, dir).as_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+/// The canonical form of `path`, or of its nearest existing ancestor joined with the rest.
+fn resolve_to_existing(path: &Path) -> std::io::Result<PathBuf> {
+    let mut rest = Vec::new();
+    let mut cur = path.to_path_buf();
+    loop {
+        if let Ok(c) = std::fs::canonicalize(&cur) {
+            return Ok(rest.iter().rev().fold(c, |acc: PathBuf, part: &std::ffi::OsString| acc.join(part)));
+        }
+        match (cur.file_name().map(|n| n.to_os_string()), cur.parent()) {
+            (Some(name), Some(parent)) => {
+                rest.push(name);
+                cur = if parent.as_os_str().is_empty() { PathBuf::from(".") } else { parent.to_path_buf() };
+            }
+            _ => return std::fs::canonicalize(path),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relative_paths() {
+        let rel = |a: &str, b: &str| relative_path(Path::new(a), Path::new(b));
+        assert_eq!(rel("/d/k/results/A/training", "/d/k/training"), Path::new("../../../training"));
+        assert_eq!(rel("/r/A/training", "/d/k/training"), Path::new("../../../d/k/training"));
+        assert_eq!(rel("/d", "/d"), Path::new("."));
+        assert_eq!(tidy(Path::new("/r/A/x/../../../d/./k")), Path::new("/d/k"));
+    }
+}
