@@ -126,7 +126,7 @@ fn issue42_viz_kitti_tree_with_d1() {
     let second = |row: &[f32]| [row, row].concat();
     write_map(&d.join("kitti/training/disp_occ_0").join(frame), 8, 2, second(&all));
     write_map(&d.join("kitti/training/disp_noc_0").join(frame), 8, 2, second(&nonocc));
-    write_map(&d.join("kitti/results/T/disp_0").join(frame), 8, 2, second(&result));
+    write_map(&d.join("kitti/results/T/training/disp_0").join(frame), 8, 2, second(&result));
     let want = |x0: u32, sheet: &Path| {
         let grey = (255.0f32 - 50.0 * 4.0 / 5.0).round() as u8;
         let colours: Vec<[u8; 3]> = (0..8).map(|x| pixel(sheet, x0 + x, 1).1).collect();
@@ -144,14 +144,19 @@ fn issue42_viz_kitti_tree_with_d1() {
     assert_eq!(pixel(&d.join("sheet.png"), 0, 0).0, (3 * 8 + 2 * 4, 2));
     want(24, &d.join("sheet.png"));
     // One map against disp_noc_0 (its sibling disp_occ_0 is the truth of all pixels).
-    let args = ["viz", "kitti/results/T/disp_0/000000_10.png", "--gt", "kitti/training/disp_noc_0/000000_10.png"];
+    let args =
+        ["viz", "kitti/results/T/training/disp_0/000000_10.png", "--gt", "kitti/training/disp_noc_0/000000_10.png"];
     let out = run_in(d, &[&args[..], &["-o", "one.png"]].concat());
     assert!(out.status.success() && stderr(&out).contains("red: KITTI D1"), "{}", stderr(&out));
     want(12, &d.join("one.png"));
     // A sheet of a tree without results says where it looked.
     let out = run_in(d, &["viz", "kitti/training", "--alg", "U", "-o", "none.png"]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(stderr(&out).contains("no result of U") && stderr(&out).contains("results/U/disp_0"), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("no result of U") && stderr(&out).contains("results/U/training/disp_0"),
+        "{}",
+        stderr(&out)
+    );
 }
 
 /// Issue 42, item 4: an ETH3D tree's contact sheet uses bad-1 (error > 1 px, native pixels; MiddEval3's rule would
@@ -169,7 +174,7 @@ fn issue42_viz_eth3d_tree_with_bad1() {
         .unwrap()
         .save(d.join("two_view_training_gt/S/mask0nocc.png"))
         .unwrap();
-    write_map(&d.join("results/T/low_res_two_view/S.pfm"), 4, 1, vec![11.5, 10.5, 10.0, 10.0]);
+    write_map(&d.join("results/T/two_view_training/low_res_two_view/S.pfm"), 4, 1, vec![11.5, 10.5, 10.0, 10.0]);
     let out = run_in(d, &["viz", "two_view_training", "--alg", "T", "-o", "sheet.png"]);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(stderr(&out).contains("1 rows (S); error maps: ETH3D bad-1 (error > 1 px)"), "{}", stderr(&out));
@@ -177,7 +182,14 @@ fn issue42_viz_eth3d_tree_with_bad1() {
     let colours: Vec<[u8; 3]> = (0..4).map(|x| pixel(&sheet, 16 + x, 0).1).collect();
     assert_eq!(colours, vec![[230, 30, 30], [230; 3], occluded_exact(), [255; 3]]);
     // One map: the rule follows from the ground truth's place in a *_gt tree.
-    let args = ["viz", "results/T/low_res_two_view/S.pfm", "--gt", "two_view_training_gt/S/disp0GT.pfm", "-o", "o.png"];
+    let args = [
+        "viz",
+        "results/T/two_view_training/low_res_two_view/S.pfm",
+        "--gt",
+        "two_view_training_gt/S/disp0GT.pfm",
+        "-o",
+        "o.png",
+    ];
     let out = run_in(d, &args);
     assert!(out.status.success() && stderr(&out).contains("red: ETH3D bad-1"), "{}", stderr(&out));
     assert_eq!(pixel(&d.join("o.png"), 8, 0).1, [230, 30, 30]);

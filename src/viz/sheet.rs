@@ -22,7 +22,7 @@ pub struct SheetOptions {
     pub scale: Option<u32>,
     /// Read the tree as this layout instead of recognising it (as `jem batch --layout`).
     pub layout: Option<Layout>,
-    /// Where KITTI and ETH3D results are (`RESULTS/NAME/`; default: `results/` beside the data set).
+    /// Where KITTI and ETH3D results are (`RESULTS/NAME/SPLIT/`; default: `results/` beside the data set).
     pub results: Option<PathBuf>,
     /// ETH3D's ground-truth tree (default: the sibling `<name>_gt/`).
     pub gt: Option<PathBuf>,
