@@ -209,3 +209,67 @@ fn check_other_parts(dir: &Path, own: &str, shard: Option<(usize, usize)>) -> Re
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn empty_lock() -> ResultsLock {
+        let token = format!("pid {}\nhost {}\n", std::process::id(), crate::degrade::host_name());
+        ResultsLock { files: Vec::new(), token, taken_over: Vec::new() }
+    }
+
+    #[test]
+    fn live_locks_are_refused_stale_ones_taken_over_and_only_ours_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join(".jem-lock");
+        let host = crate::degrade::host_name();
+        assert!(process_start("self").is_some(), "this test needs /proc");
+
+        // Live: this process, with and without its start time; another host; unreadable.
+        let start = process_start("self").unwrap();
+        for text in [
+            format!("pid {}\nhost {host}\nstart {start}\n", std::process::id()),
+            format!("pid {}\nhost {host}\n", std::process::id()),
+            "pid 1\nhost another-host.example\n".to_string(),
+            String::new(),
+        ] {
+            std::fs::write(&file, &text).unwrap();
+            let e = acquire(&file, &mut empty_lock()).unwrap_err().to_string();
+            assert!(e.contains("is writing these results") && e.contains(".jem-lock"), "{text:?}: {e}");
+            assert_eq!(std::fs::read_to_string(&file).unwrap(), text, "left alone");
+        }
+        // Stale: a process that is gone, or this pid with another start time (a reused pid).
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let dead = child.id();
+        child.wait().unwrap();
+        for text in [
+            format!("pid {dead}\nhost {host}\n"),
+            format!("pid {}\nhost {host}\nstart {}\n", std::process::id(), start + 1),
+        ] {
+            std::fs::write(&file, &text).unwrap();
+            let mut lock = empty_lock();
+            acquire(&file, &mut lock).unwrap();
+            assert_eq!(lock.taken_over().len(), 1, "{text:?}");
+            assert_eq!(std::fs::read_to_string(&file).unwrap(), lock.token);
+            lock.files.push(file.clone());
+            drop(lock);
+            assert!(!file.exists(), "removed at the end");
+        }
+        // Dropping a lock that another run has replaced meanwhile leaves that one.
+        let mut lock = empty_lock();
+        acquire(&file, &mut lock).unwrap();
+        lock.files.push(file.clone());
+        std::fs::write(&file, "pid 1\nhost another-host.example\n").unwrap();
+        drop(lock);
+        assert!(file.exists());
+        assert_eq!(names_in(dir.path()), [".jem-lock"], "no file left aside");
+    }
+
+    fn names_in(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> =
+            std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        names.sort();
+        names
+    }
+}

@@ -95,7 +95,8 @@ fn holds(have: &str, pair: &Pair, dir: &Path) -> std::result::Result<(), String>
 
 /// Checks that the results folders of `alg` for these pairs are free for them: no folder is claimed by two data
 /// sets, none holds another data set's results (its [`SOURCE_FILE`] names another, see the module doc), none lies
-/// inside a data set's folder. With `claim`, creates the folders and writes the missing source files.
+/// inside a data set's folder, and no results of the data set wait in the folder an older jem used (`RES/NAME/`,
+/// before each split had its own). With `claim`, creates the folders and writes the missing source files.
 ///
 /// # Errors
 /// [`Error::Input`] naming the folder and the data sets; [`Error::Io`] if a folder or file cannot be made.
@@ -124,6 +125,21 @@ pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, cla
                 "{}: results would go inside the data set {} (never written to); choose another --results",
                 dir.display(),
                 pair.root.display()
+            )));
+        }
+        // Results of this data set where a jem before per-split folders put them (`RES/NAME/`): say where they
+        // are, rather than report every result missing, or compute them all again beside them.
+        if let Some(old) = dir.parent()
+            && !dir.exists()
+            && let Ok(have) = std::fs::read(old.join(SOURCE_FILE))
+            && holds(&String::from_utf8_lossy(&have), pair, old).is_ok()
+        {
+            return Err(Error::Input(format!(
+                "{}: holds results of {} written by an older jem, which put them there; move its {SOURCE_FILE} and \
+                 result folders into {} (each split now has its own folder)",
+                old.display(),
+                pair.root.display(),
+                dir.display()
             )));
         }
         if let Ok(have) = std::fs::read(dir.join(SOURCE_FILE))

@@ -164,6 +164,17 @@ fn a_results_folder_belongs_to_one_data_set() {
     assert!(e.contains("would share this folder"), "{e}");
     assert!(!r.join("B").exists(), "nothing made before the check passed");
 
+    // Results where an older jem put them (R/C/, an absolute root, no fingerprint): the error says where they are.
+    let old = r.join("C");
+    std::fs::create_dir_all(&old).unwrap();
+    let root_k = std::fs::canonicalize(root.join("k/training")).unwrap();
+    std::fs::write(old.join(SOURCE_FILE), format!("layout kitti2015\nroot {}\n", root_k.display())).unwrap();
+    let e = check_results_dirs(&training, "C", Some(&r), false).unwrap_err().to_string();
+    assert!(e.contains("older jem") && e.contains("C/training"), "{e}");
+    std::fs::create_dir_all(old.join("training")).unwrap();
+    std::fs::rename(old.join(SOURCE_FILE), old.join("training").join(SOURCE_FILE)).unwrap();
+    check_results_dirs(&training, "C", Some(&r), false).unwrap();
+
     // Results inside the data set are refused.
     let inside = root.join("k/training/out");
     let e = check_results_dirs(&training, "A", Some(&inside), true).unwrap_err().to_string();
