@@ -182,32 +182,25 @@ pub fn truncation_cost(p: &CostParams) -> f32 {
     p.census_weight * p.census_trunc + p.grad_weight * p.grad_trunc
 }
 
-/// Builds the left view's cost volume (labels 0..ndisp).
+/// Builds the left view's cost volume (labels 0..ndisp), ḡ of the gradient normalisation measured on `left`.
 ///
 /// # Panics
 /// If the images differ in size (checked by [`crate::StereoPair::new`]) or the Census window is invalid.
 pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &CostParams) -> CostVolume {
-    build_cost_volume_in(left, right, ndisp, p, Vec::new())
+    build_cost_volume_then(left, right, ndisp, p, None, Vec::new(), |_, _| ()).0
 }
 
-/// [`build_cost_volume`] in `storage` (reused whatever its size and contents).
-pub fn build_cost_volume_in(
-    left: &RgbImage,
-    right: &RgbImage,
-    ndisp: usize,
-    p: &CostParams,
-    storage: Vec<f32>,
-) -> CostVolume {
-    build_cost_volume_then(left, right, ndisp, p, storage, |_, _| ()).0
-}
-
-/// [`build_cost_volume_in`], with `then(y, row)` called on each row of the volume as soon as it is written (in the
-/// same parallel task, while the row is still in cache); its results, row by row.
+/// [`build_cost_volume`] in `storage` (reused whatever its size and contents), with ḡ of the gradient
+/// normalisation given (`grad_norm_mean`: measured once for a whole pair, so that tiles and the whole image share
+/// it; `None` measures it on `left`), and `then(y, row)` called on each row of the volume as soon as it is written
+/// (in the same parallel task, while the row is still in cache); its results, row by row.
+#[allow(clippy::too_many_arguments)]
 pub fn build_cost_volume_then<R: Send>(
     left: &RgbImage,
     right: &RgbImage,
     ndisp: usize,
     p: &CostParams,
+    grad_norm_mean: Option<f32>,
     storage: Vec<f32>,
     then: impl Fn(usize, &mut [f32]) -> R + Sync,
 ) -> (CostVolume, Vec<R>) {
@@ -227,7 +220,7 @@ pub fn build_cost_volume_then<R: Send>(
     if p.grad_norm_radius > 0 {
         let r = p.grad_norm_radius;
         let (sl, sr) = rayon::join(|| local_mean_abs(&gx_l, r), || local_mean_abs(&gx_r, r));
-        let mean = p.grad_norm_mean.unwrap_or_else(|| plane_mean(&sl));
+        let mean = grad_norm_mean.unwrap_or_else(|| plane_mean(&sl));
         normalise_gradient(&mut gx_l, &sl, mean, p.grad_norm_eps);
         normalise_gradient(&mut gx_r, &sr, mean, p.grad_norm_eps);
     }
@@ -520,12 +513,12 @@ mod tests {
     }
 
     impl NaiveCost {
-        /// `this` against `other`; ḡ from the parameters, else the mean local contrast of the left view (summed
-        /// in f64, row-major).
-        fn new(this: &Plane<f32>, other: &Plane<f32>, step: isize, p: &CostParams) -> NaiveCost {
+        /// `this` against `other`; ḡ as given, else the mean local contrast of the left view (summed in f64,
+        /// row-major).
+        fn new(this: &Plane<f32>, other: &Plane<f32>, step: isize, p: &CostParams, mean: Option<f32>) -> NaiveCost {
             let left = if step < 0 { this } else { other };
             let r = p.grad_norm_radius as isize;
-            let mean = p.grad_norm_mean.unwrap_or_else(|| {
+            let mean = mean.unwrap_or_else(|| {
                 let (w, h) = (left.width as isize, left.height as isize);
                 let sum: f64 = (0..h)
                     .flat_map(|y| (0..w).map(move |x| (x, y)))
@@ -662,64 +655,70 @@ mod tests {
     #[test]
     fn cost_volume_matches_the_naive_definition() {
         let params = [
-            CostParams::default(),
-            CostParams {
-                census_width: 5,
-                census_height: 3,
-                census_dead_band: 3.0,
-                census_support: 0.0,
-                census_weight: 2.0,
-                census_trunc: 5.0,
-                grad_weight: 0.45,
-                grad_trunc: 12.5,
-                grad_norm_radius: 0,
-                grad_norm_eps: 4.0,
-                grad_norm_mean: None,
-            },
-            CostParams {
-                census_width: 9,
-                census_height: 7,
-                census_dead_band: 0.5,
-                census_support: 90.0,
-                census_weight: 0.7,
-                census_trunc: 21.0,
-                grad_weight: 1.3,
-                grad_trunc: 90.0,
-                grad_norm_radius: 1,
-                grad_norm_eps: 2.5,
-                grad_norm_mean: None,
-            },
-            CostParams {
-                census_width: 1,
-                census_height: 3,
-                census_dead_band: 0.0,
-                census_support: 85.0,
-                census_weight: 1.0,
-                census_trunc: 1.0,
-                grad_weight: 0.1,
-                grad_trunc: 30.0,
-                grad_norm_radius: 3,
-                grad_norm_eps: 40.0,
-                grad_norm_mean: Some(17.5),
-            },
+            (CostParams::default(), None),
+            (
+                CostParams {
+                    census_width: 5,
+                    census_height: 3,
+                    census_dead_band: 3.0,
+                    census_support: 0.0,
+                    census_weight: 2.0,
+                    census_trunc: 5.0,
+                    grad_weight: 0.45,
+                    grad_trunc: 12.5,
+                    grad_norm_radius: 0,
+                    grad_norm_eps: 4.0,
+                },
+                None,
+            ),
+            (
+                CostParams {
+                    census_width: 9,
+                    census_height: 7,
+                    census_dead_band: 0.5,
+                    census_support: 90.0,
+                    census_weight: 0.7,
+                    census_trunc: 21.0,
+                    grad_weight: 1.3,
+                    grad_trunc: 90.0,
+                    grad_norm_radius: 1,
+                    grad_norm_eps: 2.5,
+                },
+                None,
+            ),
+            (
+                CostParams {
+                    census_width: 1,
+                    census_height: 3,
+                    census_dead_band: 0.0,
+                    census_support: 85.0,
+                    census_weight: 1.0,
+                    census_trunc: 1.0,
+                    grad_weight: 0.1,
+                    grad_trunc: 30.0,
+                    grad_norm_radius: 3,
+                    grad_norm_eps: 40.0,
+                },
+                Some(17.5),
+            ),
         ];
         let mut checked = 0;
         for (case, &(w, h)) in [(1, 1), (2, 3), (5, 4), (17, 9), (31, 6)].iter().enumerate() {
             for (levels, grey) in [(256, false), (4, true)] {
                 let (left, right) = random_pair(w, h, case as u64 + levels, levels, grey);
                 let (grey_l, grey_r) = (left.to_grey(), right.to_grey());
-                for p in &params {
+                for (p, mean) in &params {
                     let mut ndisps = vec![1, 3, w, w + 5];
                     ndisps.sort_unstable();
                     ndisps.dedup();
                     for ndisp in ndisps {
-                        let what = format!("{w}x{h}, {levels} levels, ndisp {ndisp}, {p:?}");
-                        let vl = build_cost_volume(&left, &right, ndisp, p);
-                        let naive_l = NaiveCost::new(&grey_l, &grey_r, -1, p);
+                        let what = format!("{w}x{h}, {levels} levels, ndisp {ndisp}, {p:?}, ḡ {mean:?}");
+                        let vl = build_cost_volume_then(&left, &right, ndisp, p, *mean, Vec::new(), |_, _| ()).0;
+                        let naive_l = NaiveCost::new(&grey_l, &grey_r, -1, p, *mean);
                         assert_same_volume(&vl, &naive_l.volume(ndisp), &format!("left view, {what}"));
                         // The pipeline reuses a stale allocation: start from NaN so an unwritten entry shows.
                         let vr = derive_right_volume_in(&vl, truncation_cost(p), vec![f32::NAN; w * h * ndisp]);
-                        let naive_r = NaiveCost::new(&grey_r, &grey_l, 1, p);
+                        let naive_r = NaiveCost::new(&grey_r, &grey_l, 1, p, *mean);
                         assert_same_volume(&vr, &naive_r.volume(ndisp), &format!("right view, {what}"));
                         checked += 2 * w * h * ndisp;
                     }
@@ -815,8 +814,10 @@ mod tests {
         let (left, right) = shifted_pair(40, 9, |x, _| x % 5);
         // ḡ of the gradient normalisation is the left view's unless given: given, so that the mirrored pair (whose
         // left view is this right view) uses the same.
-        let p = CostParams { grad_norm_mean: Some(60.0), ..CostParams::default() };
-        let vl = build_cost_volume(&left, &right, 12, &p);
+        let p = CostParams::default();
+        let build =
+            |l: &RgbImage, r: &RgbImage| build_cost_volume_then(l, r, 12, &p, Some(60.0), Vec::new(), |_, _| ()).0;
+        let vl = build(&left, &right);
         let vr = derive_right_volume(&vl, truncation_cost(&p));
         for y in 0..9 {
             for x in 0..40 {
@@ -827,7 +828,7 @@ mod tests {
             }
         }
         // And it matches a right-view volume computed directly on the mirrored pair.
-        let direct = build_cost_volume(&right.mirrored(), &left.mirrored(), 12, &p);
+        let direct = build(&right.mirrored(), &left.mirrored());
         for y in 0..9 {
             for x in 0..40 {
                 let xm = 39 - x;

@@ -77,7 +77,7 @@ fn same_output_bytes_whatever_the_thread_count() {
     }
 }
 
-/// The same on a noisy JPEG pair, where the compression is measured (`jpeg_noise`: a parallel sum over the DCT
+/// The same on a noisy JPEG pair, where the compression is measured (`condition.noise.jpeg`: a parallel sum over the DCT
 /// frequencies) and the views are denoised (the vectorised bilateral filter): `-v` reports the JPEG, and the
 /// output is the same with 1, 2 and 3 threads.
 #[test]

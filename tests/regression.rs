@@ -118,7 +118,7 @@ const JEM_ALL_ACHIEVED: f64 = 4.938;
 /// 3.5437 (docs/tuning-log.md, "The prior where the cost is flat"; 3.7006 with the third level of coarse priors
 /// alone, docs/tuning-log.md, "A third coarse level"; 3.7443 since the noise estimate leaves clipped plateaus out,
 /// docs/tuning-log.md, "Clipped regions in the noise estimate"; 3.7401 since the right view's
-/// residual vertical offset is removed, `condition.vertical_align`, docs/tuning-log.md, "Imperfect rectification"; 3.9932 with the
+/// residual vertical offset is removed, `condition.vertical.enabled`, docs/tuning-log.md, "Imperfect rectification"; 3.9932 with the
 /// prior freeing the step beside coarse depth edges alone (docs/tuning-log.md, "The prior at coarse depth edges"), 4.0012 with
 /// the prior weakened at detail alone, 3.992 with the gradient normalisation alone, 4.101 with the Census support
 /// alone, 4.156 before it, 4.4028 with one level of coarse priors).
@@ -156,8 +156,8 @@ fn one_view_out_of_focus_trainingq() {
 fn jpeg_compression_trainingq() {
     let Some(data) = common::data_dir() else { return };
     let mut off = Params::default();
-    off.condition.jpeg_noise = false;
-    off.condition.block_band = 0.0;
+    off.condition.noise.jpeg = false;
+    off.condition.noise.block_band = 0.0;
     let recipe = "jpeg:90".parse().unwrap();
     let errors = off_and_default(&data, &off, |image, view| degrade(&image, &recipe, view, 1).unwrap());
     eprintln!("JPEG quality 90: compression not measured {:.3}, measured {:.3}", errors[0], errors[1]);

@@ -170,12 +170,12 @@ fn untextured_surface() {
     assert!(default < 0.5 * paper && default < 2.5, "paper {paper:.3}, default {default:.3}");
 
     // As if the pair were noiseless (this renderer's texture reads σn ≈ 2, so λ would be about 1 from the noise
-    // alone): without the noise-scaled weight only the floor where the cost is flat (`condition.prior_flat`) lets
+    // alone): without the noise-scaled weight only the floor where the cost is flat (`condition.prior.flat`) lets
     // the coarse levels hold the disc. Measured: 12.61 px without the floor (no coarse prior at all), 1.93 with it.
     let mut noiseless = Params::default();
-    noiseless.condition.prior_per_sigma = 0.0;
+    noiseless.condition.prior.per_sigma = 0.0;
     let mut no_floor = noiseless.clone();
-    no_floor.condition.prior_flat = 0.0;
+    no_floor.condition.prior.flat = 0.0;
     let (with, without) = (inside(&noiseless), inside(&no_floor));
     eprintln!("untextured surface, no noise-scaled prior: floor where the cost is flat {with:.3}, none {without:.3}");
     assert!(with < 0.3 * without && with < 2.5, "with the floor {with:.3}, without {without:.3}");
@@ -183,7 +183,7 @@ fn untextured_surface() {
 
 /// Thin structures under noise (σ 8): bars two pixels wide, 12 px of disparity in front of a textured background.
 /// The coarse runs (at 1/2, 1/4 and 1/8) cannot hold them, and a prior as strong as the noise asks would forbid them;
-/// the prior weakened at detail (`condition.prior_detail`) lets the full-resolution cost keep them.
+/// the prior weakened at detail (`condition.prior.detail`) lets the full-resolution cost keep them.
 #[test]
 fn thin_structures_under_noise() {
     let (w, h, ndisp) = (240usize, 120usize, 32usize);
@@ -232,24 +232,24 @@ fn thin_structures_under_noise() {
     let pair = degraded(&scene, Some("noise:8"), 5);
     let on_bars = |params: &Params| mean_errors(params, &pair, &scene, |i| bar(i % w) && i / w > 4 && i / w < h - 4);
     let mut without = Params::default();
-    without.condition.prior_detail = 0.0;
+    without.condition.prior.detail = 0.0;
     let ((off, all_off), (on, all_on)) = (on_bars(&without), on_bars(&Params::default()));
     eprintln!(
-        "thin bars under noise σ 8: prior_detail off {off:.3} px, default {on:.3} px (whole image {all_off:.3} / {all_on:.3})"
+        "thin bars under noise σ 8: prior.detail off {off:.3} px, default {on:.3} px (whole image {all_off:.3} / {all_on:.3})"
     );
     assert!(on < 0.7 * off, "default {on:.3}, without the detail factor {off:.3}");
     assert!(all_on < all_off, "whole image: default {all_on:.3}, without {all_off:.3}");
 }
 
 /// Depth edges under noise (σ 8): the coarse runs fatten the near objects by a coarse pixel or more, and a prior
-/// that holds the full resolution to the coarse disparity keeps the fattening. With `prior_spread` the labels of
+/// that holds the full resolution to the coarse disparity keeps the fattening. With `prior.spread` the labels of
 /// the whole step are free beside a coarse depth edge, so the full resolution places the edge. Six rendered
 /// scenes; mean error within 8 px of a depth step (on the row): 1.454 px with the point prior, 0.991 px with the
 /// spread (every scene better: 12 to 50 %); whole images 0.326 / 0.269.
 #[test]
 fn depth_edges_under_noise() {
     let mut point = Params::default();
-    point.condition.prior_spread = 0;
+    point.condition.prior.spread = 0;
     let (mut near, mut all) = ([0.0f64; 2], [0.0f64; 2]);
     for seed in 11..=16 {
         let s = scene(seed, 1.0);
@@ -281,7 +281,7 @@ fn depth_edges_under_noise() {
 fn vertical_misalignment_is_measured_and_removed() {
     use jem::rectify::{VerticalOffset, resample_right};
     let mut off = Params::default();
-    off.condition.vertical_align = false;
+    off.condition.vertical.enabled = false;
     let (mut errors, mut worst) = ([0.0f64; 2], 0.0f64);
     for seed in 11..=16 {
         let s = scene(seed, 1.0);

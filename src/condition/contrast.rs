@@ -1,6 +1,6 @@
 //! Contrast (module doc of [`crate::condition`], items 1 and 2): the right view's histogram matched onto the
 //! left view's (`experimental.match_histograms`), and a low-contrast view stretched to [`TARGET_RANGE`] grey levels
-//! (`stretch`).
+//! (`condition.stretch`).
 
 use std::borrow::Cow;
 
@@ -69,7 +69,7 @@ mod tests {
     use super::*;
     use crate::condition::condition_pair;
     use crate::condition::test_images::textured;
-    use crate::params::ConditionParams;
+    use crate::params::{ConditionParams, StretchParams};
 
     /// A right view with another gain and gamma is mapped back onto the left view's levels.
     #[test]
@@ -98,7 +98,10 @@ mod tests {
             .for_each(|c| c.iter_mut().enumerate().for_each(|(i, v)| *v = (255 * (i % 64) / 63) as f32));
         let mut dark = textured(64, 48, 1.0, 7);
         dark.channels.iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v = (*v * 0.2).round()));
-        let p = ConditionParams { stretch: true, ..ConditionParams::off() };
+        let p = ConditionParams {
+            stretch: StretchParams { enabled: true, ..Default::default() },
+            ..ConditionParams::off()
+        };
         let pair = |img: &RgbImage| StereoPair { left: img.clone(), right: img.clone(), ndisp: 4 };
         let dark_pair = pair(&dark);
         let out = condition_pair(&dark_pair, &p, None);

@@ -93,7 +93,7 @@ mod tests {
     use crate::condition::condition_pair;
     use crate::condition::test_images::textured;
     use crate::image::StereoPair;
-    use crate::params::ConditionParams;
+    use crate::params::{ConditionParams, DenoiseParams};
 
     /// The bilateral filter as written first: pixel by pixel, libm's exp (the reference for [`bilateral`]).
     fn bilateral_reference(img: &RgbImage, sigma_xy: f32, sigma_range: f32) -> RgbImage {
@@ -146,7 +146,10 @@ mod tests {
     fn denoising_only_above_the_gate_and_only_for_the_cost() {
         let noisy = textured(96, 64, 6.0, 11);
         let clean = textured(96, 64, 0.0, 11);
-        let p = ConditionParams { denoise_strength: 3.0, denoise_min_sigma: 1.5, ..ConditionParams::off() };
+        let p = {
+            let off = ConditionParams::off();
+            ConditionParams { denoise: DenoiseParams { strength: 3.0, min_sigma: 1.5, ..off.denoise }, ..off }
+        };
         let pair = StereoPair { left: noisy.clone(), right: noisy.clone(), ndisp: 4 };
         let out = condition_pair(&pair, &p, None);
         assert_eq!(out.guide.left, noisy, "the guidance keeps the original");

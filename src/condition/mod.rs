@@ -4,15 +4,15 @@
 //! 1. **Photometric alignment** (`experimental.match_histograms`, off by default). The right view's channels are mapped
 //!    onto the left view's by histogram specification (a monotonic lookup per channel). Measured worse than without
 //!    once the rest is on (it hurts PianoL, whose views are lit differently on purpose).
-//! 2. **Contrast** (`stretch`). A view whose robust range (the 0.5th to the 99.5th percentile of grey) is below
-//!    [`TARGET_RANGE`] / `stretch_min_gain` is stretched by an affine map to span [`TARGET_RANGE`] grey levels,
+//! 2. **Contrast** (`stretch.enabled`). A view whose robust range (the 0.5th to the 99.5th percentile of grey) is below
+//!    [`TARGET_RANGE`] / `stretch.min_gain` is stretched by an affine map to span [`TARGET_RANGE`] grey levels,
 //!    each view by its own range (one gain for both would push a darker right view below 0). A dark image gets
 //!    the contrast the colour thresholds (σf, μ, the weighted median's and the planes' colour weights) assume,
 //!    and its noise is then measured relative to its contrast: what matters for matching is the
 //!    signal-to-noise ratio, not the absolute grey levels.
-//! 3. **Noise** (`denoise_*`). The noise σn of each view is measured after the stretch ([`estimate_noise`]); a
-//!    view noisier than `denoise_min_sigma` is smoothed by an edge-preserving bilateral filter (range scale
-//!    `denoise_strength` × σn) **for the matching cost only**: Census bits of noisy near-flat windows flip at
+//! 3. **Noise** (`[condition.denoise]`). The noise σn of each view is measured after the stretch ([`estimate_noise`]); a
+//!    view noisier than `denoise.min_sigma` is smoothed by an edge-preserving bilateral filter (range scale
+//!    `denoise.strength` × σn) **for the matching cost only**: Census bits of noisy near-flat windows flip at
 //!    random, and no averaging of the cost afterwards recovers a stable code; the guidance (colour weights of the
 //!    mean field, weighted median, planes) keeps the original edges. A clean camera measures 0.5–1.6 grey
 //!    levels (texture counts a little as noise) and is not filtered: filtering it removes the fine texture
@@ -22,23 +22,23 @@
 //! 4. **Coarse prior** (`prior_*`, in [`crate::pipeline`], prior.rs): the whole pipeline first runs on the
 //!    conditioned pair reduced 2× (noise halves, the range of labels too; a quarter of the plane segments, so
 //!    they keep their size in the scene), and the full-resolution cost of label d at pixel i
-//!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = max(`experimental.prior_base` + `prior_per_sigma`·σn,
-//!    `prior_flat` × the flatness of the pixel's cost, [`crate::cost::flatness`]: an untextured surface follows
+//!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = max(`experimental.prior_base` + `prior.per_sigma`·σn,
+//!    `prior.flat` × the flatness of the pixel's cost, [`crate::cost::flatness`]: an untextured surface follows
 //!    the coarse answer whatever the noise) × the coarse run's confidence at i (its max-marginal, with
-//!    `prior_confidence`) × `prior_untrusted` where the coarse left-right check failed (the fill guessed there),
+//!    `prior.confidence`) × `prior.untrusted` where the coarse left-right check failed (the fill guessed there),
 //!    × `detail_factor` (pipeline/prior.rs) where the image has detail the coarse level cannot hold. Beside a
 //!    depth edge of the
-//!    coarse answer (`prior_spread`) the distance is taken from the whole step, [low, high] of `edge_range`,
+//!    coarse answer (`prior.spread`) the distance is taken from the whole step, [low, high] of `edge_range`,
 //!    instead of d_coarse: the coarse level places an edge only to within its own pixels, and fattens near
 //!    objects under noise. The coarse level removes the gross errors that fine-scale noise causes, the fine level
 //!    keeps the precision; the prior also places each pixel well enough that three full-resolution iterations do
-//!    the work of five. With `prior_levels` L the coarse run has a coarse prior of its own, L − 1 levels deep (default
+//!    the work of five. With `prior.levels` L the coarse run has a coarse prior of its own, L − 1 levels deep (default
 //!    3: the half-resolution run is guided by a quarter-resolution one, and that by an eighth-resolution one). With
 //!    `experimental.prior_window` the full resolution searches only the labels the coarse run found, widened by two
 //!    coarse labels (off by default: as accurate, and on MiddEval3's ranges hardly faster).
-//! 5. **Vertical alignment** (`vertical_align`, in [`crate::run`] and the tiled run): with the coarse run's answer,
+//! 5. **Vertical alignment** (`vertical.enabled`, in [`crate::run`] and the tiled run): with the coarse run's answer,
 //!    the right view's residual vertical offset (imperfect rectification) is measured and, where it reaches
-//!    `vertical_min_px`, removed from the guidance and the cost pair before the full-resolution cost
+//!    `vertical.min_px`, removed from the guidance and the cost pair before the full-resolution cost
 //!    ([`crate::rectify`]).
 //!
 //! Everything is measured on the pair itself; nothing depends on the dataset. The paper's configs turn all of
@@ -95,11 +95,11 @@ impl PairStats {
         self.noise[0].max(self.noise[1])
     }
 
-    /// The Census band's multiple of the blocking for a pair measured so: `c.block_band` where JPEG was detected,
+    /// The Census band's multiple of the blocking for a pair measured so: `c.noise.block_band` where JPEG was detected,
     /// or where this level does not look for it (a coarse level, reduced off the block grid, gets the band of the
     /// level above); 0 otherwise.
     pub fn block_band(&self, c: &ConditionParams) -> f32 {
-        if self.is_jpeg() || !c.jpeg_noise { c.block_band } else { 0.0 }
+        if self.is_jpeg() || !c.noise.jpeg { c.noise.block_band } else { 0.0 }
     }
 }
 
@@ -141,7 +141,7 @@ pub fn condition_pair<'a>(
     }
     // Each view by its own range: a view darker than the other (exposure, gamma) is not pushed below 0 by the
     // other's gain, and the two end up with about the same contrast.
-    let gain = if p.stretch { stretch(&mut guide, p.stretch_min_gain) } else { [1.0; 2] };
+    let gain = if p.stretch.enabled { stretch(&mut guide, p.stretch.min_gain) } else { [1.0; 2] };
     // Compression artifacts count as noise of their measured size: JPEG flattens the flat regions the noise is
     // measured on (σn ≈ 0) while its block steps sit on the same image grid in both views and pull matches to
     // it. A step between two blocks with independent errors of σ has mean 2σ/√π, hence the factor.
@@ -150,7 +150,7 @@ pub fn condition_pair<'a>(
     let view_noise = |img: &RgbImage, input: &RgbImage, gain: f32| {
         let grey = img.to_grey();
         let b = blockiness(&grey);
-        let jpeg = if p.jpeg_noise {
+        let jpeg = if p.noise.jpeg {
             // An unstretched view is the input itself: its grey is the one just made.
             let input_grey = (!std::ptr::eq(img, input)).then(|| input.to_grey());
             gain * jpeg_noise(input_grey.as_ref().unwrap_or(&grey))
@@ -168,11 +168,11 @@ pub fn condition_pair<'a>(
     };
     let noise = [nl, nr];
     let (blocking, jpeg) = ([bl, br], [jl, jr]);
-    // Below `denoise_min_sigma` (a clean camera, quantisation noise) a view is not filtered.
-    let range = |n: f32| if n >= p.denoise_min_sigma { p.denoise_strength * n } else { 0.0 };
+    // Below `denoise.min_sigma` (a clean camera, quantisation noise) a view is not filtered.
+    let range = |n: f32| if n >= p.denoise.min_sigma { p.denoise.strength * n } else { 0.0 };
     let cost = (range(nl) > 0.0 || range(nr) > 0.0).then(|| StereoPair {
-        left: bilateral(&guide.left, p.denoise_sigma_xy, range(nl)),
-        right: bilateral(&guide.right, p.denoise_sigma_xy, range(nr)),
+        left: bilateral(&guide.left, p.denoise.sigma_xy, range(nl)),
+        right: bilateral(&guide.right, p.denoise.sigma_xy, range(nr)),
         ndisp: pair.ndisp,
     });
     let residual_grey_noise = if p.experimental.census_band > 0.0 {

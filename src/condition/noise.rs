@@ -65,7 +65,7 @@ mod tests {
     use crate::condition::condition_pair;
     use crate::condition::test_images::textured;
     use crate::image::StereoPair;
-    use crate::params::ConditionParams;
+    use crate::params::{ConditionParams, StretchParams};
 
     #[test]
     fn noise_estimate_matches_the_added_noise() {
@@ -114,9 +114,19 @@ mod tests {
         let coarse = crate::scale::downsample_rgb(&fine, f);
         let pair = StereoPair { left: coarse.clone(), right: coarse, ndisp: 4 };
         let reduced = sigma as f32 / f as f32;
-        let own = condition_pair(&pair, &ConditionParams { stretch: false, ..ConditionParams::default() }, None);
+        let own = condition_pair(
+            &pair,
+            &ConditionParams {
+                stretch: StretchParams { enabled: false, ..Default::default() },
+                ..ConditionParams::default()
+            },
+            None,
+        );
         assert!(own.stats.noise[0] > 3.0 * reduced, "the estimate at 1/{f}: {:?}", own.stats.noise);
-        let p = ConditionParams { stretch: false, ..ConditionParams::default() };
+        let p = ConditionParams {
+            stretch: StretchParams { enabled: false, ..Default::default() },
+            ..ConditionParams::default()
+        };
         assert_eq!(condition_pair(&pair, &p, Some([reduced; 2])).stats.noise, [reduced; 2]);
         assert_eq!(condition_pair(&pair, &p, Some([100.0; 2])).stats.noise, own.stats.noise);
     }

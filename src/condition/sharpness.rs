@@ -97,7 +97,7 @@ mod tests {
     use super::*;
     use crate::condition::condition_pair;
     use crate::image::StereoPair;
-    use crate::params::ConditionParams;
+    use crate::params::{ConditionParams, StretchParams};
 
     /// Sharpness does not depend on contrast, falls with blur, and a view blurred by σ 1.5 px gets a matching
     /// blur of about that much in the other view.
@@ -123,7 +123,10 @@ mod tests {
         assert!((1.25..=1.75).contains(&sigma), "matching blur {sigma}");
         // The default conditions such a pair (without the stretch, so the guidance is the input itself): the
         // sharper (left) view of the cost pair is blurred, the guidance keeps it sharp.
-        let p = ConditionParams { stretch: false, ..ConditionParams::default() };
+        let p = ConditionParams {
+            stretch: StretchParams { enabled: false, ..Default::default() },
+            ..ConditionParams::default()
+        };
         let pair = StereoPair { left: img.clone(), right: blurred, ndisp: 8 };
         let c = condition_pair(&pair, &p, None);
         assert!(c.stats.cost_blur[0] > 1.0 && c.stats.cost_blur[1] == 0.0, "{:?}", c.stats.cost_blur);

@@ -34,12 +34,8 @@ pub struct CostParams {
     /// contrast is well above ε.
     pub grad_norm_radius: usize,
     /// ε of the normalisation, in Sobel units (4 = the response to a one-grey-level step); widened with the
-    /// measured noise by `condition.grad_eps_per_sigma`.
+    /// measured noise by `condition.noise.grad_eps_per_sigma`.
     pub grad_norm_eps: f32,
-    /// ḡ measured once for the whole pair (so tiles and the full image share it); `None`: measured on the left
-    /// view each volume is built from. Set at run time, never read from a config.
-    #[serde(skip)]
-    pub grad_norm_mean: Option<f32>,
 }
 
 impl Default for CostParams {
@@ -55,7 +51,6 @@ impl Default for CostParams {
             grad_trunc: 60.0,
             grad_norm_radius: 2,
             grad_norm_eps: 4.0,
-            grad_norm_mean: None,
         }
     }
 }

@@ -27,7 +27,10 @@ mod meanfield;
 mod sps;
 mod wmedian;
 
-pub use condition::{ConditionParams, ExperimentalConditionParams};
+pub use condition::{
+    ConditionParams, DenoiseParams, ExperimentalConditionParams, NoiseParams, PriorParams, StretchParams,
+    VerticalParams,
+};
 pub use cost::CostParams;
 pub use lrc::{LrcMode, LrcParams};
 pub use meanfield::{MeanFieldParams, Normalization, Schedule};
@@ -160,6 +163,14 @@ impl Params {
             Some((_, path)) => format!("{} + --set", path.display()).into(),
             None => "--set".into(),
         };
+        if let Some(toml::Value::Table(c)) = table.get("condition") {
+            if let Some((key, new)) = c.iter().find_map(|(k, v)| condition::renamed_key(k, v).map(|new| (k, new))) {
+                let msg = format!(
+                    "`condition.{key}` is now `condition.{new}` (the [condition] keys were grouped into sub-tables)"
+                );
+                return Err(Error::Toml { path: origin, msg });
+            }
+        }
         let params = Params::deserialize(toml::Value::Table(table))
             .map_err(|e| Error::Toml { path: origin, msg: one_line(&e.to_string()) })?;
         params.validate()?;
@@ -288,6 +299,26 @@ mod tests {
     }
 
     #[test]
+    fn flat_condition_keys_name_their_new_place() {
+        let e = Params::from_toml_str("[condition]\nprior_levels = 2\n", Path::new("old.toml")).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.contains("old.toml") && msg.contains("condition.prior.levels"), "{msg}");
+        for (item, new) in
+            [("condition.stretch=false", "condition.stretch.enabled"), ("condition.jpeg_noise=true", "noise.jpeg")]
+        {
+            let msg = Params::load(None, &[item.to_string()]).unwrap_err().to_string();
+            assert!(msg.contains(new), "{item}: {msg}");
+        }
+        // The new forms are read.
+        let p =
+            Params::load(None, &["condition.stretch.enabled=false".into(), "condition.prior.levels=2".into()]).unwrap();
+        assert!(!p.condition.stretch.enabled);
+        assert_eq!(p.condition.prior.levels, 2);
+        let p = Params::from_toml_str("[condition.stretch]\nmin_gain = 2.0\n", Path::new("c.toml")).unwrap();
+        assert_eq!(p.condition.stretch.min_gain, 2.0);
+    }
+
+    #[test]
     fn wrong_type_is_named() {
         let e = Params::from_toml_str("[meanfield]\niterations = \"many\"\n", Path::new("c.toml")).unwrap_err();
         let msg = e.to_string();
@@ -323,8 +354,8 @@ mod tests {
             Params::load(None, &["meanfield.unary_scale_start=0.05".into()]).unwrap().meanfield.unary_scale_start,
             0.05
         );
-        let e = Params::load(None, &["condition.prior_spread=9".into()]).unwrap_err();
-        assert_eq!(e.to_string(), "invalid condition.prior_spread = 9 (expected 0 to 8)");
+        let e = Params::load(None, &["condition.prior.spread=9".into()]).unwrap_err();
+        assert_eq!(e.to_string(), "invalid condition.prior.spread = 9 (expected 0 to 8)");
         let e = Params::load(None, &["cost.census_width=4".into()]).unwrap_err();
         assert!(e.to_string().contains("cost.census_width = 4"), "{e}");
         let e = Params::from_toml_str("downscale = 0\n", Path::new("c.toml")).unwrap_err();

@@ -29,6 +29,9 @@ pub(crate) struct FineInput<'a> {
     pub cost_pair: &'a StereoPair,
     /// The cost parameters for this pair ([`super::prepared::Prepared::cost_params`]).
     pub cost_params: &'a params::CostParams,
+    /// ḡ of the gradient normalisation measured on the whole pair ([`super::prepared::Prepared::grad_norm_mean`];
+    /// `None`: measured on this pair's left view).
+    pub grad_norm_mean: Option<f32>,
     /// The coarse prior, if any.
     pub prior: Option<&'a Prior>,
     /// The left view's first `left_from` columns are there only for the right view's matches (a tile's extension,
@@ -47,7 +50,7 @@ pub(crate) fn fine_pass(
     on_stage: &dyn Fn(&str),
     mut t: Timings,
 ) -> Result<Output> {
-    let FineInput { guide: pair, cost_pair, cost_params, prior, left_from } = *input;
+    let FineInput { guide: pair, cost_pair, cost_params, grad_norm_mean, prior, left_from } = *input;
     on_stage("cost volume");
     let c = &params.condition;
     let post = &params.post;
@@ -63,7 +66,8 @@ pub(crate) fn fine_pass(
         prior_bands.map(|_| Plane::from_vec(w, h, rows.into_iter().flatten().flatten().collect()))
     };
     let (mut cost_left, own_rows) = t.time("cost", || {
-        cost::build_cost_volume_then(&cost_pair.left, &cost_pair.right, pair.ndisp, cost_params, storage, |y, row| {
+        let (left, right) = (&cost_pair.left, &cost_pair.right);
+        cost::build_cost_volume_then(left, right, pair.ndisp, cost_params, grad_norm_mean, storage, |y, row| {
             let own = prior_bands.map(|_| cost::row_argmins(row, pair.ndisp));
             if let Some(prior) = row_prior {
                 prior.add_to_row(y, w, row, c);

@@ -103,7 +103,14 @@ fn run_pipeline(
         if chain.applies(pair, &input) { Some(chain.prior(params, pair, &mut input, on_stage, &mut t)?) } else { None };
     let measured = input.measured();
     let (guide, cost_pair) = input.pairs(pair);
-    let fine = FineInput { guide, cost_pair, cost_params: &input.cost_params, prior: None, left_from: 0 };
+    let fine = FineInput {
+        guide,
+        cost_pair,
+        cost_params: &input.cost_params,
+        grad_norm_mean: input.grad_norm_mean,
+        prior: None,
+        left_from: 0,
+    };
     let window = prior.as_ref().filter(|_| params.condition.experimental.prior_window).and_then(|prior| {
         window::label_window(&prior.disparity, guide.ndisp, WINDOW_MARGIN_COARSE_LABELS * CHAIN_FACTOR)
     });

@@ -63,7 +63,7 @@ pub struct Measured {
     pub stats: condition::PairStats,
     /// λ of the coarse prior before its per-pixel factor (0: no prior).
     pub prior_weight: f32,
-    /// λ's floor where the cost is flat (`condition.prior_flat`, × the pixel's flatness).
+    /// λ's floor where the cost is flat (`condition.prior.flat`, × the pixel's flatness).
     pub prior_flat: f32,
     /// The Census support τ in grey levels (0: every bit compared).
     pub census_support: f32,
@@ -78,7 +78,7 @@ pub struct Measured {
 pub struct VerticalMeasured {
     /// Its smallest and largest value over the image (px, at the resolution the pipeline ran at).
     pub range: (f32, f32),
-    /// Whether it was removed (it reached `condition.vertical_min_px`).
+    /// Whether it was removed (it reached `condition.vertical.min_px`).
     pub corrected: bool,
 }
 

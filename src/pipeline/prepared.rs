@@ -11,14 +11,17 @@ use super::output::{Measured, Output, Timings, VerticalMeasured};
 
 /// A pair after [`condition::condition_pair`] (when `[condition]` is active), with what follows from its
 /// measurements: the cost parameters (the Census dead band grows with the residual noise) and the coarse prior's
-/// weight λ = `experimental.prior_base` + `prior_per_sigma`·σn (0 when conditioning is off).
+/// weight λ = `experimental.prior_base` + `prior.per_sigma`·σn (0 when conditioning is off).
 pub(crate) struct Prepared<'a> {
     conditioned: Option<condition::Conditioned<'a>>,
     /// The cost parameters for this pair.
     pub cost_params: params::CostParams,
+    /// ḡ of the gradient normalisation, measured once on the conditioned left view (so that the tiles and the
+    /// whole image share it; `None` when conditioning is off: each volume measures its own).
+    pub grad_norm_mean: Option<f32>,
     /// λ of the coarse prior before the per-pixel factor.
     pub prior_weight: f32,
-    /// The floor of λ where the cost is flat (`condition.prior_flat`; 0 when conditioning is off).
+    /// The floor of λ where the cost is flat (`condition.prior.flat`; 0 when conditioning is off).
     pub prior_flat: f32,
     /// The right view's residual vertical offset, once [`Prepared::align_vertically`] has measured it.
     vertical: Option<VerticalMeasured>,
@@ -30,32 +33,32 @@ impl<'a> Prepared<'a> {
     pub(crate) fn of(params: &Params, pair: &'a StereoPair, noise_ceiling: Option<[f32; 2]>, t: &mut Timings) -> Self {
         let c = &params.condition;
         let mut cost_params = params.cost.clone();
-        let (mut prior_weight, mut prior_flat) = (0.0f32, 0.0f32);
+        let (mut prior_weight, mut prior_flat, mut grad_norm_mean) = (0.0f32, 0.0f32, None);
         let conditioned =
             c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c, noise_ceiling)));
         if let Some(cond) = &conditioned {
-            prior_weight = c.experimental.prior_base + c.prior_per_sigma * cond.stats.sigma();
-            prior_flat = c.prior_flat;
+            prior_weight = c.experimental.prior_base + c.prior.per_sigma * cond.stats.sigma();
+            prior_flat = c.prior.flat;
             cost_params.census_dead_band += c.experimental.census_band * cond.stats.residual_grey_noise;
             // JPEG: steps no larger than the block grid's own are compression artefacts, not texture.
             cost_params.census_dead_band +=
                 cond.stats.block_band(c) * cond.stats.blocking[0].max(cond.stats.blocking[1]);
             if cost_params.census_support > 0.0 {
-                cost_params.census_support += c.support_per_sigma * cond.stats.sigma();
+                cost_params.census_support += c.noise.support_per_sigma * cond.stats.sigma();
             }
             if cost_params.grad_norm_radius > 0 {
-                cost_params.grad_norm_eps += c.grad_eps_per_sigma * cond.stats.sigma();
+                cost_params.grad_norm_eps += c.noise.grad_eps_per_sigma * cond.stats.sigma();
                 let grey = cond.cost_pair().left.to_grey();
-                cost_params.grad_norm_mean = Some(cost::mean_local_contrast(&grey, cost_params.grad_norm_radius));
+                grad_norm_mean = Some(cost::mean_local_contrast(&grey, cost_params.grad_norm_radius));
             }
         }
-        Prepared { conditioned, cost_params, prior_weight, prior_flat, vertical: None }
+        Prepared { conditioned, cost_params, grad_norm_mean, prior_weight, prior_flat, vertical: None }
     }
 
     /// Measures the right view's residual vertical offset against a coarse answer at this size
     /// ([`rectify::estimate`] on the cost pair, `grey_left` its left view in grey) and, where it reaches
-    /// `condition.vertical_min_px`, moves the right views of the guidance and the cost pair onto the left view's
-    /// rows (stage `vertical`). Nothing when conditioning or `vertical_align` is off.
+    /// `condition.vertical.min_px`, moves the right views of the guidance and the cost pair onto the left view's
+    /// rows (stage `vertical`). Nothing when conditioning or `vertical.enabled` is off.
     pub(crate) fn align_vertically(
         &mut self,
         c: &params::ConditionParams,
@@ -64,12 +67,12 @@ impl<'a> Prepared<'a> {
         t: &mut Timings,
     ) {
         // (`conditioned` exists only when conditioning is enabled.)
-        let Some(cond) = self.conditioned.as_mut().filter(|_| c.vertical_align) else { return };
+        let Some(cond) = self.conditioned.as_mut().filter(|_| c.vertical.enabled) else { return };
         let offset = t.time("vertical", || {
             rectify::estimate(grey_left, &cond.cost_pair().right.to_grey(), &coarse.disparity, &coarse.consistent)
         });
         let Some(v) = offset else { return };
-        let corrected = v.max_abs() >= c.vertical_min_px;
+        let corrected = v.max_abs() >= c.vertical.min_px;
         self.vertical = Some(VerticalMeasured { range: v.range(), corrected });
         if corrected {
             t.time("vertical", || {
@@ -95,7 +98,7 @@ impl<'a> Prepared<'a> {
             prior_flat: self.prior_flat,
             census_support: self.cost_params.census_support,
             gradient: (self.cost_params.grad_norm_radius > 0)
-                .then(|| self.cost_params.grad_norm_mean.map(|m| (m, self.cost_params.grad_norm_eps)))
+                .then(|| self.grad_norm_mean.map(|m| (m, self.cost_params.grad_norm_eps)))
                 .flatten(),
             vertical: self.vertical,
         })

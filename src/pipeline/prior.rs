@@ -17,7 +17,7 @@ use super::prepared::Prepared;
 use super::window::kernel_reach_px;
 
 /// The coarse level's downscale factor in the whole image's chain: each level is the one above it reduced 2×
-/// (`condition.prior_levels` levels in all).
+/// (`condition.prior.levels` levels in all).
 pub(crate) const CHAIN_FACTOR: usize = 2;
 
 /// How a coarse level is set up and made into a prior. The whole image's chain ([`CoarseLevel::chain`]) and the
@@ -32,13 +32,13 @@ pub(crate) struct CoarseLevel {
     pub stage: &'static str,
     /// The coarse run takes the pair as conditioned at this level, with the conditioning that is done already
     /// (histogram matching, stretch, JPEG) off, this level's block band kept, and a coarse prior of its own one level
-    /// fewer (`prior_levels`; or while the pair is noisy enough, `experimental.prior_recurse_sigma`). Off (tiles), the
+    /// fewer (`prior.levels`; or while the pair is noisy enough, `experimental.prior_recurse_sigma`). Off (tiles), the
     /// coarse level is an ordinary run on the input pair at its size, conditioned by itself.
     pub on_conditioned_pair: bool,
     /// The coarse run's plane segment count is scaled down with its area: the same segment size in the scene. Off
     /// (tiles), it keeps the count: it is the base answer, as good as a run at that resolution can be.
     pub same_segment_size: bool,
-    /// The prior leaves a coarse depth edge's whole step free (`condition.prior_spread`). Off (tiles), it is a point
+    /// The prior leaves a coarse depth edge's whole step free (`condition.prior.spread`). Off (tiles), it is a point
     /// prior: the coarse level is the base answer there, and freeing its depth edges let the fine level move them
     /// on the ×4 scenes (Adirondack 1.66 -> 1.74, Vintage 8.45 -> 8.51; docs/tuning-log.md, "The prior at coarse
     /// depth edges"). The coarse level's own chain has the spread.
@@ -94,16 +94,18 @@ impl CoarseLevel {
         if self.on_conditioned_pair {
             let c = &params.condition;
             let sigma = input.sigma();
-            let deeper = c.prior_levels > 1;
+            let deeper = c.prior.levels > 1;
             let x = &c.experimental;
             let recurse = deeper || (x.prior_recurse_sigma > 0.0 && sigma >= x.prior_recurse_sigma);
             coarse.condition = params::ConditionParams {
-                stretch: false,
-                jpeg_noise: false,
-                block_band: input.block_band(c),
-                prior_per_sigma: if recurse { c.prior_per_sigma } else { 0.0 },
-                prior_flat: if recurse { c.prior_flat } else { 0.0 },
-                prior_levels: if deeper { c.prior_levels - 1 } else { 1 },
+                stretch: params::StretchParams { enabled: false, ..c.stretch },
+                noise: params::NoiseParams { jpeg: false, block_band: input.block_band(c), ..c.noise },
+                prior: params::PriorParams {
+                    per_sigma: if recurse { c.prior.per_sigma } else { 0.0 },
+                    flat: if recurse { c.prior.flat } else { 0.0 },
+                    levels: if deeper { c.prior.levels - 1 } else { 1 },
+                    ..c.prior
+                },
                 experimental: params::ExperimentalConditionParams {
                     match_histograms: false,
                     prior_base: if recurse { x.prior_base } else { 0.0 },
@@ -152,10 +154,10 @@ impl CoarseLevel {
             let coarse_grey = scale::downsample_rgb(&input.pairs(pair).1.left, self.factor).to_grey();
             weight = weight.max(tiled_prior_floor(&grey_left, &coarse_grey));
         }
-        let mut prior = Prior::from_coarse(coarse, weight, input.prior_flat, c.prior_untrusted);
-        prior.weaken_at_detail(&grey_left, self.factor, c.prior_detail);
+        let mut prior = Prior::from_coarse(coarse, weight, input.prior_flat, c.prior.untrusted);
+        prior.weaken_at_detail(&grey_left, self.factor, c.prior.detail);
         if self.spread_at_edges {
-            prior.spread_at_edges(self.factor, c.prior_spread, c.prior_trunc_px);
+            prior.spread_at_edges(self.factor, c.prior.spread, c.prior.trunc_px);
         }
         Ok(prior)
     }
@@ -174,7 +176,7 @@ pub(crate) struct Prior {
     pub confidence: Plane<f32>,
     /// λ before the per-pixel factor.
     pub weight: f32,
-    /// Where the fine cost is flat, λ is at least this × its flatness ([`cost::flatness`]; `condition.prior_flat`).
+    /// Where the fine cost is flat, λ is at least this × its flatness ([`cost::flatness`]; `condition.prior.flat`).
     pub flat: f32,
     /// Whether inference keeps each pixel to a band of labels around the prior ([`Prior::label_bands`]; tiles).
     pub in_bands: bool,
@@ -209,7 +211,7 @@ impl Prior {
     ) -> meanfield::LabelBands {
         let c = &params.condition;
         let reach = kernel_reach_px(params);
-        let half_width = c.prior_margin_px + c.prior_trunc_px + 1.0;
+        let half_width = c.prior.margin_px + c.prior.trunc_px + 1.0;
         let (low, high) = self.free.as_ref().map_or((&self.disparity, &self.disparity), |(l, h)| (l, h));
         let bands =
             |low, high| meanfield::LabelBands::around((low, high), own_best, ndisp, reach, half_width, OWN_BEST_BAND);
@@ -233,7 +235,7 @@ impl Prior {
     /// Adds the prior's penalty to `cost` (the fine level's left volume, before inference): at pixel i, label d
     /// gets λᵢ·min(max(dist(d) − margin, 0), trunc), dist the distance from the labels the prior leaves free, and
     /// λᵢ = max(`weight`, `flat` × the flatness of the pixel's cost, [`cost::flatness`]) × its confidence factor
-    /// (the confidence only with `prior_confidence`). Stage `flatness` when the floor can matter.
+    /// (the confidence only with `prior.confidence`). Stage `flatness` when the floor can matter.
     pub(crate) fn add_to(&self, cost: &mut CostVolume, c: &params::ConditionParams, t: &mut Timings) {
         let m = cost.ndisp;
         let flatness = self.needs_flatness().then(|| t.time("flatness", || cost::flatness(cost)));
@@ -262,14 +264,14 @@ impl Prior {
     /// The penalty of pixel `i` added to its `costs`, its weight at least `floor`.
     #[inline(always)]
     fn add_at(&self, i: usize, floor: f32, costs: &mut [f32], c: &params::ConditionParams) {
-        let (margin, trunc) = (c.prior_margin_px, c.prior_trunc_px);
+        let (margin, trunc) = (c.prior.margin_px, c.prior.trunc_px);
         let (low, high) = self.free.as_ref().map_or((&self.disparity, &self.disparity), |(l, h)| (l, h));
         let (low, high) = (low.data[i], high.data[i]);
         if !low.is_finite() {
             return;
         }
         let weight = self.weight.max(floor);
-        let lambda = if c.prior_confidence { weight * self.confidence.data[i] } else { weight };
+        let lambda = if c.prior.confidence { weight * self.confidence.data[i] } else { weight };
         for (d, v) in costs.iter_mut().enumerate() {
             // The distance from [low, high]: |d − d_coarse| where the two are one. Compares and selects, the same
             // values as `f32::max` and `clamp` for these (never NaN) operands, without their NaN fix-ups.
@@ -406,7 +408,10 @@ mod tests {
             flat,
             in_bands: false,
         };
-        let c = params::ConditionParams { prior_margin_px: 0.0, prior_trunc_px: 8.0, ..Default::default() };
+        let c = {
+            let prior = params::PriorParams { margin_px: 0.0, trunc_px: 8.0, ..Default::default() };
+            params::ConditionParams { prior, ..Default::default() }
+        };
         let with = |flat| {
             let mut cost = CostVolume { width: 2, height: 1, ndisp: 5, data: data.clone() };
             prior(flat).add_to(&mut cost, &c, &mut Timings::default());
@@ -438,11 +443,12 @@ mod tests {
         let mut after = cost::build_cost_volume(&scene.left, &scene.right, m, &p);
         let own = cost::winner_take_all(&after);
         prior.add_to(&mut after, &c, &mut Timings::default());
-        let (fused, rows) = cost::build_cost_volume_then(&scene.left, &scene.right, m, &p, Vec::new(), |y, row| {
-            let own = cost::row_argmins(row, m);
-            prior.add_to_row(y, w, row, &c);
-            own
-        });
+        let (fused, rows) =
+            cost::build_cost_volume_then(&scene.left, &scene.right, m, &p, None, Vec::new(), |y, row| {
+                let own = cost::row_argmins(row, m);
+                prior.add_to_row(y, w, row, &c);
+                own
+            });
         assert_eq!(fused.data, after.data);
         assert_eq!(rows.concat(), own.data);
         let (right, right_rows) =

@@ -205,6 +205,7 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
         guide,
         cost_pair,
         cost_params: &input.cost_params,
+        grad_norm_mean: input.grad_norm_mean,
         prior: &prior,
         margin,
         halo: halo_px(params),
@@ -279,6 +280,7 @@ struct TileJob<'a> {
     guide: &'a StereoPair,
     cost_pair: &'a StereoPair,
     cost_params: &'a crate::params::CostParams,
+    grad_norm_mean: Option<f32>,
     prior: &'a Prior,
     margin: usize,
     /// [`halo_px`].
@@ -364,6 +366,7 @@ impl TileJob<'_> {
             guide: &guide,
             cost_pair: cost_pair.as_ref().unwrap_or(&guide),
             cost_params: self.cost_params,
+            grad_norm_mean: self.grad_norm_mean,
             prior: Some(&prior),
             left_from: tile.left_from(),
         };
@@ -478,7 +481,14 @@ mod tests {
         let pair = StereoPair::new(scene.left.clone(), scene.right.clone(), scene.ndisp).unwrap();
         let params = Params::default();
         let pass = |left_from, buffers: &mut crate::meanfield::Buffers| {
-            let input = FineInput { guide: &pair, cost_pair: &pair, cost_params: &params.cost, prior: None, left_from };
+            let input = FineInput {
+                guide: &pair,
+                cost_pair: &pair,
+                cost_params: &params.cost,
+                grad_norm_mean: None,
+                prior: None,
+                left_from,
+            };
             fine_pass(&params, &input, buffers, &|_| {}, Timings::default()).unwrap()
         };
         let mut buffers = crate::meanfield::Buffers::default();
@@ -550,6 +560,7 @@ mod tests {
                 guide: &pair,
                 cost_pair: &pair,
                 cost_params: &params.cost,
+                grad_norm_mean: None,
                 prior,
                 margin: 4,
                 halo: halo_px(&params),
