@@ -89,6 +89,26 @@ impl Default for PostParams {
     }
 }
 
+/// `[upsample]`: bringing a reduced run (`downscale` > 1) back to the input size, edge-aware
+/// ([`crate::scale::upsample_disparity_guided`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct UpsampleParams {
+    /// Where the reduced disparities a pixel interpolates span more than this (input px), it takes the one whose
+    /// reduced pixel's colour is nearest its own instead of their blend; a large value is plain bilinear.
+    pub edge_px: f32,
+    /// The colour distance's σ (RGB, 0..255 per channel).
+    pub sigma_rgb: f32,
+}
+
+impl Default for UpsampleParams {
+    /// `configs/fast.toml` on trainingQ (weighted avgErr; 5.295 plain bilinear): 2 px / σ 10: 5.148; 1 px / 10:
+    /// 5.165; 1 px / 20: 5.192; 0.5 px / 15: 5.235 (docs/tuning-log.md, "Edge-aware upsampling").
+    fn default() -> Self {
+        UpsampleParams { edge_px: 2.0, sigma_rgb: 10.0 }
+    }
+}
+
 /// Everything a run needs besides the images and ndisp.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -96,9 +116,12 @@ pub struct Params {
     /// The energy to minimise.
     pub model: Model,
     /// Run at 1/N resolution (N×N box averaging, ceil(ndisp / N) labels) and bring the disparity map back to
-    /// the input size (bilinear, × N); 1 = full resolution. About 1/N³ of the memory and time of inference.
+    /// the input size (bilinear, edge-aware: `[upsample]`; × N); 1 = full resolution. About 1/N³ of the memory and
+    /// time of inference.
     /// See [`crate::scale`].
     pub downscale: usize,
+    /// How the reduced run's disparity map is brought back to the input size (`downscale` > 1).
+    pub upsample: UpsampleParams,
     /// Input conditioning (photometric alignment, contrast, denoising).
     pub condition: ConditionParams,
     /// Matching cost.
@@ -114,6 +137,7 @@ impl Default for Params {
         Params {
             model: Model::Jem,
             downscale: 1,
+            upsample: UpsampleParams::default(),
             condition: Default::default(),
             cost: CostParams::default(),
             meanfield: MeanFieldParams::default(),
@@ -190,6 +214,8 @@ impl Params {
         if self.downscale == 0 {
             return Err(Error::param("downscale", 0, "an integer >= 1; 1 = full resolution"));
         }
+        check_nonneg("upsample.edge_px", self.upsample.edge_px)?;
+        check_positive("upsample.sigma_rgb", self.upsample.sigma_rgb)?;
         self.condition.validate()?;
         self.cost.validate()?;
         self.meanfield.validate()?;

@@ -46,7 +46,7 @@ pub fn run(params: &Params, pair: &StereoPair) -> Result<Output> {
 /// Like [`run`], calling `on_stage(name)` as each stage starts (for progress display).
 ///
 /// With `params.downscale` = N > 1: the pair is reduced by N ([`scale::downsample_pair`], stage `downsample`),
-/// the pipeline runs on it, and its disparity map ([`scale::upsample_disparity`]) and confidence
+/// the pipeline runs on it, and its disparity map ([`scale::upsample_disparity_guided`], `[upsample]`) and confidence
 /// ([`scale::upsample_plane`]) are brought back to the input size (stage `upsample`).
 ///
 /// # Errors
@@ -72,16 +72,20 @@ fn run_level(
     on_stage("downsample");
     let small = t.time("downsample", || scale::downsample_pair(pair, factor))?;
     let low = run_pipeline(params, &small, on_stage, noise_ceiling, t)?;
-    drop(small);
     let mut t = low.timings;
     on_stage("upsample");
     let (w, h) = pair.left.dims();
+    let up = &params.upsample;
     let (disparity, confidence) = t.time("upsample", || {
         rayon::join(
-            || scale::upsample_disparity(&low.disparity, factor, w, h),
+            || {
+                let (low, guide) = (&low.disparity, &small.left);
+                scale::upsample_disparity_guided(low, guide, &pair.left, factor, up.edge_px, up.sigma_rgb)
+            },
             || scale::upsample_plane(&low.confidence, factor, w, h),
         )
     });
+    drop(small);
     let consistent = scale::upsample_mask(&low.consistent, factor, w, h);
     Ok(Output { disparity, confidence, consistent, timings: t, measured: low.measured })
 }
