@@ -20,8 +20,8 @@
 //!   disparities a pixel interpolates differ by more than `edge_px` (full-resolution px), it lies at a depth edge,
 //!   and blending them puts it on neither surface. It takes instead the one of the four whose reduced pixel's
 //!   colour is nearest its own, weighted by its bilinear weight (a joint-bilateral choice, not a blend):
-//!   the edge follows the full-resolution image. `configs/fast.toml` on trainingQ: weighted avgErr 5.295 -> 5.148,
-//!   better on 11 of the 15 scenes (docs/tuning-log.md, "Edge-aware upsampling").
+//!   the edge follows the full-resolution image. `configs/fast.toml` on trainingQ: weighted avgErr 5.295 -> 5.152,
+//!   better on 13 of the 15 scenes (docs/tuning-log.md, "Edge-aware upsampling").
 //!
 //! Every parameter measured in pixels (σx of the bilateral kernel, the LRC threshold, the weighted-median
 //! window, the superpixel count, …) applies at the reduced resolution, unchanged.
@@ -193,7 +193,7 @@ pub fn upsample_mask(low: &Plane<bool>, factor: usize, width: usize, height: usi
 /// span more than `edge_px` full-resolution pixels, it takes the one of them that maximises
 /// −|I − Ī_k|² / 2σ² + ln(w_k + 0.05), with I its colour in `guide`, Ī_k the reduced pixel's colour in
 /// `low_guide` (the reduced guide), σ = `sigma_rgb` and w_k the bilinear weight (floored, so that a far corner of the
-/// right colour still wins). `edge_px` = 0 is plain [`upsample_disparity`] wherever the four differ at all.
+/// right colour still wins). `edge_px` = 0 is plain [`upsample_disparity`] everywhere.
 ///
 /// # Panics
 /// If `low` and `low_guide` differ in size, or as [`upsample_disparity`] for `guide`'s size.
@@ -208,6 +208,9 @@ pub fn upsample_disparity_guided(
     assert_eq!(low.dims(), low_guide.dims(), "low-resolution map and guide differ in size");
     let (width, height) = guide.dims();
     let mut out = upsample_disparity(low, factor, width, height);
+    if edge_px <= 0.0 {
+        return out;
+    }
     let (xs, ys) = (axis_table(width, factor), axis_table(height, factor));
     let (lw, scale) = (low.width, factor as f32);
     let inv = 1.0 / (2.0 * sigma_rgb * sigma_rgb);
@@ -324,6 +327,8 @@ mod tests {
             upsample_disparity_guided(&ramp, &low_guide, &full, 2, 1.0, 10.0).data,
             upsample_disparity(&ramp, 2, 8, 1).data
         );
+        // edge_px 0 is plain bilinear.
+        assert_eq!(upsample_disparity_guided(&low, &low_guide, &full, 2, 0.0, 10.0).data, plain.data);
         // Invalid pixels stay invalid and are never chosen.
         let holes = Plane::from_vec(4, 1, vec![10.0, f32::INFINITY, 2.0, 2.0]);
         let out = upsample_disparity_guided(&holes, &low_guide, &full, 2, 1.0, 10.0);

@@ -95,15 +95,16 @@ impl Default for PostParams {
 #[serde(deny_unknown_fields, default)]
 pub struct UpsampleParams {
     /// Where the reduced disparities a pixel interpolates span more than this (input px), it takes the one whose
-    /// reduced pixel's colour is nearest its own instead of their blend; a large value is plain bilinear.
+    /// reduced pixel's colour is nearest its own instead of their blend; 0 = off (plain bilinear). The coarse
+    /// prior's levels always upsample plainly: edge-aware there, trainingQ's default 3.584 -> 3.645.
     pub edge_px: f32,
     /// The colour distance's σ (RGB, 0..255 per channel).
     pub sigma_rgb: f32,
 }
 
 impl Default for UpsampleParams {
-    /// `configs/fast.toml` on trainingQ (weighted avgErr; 5.295 plain bilinear): 2 px / σ 10: 5.148; 1 px / 10:
-    /// 5.165; 1 px / 20: 5.192; 0.5 px / 15: 5.235 (docs/tuning-log.md, "Edge-aware upsampling").
+    /// `configs/fast.toml` on trainingQ (weighted avgErr; 5.295 plain bilinear): 2 px / σ 10: 5.152 (docs/tuning-log.md,
+    /// "Edge-aware upsampling", with the other settings tried).
     fn default() -> Self {
         UpsampleParams { edge_px: 2.0, sigma_rgb: 10.0 }
     }
@@ -187,13 +188,13 @@ impl Params {
             Some((_, path)) => format!("{} + --set", path.display()).into(),
             None => "--set".into(),
         };
-        if let Some(toml::Value::Table(c)) = table.get("condition") {
-            if let Some((key, new)) = c.iter().find_map(|(k, v)| condition::renamed_key(k, v).map(|new| (k, new))) {
-                let msg = format!(
-                    "`condition.{key}` is now `condition.{new}` (the [condition] keys were grouped into sub-tables)"
-                );
-                return Err(Error::Toml { path: origin, msg });
-            }
+        if let Some(toml::Value::Table(c)) = table.get("condition")
+            && let Some((key, new)) = c.iter().find_map(|(k, v)| condition::renamed_key(k, v).map(|new| (k, new)))
+        {
+            let msg = format!(
+                "`condition.{key}` is now `condition.{new}` (the [condition] keys were grouped into sub-tables)"
+            );
+            return Err(Error::Toml { path: origin, msg });
         }
         let params = Params::deserialize(toml::Value::Table(table))
             .map_err(|e| Error::Toml { path: origin, msg: one_line(&e.to_string()) })?;

@@ -87,6 +87,9 @@ impl CoarseLevel {
     pub(crate) fn params(&self, params: &Params, input: &Prepared) -> Params {
         let mut coarse = params.clone();
         coarse.downscale = self.factor;
+        // The prior is made of the plain bilinear upsampling: edge-aware, it is worse (trainingQ 3.584 -> 3.645;
+        // docs/tuning-log.md, "Edge-aware upsampling").
+        coarse.upsample.edge_px = 0.0;
         if self.same_segment_size {
             // A 1/F² of the pixels gets a 1/F² of the segments.
             coarse.post.sps.segments = params.post.sps.segments.div_ceil(self.factor * self.factor);
