@@ -4,7 +4,7 @@
 //! (nonocc mask, errors ×4 in full-resolution pixels, weighted average with five scenes at half weight). It fails
 //! when the weighted avgErr rises above the value achieved when the config was tuned plus a margin.
 //!
-//! Every test here runs the pipeline on real pairs, together about 7.5 minutes on 2 cores, so they are all
+//! Every test here runs the pipeline on real pairs, together about 6 to 7 minutes on 2 cores, so they are all
 //! `#[ignore]`d: `cargo test --release` (the README's command) leaves them out, `.ci/run` runs them (`--
 //! --include-ignored`), and so does `cargo test --release --test regression -- --include-ignored`.
 //!

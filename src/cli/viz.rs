@@ -41,7 +41,7 @@ pub(super) struct VizArgs {
     /// error rule.
     #[arg(long, value_name = "LAYOUT")]
     layout: Option<jem::dataset::Layout>,
-    /// Where KITTI and ETH3D results are: RESULTS/NAME/ (default: results/ beside the data set, as batch).
+    /// Where KITTI and ETH3D results are: RESULTS/NAME/SPLIT/ (default: results/ beside the data set, as batch).
     #[arg(long, value_name = "RESULTS")]
     results: Option<PathBuf>,
     /// Largest panel width of a contact sheet, in pixels.
