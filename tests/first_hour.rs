@@ -22,7 +22,7 @@ fn issue42_every_command_ends_with_what_it_did() {
     let d = dir.path();
     let small = ["--width", "96", "--height", "64", "--ndisp", "16"];
     let line = last_line(d, &[&["synth", "set/S"][..], &small].concat());
-    assert!(line.starts_with("wrote set/S/") && line.contains("96x64"), "{line}");
+    assert!(line.starts_with("wrote set/S/") && line.contains("96×64"), "{line}");
 
     let line = last_line(d, &["set/S/im0.png", "set/S/im1.png", "-o", "d.pfm", "--cloud", "p.ply"]);
     let (head, tail) = line.split_once(" % valid, ndisp 16, ").unwrap_or_else(|| panic!("{line}"));

@@ -19,7 +19,7 @@ fn synth_writes_a_middlebury_scene_deterministically() {
     let (a, b, c) = (tmp.path().join("a"), tmp.path().join("nested/b"), tmp.path().join("c"));
     let out = synth(&a, &["--seed", "5", "--width", "120", "--height", "64", "--ndisp", "24"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("120x64"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("120×64"));
 
     let gt = jem::io::pfm::read_pfm(&a.join("disp0GT.pfm")).unwrap();
     assert_eq!(gt.dims(), (120, 64));

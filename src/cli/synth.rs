@@ -37,7 +37,7 @@ pub(super) fn run(args: &SynthArgs, global: &GlobalArgs) -> Result<ExitCode> {
     jem::synth::write_scene(&args.outdir, &scene)?;
     if !global.quiet {
         note!(
-            "wrote {}/{{im0.png,im1.png,calib.txt,disp0GT.pfm,mask0nocc.png}}: {}x{}, ndisp {}, disparities {}..{}, \
+            "wrote {}/{{im0.png,im1.png,calib.txt,disp0GT.pfm,mask0nocc.png}}: {}×{}, ndisp {}, disparities {}..{}, \
              seed {}",
             args.outdir.display(),
             params.width,
