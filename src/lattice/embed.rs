@@ -2,7 +2,6 @@
 //! simplex and its barycentric weights, eight pixels at a time in [`embed_lanes`] (vectorised), with the scalar
 //! `embed` kept as the test reference.
 
-use super::keys::Key;
 use super::*;
 use crate::fastmath::integral_to_i32;
 
@@ -15,25 +14,6 @@ pub(super) struct Embedding {
     /// Rank of each coordinate's rounding residual (0 = largest … d = smallest).
     pub(super) rank: [i32; D1],
     pub(super) weights: [f32; D1],
-}
-
-impl Embedding {
-    /// The key of the simplex vertex with remainder `rem`: the origin plus the canonical offset `rem` for the
-    /// coordinates ranked within the first d+1−rem, `rem` − (d+1) for the others. The d+1-th coordinate is
-    /// implied by the zero sum and left out.
-    #[inline(always)]
-    pub(super) fn key(&self, rem: usize) -> Key {
-        Key::from_coords(std::array::from_fn(|i| {
-            let offset = if self.rank[i] as usize <= D - rem { rem as i32 } else { rem as i32 - D1 as i32 };
-            self.origin[i] + offset
-        }))
-    }
-
-    /// All d+1 vertex keys, by remainder.
-    #[cfg(test)]
-    pub(super) fn keys(&self) -> [Key; D1] {
-        std::array::from_fn(|rem| self.key(rem))
-    }
 }
 
 /// The per-axis elevation scales √(2/3)·(d+1)/√(i(i+1)) for features i = 1..=d (index i − 1).

@@ -113,6 +113,25 @@ pub(super) struct Key {
 
 pub(super) const KEY_BIAS: i32 = 1 << 15;
 
+impl Embedding {
+    /// The key of the simplex vertex with remainder `rem`: the origin plus the canonical offset `rem` for the
+    /// coordinates ranked within the first d+1−rem, `rem` − (d+1) for the others. The d+1-th coordinate is
+    /// implied by the zero sum and left out.
+    #[inline(always)]
+    pub(super) fn key(&self, rem: usize) -> Key {
+        Key::from_coords(std::array::from_fn(|i| {
+            let offset = if self.rank[i] as usize <= D - rem { rem as i32 } else { rem as i32 - D1 as i32 };
+            self.origin[i] + offset
+        }))
+    }
+
+    /// All d+1 vertex keys, by remainder.
+    #[cfg(test)]
+    pub(super) fn keys(&self) -> [Key; D1] {
+        std::array::from_fn(|rem| self.key(rem))
+    }
+}
+
 impl Key {
     /// The key of lattice coordinates `c` (the first d).
     ///

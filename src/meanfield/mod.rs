@@ -61,7 +61,8 @@ pub use pyramid::{downsample_volume, infer_coarse_to_fine};
 use energy::unary_marginals;
 use full::FullKernel;
 use pyramid::copy_from_coarse;
-use schedule::{Pass, checkerboard_bands};
+use schedule::checkerboard_bands;
+use update::Pass;
 
 /// Per-pixel label distributions, laid out like a [`CostVolume`]: `data[(y·w + x)·M + d]`.
 pub type Marginals = CostVolume;

@@ -8,15 +8,7 @@
 use rayon::prelude::*;
 
 use super::MeanField;
-use super::update::{NeighbourRows, RowScratch, split_rows, update_row};
-
-/// Which pixels one update pass computes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Pass {
-    All,
-    Even,
-    Odd,
-}
+use super::update::{NeighbourRows, Pass, RowScratch, split_rows, update_row};
 
 /// One pass over row y of a band `[a, b)` in [`MeanField::checkerboard_in_place`]: the band's interior rows
 /// a + 1 … b − 2 are `interior` (updated in place), its first and last rows `first` and `last` (the edge

@@ -6,8 +6,15 @@
 //! and picked at run time, with the same results (Rust never contracts a·b + c into an FMA).
 
 use super::energy::{FullTerm, LocalTerm, pixel_energies, softmax_neg_padded};
-use super::schedule::Pass;
 use super::{MeanField, PairwiseWeights};
+
+/// Which pixels one update pass computes: all, or one colour of the checkerboard ((x + y) even or odd).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Pass {
+    All,
+    Even,
+    Odd,
+}
 
 /// Per-thread scratch of the row update, `M` labels.
 pub(super) struct RowScratch {
