@@ -32,7 +32,7 @@ pub struct ConditionParams {
     pub experimental: ExperimentalConditionParams,
 }
 
-/// `[condition.stretch]`: the contrast stretch ([`crate::condition::contrast`]).
+/// `[condition.stretch]`: the contrast stretch ([`crate::condition`], "Contrast").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct StretchParams {
@@ -43,7 +43,7 @@ pub struct StretchParams {
     pub min_gain: f32,
 }
 
-/// `[condition.denoise]`: the bilateral denoiser ([`crate::condition::denoise`]); the guidance keeps the original.
+/// `[condition.denoise]`: the bilateral denoiser ([`crate::condition`], "Noise"); the guidance keeps the original.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DenoiseParams {
@@ -55,8 +55,8 @@ pub struct DenoiseParams {
     pub min_sigma: f32,
 }
 
-/// `[condition.noise]`: what the measured noise σn changes in the cost ([`crate::condition::noise`],
-/// [`crate::condition::jpeg`]).
+/// `[condition.noise]`: what the measured noise σn changes in the cost ([`crate::condition::estimate_noise`],
+/// [`crate::condition::jpeg_noise`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct NoiseParams {
