@@ -519,3 +519,43 @@ fn issue42_results_move_and_copy_with_their_data_set() {
     let out = run_in(d, &["batch", "other/training", "--alg", "A", "--results", "R", "--set", "model=wta"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
 }
+
+/// `jem eval` while a batch still holds the results' lock (noticed with issue 41, item 5): it scores them as they
+/// are and says so in a warning naming the folder and the run, for a KITTI results folder and a MiddEval3 scene; a
+/// stale lock (its process gone) says nothing, and `-q` silences the warning.
+#[test]
+fn eval_warns_while_a_batch_holds_the_results() {
+    let dir = tempfile::tempdir().unwrap();
+    let training = kitti_split(dir.path(), "s1", 1, "k/training");
+    let out = run_in(dir.path(), &["batch", training.to_str().unwrap(), "--alg", "A", "--set", "model=wta", "-q"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let scene = dir.path().join("trainingQ/S");
+    synth(&scene, 3);
+    let out = run_in(dir.path(), &["batch", "trainingQ", "--alg", "A", "--set", "model=wta", "-q"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let live = format!("pid {}\nhost {}\n", std::process::id(), host());
+    let mut child = std::process::Command::new("true").spawn().unwrap();
+    let dead = format!("pid {}\nhost {}\n", child.id(), host());
+    child.wait().unwrap();
+    for (tree, lock) in
+        [("k/training", dir.path().join("k/results/A/training/.jem-lock")), ("trainingQ", scene.join(".jem-lock-A"))]
+    {
+        let eval = |extra: &[&str]| {
+            let out = run_in(dir.path(), &[&["eval", tree, "--alg", "A"], extra].concat());
+            assert!(out.status.success(), "{tree}: {}", stderr(&out));
+            stderr(&out)
+        };
+        assert!(!eval(&[]).contains("warning"), "{tree}: no lock, no warning");
+        std::fs::write(&lock, &live).unwrap();
+        let text = eval(&[]);
+        let line = text.lines().find(|l| l.starts_with("warning:")).unwrap_or_else(|| panic!("{tree}: {text}"));
+        assert!(
+            line.contains(&format!("pid {}", std::process::id())) && line.contains("is writing these results"),
+            "{line}"
+        );
+        assert!(!eval(&["-q"]).contains("warning"), "{tree}: -q silences it");
+        std::fs::write(&lock, &dead).unwrap();
+        assert!(!eval(&[]).contains("warning"), "{tree}: a stale lock says nothing");
+        std::fs::remove_file(&lock).unwrap();
+    }
+}

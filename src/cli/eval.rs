@@ -115,6 +115,12 @@ pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCod
         .iter()
         .map(|alg| evaluate_dir(&dir, alg, args.mask, args.scale.0, &sources))
         .collect::<Result<Vec<_>>>()?;
+    if !global.quiet {
+        // Results a batch is still writing (its lock is held): scored as they are now.
+        for line in reports.iter().flat_map(|r| &r.writers) {
+            note!("warning: {line}; scored as it is now, the scores may change when it ends");
+        }
+    }
     out!("{}", render(&reports, &papers, args.format));
     let excluded = reports.iter().any(|r| r.excluded().next().is_some());
     if !global.quiet {

@@ -127,6 +127,40 @@ pub fn lock_results(
     Ok(lock)
 }
 
+/// The live runs holding a lock on the results of `alg` for these pairs, one line each (the folder and who holds
+/// it), for `jem eval`, which reads results that a batch may still be writing. Stale locks are not listed; a lock
+/// this machine cannot check (another host, unreadable) is.
+pub fn writers(pairs: &[Pair], alg: &str, results: Option<&Path>) -> Vec<String> {
+    let mut dirs = std::collections::BTreeSet::new();
+    let mut found = Vec::new();
+    for pair in pairs {
+        let (dir, own) = match pair.results_dir(alg, results) {
+            None => (pair.root.clone(), Some(format!(".jem-lock-{alg}"))),
+            Some(dir) => (dir, None),
+        };
+        if !dirs.insert(dir.clone()) {
+            continue;
+        }
+        let Ok(entries) = std::fs::read_dir(&dir) else { continue };
+        let mut names: Vec<String> = entries.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect();
+        names.sort();
+        for name in names {
+            let ours = match &own {
+                Some(own) => name == *own,
+                None => name == ".jem-lock" || name.strip_prefix(".jem-lock-").is_some_and(|r| r.contains("-of-")),
+            };
+            let Ok(text) = std::fs::read_to_string(dir.join(&name)) else { continue };
+            let holder = Holder::parse(&text);
+            if ours && holder.as_ref().and_then(Holder::alive) != Some(false) {
+                let who = holder
+                    .map_or("a run whose lock cannot be read".into(), |h| format!("a jem run ({})", h.describe()));
+                found.push(format!("{}: {who} is writing these results ({name})", dir.display()));
+            }
+        }
+    }
+    found
+}
+
 /// The error for a live (or unknown) holder of `file`.
 fn held(file: &Path, holder: Option<&Holder>) -> Error {
     let dir = file.parent().unwrap_or(Path::new("."));

@@ -32,7 +32,7 @@ use std::str::FromStr;
 use crate::error::Result;
 
 pub use kitti::interpolate_background;
-pub use lock::{ResultsLock, lock_results};
+pub use lock::{ResultsLock, lock_results, writers};
 pub use results::check_results_dirs;
 
 /// The search range of a KITTI frame when nothing else gives one (0..191, the usual choice for KITTI).

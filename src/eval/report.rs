@@ -66,6 +66,9 @@ pub struct AlgReport {
     pub scale: u32,
     /// Every scene with ground truth, sorted by path.
     pub scenes: Vec<SceneResult>,
+    /// Runs that were writing these results while they were scored ([`crate::dataset::writers`]): the scores may
+    /// change when they end.
+    pub writers: Vec<String>,
 }
 
 impl AlgReport {
@@ -172,6 +175,7 @@ pub fn evaluate_dir(
         )));
     }
     crate::dataset::check_results_dirs(&pairs, alg, src.results.as_deref(), false)?;
+    let writers = crate::dataset::writers(&pairs, alg, src.results.as_deref());
     let locations: Vec<PathBuf> = pairs.iter().map(Pair::location).collect();
     let scale = match (scale, layout) {
         (Some(s), _) => s,
@@ -191,7 +195,7 @@ pub fn evaluate_dir(
             dir,
         })
         .collect();
-    Ok(AlgReport { alg: alg.to_string(), layout, mask: mask_mode, scale, scenes })
+    Ok(AlgReport { alg: alg.to_string(), layout, mask: mask_mode, scale, scenes, writers })
 }
 
 /// Scores one pair's result (see the [`eval`](crate::eval) module doc for each layout's rules).
@@ -327,6 +331,7 @@ pub(super) mod tests {
                 scene("New", 1.0, true),
                 scene("Vintage", 50.0, false),
             ],
+            writers: Vec::new(),
         };
         let w = r.weighted().unwrap();
         assert!((w.avgerr - (0.5 * 2.0 + 4.0 + 1.0) / 2.5).abs() < 1e-12);
