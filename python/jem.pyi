@@ -84,6 +84,7 @@ def match(
     peak_rss). The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
 
     Raises ValueError (shape, dtype, range, config), MemoryError (fits neither whole nor in tiles), OSError.
+    Warns (UserWarning) for a value the image cannot use, held to a bound (post.sps.segments).
     """
 
 def depth(disp: npt.NDArray[np.floating[Any]], f: float, baseline: float, doffs: float = 0.0) -> _Map:

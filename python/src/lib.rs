@@ -214,7 +214,8 @@ fn peak_rss_bytes() -> Option<u64> {
 /// honoured only when the call returns.
 ///
 /// Raises ValueError (bad shape, dtype, range, config key or value), MemoryError (the run fits ``max_memory``
-/// neither whole nor in tiles), OSError (an unreadable config file).
+/// neither whole nor in tiles), OSError (an unreadable config file). Warns (UserWarning) for a value the image
+/// cannot use, held to a bound as ``jem`` does (``post.sps.segments`` above pixels / ``post.sps.min_support``).
 #[pyfunction]
 #[pyo3(
     name = "match",
@@ -253,13 +254,18 @@ fn match_pair<'py>(
             Ok((plan, out, start.elapsed().as_secs_f64()))
         })
     })?;
+    // Values too large for this image (held to a bound, as `jem` warns on stderr): a UserWarning each.
+    let (w, h) = plan.pair.left.dims();
+    for warning in params.image_warnings(w, h) {
+        let message = std::ffi::CString::new(warning).unwrap_or_default();
+        PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &message, 1)?;
+    }
     let mut result = vec![to_numpy(py, out.disparity).into_any()];
     if confidence {
         result.push(to_numpy(py, out.confidence).into_any());
     }
     if return_info {
         let info = PyDict::new(py);
-        let (w, h) = plan.pair.left.dims();
         info.set_item("ndisp", plan.pair.ndisp)?;
         info.set_item("ndisp_measured", plan.ndisp_measured)?;
         info.set_item("tiled", matches!(plan.strategy, jem::tile::Strategy::Tiled(_)))?;

@@ -1,6 +1,7 @@
 """jem.match gives the command line's disparity map, byte for byte, for every kind of input and setting."""
 
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -113,6 +114,17 @@ def test_confidence_and_info(synth_pair):
     assert 0 < info["seconds"] and info["memory_planned"] > 0 and info["peak_rss"] > 0
     off = jem.match(*synth_pair, ndisp=48, overrides={"condition.enabled": False}, return_info=True)[1]
     assert off["noise"] is None
+
+
+def test_a_segment_count_the_image_cannot_hold_warns(synth_pair):
+    # Issue 41, item 6: held to pixels / post.sps.min_support, as jem does (which says so on stderr).
+    small = tuple(view[:48, :64] for view in synth_pair)
+    with pytest.warns(UserWarning, match=r"post\.sps\.segments = 100000 .*using 307"):
+        held = jem.match(*small, ndisp=16, overrides={"post.sps.segments": 100000})
+    assert np.isfinite(held).all() and held.max() < 16
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the bound itself: no warning
+        jem.match(*small, ndisp=16, overrides={"post.sps.segments": 307})
 
 
 def test_version_is_the_core_crate_version():
