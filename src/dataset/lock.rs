@@ -101,13 +101,11 @@ pub fn lock_results(
     let mut lock = ResultsLock { files: Vec::new(), token, taken_over: Vec::new() };
     let mut dirs = std::collections::BTreeSet::new();
     for pair in pairs {
-        let (dir, name) = match pair.results_dir(alg, results) {
-            None => (pair.root.clone(), format!(".jem-lock-{alg}")),
-            Some(dir) => match shard.filter(|&(_, n)| n > 1) {
-                Some((i, n)) => (dir, format!(".jem-lock-{i}-of-{n}")),
-                None => (dir, ".jem-lock".to_string()),
-            },
-        };
+        let (dir, scene_lock) = lock_dir(pair, alg, results);
+        let name = scene_lock.unwrap_or_else(|| match shard.filter(|&(_, n)| n > 1) {
+            Some((i, n)) => format!(".jem-lock-{i}-of-{n}"),
+            None => ".jem-lock".to_string(),
+        });
         if !dirs.insert(dir.clone()) {
             continue;
         }
@@ -134,41 +132,71 @@ pub fn writers(pairs: &[Pair], alg: &str, results: Option<&Path>) -> Vec<String>
     let mut dirs = std::collections::BTreeSet::new();
     let mut found = Vec::new();
     for pair in pairs {
-        let (dir, own) = match pair.results_dir(alg, results) {
-            None => (pair.root.clone(), Some(format!(".jem-lock-{alg}"))),
-            Some(dir) => (dir, None),
-        };
+        let (dir, scene_lock) = lock_dir(pair, alg, results);
         if !dirs.insert(dir.clone()) {
             continue;
         }
-        let Ok(entries) = std::fs::read_dir(&dir) else { continue };
-        let mut names: Vec<String> = entries.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect();
-        names.sort();
+        let names = match scene_lock {
+            Some(name) => vec![name],
+            None => {
+                let Ok(entries) = std::fs::read_dir(&dir) else { continue };
+                let mut names: Vec<String> = entries
+                    .flatten()
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|name| is_folder_lock(name))
+                    .collect();
+                names.sort();
+                names
+            }
+        };
         for name in names {
-            let ours = match &own {
-                Some(own) => name == *own,
-                None => name == ".jem-lock" || name.strip_prefix(".jem-lock-").is_some_and(|r| r.contains("-of-")),
-            };
             let Ok(text) = std::fs::read_to_string(dir.join(&name)) else { continue };
             let holder = Holder::parse(&text);
-            if ours && holder.as_ref().and_then(Holder::alive) != Some(false) {
-                let who = holder
-                    .map_or("a run whose lock cannot be read".into(), |h| format!("a jem run ({})", h.describe()));
-                found.push(format!("{}: {who} is writing these results ({name})", dir.display()));
+            if may_be_live(holder.as_ref()) {
+                found.push(format!("{}: {} is writing these results ({name})", dir.display(), who(holder.as_ref())));
             }
         }
     }
     found
 }
 
+/// Where the lock of `pair`'s results of `alg` lives: its MiddEval3 scene folder with the scene's own lock name
+/// (`.jem-lock-ALG`), or a KITTI/ETH3D results folder (`None`: the run's name there depends on its shard).
+fn lock_dir(pair: &Pair, alg: &str, results: Option<&Path>) -> (PathBuf, Option<String>) {
+    match pair.results_dir(alg, results) {
+        None => (pair.root.clone(), Some(format!(".jem-lock-{alg}"))),
+        Some(dir) => (dir, None),
+    }
+}
+
+/// Part I of N in a results folder lock's name (`.jem-lock-I-of-N`).
+fn shard_part(name: &str) -> Option<(usize, usize)> {
+    let (i, n) = name.strip_prefix(".jem-lock-")?.split_once("-of-")?;
+    Some((i.parse().ok()?, n.parse().ok()?))
+}
+
+/// Whether `name` is a results folder's lock: `.jem-lock`, or a shard's `.jem-lock-I-of-N`.
+fn is_folder_lock(name: &str) -> bool {
+    name == ".jem-lock" || shard_part(name).is_some()
+}
+
+/// Whether the holder of a lock may still be running: unless this machine can tell it is gone.
+fn may_be_live(holder: Option<&Holder>) -> bool {
+    holder.and_then(Holder::alive) != Some(false)
+}
+
+/// Who holds a lock, in words.
+fn who(holder: Option<&Holder>) -> String {
+    holder.map_or("a run whose lock cannot be read".to_string(), |h| format!("another jem run ({})", h.describe()))
+}
+
 /// The error for a live (or unknown) holder of `file`.
 fn held(file: &Path, holder: Option<&Holder>) -> Error {
     let dir = file.parent().unwrap_or(Path::new("."));
-    let who =
-        holder.map_or("a run whose lock cannot be read".to_string(), |h| format!("another jem run ({})", h.describe()));
     Error::Input(format!(
-        "{}: {who} is writing these results; wait for it to end, or remove {} if no such run is going on",
+        "{}: {} is writing these results; wait for it to end, or remove {} if no such run is going on",
         dir.display(),
+        who(holder),
         file.display()
     ))
 }
@@ -189,7 +217,7 @@ fn acquire(file: &Path, lock: &mut ResultsLock) -> Result<()> {
         }
         let Ok(text) = std::fs::read_to_string(file) else { continue }; // gone meanwhile: try again
         let holder = Holder::parse(&text);
-        if holder.as_ref().and_then(Holder::alive) != Some(false) {
+        if may_be_live(holder.as_ref()) {
             return Err(held(file, holder.as_ref()));
         }
         // Stale: move it aside (one run wins the rename), and check that what moved is the stale lock read
@@ -219,17 +247,13 @@ fn acquire(file: &Path, lock: &mut ResultsLock) -> Result<()> {
 /// Errors if `dir` holds a live lock of another run that conflicts with this one's `own` lock: any but another
 /// part of the same number of parts.
 fn check_other_parts(dir: &Path, own: &str, shard: Option<(usize, usize)>) -> Result<()> {
-    let part = |name: &str| -> Option<(usize, usize)> {
-        let (i, n) = name.strip_prefix(".jem-lock-")?.split_once("-of-")?;
-        Some((i.parse().ok()?, n.parse().ok()?))
-    };
     let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
     for entry in entries.flatten() {
         let name = entry.file_name().to_string_lossy().into_owned();
-        if name == own || !(name == ".jem-lock" || part(&name).is_some()) {
+        if name == own || !is_folder_lock(&name) {
             continue;
         }
-        let other = part(&name);
+        let other = shard_part(&name);
         let compatible =
             matches!((shard.filter(|&(_, n)| n > 1), other), (Some((i, n)), Some((j, m))) if n == m && i != j);
         if compatible {
@@ -237,7 +261,7 @@ fn check_other_parts(dir: &Path, own: &str, shard: Option<(usize, usize)>) -> Re
         }
         let Ok(text) = std::fs::read_to_string(entry.path()) else { continue };
         let holder = Holder::parse(&text);
-        if holder.as_ref().and_then(Holder::alive) != Some(false) {
+        if may_be_live(holder.as_ref()) {
             return Err(held(&entry.path(), holder.as_ref()));
         }
     }
