@@ -156,7 +156,7 @@ fn axis_table(len: usize, factor: usize) -> Vec<(usize, usize, f32)> {
 /// # Panics
 /// If `factor` is 0 or `low` is not `ceil(width / factor) × ceil(height / factor)`.
 pub fn upsample_plane(low: &Plane<f32>, factor: usize, width: usize, height: usize) -> Plane<f32> {
-    resample_up(low, factor, width, height, 1.0)
+    resample_up(low, factor, width, height, 1.0, None)
 }
 
 /// Brings a low-resolution disparity map back to `width × height` (see [`upsample_plane`]) and multiplies it by
@@ -173,7 +173,7 @@ pub fn upsample_plane(low: &Plane<f32>, factor: usize, width: usize, height: usi
 /// assert_eq!(full.data, vec![2.0, 2.0, f32::INFINITY, f32::INFINITY]);
 /// ```
 pub fn upsample_disparity(low: &DisparityMap, factor: usize, width: usize, height: usize) -> DisparityMap {
-    resample_up(low, factor, width, height, factor as f32)
+    resample_up(low, factor, width, height, factor as f32, None)
 }
 
 /// Brings a low-resolution mask back to `width × height`: each pixel takes the flag of the reduced pixel it
@@ -207,49 +207,57 @@ pub fn upsample_disparity_guided(
 ) -> DisparityMap {
     assert_eq!(low.dims(), low_guide.dims(), "low-resolution map and guide differ in size");
     let (width, height) = guide.dims();
-    let mut out = upsample_disparity(low, factor, width, height);
-    if edge_px <= 0.0 {
-        return out;
-    }
-    let (xs, ys) = (axis_table(width, factor), axis_table(height, factor));
-    let (lw, scale) = (low.width, factor as f32);
-    let inv = 1.0 / (2.0 * sigma_rgb * sigma_rgb);
-    out.data.par_chunks_mut(width.max(1)).zip(ys.par_iter()).enumerate().for_each(|(y, (row, &(j0, j1, wy)))| {
-        for (x, (o, &(i0, i1, wx))) in row.iter_mut().zip(&xs).enumerate() {
-            if !o.is_finite() {
-                continue;
-            }
-            let corners = [
-                (j0 * lw + i0, (1.0 - wy) * (1.0 - wx)),
-                (j0 * lw + i1, (1.0 - wy) * wx),
-                (j1 * lw + i0, wy * (1.0 - wx)),
-                (j1 * lw + i1, wy * wx),
-            ];
-            let finite = corners.iter().map(|&(k, _)| low.data[k]).filter(|d| d.is_finite());
-            let (lo, hi) = finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), d| (lo.min(d), hi.max(d)));
-            if (hi - lo) * scale <= edge_px {
-                continue;
-            }
-            let c = guide.rgb(y * width + x);
-            let mut best = (f32::NEG_INFINITY, *o);
-            for (k, w) in corners {
-                let d = low.data[k];
-                if d.is_finite() {
-                    let g = low_guide.rgb(k);
-                    let dist = (c[0] - g[0]).powi(2) + (c[1] - g[1]).powi(2) + (c[2] - g[2]).powi(2);
-                    let score = (w + 0.05).ln() - dist * inv;
-                    if score > best.0 {
-                        best = (score, d * scale);
-                    }
-                }
-            }
-            *o = best.1;
-        }
-    });
-    out
+    let edges = EdgeGuide { low: low_guide, full: guide, edge_px, inv: 1.0 / (2.0 * sigma_rgb * sigma_rgb) };
+    resample_up(low, factor, width, height, factor as f32, (edge_px > 0.0).then_some(&edges))
 }
 
-fn resample_up(low: &Plane<f32>, factor: usize, width: usize, height: usize, value_scale: f32) -> Plane<f32> {
+/// The colours [`upsample_disparity_guided`] chooses by at depth edges.
+struct EdgeGuide<'a> {
+    /// The reduced guide (one colour per low-resolution pixel).
+    low: &'a RgbImage,
+    /// The full-resolution guide.
+    full: &'a RgbImage,
+    /// The span of the four (scaled) values above which a pixel chooses instead of blending.
+    edge_px: f32,
+    /// 1 / 2σ².
+    inv: f32,
+}
+
+impl EdgeGuide<'_> {
+    /// The value full-resolution pixel `i` takes from its four `corners` (low-resolution index, value, bilinear
+    /// weight), `blend` their bilinear result, values scaled by `value_scale`.
+    fn choose(&self, i: usize, corners: &[(usize, f32, f32); 4], blend: f32, value_scale: f32) -> f32 {
+        let finite = corners.iter().map(|&(_, v, _)| v).filter(|v| v.is_finite());
+        let (lo, hi) = finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        if (hi - lo) * value_scale <= self.edge_px {
+            return blend;
+        }
+        let c = self.full.rgb(i);
+        let mut best = (f32::NEG_INFINITY, blend);
+        for &(k, v, w) in corners {
+            if v.is_finite() {
+                let g = self.low.rgb(k);
+                let dist = (c[0] - g[0]).powi(2) + (c[1] - g[1]).powi(2) + (c[2] - g[2]).powi(2);
+                let score = (w + 0.05).ln() - dist * self.inv;
+                if score > best.0 {
+                    best = (score, v * value_scale);
+                }
+            }
+        }
+        best.1
+    }
+}
+
+/// Bilinear upsampling with invalid pixels kept (the module doc), values × `value_scale`; at depth edges the
+/// choice of `edges` instead of the blend.
+fn resample_up(
+    low: &Plane<f32>,
+    factor: usize,
+    width: usize,
+    height: usize,
+    value_scale: f32,
+    edges: Option<&EdgeGuide<'_>>,
+) -> Plane<f32> {
     let (lw, lh) = (reduced_len(width, factor), reduced_len(height, factor));
     assert_eq!(low.dims(), (lw, lh), "low-resolution map is not the {width}x{height} size reduced by {factor}");
     let mut out = Plane::new(width, height, f32::INFINITY);
@@ -259,25 +267,26 @@ fn resample_up(low: &Plane<f32>, factor: usize, width: usize, height: usize, val
     let (xs, ys) = (axis_table(width, factor), axis_table(height, factor));
     out.data.par_chunks_mut(width).zip(ys.par_iter()).enumerate().for_each(|(y, (row, &(j0, j1, wy)))| {
         let own_row = low.row(y / factor);
-        let (r0, r1) = (low.row(j0), low.row(j1));
         for (x, (o, &(i0, i1, wx))) in row.iter_mut().zip(&xs).enumerate() {
             if !own_row[x / factor].is_finite() {
                 continue; // stays inf
             }
             let corners = [
-                (r0[i0], (1.0 - wy) * (1.0 - wx)),
-                (r0[i1], (1.0 - wy) * wx),
-                (r1[i0], wy * (1.0 - wx)),
-                (r1[i1], wy * wx),
-            ];
+                (j0 * lw + i0, (1.0 - wy) * (1.0 - wx)),
+                (j0 * lw + i1, (1.0 - wy) * wx),
+                (j1 * lw + i0, wy * (1.0 - wx)),
+                (j1 * lw + i1, wy * wx),
+            ]
+            .map(|(k, w)| (k, low.data[k], w));
             let (mut sum, mut weight) = (0.0f32, 0.0f32);
-            for (v, wgt) in corners {
+            for &(_, v, wgt) in &corners {
                 if v.is_finite() {
                     sum += wgt * v;
                     weight += wgt;
                 }
             }
-            *o = sum / weight * value_scale;
+            let blend = sum / weight * value_scale;
+            *o = edges.map_or(blend, |e| e.choose(y * width + x, &corners, blend, value_scale));
         }
     });
     out
