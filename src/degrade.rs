@@ -501,10 +501,7 @@ fn resolve_new_path(path: &Path) -> Result<PathBuf> {
 fn degrade_scene(scene: &Path, dest: &Path, rel: &Path, recipe: &Recipe, seed: u64) -> Result<()> {
     std::fs::create_dir_all(dest).map_err(|e| Error::io(dest, e))?;
     // FNV-1a of the relative path: a per-scene stream that does not depend on where the tree lives.
-    let key = rel
-        .to_string_lossy()
-        .bytes()
-        .fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3));
+    let key = crate::rng::fnv1a(crate::rng::FNV_OFFSET, rel.to_string_lossy().as_bytes());
     for (name, view) in [("im0.png", View::Left), ("im1.png", View::Right)] {
         let image = crate::io::png::load_rgb(&scene.join(name))?;
         let out = degrade(&image, recipe, view, seed ^ key)?;

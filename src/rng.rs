@@ -25,6 +25,23 @@ pub fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// FNV-1a (64 bits) of `bytes`, continuing from `hash` ([`FNV_OFFSET`] to start): a stable hash of names and
+/// sizes (the per-scene streams of `jem degrade`, the fingerprint of a data set in its results folder).
+///
+/// # Examples
+/// ```
+/// use jem::rng::{FNV_OFFSET, fnv1a};
+/// assert_eq!(fnv1a(FNV_OFFSET, b""), FNV_OFFSET);
+/// assert_eq!(fnv1a(fnv1a(FNV_OFFSET, b"a"), b"b"), fnv1a(FNV_OFFSET, b"ab"));
+/// ```
+#[inline]
+pub fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
+    bytes.iter().fold(hash, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3))
+}
+
+/// FNV-1a's starting value.
+pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
 /// A SplitMix64 stream: the state advances by the golden-ratio increment and each output is [`mix64`] of it.
 ///
 /// # Examples

@@ -138,11 +138,11 @@ fn scored_line(reports: &[jem::eval::AlgReport]) -> String {
             let total = r.scenes.len();
             let missing = r.excluded().count();
             let scale = if r.scale == 1 { String::new() } else { format!(", errors ×{}", r.scale) };
-            let missing =
+            let note =
                 if missing > 0 { format!("; {missing} without a usable result (listed above)") } else { String::new() };
             format!(
-                "scored {} of {total} scene(s) of {} ({}, {}{scale}){missing}",
-                total - r.excluded().count(),
+                "scored {} of {total} scene(s) of {} ({}, {}{scale}){note}",
+                total - missing,
                 r.alg,
                 r.layout.name(),
                 r.mask.name()

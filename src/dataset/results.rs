@@ -25,12 +25,8 @@ fn source_text(pair: &Pair, dir: &Path) -> String {
 fn fingerprint(pair: &Pair) -> String {
     let how = Discovery { layout: Some(pair.layout), gt: None };
     let pairs = discover(std::slice::from_ref(&pair.root), Purpose::Run, &how).unwrap_or_default();
-    let mut hash = 0xcbf2_9ce4_8422_2325u64;
-    let mut add = |bytes: &[u8]| {
-        for &b in bytes {
-            hash = (hash ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
-        }
-    };
+    let mut hash = crate::rng::FNV_OFFSET;
+    let mut add = |bytes: &[u8]| hash = crate::rng::fnv1a(hash, bytes);
     for p in &pairs {
         add(p.name.as_bytes());
         for image in [&p.left, &p.right] {
