@@ -2,6 +2,8 @@
 //! piecewise-planar disparities from noisy, holed maps; degenerate inputs stay finite; outputs do not depend on the
 //! thread count. One `#[ignore]`d test runs both stages on a Middlebury scene for timings.
 
+mod common;
+
 use jem::image::{DisparityMap, Plane, RgbImage};
 use jem::params::{SpsParams, WmedianParams};
 use jem::post::planes::fit_slanted_planes;
@@ -312,18 +314,10 @@ fn wmedian_fills_holes_from_the_right_side() {
 #[test]
 #[ignore = "needs the MiddEval3 data ($JEM_DATA) and a release build; .ci/run runs it (--include-ignored)"]
 fn motorcycle_timings() {
-    use std::path::Path;
     use std::time::Instant;
     let scene = std::env::var("JEM_SCENE").unwrap_or_else(|_| "Motorcycle".into());
-    let data = match std::env::var_os("JEM_DATA") {
-        Some(d) if !d.is_empty() => std::path::PathBuf::from(d),
-        _ => Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/middlebury"),
-    };
+    let Some(data) = common::data_dir() else { return };
     let dir = data.join("MiddEval3/trainingQ").join(&scene);
-    if !dir.is_dir() && std::env::var_os("JEM_REQUIRE_DATA").is_none() {
-        eprintln!("skipped: no MiddEval3 data at {} (set JEM_DATA)", dir.display());
-        return;
-    }
     let left = jem::io::png::load_rgb(&dir.join("im0.png")).unwrap();
     let right = jem::io::png::load_rgb(&dir.join("im1.png")).unwrap();
     let ndisp = jem::io::calib::read_ndisp(&dir.join("calib.txt")).unwrap();
