@@ -20,7 +20,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (dir, input, output, config) = (PathBuf::from(&args[0]), &args[1], &args[2], Path::new(&args[3]));
     let params = jem::Params::load(Some(config), &args[4..])?;
     assert!(!params.post.fill && !params.post.wmedian.enabled, "the cached maps are only valid without fill/WMF");
-    let scenes = jem::batch::find_scenes(std::slice::from_ref(&dir))?;
+    let scenes = jem::dataset::walk::find_scenes(std::slice::from_ref(&dir))?;
     for scene in scenes {
         let disp = jem::io::read_disparity(&scene.join(format!("disp0{input}.pfm")))?;
         let image = jem::io::png::load_rgb(&scene.join("im0.png"))?;

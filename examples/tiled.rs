@@ -19,7 +19,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         split_for_work: false,
     };
     let params = jem::Params::load(None, &args[4..])?;
-    for scene in jem::batch::find_scenes(std::slice::from_ref(&dir))? {
+    for scene in jem::dataset::walk::find_scenes(std::slice::from_ref(&dir))? {
         let ndisp = jem::io::calib::read_ndisp(&scene.join("calib.txt"))?;
         let (l, r) = jem::io::png::load_rgb_pair(&scene.join("im0.png"), &scene.join("im1.png"))?;
         let pair = jem::StereoPair::new(l, r, ndisp)?;

@@ -78,7 +78,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if out.exists() {
         return Err(format!("{} exists", out.display()).into());
     }
-    for scene in jem::batch::find_scenes(std::slice::from_ref(&src))? {
+    for scene in jem::dataset::walk::find_scenes(std::slice::from_ref(&src))? {
         let name = scene.file_name().unwrap().to_string_lossy().into_owned();
         if args.len() > 3 && !args[3..].contains(&name) {
             continue;

@@ -15,8 +15,6 @@
 //!
 //! [`Shard`] splits a sorted list into N deterministic parts (item k goes to part `k mod N`), so a job array
 //! (Slurm, GNU parallel) can process a data set with no coordination; `--skip-existing` makes reruns resume.
-//!
-//! The folder walk ([`find_scenes`], [`find_dirs_with`]) is [`crate::dataset`]'s (`dataset/walk.rs`).
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
@@ -26,8 +24,6 @@ use std::sync::{Condvar, Mutex};
 use std::time::Instant;
 
 use crate::dataset::Pair;
-pub use crate::dataset::SCENE_FILES;
-pub use crate::dataset::walk::{find_dirs_with, find_scenes};
 use crate::error::{Error, Result};
 use crate::io::calib;
 use crate::plan::NdispSource;

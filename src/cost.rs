@@ -35,6 +35,8 @@
 use rayon::prelude::*;
 
 use crate::image::{CostVolume, Plane, RgbImage};
+use crate::imgproc::filter::{local_mean_abs, pad_replicate, sobel_x};
+use crate::imgproc::stats::{plane_mean, rank_value};
 use crate::params::CostParams;
 
 /// Census codes of a grey image: one bit per window neighbour, set when the neighbour is darker than the centre;
@@ -101,75 +103,10 @@ fn census_bits_mask(n: usize) -> u64 {
     if n == 0 { 0 } else { u64::MAX >> (64 - n) }
 }
 
-/// The plane with `px` columns and `py` rows of replicated border on each side, row-major, width `w + 2·px`.
-fn pad_replicate(p: &Plane<f32>, px: usize, py: usize) -> Vec<f32> {
-    let (w, h) = p.dims();
-    let pw = w + 2 * px;
-    let mut out = vec![0.0f32; pw * (h + 2 * py)];
-    for (py_i, row) in out.chunks_exact_mut(pw).enumerate() {
-        let src = p.row(py_i.saturating_sub(py).min(h - 1));
-        row[..px].fill(src[0]);
-        row[px..px + w].copy_from_slice(src);
-        row[px + w..].fill(src[w - 1]);
-    }
-    out
-}
-
-/// Horizontal Sobel gradient (`[-1 0 1; -2 0 2; -1 0 1]`), borders replicated.
-pub fn sobel_x(grey: &Plane<f32>) -> Plane<f32> {
-    let (w, h) = grey.dims();
-    let mut out = Plane::new(w, h, 0.0f32);
-    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
-        let up = grey.row(y.saturating_sub(1));
-        let mid = grey.row(y);
-        let down = grey.row((y + 1).min(h - 1));
-        for (x, g) in row.iter_mut().enumerate() {
-            let (l, r) = (x.saturating_sub(1), (x + 1).min(w - 1));
-            *g = (up[r] - up[l]) + 2.0 * (mid[r] - mid[l]) + (down[r] - down[l]);
-        }
-    });
-    out
-}
-
 /// The mean over the image of its local contrast (the mean |Sobel x| over the (2r + 1)² window around each
 /// pixel): ḡ of the gradient normalisation.
 pub fn mean_local_contrast(grey: &Plane<f32>, radius: usize) -> f32 {
     plane_mean(&local_mean_abs(&sobel_x(grey), radius))
-}
-
-/// The value at fraction `f` of `v` in sorted order (nearest rank), found by selection (`v` is reordered).
-pub(crate) fn rank_value(v: &mut [f32], f: f64) -> f32 {
-    let k = ((v.len() - 1) as f64 * f).round() as usize;
-    *v.select_nth_unstable_by(k, f32::total_cmp).1
-}
-
-/// The mean of a plane (summed in `f64`, row-major: the same value whatever the thread count).
-pub(crate) fn plane_mean(p: &Plane<f32>) -> f32 {
-    (p.data.iter().map(|&v| f64::from(v)).sum::<f64>() / p.data.len().max(1) as f64) as f32
-}
-
-/// The mean of |v| over the (2r + 1)² window around each pixel, borders replicated: a row sum over dx = −r..r,
-/// then the sum of those over dy = −r..r, each in that order, divided by (2r + 1)².
-pub(crate) fn local_mean_abs(p: &Plane<f32>, r: usize) -> Plane<f32> {
-    let (w, h) = p.dims();
-    let mut rows = Plane::new(w, h, 0.0f32);
-    rows.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, out)| {
-        let src = p.row(y);
-        for (x, o) in out.iter_mut().enumerate() {
-            *o = (0..=2 * r).map(|k| src[(x + k).saturating_sub(r).min(w - 1)].abs()).fold(0.0, |acc, v| acc + v);
-        }
-    });
-    let norm = 1.0 / ((2 * r + 1) * (2 * r + 1)) as f32;
-    let mut out = Plane::new(w, h, 0.0f32);
-    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, o)| {
-        o.fill(0.0);
-        for k in 0..=2 * r {
-            let src = rows.row((y + k).saturating_sub(r).min(h - 1));
-            o.iter_mut().zip(src).for_each(|(a, &v)| *a += v);
-        }
-        o.iter_mut().for_each(|a| *a *= norm);
-    });
-    out
 }
 
 /// Scales each gradient by (`mean` + ε) / (s + ε), `s` its local mean |∇x|.

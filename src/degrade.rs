@@ -32,6 +32,7 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::image::RgbImage;
+use crate::imgproc::filter::gaussian_blur;
 use crate::rng::SplitMix64;
 
 /// One degradation step (see the module doc for the models).
@@ -264,8 +265,9 @@ fn apply(image: &RgbImage, step: Degradation, view: View, seed: u64) -> RgbImage
             }
         }
         Degradation::Blur { sigma } => {
+            out = gaussian_blur(image, sigma as f32);
             for ch in &mut out.channels {
-                *ch = gaussian_blur(ch, image.width, image.height, sigma);
+                ch.iter_mut().for_each(|v| *v = quantise(f64::from(*v)));
             }
         }
         Degradation::Misalign { dy, degrees } => {
@@ -279,7 +281,7 @@ fn apply(image: &RgbImage, step: Degradation, view: View, seed: u64) -> RgbImage
 }
 
 /// The image moved down by `dy` pixels and rotated by `degrees` (counter-clockwise on screen) about its centre:
-/// each output pixel samples the input bilinearly at the inverse transform ([`crate::rectify::sample_bilinear`],
+/// each output pixel samples the input bilinearly at the inverse transform ([`sample_bilinear`](crate::imgproc::sample::sample_bilinear),
 /// coordinates clamped to the image), rounded to 8 bits.
 fn misalign(image: &RgbImage, dy: f64, degrees: f64) -> RgbImage {
     let (w, h) = image.dims();
@@ -293,7 +295,7 @@ fn misalign(image: &RgbImage, dy: f64, degrees: f64) -> RgbImage {
             let (px, py) = (x as f64 - cx, y as f64 - dy - cy);
             let (sx, sy) = (cos * px - sin * py + cx, sin * px + cos * py + cy);
             for (src, dst) in image.channels.iter().zip(out.channels.iter_mut()) {
-                dst[y * w + x] = quantise(crate::rectify::sample_bilinear(src, w, h, sx, sy));
+                dst[y * w + x] = quantise(crate::imgproc::sample::sample_bilinear(src, w, h, sx, sy));
             }
         }
     }
@@ -323,33 +325,6 @@ fn jpeg_round_trip(image: &RgbImage, quality: u8) -> RgbImage {
 /// Rounds to the nearest 8-bit level, clamped to 0..=255.
 fn quantise(v: f64) -> f32 {
     v.round().clamp(0.0, 255.0) as f32
-}
-
-/// A separable Gaussian blur (σ in pixels, kernel radius ⌈3σ⌉, borders clamped), rounded to 8 bits.
-fn gaussian_blur(data: &[f32], w: usize, h: usize, sigma: f64) -> Vec<f32> {
-    if sigma <= 0.0 {
-        return data.to_vec();
-    }
-    let r = (3.0 * sigma).ceil() as isize;
-    let kernel: Vec<f64> = (-r..=r).map(|k| (-((k * k) as f64) / (2.0 * sigma * sigma)).exp()).collect();
-    let total: f64 = kernel.iter().sum();
-    let clamp = |v: isize, n: usize| v.clamp(0, n as isize - 1) as usize;
-    let mut tmp = vec![0.0f64; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let s: f64 =
-                kernel.iter().zip(-r..=r).map(|(k, d)| k * f64::from(data[y * w + clamp(x as isize + d, w)])).sum();
-            tmp[y * w + x] = s / total;
-        }
-    }
-    let mut out = vec![0.0f32; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let s: f64 = kernel.iter().zip(-r..=r).map(|(k, d)| k * tmp[clamp(y as isize + d, h) * w + x]).sum();
-            out[y * w + x] = quantise(s / total);
-        }
-    }
-    out
 }
 
 /// Standard normal samples (Box–Muller on a [`SplitMix64`] stream).
@@ -417,14 +392,15 @@ pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Resul
         _ => PathBuf::from("."),
     };
     std::fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
-    let scenes = crate::batch::find_scenes(&[src.to_path_buf()])?;
+    let scenes = crate::dataset::walk::find_scenes(&[src.to_path_buf()])?;
     if scenes.is_empty() {
         return Err(Error::Input(format!(
             "{}: no scene folder (with im0.png, im1.png, calib.txt) found",
             src.display()
         )));
     }
-    let prefix = format!(".{}.jem-tmp-{}-", out.file_name().unwrap_or_default().to_string_lossy(), host_name());
+    let prefix =
+        format!(".{}.jem-tmp-{}-", out.file_name().unwrap_or_default().to_string_lossy(), crate::process::host_name());
     sweep_stale(&parent, &prefix);
     let tmp = parent.join(format!("{prefix}{}", std::process::id()));
     let result = (|| {
@@ -454,25 +430,18 @@ pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Resul
     result
 }
 
-/// This machine's name (`/proc/sys/kernel/hostname`; empty where there is none): the temporary tree's name holds
-/// it, so that a sweep never takes another machine's tree in a folder they share.
-pub(crate) fn host_name() -> String {
-    let name = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
-    name.trim().chars().filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '.')).collect()
-}
-
 /// Removes the temporary trees `parent/PREFIX<pid>` that an earlier run on this machine left when it was killed
 /// (SIGTERM, SIGKILL: it could not clean up): those whose process is gone (`/proc/<pid>` missing). Nothing is
 /// removed where `/proc` cannot tell (no `/proc/self`).
 fn sweep_stale(parent: &Path, prefix: &str) {
-    if !Path::new("/proc/self").exists() {
+    if !crate::process::proc_available() {
         return;
     }
     let Ok(entries) = std::fs::read_dir(parent) else { return };
     for entry in entries.flatten() {
         let name = entry.file_name();
         let Some(pid) = name.to_str().and_then(|n| n.strip_prefix(prefix)) else { continue };
-        let alive = pid.parse::<u32>().map_or(true, |pid| Path::new(&format!("/proc/{pid}")).exists());
+        let alive = pid.parse::<u32>().map_or(true, |pid| crate::process::pid_exists(pid) != Some(false));
         if !alive && entry.file_type().is_ok_and(|t| t.is_dir()) {
             let _ = std::fs::remove_dir_all(entry.path());
         }

@@ -50,6 +50,7 @@ pub mod eval;
 pub mod fastmath;
 pub mod geometry;
 pub mod image;
+pub(crate) mod imgproc;
 pub mod io;
 pub mod lattice;
 pub mod meanfield;
@@ -57,6 +58,7 @@ pub mod params;
 pub mod pipeline;
 pub mod plan;
 pub mod post;
+pub mod process;
 pub mod range;
 pub mod rectify;
 #[doc(hidden)]

@@ -19,6 +19,8 @@
 use rayon::prelude::*;
 
 use crate::image::{DisparityMap, Plane, RgbImage};
+use crate::imgproc::filter::central_differences;
+use crate::imgproc::sample::{keys, sample_bilinear};
 
 /// The side of the blocks that each give one measurement of the offset (px).
 pub const BLOCK: usize = 8;
@@ -105,46 +107,9 @@ impl VerticalOffset {
     }
 }
 
-/// Horizontal and vertical central differences (one-sided at the borders).
-fn gradients(p: &Plane<f32>) -> (Plane<f32>, Plane<f32>) {
-    let (w, h) = p.dims();
-    let diff = |a: f32, b: f32, span: usize| (b - a) / span as f32;
-    let mut gx = Plane::new(w, h, 0.0f32);
-    let mut gy = Plane::new(w, h, 0.0f32);
-    if w < 2 || h < 2 {
-        return (gx, gy);
-    }
-    gx.data.par_chunks_mut(w).zip(gy.data.par_chunks_mut(w)).enumerate().for_each(|(y, (rx, ry))| {
-        let row = p.row(y);
-        for (x, g) in rx.iter_mut().enumerate() {
-            let (l, r) = (x.saturating_sub(1), (x + 1).min(w - 1));
-            *g = diff(row[l], row[r], r - l);
-        }
-        let (u, d) = (y.saturating_sub(1), (y + 1).min(h - 1));
-        for ((g, &a), &b) in ry.iter_mut().zip(p.row(u)).zip(p.row(d)) {
-            *g = diff(a, b, d - u);
-        }
-    });
-    (gx, gy)
-}
-
 /// Bilinear sample of `p` at (x, y), clamped to the image.
 fn bilinear(p: &Plane<f32>, x: f64, y: f64) -> f64 {
     sample_bilinear(&p.data, p.width, p.height, x, y)
-}
-
-/// Bilinear sample of a row-major `w × h` plane at (x, y), clamped to the image (also [`crate::degrade`]'s
-/// misalignment).
-pub(crate) fn sample_bilinear(data: &[f32], w: usize, h: usize, x: f64, y: f64) -> f64 {
-    let x = x.clamp(0.0, (w - 1) as f64);
-    let y = y.clamp(0.0, (h - 1) as f64);
-    let (x0, y0) = ((x.floor() as usize).min(w.saturating_sub(2)), (y.floor() as usize).min(h.saturating_sub(2)));
-    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
-    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let at = |x: usize, y: usize| f64::from(data[y * w + x]);
-    let top = at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx;
-    let bottom = at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx;
-    top * (1.0 - fy) + bottom * fy
 }
 
 /// The right view's column that left pixel `i` (of a `w`-wide image) matches at its coarse disparity, where the
@@ -263,7 +228,7 @@ pub fn estimate(
     if w < 3 * BLOCK || h < 3 * BLOCK {
         return None;
     }
-    let (lgrad, rgrad) = rayon::join(|| gradients(left), || gradients(right));
+    let (lgrad, rgrad) = rayon::join(|| central_differences(left), || central_differences(right));
     let blocks: Vec<(usize, usize)> =
         (0..h / BLOCK).flat_map(|j| (0..w / BLOCK).map(move |i| (i * BLOCK, j * BLOCK))).collect();
     let mut v = VerticalOffset::zero(w, h);
@@ -346,18 +311,6 @@ fn best_whole_shift(left: &Plane<f32>, right: &Plane<f32>, disparity: &Disparity
         .iter()
         .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.abs().cmp(&a.0.abs())))
         .map_or(0, |&(dy, c)| if c.is_finite() { dy } else { 0 })
-}
-
-/// Keys' cubic convolution kernel (a = −½).
-fn keys(t: f64) -> f64 {
-    let t = t.abs();
-    if t < 1.0 {
-        (1.5 * t - 2.5) * t * t + 1.0
-    } else if t < 2.0 {
-        ((-0.5 * t + 2.5) * t - 4.0) * t + 2.0
-    } else {
-        0.0
-    }
 }
 
 /// The right view moved so that its matches lie on the left view's rows: out(x, y) = img(x, y + v(x, y)), cubic

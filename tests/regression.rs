@@ -147,9 +147,10 @@ fn one_view_out_of_focus_trainingq() {
     let Some(data) = common::data_dir() else { return };
     let mut off = Params::default();
     off.condition.sharpness_ratio = 0.0;
+    let blur = "blur:1.5".parse().unwrap();
     let errors = off_and_default(&data, &off, |image, view| match view {
         View::Left => image,
-        View::Right => jem::condition::gaussian_blur(&image, 1.5),
+        View::Right => degrade(&image, &blur, view, 1).unwrap(),
     });
     eprintln!("right view blurred σ 1.5: sharpness not matched {:.3}, matched {:.3}", errors[0], errors[1]);
     assert!(errors[1] < 0.85 * errors[0], "matched {:.3}, not matched {:.3}", errors[1], errors[0]);

@@ -1,16 +1,13 @@
 //! Input conditioning and the coarse prior (our addition, not in the paper): measure the pair, then adapt to it,
 //! so that one configuration serves clean, noisy, dark and unevenly exposed pairs (issue 15).
 //!
-//! 1. **Photometric alignment** (`experimental.match_histograms`, off by default). The right view's channels are mapped
-//!    onto the left view's by histogram specification (a monotonic lookup per channel). Measured worse than without
-//!    once the rest is on (it hurts PianoL, whose views are lit differently on purpose).
-//! 2. **Contrast** (`stretch.enabled`). A view whose robust range (the 0.5th to the 99.5th percentile of grey) is below
+//! 1. **Contrast** (`stretch.enabled`). A view whose robust range (the 0.5th to the 99.5th percentile of grey) is below
 //!    [`TARGET_RANGE`] / `stretch.min_gain` is stretched by an affine map to span [`TARGET_RANGE`] grey levels,
 //!    each view by its own range (one gain for both would push a darker right view below 0). A dark image gets
 //!    the contrast the colour thresholds (σf, μ, the weighted median's and the planes' colour weights) assume,
 //!    and its noise is then measured relative to its contrast: what matters for matching is the
 //!    signal-to-noise ratio, not the absolute grey levels.
-//! 3. **Noise** (`[condition.denoise]`). The noise σn of each view is measured after the stretch ([`estimate_noise`]); a
+//! 2. **Noise** (`[condition.denoise]`). The noise σn of each view is measured after the stretch ([`estimate_noise`]); a
 //!    view noisier than `denoise.min_sigma` is smoothed by an edge-preserving bilateral filter (range scale
 //!    `denoise.strength` × σn) **for the matching cost only**: Census bits of noisy near-flat windows flip at
 //!    random, and no averaging of the cost afterwards recovers a stable code; the guidance (colour weights of the
@@ -19,10 +16,10 @@
 //!    Census relies on. JPEG compression flattens the flat regions (σn ≈ 0) but leaves block steps on the
 //!    same image grid in both views; [`blockiness`] measures them, and a view's noise is taken as
 //!    max(σn, blockiness·√π/2) (the mean step between two blocks with independent errors of σ is 2σ/√π).
-//! 4. **Coarse prior** (`prior_*`, in [`crate::pipeline`], prior.rs): the whole pipeline first runs on the
+//! 3. **Coarse prior** (`prior_*`, in [`crate::pipeline`], prior.rs): the whole pipeline first runs on the
 //!    conditioned pair reduced 2× (noise halves, the range of labels too; a quarter of the plane segments, so
 //!    they keep their size in the scene), and the full-resolution cost of label d at pixel i
-//!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = max(`experimental.prior_base` + `prior.per_sigma`·σn,
+//!    gets λᵢ·min(max(|d − d_coarse,i| − margin, 0), trunc), λᵢ = max(`prior.per_sigma`·σn,
 //!    `prior.flat` × the flatness of the pixel's cost, [`crate::cost::flatness`]: an untextured surface follows
 //!    the coarse answer whatever the noise) × the coarse run's confidence at i (its max-marginal, with
 //!    `prior.confidence`) × `prior.untrusted` where the coarse left-right check failed (the fill guessed there),
@@ -33,10 +30,8 @@
 //!    objects under noise. The coarse level removes the gross errors that fine-scale noise causes, the fine level
 //!    keeps the precision; the prior also places each pixel well enough that three full-resolution iterations do
 //!    the work of five. With `prior.levels` L the coarse run has a coarse prior of its own, L − 1 levels deep (default
-//!    3: the half-resolution run is guided by a quarter-resolution one, and that by an eighth-resolution one). With
-//!    `experimental.prior_window` the full resolution searches only the labels the coarse run found, widened by two
-//!    coarse labels (off by default: as accurate, and on MiddEval3's ranges hardly faster).
-//! 5. **Vertical alignment** (`vertical.enabled`, in [`crate::run`] and the tiled run): with the coarse run's answer,
+//!    3: the half-resolution run is guided by a quarter-resolution one, and that by an eighth-resolution one).
+//! 4. **Vertical alignment** (`vertical.enabled`, in [`crate::run`] and the tiled run): with the coarse run's answer,
 //!    the right view's residual vertical offset (imperfect rectification) is measured and, where it reaches
 //!    `vertical.min_px`, removed from the guidance and the cost pair before the full-resolution cost
 //!    ([`crate::rectify`]).
@@ -49,20 +44,20 @@ mod denoise;
 mod jpeg;
 mod noise;
 mod sharpness;
-mod stats;
 
 use std::borrow::Cow;
 
 use crate::image::{RgbImage, StereoPair};
 use crate::params::ConditionParams;
 
+use crate::imgproc::filter::gaussian_blur;
 pub use contrast::TARGET_RANGE;
-use contrast::{match_histograms, stretch};
+use contrast::stretch;
 use denoise::bilateral;
 pub use jpeg::{blockiness, jpeg_noise};
 pub use noise::{channel_noise, estimate_noise};
 use sharpness::matching_blur;
-pub use sharpness::{gaussian_blur, sharpness};
+pub use sharpness::sharpness;
 
 /// What was measured on a pair, for diagnostics (`jem -v`) and the adaptive stages.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -71,9 +66,6 @@ pub struct PairStats {
     pub gain: [f32; 2],
     /// Noise σ of the left and right view after the stretch, in grey levels (mean of the channels).
     pub noise: [f32; 2],
-    /// Noise σ of the grey images the cost sees (after denoising; the larger view's); measured only when the
-    /// Census dead band needs it (`experimental.census_band` > 0), else 0.
-    pub residual_grey_noise: f32,
     /// The Gaussian blur σ (px) given to the left and the right view of the cost pair so that their sharpness
     /// matches ([`sharpness`]; 0 = none).
     pub cost_blur: [f32; 2],
@@ -135,10 +127,6 @@ pub fn condition_pair<'a>(
     noise_ceiling: Option<[f32; 2]>,
 ) -> Conditioned<'a> {
     let mut guide = Cow::Borrowed(pair);
-    if p.experimental.match_histograms {
-        let right = match_histograms(&pair.right, &pair.left);
-        guide.to_mut().right = right;
-    }
     // Each view by its own range: a view darker than the other (exposure, gamma) is not pushed below 0 by the
     // other's gain, and the two end up with about the same contrast.
     let gain = if p.stretch.enabled { stretch(&mut guide, p.stretch.min_gain) } else { [1.0; 2] };
@@ -175,12 +163,6 @@ pub fn condition_pair<'a>(
         right: bilateral(&guide.right, p.denoise.sigma_xy, range(nr)),
         ndisp: pair.ndisp,
     });
-    let residual_grey_noise = if p.experimental.census_band > 0.0 {
-        let c = cost.as_ref().unwrap_or(&guide);
-        estimate_noise(&c.left.to_grey()).max(estimate_noise(&c.right.to_grey()))
-    } else {
-        0.0
-    };
     // One view sharper than the other (focus, a lens, motion): the Census codes of its fine texture have no
     // counterpart in the other view. The sharper view of the cost pair is blurred until the two match.
     let mut cost = cost;
@@ -202,7 +184,7 @@ pub fn condition_pair<'a>(
             cost = Some(pair);
         }
     }
-    Conditioned { guide, cost, stats: PairStats { gain, noise, residual_grey_noise, cost_blur, blocking, jpeg } }
+    Conditioned { guide, cost, stats: PairStats { gain, noise, cost_blur, blocking, jpeg } }
 }
 
 /// Test images shared by the conditioning stages' tests.

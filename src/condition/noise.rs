@@ -4,6 +4,7 @@
 use rayon::prelude::*;
 
 use crate::image::{Plane, RgbImage};
+use crate::imgproc::stats::rank_value;
 
 /// The fraction of pixels, those of lowest gradient, on which [`estimate_noise`] measures.
 const FLAT_FRACTION: f64 = 0.25;
@@ -54,9 +55,9 @@ fn noise_of(data: &[f32], w: usize, h: usize) -> f32 {
     if grad.is_empty() {
         return 0.0;
     }
-    let median_grad = crate::cost::rank_value(&mut grad.clone(), FLAT_FRACTION);
+    let median_grad = rank_value(&mut grad.clone(), FLAT_FRACTION);
     let mut flat: Vec<f32> = resp.iter().zip(&grad).filter(|(_, g)| **g <= median_grad).map(|(r, _)| *r).collect();
-    crate::cost::rank_value(&mut flat, 0.5) / (6.0 * 0.6745)
+    rank_value(&mut flat, 0.5) / (6.0 * 0.6745)
 }
 
 #[cfg(test)]

@@ -3,7 +3,8 @@
 
 use rayon::prelude::*;
 
-use crate::image::{Plane, RgbImage};
+use crate::image::Plane;
+use crate::imgproc::filter::gaussian_blur_plane;
 
 /// How sharp a grey image is, independently of its contrast: the mean |Laplacian| (4-neighbour) over the mean
 /// |gradient| (central differences, both directions), interior pixels. Blur lowers the fine scale more than the
@@ -55,48 +56,12 @@ pub(super) fn matching_blur(grey: &Plane<f32>, target: f32) -> f32 {
     if lo > 1 && gap(lo - 1) < gap(lo) { sigma(lo - 1) } else { sigma(lo) }
 }
 
-/// A separable Gaussian blur of every channel (σ px, radius ⌈3σ⌉, borders replicated; not quantised).
-pub fn gaussian_blur(img: &RgbImage, sigma: f32) -> RgbImage {
-    let (w, h) = img.dims();
-    let mut out = img.clone();
-    for ch in &mut out.channels {
-        *ch = gaussian_blur_plane(ch, w, h, sigma);
-    }
-    out
-}
-
-/// [`gaussian_blur`] of one row-major `w` × `h` channel.
-fn gaussian_blur_plane(data: &[f32], w: usize, h: usize, sigma: f32) -> Vec<f32> {
-    if sigma <= 0.0 || data.is_empty() {
-        return data.to_vec();
-    }
-    let r = (3.0 * sigma).ceil() as usize;
-    let kernel: Vec<f32> =
-        (0..=2 * r).map(|k| (-((k as f32 - r as f32).powi(2)) / (2.0 * sigma * sigma)).exp()).collect();
-    let total: f32 = kernel.iter().sum();
-    let kernel: Vec<f32> = kernel.iter().map(|k| k / total).collect();
-    let mut tmp = vec![0.0f32; w * h];
-    tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let src = &data[y * w..][..w];
-        for (x, o) in row.iter_mut().enumerate() {
-            *o = kernel.iter().enumerate().map(|(k, kv)| kv * src[(x + k).saturating_sub(r).min(w - 1)]).sum();
-        }
-    });
-    let mut out = vec![0.0f32; w * h];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        for (k, kv) in kernel.iter().enumerate() {
-            let src = &tmp[(y + k).saturating_sub(r).min(h - 1) * w..][..w];
-            row.iter_mut().zip(src).for_each(|(o, s)| *o += kv * s);
-        }
-    });
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::condition::condition_pair;
-    use crate::image::StereoPair;
+    use crate::image::{RgbImage, StereoPair};
+    use crate::imgproc::filter::gaussian_blur;
     use crate::params::{ConditionParams, StretchParams};
 
     /// Sharpness does not depend on contrast, falls with blur, and a view blurred by σ 1.5 px gets a matching

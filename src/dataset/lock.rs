@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 
 use super::{Layout, Pair};
 use crate::error::{Error, Result};
+use crate::process::process_start;
 
 /// The locks a run holds; dropping it removes them (each only while it is still this run's).
 #[derive(Debug)]
@@ -62,7 +63,7 @@ impl Holder {
 
     /// `Some(false)` if the process is gone for sure; `None` if this machine cannot tell (another host, no `/proc`).
     fn alive(&self) -> Option<bool> {
-        if self.host != crate::degrade::host_name() || !Path::new("/proc/self").exists() {
+        if self.host != crate::process::host_name() || !crate::process::proc_available() {
             return None;
         }
         match process_start(&self.pid.to_string()) {
@@ -74,13 +75,6 @@ impl Holder {
     fn describe(&self) -> String {
         format!("pid {} on {}", self.pid, if self.host.is_empty() { "an unnamed host" } else { &self.host })
     }
-}
-
-/// The start time (clock ticks after boot, `/proc/PID/stat` field 22) of process `pid` (`self` for this one).
-fn process_start(pid: &str) -> Option<u64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    // The command name (field 2) is in parentheses and may hold spaces: count from the last ')'.
-    stat.rsplit_once(')')?.1.split_whitespace().nth(19)?.parse().ok()
 }
 
 /// Locks the results of `alg` for these pairs against a second writer (see the module doc): the scene folders of
@@ -97,7 +91,7 @@ pub fn lock_results(
     shard: Option<(usize, usize)>,
 ) -> Result<ResultsLock> {
     let start = process_start("self").map_or(String::new(), |s| format!("start {s}\n"));
-    let token = format!("pid {}\nhost {}\n{start}", std::process::id(), crate::degrade::host_name());
+    let token = format!("pid {}\nhost {}\n{start}", std::process::id(), crate::process::host_name());
     let mut lock = ResultsLock { files: Vec::new(), token, taken_over: Vec::new() };
     let mut dirs = std::collections::BTreeSet::new();
     for pair in pairs {
@@ -273,7 +267,7 @@ mod tests {
     use super::*;
 
     fn empty_lock() -> ResultsLock {
-        let token = format!("pid {}\nhost {}\n", std::process::id(), crate::degrade::host_name());
+        let token = format!("pid {}\nhost {}\n", std::process::id(), crate::process::host_name());
         ResultsLock { files: Vec::new(), token, taken_over: Vec::new() }
     }
 
@@ -281,7 +275,7 @@ mod tests {
     fn live_locks_are_refused_stale_ones_taken_over_and_only_ours_removed() {
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join(".jem-lock");
-        let host = crate::degrade::host_name();
+        let host = crate::process::host_name();
         assert!(process_start("self").is_some(), "this test needs /proc");
 
         // Live: this process, with and without its start time; another host; unreadable.

@@ -31,7 +31,6 @@ use std::str::FromStr;
 
 use crate::error::Result;
 
-pub use kitti::interpolate_background;
 pub use lock::{ResultsLock, lock_results, writers};
 pub use results::check_results_dirs;
 

@@ -34,7 +34,7 @@
 //! [`dataset`](crate::dataset) layout puts them. ETH3D: `mask0nocc.png == 255` for `nonocc`, every GT pixel for
 //! `all` (its mask does not mark "no ground truth"). KITTI, as its development kit: `nonocc` scores against
 //! `disp_noc*`, `all` against `disp_occ*` (16-bit PNG, 0 = unknown); the result's invalid pixels are first
-//! filled by [`interpolate_background`](crate::dataset::interpolate_background), so every error column counts
+//! filled by [`interpolate_background`], so every error column counts
 //! them with their filled value, and `invalid` reports the share that was invalid before the fill. The KITTI
 //! table leads with `d1`; the MiddEval3 and ETH3D tables do not show it (the JSON and CSV of a KITTI report
 //! have it).
@@ -55,11 +55,13 @@
 //! - `format.rs`: [`render`] prints reports as a text or Markdown table, JSON or CSV.
 
 mod format;
+mod kitti_fill;
 mod metrics;
 mod paper;
 mod report;
 
 pub use format::{Format, render};
+pub use kitti_fill::interpolate_background;
 pub(crate) use metrics::check_size;
 pub use metrics::{
     BAD_THRESHOLDS_PX, D1_RELATIVE, D1_THRESHOLD_PX, MaskMode, Metrics, evaluate, evaluate_files, evaluate_scene,

@@ -120,7 +120,7 @@ impl AlgReport {
 /// # Errors
 /// [`Error::Io`] if `dir` cannot be read, [`Error::Input`] if it holds no such folder.
 pub fn find_gt_scenes(dir: &Path) -> Result<Vec<PathBuf>> {
-    let scenes = crate::batch::find_dirs_with(&[dir.to_path_buf()], &["disp0GT.pfm"])?;
+    let scenes = crate::dataset::walk::find_dirs_with(&[dir.to_path_buf()], &["disp0GT.pfm"])?;
     if scenes.is_empty() {
         return Err(Error::Input(format!("no scene folder with a disp0GT.pfm under {}", dir.display())));
     }
@@ -222,7 +222,7 @@ fn score_pair(pair: &Pair, alg: &str, scale: u32, mask_mode: MaskMode, src: &Sou
     check_size(&result, "result", map.dims(), &format!("the ground truth {}", truth.disparity.display()), gt.dims())?;
     let known = gt.data.iter().filter(|g| g.is_finite()).count();
     let invalid_before = gt.data.iter().zip(&map.data).filter(|(g, d)| g.is_finite() && !d.is_finite()).count();
-    crate::dataset::interpolate_background(&mut map);
+    super::interpolate_background(&mut map);
     let mut metrics = evaluate(&map, &gt, None, unbounded, scale, mask_mode);
     if metrics.pixels == 0 {
         return Err(Error::Input(format!("{}: no pixel with ground truth", truth.disparity.display())));

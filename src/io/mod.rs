@@ -225,18 +225,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic_with(path, |file| file.write_all(bytes).map_err(|e| Error::io(path, e)))
 }
 
-/// The soft file-size limit of this process (`ulimit -f`), from `/proc/self/limits` (Linux); `None` when
-/// unlimited or unknown.
-fn file_size_limit() -> Option<u64> {
-    let limits = std::fs::read_to_string("/proc/self/limits").ok()?;
-    let line = limits.lines().find(|l| l.starts_with("Max file size"))?;
-    line["Max file size".len()..].split_whitespace().next()?.parse().ok()
-}
-
 /// Refuses, before writing, a file larger than the file-size limit: the kernel would kill the process in the
 /// middle of the write (SIGXFSZ), leaving the temporary file behind.
 fn check_file_size_limit(path: &Path, bytes: u64) -> Result<()> {
-    match file_size_limit() {
+    match crate::process::file_size_limit() {
         Some(limit) if bytes > limit => Err(Error::Input(format!(
             "{}: needs {bytes} bytes but the file-size limit (ulimit -f) is {limit} bytes",
             path.display()

@@ -1,7 +1,8 @@
 //! Parameters of input conditioning and the coarse prior ([`crate::condition`]), one sub-table per purpose:
 //! `[condition.stretch]`, `[condition.denoise]`, `[condition.noise]` (how the measured noise widens the cost),
-//! `[condition.prior]`, `[condition.vertical]` and `[condition.experimental]`. Until issue 38 these keys sat flat
-//! in `[condition]`; a config that still uses a flat key is refused with the key's new name.
+//! `[condition.prior]` and `[condition.vertical]`. A config that still uses a flat key of older versions is refused
+//! with the key's new name; one that sets a removed experiment switch (`[condition.experimental]`) is refused with
+//! where it can still be found.
 
 use serde::{Deserialize, Serialize};
 
@@ -28,8 +29,6 @@ pub struct ConditionParams {
     pub prior: PriorParams,
     /// `[condition.vertical]`: the right view's residual vertical offset.
     pub vertical: VerticalParams,
-    /// Switches measured and not kept, off by default (`[condition.experimental]`).
-    pub experimental: ExperimentalConditionParams,
 }
 
 /// `[condition.stretch]`: the contrast stretch ([`crate::condition`], "Contrast").
@@ -120,28 +119,10 @@ pub struct VerticalParams {
     pub min_px: f32,
 }
 
-/// `[condition.experimental]`: switches that were measured and not adopted, off by default and set by no shipped
-/// config. They stay so that the measurements in docs/tuning-log.md can be repeated
-/// (`--set condition.experimental.KEY=VALUE`); a switch that measurement keeps moves out of this table.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ExperimentalConditionParams {
-    /// Map the right view's histogram onto the left's. Worse than without once the rest of the conditioning is on:
-    /// it hurts PianoL, whose views are lit differently on purpose (docs/tuning-log.md, "Robustness").
-    pub match_histograms: bool,
-    /// Census dead band as a multiple of the grey noise σ measured after denoising; 0 = none. A band tied to the
-    /// measured noise (1 to 3) changed nothing measurable (docs/tuning-log.md).
-    pub census_band: f32,
-    /// A fixed prior weight added to the noise-scaled one (`prior.per_sigma`); 0 = none. Tried for blur, which
-    /// lowers the measured noise, and not kept (docs/tuning-log.md).
-    pub prior_base: f32,
-    /// The coarse run gets a coarse prior of its own (recursively) when the measured σn is at least this; 0 =
-    /// never. Superseded by `condition.prior.levels`, which gives every pair its chain.
-    pub prior_recurse_sigma: f32,
-    /// Search only the labels the coarse run found (its smallest and largest disparity, widened by two coarse
-    /// labels) at full resolution: as accurate, and on MiddEval3's ranges hardly faster (docs/tuning-log.md).
-    pub prior_window: bool,
-}
+/// The git tag of the last version with `[condition.experimental]` (switches measured and not kept: histogram
+/// matching, a noise-tied Census band, a fixed prior weight, a recursive coarse prior, a label window at full
+/// resolution); docs/tuning-log.md's measurements of them run there.
+pub(crate) const EXPERIMENTS_TAG: &str = "experiments-last";
 
 /// The flat `[condition]` keys of configs written before the sub-tables, and their names now (a config that uses
 /// one is refused with the new name, rather than read differently).
@@ -234,7 +215,6 @@ impl Default for ConditionParams {
             noise: NoiseParams::default(),
             prior: PriorParams::default(),
             vertical: VerticalParams::default(),
-            experimental: ExperimentalConditionParams::default(),
         }
     }
 }
@@ -251,21 +231,17 @@ impl ConditionParams {
             noise: NoiseParams { jpeg: false, block_band: 0.0, support_per_sigma: 0.0, grad_eps_per_sigma: 0.0 },
             prior: PriorParams { per_sigma: 0.0, confidence: false, detail: 0.0, spread: 0, ..on.prior },
             vertical: VerticalParams { enabled: false, ..on.vertical },
-            experimental: ExperimentalConditionParams::default(),
         }
     }
 
     /// Whether any part is on (when none is, the pair goes to the cost unchanged).
     pub fn is_active(&self) -> bool {
         self.enabled
-            && (self.experimental.match_histograms
-                || self.stretch.enabled
+            && (self.stretch.enabled
                 || self.denoise.strength > 0.0
-                || self.experimental.census_band > 0.0
                 || self.noise.block_band > 0.0
                 || self.noise.jpeg
                 || self.prior.per_sigma > 0.0
-                || self.experimental.prior_base > 0.0
                 || self.prior.flat > 0.0)
     }
 
@@ -274,7 +250,7 @@ impl ConditionParams {
     /// # Errors
     /// [`Error::InvalidParam`] naming the first offending key, its value and the valid range.
     pub fn validate(&self) -> Result<()> {
-        let (d, n, p, x) = (&self.denoise, &self.noise, &self.prior, &self.experimental);
+        let (d, n, p) = (&self.denoise, &self.noise, &self.prior);
         check_nonneg("condition.denoise.strength", d.strength)?;
         if !(d.sigma_xy.is_finite() && (0.0..=10.0).contains(&d.sigma_xy)) {
             return Err(Error::param("condition.denoise.sigma_xy", d.sigma_xy, "0 to 10"));
@@ -283,16 +259,13 @@ impl ConditionParams {
             return Err(Error::param("condition.stretch.min_gain", self.stretch.min_gain, "at least 1"));
         }
         check_nonneg("condition.denoise.min_sigma", d.min_sigma)?;
-        check_nonneg("condition.experimental.census_band", x.census_band)?;
         check_nonneg("condition.noise.block_band", n.block_band)?;
         check_nonneg("condition.noise.support_per_sigma", n.support_per_sigma)?;
         check_nonneg("condition.noise.grad_eps_per_sigma", n.grad_eps_per_sigma)?;
         check_nonneg("condition.prior.per_sigma", p.per_sigma)?;
-        check_nonneg("condition.experimental.prior_base", x.prior_base)?;
         check_nonneg("condition.prior.untrusted", p.untrusted)?;
         check_nonneg("condition.prior.detail", p.detail)?;
         check_nonneg("condition.prior.flat", p.flat)?;
-        check_nonneg("condition.experimental.prior_recurse_sigma", x.prior_recurse_sigma)?;
         if !(1..=4).contains(&p.levels) {
             return Err(Error::param("condition.prior.levels", p.levels, "1 to 4"));
         }

@@ -27,10 +27,7 @@ mod meanfield;
 mod sps;
 mod wmedian;
 
-pub use condition::{
-    ConditionParams, DenoiseParams, ExperimentalConditionParams, NoiseParams, PriorParams, StretchParams,
-    VerticalParams,
-};
+pub use condition::{ConditionParams, DenoiseParams, NoiseParams, PriorParams, StretchParams, VerticalParams};
 pub use cost::CostParams;
 pub use lrc::{LrcMode, LrcParams};
 pub use meanfield::{MeanFieldParams, Normalization, Schedule};
@@ -196,6 +193,16 @@ impl Params {
             );
             return Err(Error::Toml { path: origin, msg });
         }
+        if let Some(toml::Value::Table(c)) = table.get("condition")
+            && c.contains_key("experimental")
+        {
+            let msg = format!(
+                "`[condition.experimental]` was removed: its switches were measured and not kept; the tag {} holds \
+                 the last version that has them (docs/tuning-log.md)",
+                condition::EXPERIMENTS_TAG
+            );
+            return Err(Error::Toml { path: origin, msg });
+        }
         let params = Params::deserialize(toml::Value::Table(table))
             .map_err(|e| Error::Toml { path: origin, msg: one_line(&e.to_string()) })?;
         params.validate()?;
@@ -343,6 +350,15 @@ mod tests {
         assert_eq!(p.condition.prior.levels, 2);
         let p = Params::from_toml_str("[condition.stretch]\nmin_gain = 2.0\n", Path::new("c.toml")).unwrap();
         assert_eq!(p.condition.stretch.min_gain, 2.0);
+    }
+
+    #[test]
+    fn removed_experiment_switches_name_the_tag_that_has_them() {
+        let e = Params::from_toml_str("[condition.experimental]\nprior_window = true\n", Path::new("x.toml"));
+        let msg = e.unwrap_err().to_string();
+        assert!(msg.contains("x.toml") && msg.contains("experiments-last"), "{msg}");
+        let msg = Params::load(None, &["condition.experimental.census_band=1".into()]).unwrap_err().to_string();
+        assert!(msg.contains("removed") && msg.contains("experiments-last"), "{msg}");
     }
 
     #[test]

@@ -86,10 +86,7 @@ pub fn check_memory(width: usize, height: usize, ndisp: usize, params: &Params, 
 /// A default memory limit: 80% of the machine's physical memory (from `/proc/meminfo`), or 8 GiB where that
 /// cannot be read.
 pub fn default_memory_limit() -> u64 {
-    let total_kib = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
-        s.lines().find(|l| l.starts_with("MemTotal:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-    });
-    total_kib.map(|k| k * 1024 / 5 * 4).unwrap_or(8 << 30)
+    crate::process::physical_memory_bytes().map(|b| b / 1024 * 1024 / 5 * 4).unwrap_or(8 << 30)
 }
 
 #[cfg(test)]

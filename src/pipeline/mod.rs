@@ -7,7 +7,7 @@
 //!        ─► left-right check ─► fill ─► weighted median ─► planes
 //! ```
 //!
-//! Around it: `window.rs` (label windows: the fine pass on the labels the coarse answer holds only), [`tile`]
+//! Around it: `window.rs` (label windows: a tile's fine pass on the labels the coarse answer holds only), [`tile`]
 //! (pairs too large for one cost volume: a coarse level, then tiles over label windows), `memory.rs` (the memory
 //! model and guard: [`estimate_memory_bytes`], [`check_memory`]) and `output.rs` (what a run returns:
 //! [`Output`], [`Measured`], [`Timings`]).
@@ -23,17 +23,13 @@ mod window;
 use crate::error::{Error, Result};
 use crate::image::StereoPair;
 use crate::params::Params;
-use crate::{lattice, meanfield, scale};
+use crate::{lattice, scale};
 
 use fine::{FineInput, fine_pass};
 pub use memory::{PROCESS_BYTES, check_memory, default_memory_limit, estimate_memory_bytes};
 pub use output::{Measured, Output, Timings, VerticalMeasured};
 use prepared::Prepared;
-use prior::{CHAIN_FACTOR, CoarseLevel, Prior};
-
-/// The label window of `condition.experimental.prior_window` holds the coarse disparities widened by this many coarse
-/// labels either side.
-const WINDOW_MARGIN_COARSE_LABELS: usize = 2;
+use prior::CoarseLevel;
 
 /// Runs the whole pipeline on a pair (at 1/`params.downscale` resolution if that is > 1; see [`scale`]).
 ///
@@ -90,8 +86,7 @@ fn run_level(
     Ok(Output { disparity, confidence, consistent, timings: t, measured: low.measured })
 }
 
-/// The pipeline at the pair's own resolution, appending its stage times to `t`: prepare, coarse prior, fine pass
-/// (within the coarse answer's label window with `condition.experimental.prior_window`).
+/// The pipeline at the pair's own resolution, appending its stage times to `t`: prepare, coarse prior, fine pass.
 fn run_pipeline(
     params: &Params,
     pair: &StereoPair,
@@ -112,37 +107,11 @@ fn run_pipeline(
         cost_pair,
         cost_params: &input.cost_params,
         grad_norm_mean: input.grad_norm_mean,
-        prior: None,
+        prior: prior.as_ref(),
         left_from: 0,
     };
-    let window = prior.as_ref().filter(|_| params.condition.experimental.prior_window).and_then(|prior| {
-        window::label_window(&prior.disparity, guide.ndisp, WINDOW_MARGIN_COARSE_LABELS * CHAIN_FACTOR)
-    });
-    let mut out = match window {
-        None => fine_pass(params, &FineInput { prior: prior.as_ref(), ..fine }, &mut Default::default(), on_stage, t)?,
-        Some(window) => fine_pass_in_window(params, &fine, prior, window, on_stage, t)?,
-    };
+    let mut out = fine_pass(params, &fine, &mut Default::default(), on_stage, t)?;
     out.measured = measured;
-    Ok(out)
-}
-
-/// The fine pass over the label window `(lo, labels)` only: the right views shifted by `lo` columns, so that
-/// label d' is disparity lo + d', and `lo` added back to the answer. `fine` comes without its prior: `prior`
-/// is shifted to the window here.
-fn fine_pass_in_window(
-    params: &Params,
-    fine: &FineInput<'_>,
-    prior: Option<Prior>,
-    (lo, labels): (usize, usize),
-    on_stage: &dyn Fn(&str),
-    t: Timings,
-) -> Result<Output> {
-    let (guide, cost_shifted) = window::shift_right_views(fine.guide, fine.cost_pair, lo, labels)?;
-    let prior = prior.map(|p| p.shifted(lo));
-    let cost_pair = cost_shifted.as_ref().unwrap_or(&guide);
-    let shifted = FineInput { guide: &guide, cost_pair, prior: prior.as_ref(), ..*fine };
-    let mut out = fine_pass(params, &shifted, &mut meanfield::Buffers::default(), on_stage, t)?;
-    out.disparity.data.iter_mut().for_each(|d| *d += lo as f32);
     Ok(out)
 }
 

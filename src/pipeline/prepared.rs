@@ -10,8 +10,8 @@ use crate::{condition, cost, rectify};
 use super::output::{Measured, Output, Timings, VerticalMeasured};
 
 /// A pair after [`condition::condition_pair`] (when `[condition]` is active), with what follows from its
-/// measurements: the cost parameters (the Census dead band grows with the residual noise) and the coarse prior's
-/// weight λ = `experimental.prior_base` + `prior.per_sigma`·σn (0 when conditioning is off).
+/// measurements: the cost parameters (the Census dead band grows with JPEG's block steps, the support and the
+/// gradient's ε with the noise) and the coarse prior's weight λ = `prior.per_sigma`·σn (0 when conditioning is off).
 pub(crate) struct Prepared<'a> {
     conditioned: Option<condition::Conditioned<'a>>,
     /// The cost parameters for this pair.
@@ -37,9 +37,8 @@ impl<'a> Prepared<'a> {
         let conditioned =
             c.is_active().then(|| t.time("condition", || condition::condition_pair(pair, c, noise_ceiling)));
         if let Some(cond) = &conditioned {
-            prior_weight = c.experimental.prior_base + c.prior.per_sigma * cond.stats.sigma();
+            prior_weight = c.prior.per_sigma * cond.stats.sigma();
             prior_flat = c.prior.flat;
-            cost_params.census_dead_band += c.experimental.census_band * cond.stats.residual_grey_noise;
             // JPEG: steps no larger than the block grid's own are compression artefacts, not texture.
             cost_params.census_dead_band +=
                 cond.stats.block_band(c) * cond.stats.blocking[0].max(cond.stats.blocking[1]);
@@ -109,11 +108,6 @@ impl<'a> Prepared<'a> {
     /// independent noise (`None` when conditioning is off).
     pub(crate) fn noise_ceiling(&self, factor: usize) -> Option<[f32; 2]> {
         self.conditioned.as_ref().map(|cond| cond.stats.noise.map(|v| v / factor as f32))
-    }
-
-    /// The measured noise σn that the adaptive stages scale with (0 when conditioning is off).
-    pub(crate) fn sigma(&self) -> f32 {
-        self.conditioned.as_ref().map_or(0.0, |cond| cond.stats.sigma())
     }
 
     /// The block band that applied at this level ([`condition::PairStats::block_band`]; 0 when conditioning

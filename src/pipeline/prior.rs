@@ -32,7 +32,7 @@ pub(crate) struct CoarseLevel {
     pub stage: &'static str,
     /// The coarse run takes the pair as conditioned at this level, with the conditioning that is done already
     /// (histogram matching, stretch, JPEG) off, this level's block band kept, and a coarse prior of its own one level
-    /// fewer (`prior.levels`; or while the pair is noisy enough, `experimental.prior_recurse_sigma`). Off (tiles), the
+    /// fewer (`prior.levels`). Off (tiles), the
     /// coarse level is an ordinary run on the input pair at its size, conditioned by itself.
     pub on_conditioned_pair: bool,
     /// The coarse run's plane segment count is scaled down with its area: the same segment size in the scene. Off
@@ -96,23 +96,15 @@ impl CoarseLevel {
         }
         if self.on_conditioned_pair {
             let c = &params.condition;
-            let sigma = input.sigma();
             let deeper = c.prior.levels > 1;
-            let x = &c.experimental;
-            let recurse = deeper || (x.prior_recurse_sigma > 0.0 && sigma >= x.prior_recurse_sigma);
             coarse.condition = params::ConditionParams {
                 stretch: params::StretchParams { enabled: false, ..c.stretch },
                 noise: params::NoiseParams { jpeg: false, block_band: input.block_band(c), ..c.noise },
                 prior: params::PriorParams {
-                    per_sigma: if recurse { c.prior.per_sigma } else { 0.0 },
-                    flat: if recurse { c.prior.flat } else { 0.0 },
+                    per_sigma: if deeper { c.prior.per_sigma } else { 0.0 },
+                    flat: if deeper { c.prior.flat } else { 0.0 },
                     levels: if deeper { c.prior.levels - 1 } else { 1 },
                     ..c.prior
-                },
-                experimental: params::ExperimentalConditionParams {
-                    match_histograms: false,
-                    prior_base: if recurse { x.prior_base } else { 0.0 },
-                    ..*x
                 },
                 ..*c
             };
@@ -301,15 +293,6 @@ impl Prior {
             self.confidence.data.iter_mut().zip(&f.data).for_each(|(c, f)| *c *= f);
         }
     }
-
-    /// The prior in the labels of a label window that starts at disparity `lo` (label d' is disparity lo + d').
-    pub(crate) fn shifted(mut self, lo: usize) -> Prior {
-        let free = self.free.iter_mut().flat_map(|(low, high)| [low, high]);
-        for plane in std::iter::once(&mut self.disparity).chain(free) {
-            plane.data.iter_mut().for_each(|d| *d -= lo as f32);
-        }
-        self
-    }
 }
 
 /// The least weight of the coarse prior in a tile whose full resolution holds no more detail than its coarse
@@ -360,8 +343,8 @@ pub(crate) fn detail_factor(grey: &Plane<f32>, factor: usize, k: f32) -> Plane<f
             *v = g[x] - means[x / f];
         }
     });
-    let mut out = crate::cost::local_mean_abs(&lost, 1);
-    let scale = k * crate::cost::plane_mean(&out);
+    let mut out = crate::imgproc::filter::local_mean_abs(&lost, 1);
+    let scale = k * crate::imgproc::stats::plane_mean(&out);
     if scale > 0.0 && scale.is_finite() {
         out.data.iter_mut().for_each(|d| *d = 1.0 / (1.0 + *d / scale));
     } else {

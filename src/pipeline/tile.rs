@@ -396,7 +396,6 @@ impl TileJob<'_> {
 mod tests {
     use super::*;
 
-    use super::super::window::label_window;
     use crate::image::{DisparityMap, RgbImage};
     use crate::synth::{MASK_VISIBLE, SynthParams, render_scene};
 
@@ -508,25 +507,6 @@ mod tests {
         assert_eq!(again.disparity.data, all.disparity.data);
         let again = pass(k, &mut Default::default());
         assert_eq!(again.disparity.data, kept.disparity.data);
-    }
-
-    /// The default pipeline with a label window from the coarse run gives the same map (up to 1 px on ≥ 98 %
-    /// of the pixels) when the window holds the scene's disparities, with ndisp far above them.
-    #[test]
-    fn label_window_keeps_the_answer() {
-        let scene = render_scene(&SynthParams { width: 320, height: 240, ndisp: 48, seed: 2 }).unwrap();
-        let pair = StereoPair::new(scene.left.clone(), scene.right.clone(), 150).unwrap();
-        let full = crate::run(&Params::default(), &pair).unwrap();
-        let mut p = Params::default();
-        p.condition.experimental.prior_window = true;
-        let windowed = crate::run(&p, &pair).unwrap();
-        let (e_w, e_full, apart) = compare(&windowed.disparity, &full.disparity, &scene.gt, &scene.mask);
-        assert!(apart <= 0.02, "{:.1} % apart", 100.0 * apart);
-        assert!(e_w <= e_full + 0.05, "{e_w} vs {e_full}");
-        let coarse = Plane::from_vec(3, 1, vec![10.2, f32::INFINITY, 20.7]);
-        assert_eq!(label_window(&coarse, 100, 4), Some((6, 20)));
-        assert_eq!(label_window(&coarse, 24, 4), Some((6, 18)));
-        assert_eq!(label_window(&coarse, 16, 12), None, "no narrower than the range");
     }
 
     /// Same input, same plan: byte-identical output whatever the thread count.

@@ -1,6 +1,5 @@
-//! Label windows: a pair whose disparities the coarse answer puts in a narrow part of the range is matched on those
-//! labels only, its right views shifted so that label d' is disparity lo + d' (`condition.experimental.prior_window`,
-//! and every tile of [`super::tile`]).
+//! Label windows: a tile of [`super::tile`] whose disparities the coarse answer puts in a narrow part of the range
+//! is matched on those labels only, its right views shifted so that label d' is disparity lo + d'.
 
 use crate::error::Result;
 use crate::image::{DisparityMap, Plane, RgbImage, StereoPair};
@@ -21,15 +20,6 @@ pub(crate) struct Rect {
     pub y1: usize,
 }
 
-/// The label window `(lo, labels)` that holds every finite disparity of `coarse`, widened by `margin` labels
-/// and clipped to `0..ndisp`; `None` when it would not be narrower than the full range (or there is no finite
-/// disparity).
-pub(crate) fn label_window(coarse: &DisparityMap, ndisp: usize, margin: usize) -> Option<(usize, usize)> {
-    let all = Rect { x0: 0, y0: 0, x1: coarse.width, y1: coarse.height };
-    let (lo, labels) = window_in(coarse, all, ndisp, margin)?;
-    (labels < ndisp).then_some((lo, labels))
-}
-
 /// The label window `(lo, labels)` that holds every finite disparity of `coarse` inside `r`, widened by `margin`
 /// labels and clipped to `0..ndisp`; `None` when there is no finite disparity there.
 pub(crate) fn window_in(coarse: &DisparityMap, r: Rect, ndisp: usize, margin: usize) -> Option<(usize, usize)> {
@@ -47,22 +37,6 @@ pub(crate) fn window_in(coarse: &DisparityMap, r: Rect, ndisp: usize, margin: us
     let lo = (dmin.floor() as usize).saturating_sub(margin).min(ndisp - 1);
     let hi = (dmax.ceil() as usize + margin).clamp(lo, ndisp - 1);
     Some((lo, hi - lo + 1))
-}
-
-/// The guidance and the cost pair (`None` when the cost pair is the guidance itself) with their right views
-/// shifted right by `lo` columns (column x shows column x − lo; the first column repeats where that is left of
-/// the image) and `labels` labels: label d' of the result is disparity `lo + d'`.
-///
-/// # Errors
-/// As [`StereoPair::new`].
-pub(crate) fn shift_right_views(
-    guide: &StereoPair,
-    cost: &StereoPair,
-    lo: usize,
-    labels: usize,
-) -> Result<(StereoPair, Option<StereoPair>)> {
-    let (w, h) = guide.left.dims();
-    cut_pairs(guide, cost, Rect { x0: 0, y0: 0, x1: w, y1: h }, lo, labels)
 }
 
 /// The crop `r` of the guidance and the cost pair, right views shifted by `lo` columns ([`cut`]), with `labels`
@@ -108,6 +82,18 @@ pub(crate) fn cut_plane(p: &Plane<f32>, r: Rect, f: impl Fn(f32) -> f32) -> Plan
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_label_window_holds_the_finite_disparities_and_its_margin() {
+        let coarse = Plane::from_vec(3, 2, vec![10.2, f32::INFINITY, 20.7, 3.0, 40.0, 2.5]);
+        let top = Rect { x0: 0, y0: 0, x1: 3, y1: 1 };
+        assert_eq!(window_in(&coarse, top, 100, 4), Some((6, 20)));
+        assert_eq!(window_in(&coarse, top, 24, 4), Some((6, 18)), "clipped to the range");
+        let middle = Rect { x0: 1, y0: 0, x1: 2, y1: 1 };
+        assert_eq!(window_in(&coarse, middle, 100, 4), None, "no finite disparity");
+        let all = Rect { x0: 0, y0: 0, x1: 3, y1: 2 };
+        assert_eq!(window_in(&coarse, all, 100, 0), Some((2, 39)));
+    }
 
     #[test]
     fn cut_shifts_and_repeats_the_first_column() {

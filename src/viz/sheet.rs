@@ -272,7 +272,7 @@ fn pair_row(pair: &Pair, result: PathBuf, opts: &SheetOptions) -> SheetRow {
 /// Every MiddEval3 scene folder under `dir` with `im0.png` and `disp0<alg>.pfm`.
 fn middlebury_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<SheetRow>> {
     let result_name = format!("disp0{alg}.pfm");
-    let scenes = crate::batch::find_dirs_with(&[dir.to_path_buf()], &["im0.png", &result_name])?;
+    let scenes = crate::dataset::walk::find_dirs_with(&[dir.to_path_buf()], &["im0.png", &result_name])?;
     if scenes.is_empty() {
         return Err(Error::Input(format!(
             "no scene folder with im0.png and {result_name} (MiddEval3), nor a KITTI or ETH3D tree, under {}",
