@@ -20,7 +20,7 @@
 //! | [`cost`], [`lattice`], [`meanfield`], [`post`] | the paper | the stages (`meanfield`'s files mark our additions) |
 //! | [`params`] | both | one file per stage: defaults, reasons, `validate()` |
 //! | [`pipeline`] (with [`tile`]) | ours | the orchestrator: coarse prior, label windows, tiles, memory |
-//! | [`condition`], [`rectify`] | ours | measuring and conditioning the pair; its vertical offset |
+//! | [`condition`] | ours | measuring and conditioning the pair; its vertical offset |
 //! | [`range`], [`scale`], [`plan`] | ours | the search range when none is given; `--downscale`; setting up a match |
 //! | [`io`], [`image`], [`dataset`], [`batch`] | around | files, data types, data-set layouts, batch runs |
 //! | [`eval`], [`viz`], [`synth`], [`degrade`] | around | scoring, colour maps, synthetic and degraded pairs |
@@ -60,7 +60,6 @@ pub mod plan;
 pub mod post;
 pub mod process;
 pub mod range;
-pub mod rectify;
 #[doc(hidden)]
 pub mod rng;
 pub mod scale;

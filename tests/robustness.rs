@@ -279,7 +279,7 @@ fn depth_edges_under_noise() {
 /// within 0.15 px and removes it (mean error 0.47 px without, 0.22 px with, when written).
 #[test]
 fn vertical_misalignment_is_measured_and_removed() {
-    use jem::rectify::{VerticalOffset, resample_right};
+    use jem::condition::vertical::{VerticalOffset, resample_right};
     let mut off = Params::default();
     off.condition.vertical.enabled = false;
     let (mut errors, mut worst) = ([0.0f64; 2], 0.0f64);

@@ -34,7 +34,7 @@
 //! 4. **Vertical alignment** (`vertical.enabled`, in [`crate::run`] and the tiled run): with the coarse run's answer,
 //!    the right view's residual vertical offset (imperfect rectification) is measured and, where it reaches
 //!    `vertical.min_px`, removed from the guidance and the cost pair before the full-resolution cost
-//!    ([`crate::rectify`]).
+//!    ([`crate::condition::vertical`]).
 //!
 //! Everything is measured on the pair itself; nothing depends on the dataset. The paper's configs turn all of
 //! it off (`enabled = false`). Measurements: docs/tuning-log.md ("Robustness").
@@ -44,6 +44,7 @@ mod denoise;
 mod jpeg;
 mod noise;
 mod sharpness;
+pub mod vertical;
 
 use std::borrow::Cow;
 

@@ -107,7 +107,7 @@ pub struct PriorParams {
     pub trunc_px: f32,
 }
 
-/// `[condition.vertical]`: the right view's residual vertical offset ([`crate::rectify`]).
+/// `[condition.vertical]`: the right view's residual vertical offset ([`crate::condition::vertical`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct VerticalParams {
@@ -276,7 +276,7 @@ impl ConditionParams {
             return Err(Error::param("condition.sharpness_ratio", self.sharpness_ratio, "0 (off) or at least 1"));
         }
         let v = &self.vertical;
-        if !(v.min_px.is_finite() && (0.0..=crate::rectify::MAX_OFFSET).contains(&v.min_px)) {
+        if !(v.min_px.is_finite() && (0.0..=crate::condition::vertical::MAX_OFFSET).contains(&v.min_px)) {
             return Err(Error::param("condition.vertical.min_px", v.min_px, "0 to 4"));
         }
         check_nonneg("condition.prior.margin_px", p.margin_px)?;

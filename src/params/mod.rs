@@ -8,7 +8,7 @@
 //! `meanfield.rs`, `lrc.rs`, `wmedian.rs`, `sps.rs`), as one struct with `#[serde(deny_unknown_fields, default)]`,
 //! an `impl Default` holding the documented defaults, and a `validate()` that names the offending key. The stage's
 //! module imports its struct from here; this module imports nothing from the stages (only a bound that validation
-//! checks, `rectify::MAX_OFFSET`, and `io`'s capped file read for the config). Adding a stage: add its
+//! checks, `condition::vertical::MAX_OFFSET`, and `io`'s capped file read for the config). Adding a stage: add its
 //! file here, a field to [`Params`] (or [`PostParams`]), and a call to its `validate()` in the parent's.
 //!
 //! Defaults are the paper's values where the paper gives them (σx = 5, σf = 55, μ1 = 7, μ2 = 15, λ = 3.5/3.0/1.0,

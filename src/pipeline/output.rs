@@ -69,11 +69,11 @@ pub struct Measured {
     pub census_support: f32,
     /// ḡ and ε of the gradient normalisation (`None`: the raw gradient).
     pub gradient: Option<(f32, f32)>,
-    /// The right view's residual vertical offset ([`crate::rectify`]; `None`: not measured).
+    /// The right view's residual vertical offset ([`crate::condition::vertical`]; `None`: not measured).
     pub vertical: Option<VerticalMeasured>,
 }
 
-/// The right view's residual vertical offset as measured ([`crate::rectify::estimate`]).
+/// The right view's residual vertical offset as measured ([`crate::condition::vertical::estimate`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VerticalMeasured {
     /// Its smallest and largest value over the image (px, at the resolution the pipeline ran at).

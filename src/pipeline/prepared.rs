@@ -3,9 +3,10 @@
 
 use std::borrow::Cow;
 
+use crate::condition::{self, vertical};
+use crate::cost;
 use crate::image::{Plane, StereoPair};
 use crate::params::{self, Params};
-use crate::{condition, cost, rectify};
 
 use super::output::{Measured, Output, Timings, VerticalMeasured};
 
@@ -55,7 +56,7 @@ impl<'a> Prepared<'a> {
     }
 
     /// Measures the right view's residual vertical offset against a coarse answer at this size
-    /// ([`rectify::estimate`] on the cost pair, `grey_left` its left view in grey) and, where it reaches
+    /// ([`vertical::estimate`] on the cost pair, `grey_left` its left view in grey) and, where it reaches
     /// `condition.vertical.min_px`, moves the right views of the guidance and the cost pair onto the left view's
     /// rows (stage `vertical`). Nothing when conditioning or `vertical.enabled` is off.
     pub(crate) fn align_vertically(
@@ -68,7 +69,7 @@ impl<'a> Prepared<'a> {
         // (`conditioned` exists only when conditioning is enabled.)
         let Some(cond) = self.conditioned.as_mut().filter(|_| c.vertical.enabled) else { return };
         let offset = t.time("vertical", || {
-            rectify::estimate(grey_left, &cond.cost_pair().right.to_grey(), &coarse.disparity, &coarse.consistent)
+            vertical::estimate(grey_left, &cond.cost_pair().right.to_grey(), &coarse.disparity, &coarse.consistent)
         });
         let Some(v) = offset else { return };
         let corrected = v.max_abs() >= c.vertical.min_px;
@@ -76,9 +77,9 @@ impl<'a> Prepared<'a> {
         if corrected {
             t.time("vertical", || {
                 if let Some(cost) = &mut cond.cost {
-                    cost.right = rectify::resample_right(&cost.right, &v);
+                    cost.right = vertical::resample_right(&cost.right, &v);
                 }
-                let right = rectify::resample_right(&cond.guide.right, &v);
+                let right = vertical::resample_right(&cond.guide.right, &v);
                 match &mut cond.guide {
                     Cow::Owned(guide) => guide.right = right,
                     Cow::Borrowed(guide) => {

@@ -73,7 +73,7 @@ pub fn halo_px(params: &Params) -> usize {
 pub const MIN_CORE_PX: usize = 64;
 
 /// Memory per full-resolution pixel beside the tiles: the pair, its conditioned copies and the vertically
-/// aligned right views ([`crate::rectify`]; up to 6 RGB `f32` images), the coarse result at full size, the prior
+/// aligned right views ([`crate::condition::vertical`]; up to 6 RGB `f32` images), the coarse result at full size, the prior
 /// made of it and the stitched maps.
 pub const FULL_SIZE_BYTES_PER_PX: u64 = 6 * 12 + 6 * 4 + 2;
 
