@@ -13,12 +13,13 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use jem::lattice::{Lattice, LatticeScratch};
-use jem::meanfield::{MeanField, PairwiseWeights};
-use jem::{Params, StereoPair, cost, post};
+use jem::Params;
+use jem::internals::lattice::{Lattice, LatticeScratch};
+use jem::internals::meanfield::{MeanField, PairwiseWeights};
+use jem::internals::{StereoPair, cost, post};
 
 /// The benchmark scene: (name, pair).
-fn scene() -> (String, StereoPair) {
+fn scene() -> (String, StereoPair<'static>) {
     let data = std::env::var_os("JEM_DATA")
         .map(PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/middlebury"));
@@ -29,10 +30,10 @@ fn scene() -> (String, StereoPair) {
         eprintln!("note: Middlebury data not found; benchmarking the synthetic example instead");
         (Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/synth"), "synth")
     };
-    let (left, right) = jem::io::png::load_rgb_pair(&dir.join("im0.png"), &dir.join("im1.png")).expect("images");
+    let (left, right) = jem::io::read_image_pair(&dir.join("im0.png"), &dir.join("im1.png")).expect("images");
     let ndisp = jem::io::calib::read_ndisp(&dir.join("calib.txt")).expect("calib.txt");
     let pair = StereoPair::new(left, right, ndisp).expect("valid pair");
-    (format!("{name} {}x{} nd{}", pair.left.width, pair.left.height, ndisp), pair)
+    (format!("{name} {}x{} nd{}", pair.left().width(), pair.left().height(), ndisp), pair)
 }
 
 /// Memory bandwidth and arithmetic rate of this machine, for the roofline.
@@ -83,19 +84,19 @@ fn stages(c: &mut Criterion) {
     let params = Params::load(Some(&config), &[]).expect("configs/default.toml");
     let mf = &params.meanfield;
 
-    let (pixels, labels) = (pair.left.len() as u64, pair.ndisp as u64);
+    let (pixels, labels) = (pair.left().len() as u64, pair.ndisp() as u64);
     let mut g = c.benchmark_group("cost");
     g.throughput(Throughput::Elements(2 * pixels * labels));
     // As in the pipeline: the left volume in fresh memory, the right one in a spare buffer of the same size (the
     // left view's spent marginals there).
-    let mut spare = vec![0.0f32; pair.left.len() * pair.ndisp];
+    let mut spare = vec![0.0f32; pair.left().len() * pair.ndisp()];
     g.bench_function(BenchmarkId::new("both views", &name), |b| {
         b.iter(|| {
-            let left = cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &params.cost);
+            let left = cost::build_cost_volume(pair.left(), pair.right(), pair.ndisp(), &params.cost);
             let right =
                 cost::derive_right_volume_in(&left, cost::truncation_cost(&params.cost), std::mem::take(&mut spare));
             black_box(&left);
-            spare = right.data;
+            spare = right.into_data();
         })
     });
     g.finish();
@@ -103,11 +104,11 @@ fn stages(c: &mut Criterion) {
     let mut g = c.benchmark_group("lattice");
     g.throughput(Throughput::Elements(pixels));
     g.bench_function(BenchmarkId::new("build", &name), |b| {
-        b.iter(|| black_box(Lattice::build(&pair.left, mf.sigma_xy, mf.sigma_rgb)))
+        b.iter(|| black_box(Lattice::build(pair.left(), mf.sigma_xy, mf.sigma_rgb)))
     });
-    let lattice = Lattice::build(&pair.left, mf.sigma_xy, mf.sigma_rgb);
-    let n = pair.left.len();
-    for channels in [1, pair.ndisp] {
+    let lattice = Lattice::build(pair.left(), mf.sigma_xy, mf.sigma_rgb);
+    let n = pair.left().len();
+    for channels in [1, pair.ndisp()] {
         g.throughput(Throughput::Elements(pixels * channels as u64));
         let input: Vec<f32> = (0..n * channels).map(|i| (i % 97) as f32 / 97.0).collect();
         let mut output = vec![0.0; input.len()];
@@ -121,26 +122,30 @@ fn stages(c: &mut Criterion) {
     }
     g.finish();
 
-    let cost_left = cost::build_cost_volume(&pair.left, &pair.right, pair.ndisp, &params.cost);
+    let cost_left = cost::build_cost_volume(pair.left(), pair.right(), pair.ndisp(), &params.cost);
     let mut g = c.benchmark_group("meanfield");
     g.sample_size(10).measurement_time(Duration::from_secs(8)).throughput(Throughput::Elements(pixels * labels));
     let weights = PairwiseWeights { fcm: params.effective_fcm_weight(), lcm: params.effective_lcm_weight() };
     g.bench_function(BenchmarkId::new("setup (lattice + init)", &name), |b| {
-        b.iter(|| black_box(MeanField::new(&cost_left, &pair.left, mf, weights)))
+        b.iter(|| black_box(MeanField::new(&cost_left, pair.left(), mf, weights)))
     });
-    let mut state = MeanField::new(&cost_left, &pair.left, mf, weights);
+    let mut state = MeanField::new(&cost_left, pair.left(), mf, weights);
     g.bench_function(BenchmarkId::new("one JEM iteration", &name), |b| b.iter(|| state.step()));
     g.finish();
 
     // Post-processing on real inference output for both views.
     let mut g = c.benchmark_group("post");
     g.throughput(Throughput::Elements(pixels));
-    let infer = |image: &jem::RgbImage, cost: &jem::CostVolume| {
-        jem::meanfield::decode_marginals(&jem::meanfield::infer_mean_field(cost, image, mf, weights), true).0
+    let infer = |image: &jem::RgbImage, cost: &jem::internals::CostVolume| {
+        jem::internals::meanfield::decode_marginals(
+            &jem::internals::meanfield::infer_mean_field(cost, image, mf, weights),
+            true,
+        )
+        .0
     };
-    let dl = infer(&pair.left, &cost_left);
+    let dl = infer(pair.left(), &cost_left);
     let cost_right = cost::derive_right_volume(&cost_left, cost::truncation_cost(&params.cost));
-    let dr = infer(&pair.right, &cost_right);
+    let dr = infer(pair.right(), &cost_right);
     drop((cost_left, cost_right));
     g.bench_function(BenchmarkId::new("lrc + fill", &name), |b| {
         b.iter(|| {
@@ -151,33 +156,34 @@ fn stages(c: &mut Criterion) {
     });
     let (mut filled, trusted) = post::lr_check::left_right_check(&dl, &dr, jem::LrcMode::Invalidate, 1.0);
     post::fill::fill_occlusions_in_place(&mut filled);
-    let targets = jem::Plane::from_vec(trusted.width, trusted.height, trusted.data.iter().map(|ok| !ok).collect());
-    let share = 100.0 * targets.data.iter().filter(|t| **t).count() as f64 / targets.data.len() as f64;
+    let targets =
+        jem::Plane::from_vec(trusted.width(), trusted.height(), trusted.data().iter().map(|ok| !ok).collect()).unwrap();
+    let share = 100.0 * targets.data().iter().filter(|t| **t).count() as f64 / targets.data().len() as f64;
     let mut wm = params.post.wmedian.clone();
     wm.enabled = true;
     g.bench_function(BenchmarkId::new(format!("weighted median ({share:.1}% targets)"), &name), |b| {
-        b.iter(|| black_box(post::wmedian::weighted_median(&filled, &pair.left, &targets, &wm)))
+        b.iter(|| black_box(post::wmedian::weighted_median(&filled, pair.left(), &targets, &wm)))
     });
-    let median = post::wmedian::weighted_median(&filled, &pair.left, &targets, &wm);
+    let median = post::wmedian::weighted_median(&filled, pair.left(), &targets, &wm);
     let mut sps = params.post.sps.clone();
     sps.enabled = true;
     g.sample_size(10);
     g.bench_function(BenchmarkId::new("slanted planes", &name), |b| {
-        b.iter(|| black_box(post::planes::fit_slanted_planes(&pair.left, &median, &trusted, &sps)))
+        b.iter(|| black_box(post::planes::fit_slanted_planes(pair.left(), &median, &trusted, &sps)))
     });
     g.finish();
 
     let mut g = c.benchmark_group("end-to-end");
     g.sample_size(10).measurement_time(Duration::from_secs(20)).throughput(Throughput::Elements(pixels));
     g.bench_function(BenchmarkId::new("default.toml", &name), |b| {
-        b.iter(|| black_box(jem::run(&params, &pair).expect("pipeline")))
+        b.iter(|| black_box(jem::internals::run(&params, &pair).expect("pipeline")))
     });
     // The tiled path of large pairs (jem::tile) on the same pair: a coarse level at 1/4 and 256-px cores, to
     // compare with the run in one piece.
     let plan =
-        jem::tile::TilePlan { coarse_factor: 4, core_px: 256, tile_budget_bytes: u64::MAX, split_for_work: false };
+        jem::internals::TilePlan { coarse_factor: 4, core_px: 256, tile_budget_bytes: u64::MAX, split_for_work: false };
     g.bench_function(BenchmarkId::new("default.toml in 256-px tiles", &name), |b| {
-        b.iter(|| black_box(jem::tile::run_tiled(&params, &pair, &plan, &|_| {}).expect("tiled pipeline")))
+        b.iter(|| black_box(jem::internals::run_tiled(&params, &pair, &plan, &|_| {}).expect("tiled pipeline")))
     });
     g.finish();
 }

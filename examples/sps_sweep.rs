@@ -10,7 +10,7 @@
 //! ```
 use std::path::{Path, PathBuf};
 
-use jem::image::Plane;
+use jem::Plane;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -23,10 +23,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let scenes = jem::dataset::walk::find_scenes(std::slice::from_ref(&dir))?;
     for scene in scenes {
         let disp = jem::io::read_disparity(&scene.join(format!("disp0{input}.pfm")))?;
-        let image = jem::io::png::load_rgb(&scene.join("im0.png"))?;
-        let trusted = Plane::from_vec(disp.width, disp.height, disp.data.iter().map(|d| d.is_finite()).collect());
+        let image = jem::io::read_image(&scene.join("im0.png"))?;
+        let trusted =
+            Plane::from_vec(disp.width(), disp.height(), disp.data().iter().map(|d| d.is_finite()).collect()).unwrap();
         let start = std::time::Instant::now();
-        let out = jem::post::planes::fit_slanted_planes(&image, &disp, &trusted, &params.post.sps);
+        let out = jem::internals::post::planes::fit_slanted_planes(&image, &disp, &trusted, &params.post.sps);
         let secs = start.elapsed().as_secs_f64();
         jem::io::write_disparity(&scene.join(format!("disp0{output}.pfm")), &out)?;
         std::fs::write(scene.join(format!("time{output}.txt")), format!("{secs:.4}\n"))?;

@@ -59,9 +59,9 @@ fn upscale_scene(src: &Path, dst: &Path, k: u32) -> Result<(), Box<dyn std::erro
         big.save(dst.join(name))?;
     }
     let gt = jem::io::pfm::read_pfm(&src.join("disp0GT.pfm"))?;
-    let (w, h) = (gt.width * k as usize, gt.height * k as usize);
+    let (w, h) = (gt.width() * k as usize, gt.height() * k as usize);
     let data = (0..w * h).map(|i| gt.at(i % w / k as usize, i / w / k as usize) * k as f32).collect();
-    jem::io::pfm::write_pfm(&dst.join("disp0GT.pfm"), &jem::image::Plane::from_vec(w, h, data))?;
+    jem::io::pfm::write_pfm(&dst.join("disp0GT.pfm"), &jem::Plane::from_vec(w, h, data).unwrap())?;
     let mask = image::open(src.join("mask0nocc.png"))?.to_luma8();
     image::imageops::resize(&mask, mask.width() * k, mask.height() * k, FilterType::Nearest)
         .save(dst.join("mask0nocc.png"))?;

@@ -48,7 +48,8 @@ use crate::params::CostParams;
 ///
 /// # Panics
 /// If the window is even-sized or has more than 65 pixels (validated in [`crate::Params::validate`]).
-pub fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<u64> {
+#[cfg(test)]
+pub(crate) fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<u64> {
     census_transform_banded(grey, win_w, win_h, 0.0)
 }
 
@@ -57,7 +58,7 @@ pub fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<
 ///
 /// # Panics
 /// As [`census_transform`].
-pub fn census_transform_banded(grey: &Plane<f32>, win_w: usize, win_h: usize, band: f32) -> Plane<u64> {
+pub(crate) fn census_transform_banded(grey: &Plane<f32>, win_w: usize, win_h: usize, band: f32) -> Plane<u64> {
     window_codes(grey, win_w, win_h, |n, c| n < c - band)
 }
 
@@ -67,7 +68,7 @@ pub fn census_transform_banded(grey: &Plane<f32>, win_w: usize, win_h: usize, ba
 ///
 /// # Panics
 /// As [`census_transform`].
-pub fn support_mask(grey: &Plane<f32>, win_w: usize, win_h: usize, tau: f32) -> Plane<u64> {
+pub(crate) fn support_mask(grey: &Plane<f32>, win_w: usize, win_h: usize, tau: f32) -> Plane<u64> {
     window_codes(grey, win_w, win_h, |n, c| (n - c).abs() <= tau)
 }
 
@@ -105,7 +106,7 @@ fn census_bits_mask(n: usize) -> u64 {
 
 /// The mean over the image of its local contrast (the mean |Sobel x| over the (2r + 1)² window around each
 /// pixel): ḡ of the gradient normalisation.
-pub fn mean_local_contrast(grey: &Plane<f32>, radius: usize) -> f32 {
+pub(crate) fn mean_local_contrast(grey: &Plane<f32>, radius: usize) -> f32 {
     plane_mean(&local_mean_abs(&sobel_x(grey), radius))
 }
 
@@ -122,7 +123,7 @@ pub fn truncation_cost(p: &CostParams) -> f32 {
 /// Builds the left view's cost volume (labels 0..ndisp), ḡ of the gradient normalisation measured on `left`.
 ///
 /// # Panics
-/// If the images differ in size (checked by [`crate::StereoPair::new`]) or the Census window is invalid.
+/// If the images differ in size (checked by [`crate::image::StereoPair::new`]) or the Census window is invalid.
 pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &CostParams) -> CostVolume {
     build_cost_volume_then(left, right, ndisp, p, None, Vec::new(), |_, _| ()).0
 }
@@ -132,7 +133,7 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
 /// it; `None` measures it on `left`), and `then(y, row)` called on each row of the volume as soon as it is written
 /// (in the same parallel task, while the row is still in cache); its results, row by row.
 #[allow(clippy::too_many_arguments)]
-pub fn build_cost_volume_then<R: Send>(
+pub(crate) fn build_cost_volume_then<R: Send>(
     left: &RgbImage,
     right: &RgbImage,
     ndisp: usize,
@@ -270,7 +271,7 @@ pub fn derive_right_volume_in(left: &CostVolume, out_of_view: f32, storage: Vec<
 
 /// [`derive_right_volume_in`], with `then(y, row)` called on each row as soon as it is written (as in
 /// [`build_cost_volume_then`]); its results, row by row.
-pub fn derive_right_volume_then<R: Send>(
+pub(crate) fn derive_right_volume_then<R: Send>(
     left: &CostVolume,
     out_of_view: f32,
     mut storage: Vec<f32>,
@@ -298,12 +299,12 @@ pub fn derive_right_volume_then<R: Send>(
 }
 
 /// [`winner_take_all`] of one row of a volume with `ndisp` labels.
-pub fn row_argmins(row: &[f32], ndisp: usize) -> Vec<f32> {
+pub(crate) fn row_argmins(row: &[f32], ndisp: usize) -> Vec<f32> {
     row.chunks_exact(ndisp.max(1)).map(|c| argmin(c) as f32).collect()
 }
 
 /// Winner-take-all: the label of least cost at every pixel (ties go to the smaller label), as `f32`.
-pub fn winner_take_all(vol: &CostVolume) -> Plane<f32> {
+pub(crate) fn winner_take_all(vol: &CostVolume) -> Plane<f32> {
     let mut out = Plane::new(vol.width, vol.height, 0.0f32);
     out.data.par_iter_mut().enumerate().for_each(|(i, d)| {
         *d = argmin(vol.pixel(i)) as f32;
@@ -315,7 +316,7 @@ pub fn winner_take_all(vol: &CostVolume) -> Plane<f32> {
 /// over its labels) and s̄ the median spread of the image. 1 where every label costs the same (an untextured
 /// surface, where the cost says nothing), ½ at the median pixel, towards 0 where one label stands out. Relative to
 /// the image's own median, so it does not depend on the cost's scale. All ones when the median spread is 0.
-pub fn flatness(vol: &CostVolume) -> Plane<f32> {
+pub(crate) fn flatness(vol: &CostVolume) -> Plane<f32> {
     let m = vol.ndisp.max(1);
     let mut out = Plane::new(vol.width, vol.height, 0.0f32);
     // Each pixel's minimum and sum over its labels, in label order: a serial chain per pixel, so eight pixels at a
@@ -357,7 +358,7 @@ pub fn flatness(vol: &CostVolume) -> Plane<f32> {
 
 /// Index of the smallest value (the first one on ties). NaN never wins.
 #[inline]
-pub fn argmin(values: &[f32]) -> usize {
+pub(crate) fn argmin(values: &[f32]) -> usize {
     // The minimum over eight lanes, then its first position: two passes that vectorise, where one pass with a
     // running index does not.
     let min = crate::fastmath::lane_min(values);
@@ -679,7 +680,7 @@ mod tests {
     #[test]
     fn census_bits_on_a_tiny_image() {
         // 3x3 window on a 3x3 image: centre 5, neighbours row-major 1 2 3 / 4 . 6 / 7 8 9.
-        let grey = Plane::from_vec(3, 3, (1..=9).map(|v| v as f32).collect());
+        let grey = Plane::from_parts(3, 3, (1..=9).map(|v| v as f32).collect());
         let c = census_transform(&grey, 3, 3);
         assert_eq!(c.at(1, 1), 0b1111_0000);
         // Top-left corner, replicated borders: neighbours 1 1 1 / 1 . 2 / 4 4 5 around centre 1 → none darker.
@@ -688,7 +689,7 @@ mod tests {
 
     #[test]
     fn sobel_on_a_ramp() {
-        let grey = Plane::from_vec(4, 3, (0..12).map(|i| (i % 4) as f32 * 10.0).collect());
+        let grey = Plane::from_parts(4, 3, (0..12).map(|i| (i % 4) as f32 * 10.0).collect());
         let g = sobel_x(&grey);
         assert_eq!(g.at(1, 1), 80.0);
         assert_eq!(g.at(0, 1), 40.0, "replicated border halves the central difference");
@@ -783,7 +784,7 @@ mod tests {
     /// A bit is in a pixel's support where its neighbour is within `tau` of the centre (bit order as the Census).
     #[test]
     fn support_mask_marks_the_similar_neighbours() {
-        let g = Plane::from_vec(3, 3, vec![0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0]);
+        let g = Plane::from_parts(3, 3, vec![0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0]);
         let m = support_mask(&g, 3, 3, 15.0);
         // Centre (1, 1) = 40: neighbours 0 10 20 30 | 50 60 70 80 (bits 7 … 0); within 15: 30 and 50.
         assert_eq!(m.data[4], 0b0001_1000);

@@ -23,7 +23,7 @@
 /// interval), 2^n by writing the exponent bits. Arguments below −87 (where e^x is subnormal) give 0, and so does
 /// −∞; NaN gives 0 as well, so a bad energy can never put NaN into Q.
 #[inline(always)]
-pub fn exp_nonpositive(x: f32) -> f32 {
+pub(crate) fn exp_nonpositive(x: f32) -> f32 {
     const LOG2E: f32 = std::f32::consts::LOG2_E;
     // ln 2 split so that n·LN2_HI is exact in f32 (Cody & Waite): keeps r accurate for large |n|.
     const LN2_HI: f32 = 0.693_359_4;
@@ -50,7 +50,7 @@ pub fn exp_nonpositive(x: f32) -> f32 {
 /// float-to-integer conversion: adding 1.5·2²³ puts v in the low bits of the sum. Rust's `as` saturates, and its
 /// vectorised form (a conversion plus range and NaN fix-ups) is several times slower.
 #[inline(always)]
-pub fn integral_to_i32(v: f32) -> i32 {
+pub(crate) fn integral_to_i32(v: f32) -> i32 {
     debug_assert!(v == v.trunc() && v.abs() < 4_194_304.0, "{v} is not a small integer");
     const MAGIC: f32 = 12_582_912.0;
     const MAGIC_BITS: i32 = 0x4B40_0000;
@@ -60,7 +60,7 @@ pub fn integral_to_i32(v: f32) -> i32 {
 /// Sum with eight independent accumulators, combined in a fixed order: vectorisable (a single running float
 /// sum is a serial dependency chain) and still deterministic.
 #[inline]
-pub fn lane_sum(values: &[f32]) -> f32 {
+pub(crate) fn lane_sum(values: &[f32]) -> f32 {
     let mut acc = [0.0f32; 8];
     let chunks = values.chunks_exact(8);
     let rest = chunks.remainder();
@@ -78,7 +78,7 @@ pub fn lane_sum(values: &[f32]) -> f32 {
 
 /// Minimum with eight lanes (NaN is ignored, as by `f32::min`); +∞ for an empty slice.
 #[inline]
-pub fn lane_min(values: &[f32]) -> f32 {
+pub(crate) fn lane_min(values: &[f32]) -> f32 {
     let mut acc = [f32::INFINITY; 8];
     let chunks = values.chunks_exact(8);
     let rest = chunks.remainder();
@@ -94,7 +94,7 @@ pub fn lane_min(values: &[f32]) -> f32 {
 
 /// Maximum with eight lanes (NaN is ignored, as by `f32::max`); −∞ for an empty slice.
 #[inline]
-pub fn lane_max(values: &[f32]) -> f32 {
+pub(crate) fn lane_max(values: &[f32]) -> f32 {
     let mut acc = [f32::NEG_INFINITY; 8];
     let chunks = values.chunks_exact(8);
     let rest = chunks.remainder();

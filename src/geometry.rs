@@ -115,7 +115,7 @@ pub fn depth_map(disparity: &DisparityMap, camera: &Camera) -> Plane<f32> {
         .enumerate()
         .map(|(i, &d)| camera.point(i % w, i / w, d).map_or(f32::INFINITY, |p| p[2]))
         .collect();
-    Plane::from_vec(disparity.width, disparity.height, data)
+    Plane::from_parts(disparity.width, disparity.height, data)
 }
 
 /// A binary little-endian PLY of the pixels with a depth: `x y z` (float) and `red green blue` (uchar, from
@@ -179,7 +179,7 @@ mod tests {
         let e = Camera::resolve(None, &huge).unwrap_err().to_string();
         assert!(e.contains("overflows") && e.contains("baseline"), "{e}");
         let c = Camera { focal: 1e30, cx: 1.0, cy: 0.5, baseline: 1e30, doffs: 0.0 };
-        let disp = Plane::from_vec(3, 2, vec![1.0, 2.0, 3.0, 1e32, 2e32, f32::INFINITY]);
+        let disp = Plane::from_parts(3, 2, vec![1.0, 2.0, 3.0, 1e32, 2e32, f32::INFINITY]);
         let depth = depth_map(&disp, &c);
         let ply = encode_ply(&disp, &RgbImage::new(3, 2), &c);
         let end = b"end_header\n";
@@ -199,7 +199,7 @@ mod tests {
     #[test]
     fn depth_and_points_follow_the_camera_model() {
         let c = camera();
-        let disp = Plane::from_vec(4, 2, vec![45.0, f32::INFINITY, 95.0, -5.0, 20.0, 45.0, f32::NAN, 0.0]);
+        let disp = Plane::from_parts(4, 2, vec![45.0, f32::INFINITY, 95.0, -5.0, 20.0, 45.0, f32::NAN, 0.0]);
         let depth = depth_map(&disp, &c);
         assert_eq!(depth.data[0], 1000.0);
         assert_eq!(depth.data[2], 500.0);

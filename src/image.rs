@@ -3,17 +3,16 @@
 //! All are a flat `Vec` plus dimensions, row-major, with the layout documented on the type. Kernels index them
 //! directly; conversion from and to file formats happens only at the I/O edge (`crate::io`).
 
+use std::borrow::Cow;
+
 use rayon::prelude::*;
 
-/// A single-channel image, row-major: `data[y * width + x]`.
+/// A single-channel image, row-major: sample (x, y) is `data()[y * width + x]`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Plane<T> {
-    /// Width in pixels.
-    pub width: usize,
-    /// Height in pixels.
-    pub height: usize,
-    /// `width * height` samples, row-major.
-    pub data: Vec<T>,
+    pub(crate) width: usize,
+    pub(crate) height: usize,
+    pub(crate) data: Vec<T>,
 }
 
 impl<T: Clone> Plane<T> {
@@ -24,13 +23,54 @@ impl<T: Clone> Plane<T> {
 }
 
 impl<T> Plane<T> {
-    /// Wraps existing data.
+    /// Wraps `width × height` samples, row-major.
+    ///
+    /// # Errors
+    /// [`crate::Error::Input`] if `data.len()` is not `width × height`.
+    pub fn from_vec(width: usize, height: usize, data: Vec<T>) -> crate::Result<Self> {
+        if width.checked_mul(height) != Some(data.len()) {
+            return Err(crate::Error::Input(format!("{} samples cannot make a {width}x{height} plane", data.len())));
+        }
+        Ok(Plane { width, height, data })
+    }
+
+    /// Wraps samples the crate has sized itself.
     ///
     /// # Panics
     /// If `data.len() != width * height`.
-    pub fn from_vec(width: usize, height: usize, data: Vec<T>) -> Self {
+    pub(crate) fn from_parts(width: usize, height: usize, data: Vec<T>) -> Self {
         assert_eq!(data.len(), width * height, "plane data length does not match {width}x{height}");
         Plane { width, height, data }
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// (width, height).
+    pub fn dims(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// The samples, row-major.
+    pub fn data(&self) -> &[T] {
+        &self.data
+    }
+
+    /// The samples, row-major, to change in place.
+    pub fn data_mut(&mut self) -> &mut [T] {
+        &mut self.data
+    }
+
+    /// The samples, row-major, without a copy.
+    pub fn into_data(self) -> Vec<T> {
+        self.data
     }
 
     /// Row `y` as a slice of length `width`.
@@ -43,11 +83,6 @@ impl<T> Plane<T> {
     #[inline]
     pub fn row_mut(&mut self, y: usize) -> &mut [T] {
         &mut self.data[y * self.width..][..self.width]
-    }
-
-    /// (width, height).
-    pub fn dims(&self) -> (usize, usize) {
-        (self.width, self.height)
     }
 }
 
@@ -63,14 +98,14 @@ impl<T: Copy> Plane<T> {
     /// # Panics
     /// If `x0` is beyond the width.
     pub fn columns_from(&self, x0: usize) -> Self {
-        Plane::from_vec(self.width - x0, self.height, columns_from(&self.data, self.width, x0))
+        Plane::from_parts(self.width - x0, self.height, columns_from(&self.data, self.width, x0))
     }
 }
 
 /// `storage` resized to `len` values, for a buffer whose every value is written before it is read: a fresh
 /// allocation is zeroed by the OS (no fill pass); a reused one keeps what it held (only a grown part is zeroed, in
 /// parallel), so a buffer carried from one run to the next is not page-faulted again.
-pub fn reuse_storage(mut storage: Vec<f32>, len: usize) -> Vec<f32> {
+pub(crate) fn reuse_storage(mut storage: Vec<f32>, len: usize) -> Vec<f32> {
     if storage.capacity() == 0 {
         return vec![0.0; len];
     }
@@ -98,15 +133,13 @@ fn columns_from<T: Copy>(data: &[T], width: usize, x0: usize) -> Vec<T> {
 /// (the Middlebury convention).
 pub type DisparityMap = Plane<f32>;
 
-/// A planar RGB image with `f32` samples in 0..=255 (8-bit scale, whatever the file's bit depth).
+/// A planar RGB image with `f32` samples in 0..=255 (8-bit scale, whatever the file's bit depth): channel `c` of
+/// pixel (x, y) is `channel(c)[y * width + x]`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RgbImage {
-    /// Width in pixels.
-    pub width: usize,
-    /// Height in pixels.
-    pub height: usize,
-    /// Red, green and blue planes, each `width * height`, row-major.
-    pub channels: [Vec<f32>; 3],
+    pub(crate) width: usize,
+    pub(crate) height: usize,
+    pub(crate) channels: [Vec<f32>; 3],
 }
 
 impl RgbImage {
@@ -114,6 +147,47 @@ impl RgbImage {
     pub fn new(width: usize, height: usize) -> Self {
         let n = width * height;
         RgbImage { width, height, channels: [vec![0.0; n], vec![0.0; n], vec![0.0; n]] }
+    }
+
+    /// An image from its red, green and blue planes, each `width × height` samples, row-major.
+    ///
+    /// # Errors
+    /// [`crate::Error::Input`] if a plane has another length, or a sample is not finite.
+    pub fn from_channels(width: usize, height: usize, channels: [Vec<f32>; 3]) -> crate::Result<Self> {
+        let n = width.checked_mul(height);
+        if let Some(c) = channels.iter().find(|c| Some(c.len()) != n) {
+            return Err(crate::Error::Input(format!("{} samples cannot make a {width}x{height} channel", c.len())));
+        }
+        if channels.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(crate::Error::Input("an image sample is not finite".into()));
+        }
+        Ok(RgbImage { width, height, channels })
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// Channel `c` (0 red, 1 green, 2 blue), row-major.
+    ///
+    /// # Panics
+    /// If `c` > 2.
+    pub fn channel(&self, c: usize) -> &[f32] {
+        &self.channels[c]
+    }
+
+    /// Channel `c` (0 red, 1 green, 2 blue), row-major, to change in place (samples stay on the 0..=255 scale).
+    ///
+    /// # Panics
+    /// If `c` > 2.
+    pub fn channel_mut(&mut self, c: usize) -> &mut [f32] {
+        &mut self.channels[c]
     }
 
     /// Number of pixels.
@@ -141,7 +215,7 @@ impl RgbImage {
     pub fn to_grey(&self) -> Plane<f32> {
         let [r, g, b] = &self.channels;
         let data = r.iter().zip(g).zip(b).map(|((&r, &g), &b)| 0.299 * r + 0.587 * g + 0.114 * b).collect();
-        Plane::from_vec(self.width, self.height, data)
+        Plane::from_parts(self.width, self.height, data)
     }
 
     /// The columns `x0..` of the image.
@@ -176,19 +250,24 @@ impl RgbImage {
 #[derive(Clone, Debug, PartialEq)]
 pub struct CostVolume {
     /// Width in pixels.
-    pub width: usize,
+    pub(crate) width: usize,
     /// Height in pixels.
-    pub height: usize,
+    pub(crate) height: usize,
     /// Number of disparity labels (0..ndisp).
-    pub ndisp: usize,
+    pub(crate) ndisp: usize,
     /// `width * height * ndisp` costs.
-    pub data: Vec<f32>,
+    pub(crate) data: Vec<f32>,
 }
 
 impl CostVolume {
     /// A volume filled with `value`.
     pub fn new(width: usize, height: usize, ndisp: usize, value: f32) -> Self {
         CostVolume { width, height, ndisp, data: vec![value; width * height * ndisp] }
+    }
+
+    /// The costs, without a copy (to reuse the storage).
+    pub fn into_data(self) -> Vec<f32> {
+        self.data
     }
 
     /// The costs of pixel index `i` (= `y * width + x`), one per label.
@@ -219,24 +298,39 @@ impl CostVolume {
     }
 }
 
-/// A rectified stereo pair and its disparity search range.
+/// A rectified stereo pair and its disparity search range. The views are borrowed from the caller where they
+/// can be ([`StereoPair::borrowed`]: a match does not copy its input) and owned where a stage makes new ones.
 #[derive(Clone, Debug)]
-pub struct StereoPair {
+pub struct StereoPair<'a> {
     /// Left view (the reference view: disparities are computed for it).
-    pub left: RgbImage,
+    pub(crate) left: Cow<'a, RgbImage>,
     /// Right view.
-    pub right: RgbImage,
+    pub(crate) right: Cow<'a, RgbImage>,
     /// Number of disparity labels: disparities 0..ndisp−1 are searched.
-    pub ndisp: usize,
+    pub(crate) ndisp: usize,
 }
 
-impl StereoPair {
-    /// Checks sizes and the search range.
+impl StereoPair<'static> {
+    /// A pair that owns its views; checks sizes and the search range.
+    ///
+    /// # Errors
+    /// As [`StereoPair::borrowed`].
+    pub fn new(left: RgbImage, right: RgbImage, ndisp: usize) -> crate::Result<Self> {
+        Self::checked(Cow::Owned(left), Cow::Owned(right), ndisp)
+    }
+}
+
+impl<'a> StereoPair<'a> {
+    /// A pair of borrowed views; checks sizes and the search range.
     ///
     /// # Errors
     /// [`crate::Error::SizeMismatch`] for unequal sizes, [`crate::Error::InvalidParam`] for an impossible `ndisp`
     /// or an empty image.
-    pub fn new(left: RgbImage, right: RgbImage, ndisp: usize) -> crate::Result<Self> {
+    pub fn borrowed(left: &'a RgbImage, right: &'a RgbImage, ndisp: usize) -> crate::Result<Self> {
+        Self::checked(Cow::Borrowed(left), Cow::Borrowed(right), ndisp)
+    }
+
+    fn checked(left: Cow<'a, RgbImage>, right: Cow<'a, RgbImage>, ndisp: usize) -> crate::Result<Self> {
         if left.dims() != right.dims() {
             return Err(crate::Error::SizeMismatch { left: left.dims(), right: right.dims() });
         }
@@ -251,6 +345,30 @@ impl StereoPair {
             ));
         }
         Ok(StereoPair { left, right, ndisp })
+    }
+
+    /// The left view.
+    pub fn left(&self) -> &RgbImage {
+        &self.left
+    }
+
+    /// The right view.
+    pub fn right(&self) -> &RgbImage {
+        &self.right
+    }
+
+    /// The number of disparity labels (disparities 0..ndisp−1).
+    pub fn ndisp(&self) -> usize {
+        self.ndisp
+    }
+
+    /// The pair with views of its own (a copy of what it borrowed).
+    pub fn into_owned(self) -> StereoPair<'static> {
+        StereoPair {
+            left: Cow::Owned(self.left.into_owned()),
+            right: Cow::Owned(self.right.into_owned()),
+            ndisp: self.ndisp,
+        }
     }
 }
 
@@ -302,7 +420,7 @@ mod tests {
 
     #[test]
     fn columns_from_keeps_the_right_part_of_every_row() {
-        let p = Plane::from_vec(3, 2, vec![1, 2, 3, 4, 5, 6]);
+        let p = Plane::from_parts(3, 2, vec![1, 2, 3, 4, 5, 6]);
         assert_eq!(p.columns_from(1).data, vec![2, 3, 5, 6]);
         assert_eq!(p.columns_from(3).dims(), (0, 2));
         let mut img = RgbImage::new(3, 2);

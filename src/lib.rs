@@ -3,78 +3,84 @@
 //! An implementation of Xue & Cai, "Stereo Matching by Joint Energy Minimization": a Census + gradient cost
 //! volume, mean-field inference on an MRF that joins a fully connected Potts term (bilateral kernel, filtered
 //! with a permutohedral lattice) and a 4-neighbour local term, then left-right check, occlusion fill, weighted
-//! median and slanted-plane smoothing.
+//! median and slanted-plane smoothing; with our adaptive front end (the pair's noise, contrast, sharpness and
+//! vertical offset measured and allowed for, and a coarse-to-fine prior).
 //!
-//! The whole pipeline is one call, [`run`] ([`pipeline`]: prepare → coarse prior → fine pass); each stage is a
-//! free function in its own module:
+//! ## Use
 //!
-//! ```text
-//! cost::build_cost_volume ─► meanfield::infer_mean_field (left and right views) ─► post::lr_check
-//!   ─► post::fill ─► post::wmedian ─► post::planes
-//! ```
-//!
-//! ## The crate map
-//!
-//! | modules | whose | what |
-//! |---|---|---|
-//! | [`cost`], [`lattice`], [`meanfield`], [`post`] | the paper | the stages (`meanfield`'s files mark our additions) |
-//! | [`params`] | both | one file per stage: defaults, reasons, `validate()` |
-//! | [`pipeline`] (with [`tile`]) | ours | the orchestrator: coarse prior, label windows, tiles, memory |
-//! | [`condition`] | ours | measuring and conditioning the pair; its vertical offset |
-//! | [`range`], [`scale`], [`plan`] | ours | the search range when none is given; `--downscale`; setting up a match |
-//! | [`io`], [`image`], [`dataset`], [`batch`] | around | files, data types, data-set layouts, batch runs |
-//! | [`eval`], [`viz`], [`synth`], [`degrade`] | around | scoring, colour maps, synthetic and degraded pairs |
-//! | [`geometry`], [`table`], [`fastmath`], [`error`] | around | depth and point clouds, shared helpers, errors |
-//!
-//! With `downscale = N > 1` ([`Params::downscale`]) the pipeline runs on the pair reduced by N
-//! (`scale::downsample_pair`) and the result is brought back to the input size (`scale::upsample_disparity`).
+//! A [`Matcher`] is built once from a configuration ([`Params`]: defaults, a TOML file, `key=value` overrides) and
+//! matches rectified pairs: decoded images ([`Matcher::match_pair`]) or image files ([`Matcher::match_files`]).
+//! The images are [`RgbImage`]s (samples 0..=255, whatever the file's bit depth); the result is an [`Output`],
+//! whose disparity map is a [`DisparityMap`] (`inf` where invalid). [`io`] reads and writes images and disparity
+//! maps (PFM, EXR, 16-bit PNG), [`geometry`] turns disparities into depth and point clouds.
 //!
 //! ```
-//! use jem::{Params, StereoPair, image::RgbImage};
-//! let (left, right) = (RgbImage::new(32, 16), RgbImage::new(32, 16));
-//! let pair = StereoPair::new(left, right, 8).unwrap();
-//! let mut params = Params::default();
-//! params.model = jem::Model::Wta;
-//! let out = jem::run(&params, &pair).unwrap();
-//! assert_eq!(out.disparity.dims(), (32, 16));
+//! use jem::{Matcher, NdispSource, Params};
+//! # let dir = tempfile::tempdir()?;
+//! # let scene = jem::synth::render_scene(&jem::synth::SynthParams { width: 96, height: 64, ndisp: 16, seed: 1 })?;
+//! # jem::synth::write_scene(dir.path(), &scene)?;
+//! # let (left_png, right_png) = (dir.path().join("im0.png"), dir.path().join("im1.png"));
+//! // A configuration: the defaults with one value changed (as `jem --set meanfield.iterations=2`).
+//! let params = Params::load(None, &["meanfield.iterations=2".to_string()])?;
+//! let mut matcher = Matcher::new(params)?.with_ndisp(NdispSource::Given(16));
+//! let (left, right) = jem::io::read_image_pair(&left_png, &right_png)?;
+//! let out = matcher.match_pair(&left, &right)?;
+//! println!("ndisp {}, {:.2} s", out.plan.ndisp, out.seconds);
+//! jem::io::write_disparity(&dir.path().join("disp.pfm"), &out.disparity)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+//!
+//! Around matching: [`eval`] scores results against ground truth (MiddEval3, KITTI, ETH3D), [`batch`] and
+//! [`dataset`] run whole data sets, [`viz`] draws colour maps, [`synth`] renders scenes with exact ground truth,
+//! [`degrade`] makes degraded copies of a data set.
+//!
+//! ## Inside
+//!
+//! The pipeline, in `src/pipeline/`: prepare (condition the pair) → coarse prior (the pipeline on the pair
+//! reduced 2×) → fine pass (cost volume, inference on both views, left-right check, fill, weighted median,
+//! slanted planes). Each stage is a free function in its own module (`cost`, `lattice`, `meanfield`, `post`:
+//! the paper's; `condition`, `setup`, `scale`: ours), private to the crate; the benches reach them through
+//! [`internals`], which is not part of the API.
 #![deny(missing_docs)]
+#![warn(unreachable_pub)]
 
 pub mod batch;
-pub mod condition;
-pub mod cost;
+mod condition;
+mod cost;
 pub mod dataset;
 pub mod degrade;
-pub mod error;
+mod error;
 pub mod eval;
-pub mod fastmath;
+mod fastmath;
 pub mod geometry;
-pub mod image;
-pub(crate) mod imgproc;
+mod image;
+mod imgproc;
 pub mod io;
-pub mod lattice;
-pub mod meanfield;
+mod lattice;
+mod matcher;
+mod meanfield;
 pub mod params;
-pub mod pipeline;
-pub mod plan;
-pub mod post;
-pub mod process;
-pub mod range;
-#[doc(hidden)]
-pub mod rng;
-pub mod scale;
+mod pipeline;
+mod post;
+mod process;
+mod rng;
+mod scale;
+mod setup;
 pub mod synth;
-pub mod table;
+mod table;
 pub mod viz;
 
 pub use error::{Error, Result};
-pub use image::{CostVolume, DisparityMap, Plane, RgbImage, StereoPair};
+pub use image::{DisparityMap, Plane, RgbImage};
+pub use matcher::{Matcher, Output, Progress, RunPlan, Tiles, default_memory_limit};
 pub use params::{LrcMode, Model, Params};
-pub use pipeline::tile;
-pub use pipeline::{
-    Measured, Output, PROCESS_BYTES, Timings, VerticalMeasured, check_memory, default_memory_limit,
-    estimate_memory_bytes, run, run_observed,
-};
+pub use pipeline::{Measured, Timings, VerticalMeasured};
+pub use process::peak_rss_bytes;
+pub use setup::NdispSource;
+pub use setup::memory::MemoryBudget;
+
+#[doc(hidden)]
+pub mod internals;
 
 /// Helpers shared by the unit tests.
 #[cfg(test)]

@@ -12,14 +12,8 @@
 //! Hidden from the documentation: it is a tool of the implementation and the tests, not part of the stereo API.
 
 /// SplitMix64's output function: a bijective 64-bit mixer, also usable as a hash of integer coordinates.
-///
-/// # Examples
-/// ```
-/// assert_eq!(jem::rng::mix64(0), 0);
-/// assert_ne!(jem::rng::mix64(1), jem::rng::mix64(2));
-/// ```
 #[inline]
-pub fn mix64(mut z: u64) -> u64 {
+pub(crate) fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)
@@ -27,32 +21,15 @@ pub fn mix64(mut z: u64) -> u64 {
 
 /// FNV-1a (64 bits) of `bytes`, continuing from `hash` ([`FNV_OFFSET`] to start): a stable hash of names and
 /// sizes (the per-scene streams of `jem degrade`, the fingerprint of a data set in its results folder).
-///
-/// # Examples
-/// ```
-/// use jem::rng::{FNV_OFFSET, fnv1a};
-/// assert_eq!(fnv1a(FNV_OFFSET, b""), FNV_OFFSET);
-/// assert_eq!(fnv1a(fnv1a(FNV_OFFSET, b"a"), b"b"), fnv1a(FNV_OFFSET, b"ab"));
-/// ```
 #[inline]
-pub fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
+pub(crate) fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
     bytes.iter().fold(hash, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3))
 }
 
 /// FNV-1a's starting value.
-pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
-/// A SplitMix64 stream: the state advances by the golden-ratio increment and each output is [`mix64`] of it.
-///
-/// # Examples
-/// ```
-/// use jem::rng::SplitMix64;
-/// let (mut a, mut b) = (SplitMix64::new(7), SplitMix64::new(7));
-/// assert_eq!(a.next_u64(), b.next_u64());
-/// let u = a.next_f64();
-/// assert!((0.0..1.0).contains(&u));
-/// assert!(a.below(10) < 10);
-/// ```
+/// A SplitMix64 stream: the state advances by the golden-ratio increment and each output is `mix64` of it.
 #[derive(Clone, Debug)]
 pub struct SplitMix64(u64);
 
@@ -104,6 +81,29 @@ impl SplitMix64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn example_of_mix64() {
+        assert_eq!(crate::rng::mix64(0), 0);
+        assert_ne!(crate::rng::mix64(1), crate::rng::mix64(2));
+    }
+
+    #[test]
+    fn example_of_fnv1a() {
+        use crate::rng::{FNV_OFFSET, fnv1a};
+        assert_eq!(fnv1a(FNV_OFFSET, b""), FNV_OFFSET);
+        assert_eq!(fnv1a(fnv1a(FNV_OFFSET, b"a"), b"b"), fnv1a(FNV_OFFSET, b"ab"));
+    }
+
+    #[test]
+    fn example_of_split_mix64() {
+        use crate::rng::SplitMix64;
+        let (mut a, mut b) = (SplitMix64::new(7), SplitMix64::new(7));
+        assert_eq!(a.next_u64(), b.next_u64());
+        let u = a.next_f64();
+        assert!((0.0..1.0).contains(&u));
+        assert!(a.below(10) < 10);
+    }
 
     #[test]
     fn known_outputs() {

@@ -38,7 +38,7 @@ use crate::image::{DisparityMap, Plane, RgbImage, StereoPair};
 ///
 /// # Panics
 /// If `factor` is 0.
-pub fn reduced_len(len: usize, factor: usize) -> usize {
+pub(crate) fn reduced_len(len: usize, factor: usize) -> usize {
     assert!(factor > 0, "downscale factor must be at least 1");
     len.div_ceil(factor)
 }
@@ -47,13 +47,13 @@ pub fn reduced_len(len: usize, factor: usize) -> usize {
 ///
 /// # Panics
 /// If `factor` is 0.
-pub fn reduced_ndisp(ndisp: usize, factor: usize) -> usize {
+pub(crate) fn reduced_ndisp(ndisp: usize, factor: usize) -> usize {
     reduced_len(ndisp, factor).max(1)
 }
 
 /// Whether `factor` leaves a valid problem for a `width`-pixel-wide pair with `ndisp` labels: the reduced
 /// search range must stay below the reduced width (as [`StereoPair::new`] requires at any resolution).
-pub fn factor_fits(width: usize, ndisp: usize, factor: usize) -> bool {
+pub(crate) fn factor_fits(width: usize, ndisp: usize, factor: usize) -> bool {
     factor > 0 && reduced_ndisp(ndisp, factor) < reduced_len(width, factor)
 }
 
@@ -61,17 +61,7 @@ pub fn factor_fits(width: usize, ndisp: usize, factor: usize) -> bool {
 ///
 /// # Panics
 /// If `factor` is 0.
-///
-/// # Examples
-/// ```
-/// use jem::image::RgbImage;
-/// let mut img = RgbImage::new(3, 1);
-/// img.channels[0] = vec![10.0, 20.0, 60.0];
-/// let small = jem::scale::downsample_rgb(&img, 2);
-/// assert_eq!(small.dims(), (2, 1));
-/// assert_eq!(small.channels[0], vec![15.0, 60.0]); // the partial block is the mean of the one pixel it has
-/// ```
-pub fn downsample_rgb(image: &RgbImage, factor: usize) -> RgbImage {
+pub(crate) fn downsample_rgb(image: &RgbImage, factor: usize) -> RgbImage {
     let (w, h) = image.dims();
     let (sw, sh) = (reduced_len(w, factor), reduced_len(h, factor));
     let mut out = RgbImage::new(sw, sh);
@@ -107,7 +97,7 @@ pub fn downsample_rgb(image: &RgbImage, factor: usize) -> RgbImage {
 ///
 /// # Panics
 /// If `factor` is 0.
-pub fn downsample_pair(pair: &StereoPair, factor: usize) -> Result<StereoPair> {
+pub(crate) fn downsample_pair(pair: &StereoPair, factor: usize) -> Result<StereoPair<'static>> {
     let (w, h) = pair.left.dims();
     if !factor_fits(w, pair.ndisp, factor) {
         let largest = (1..).take_while(|&f| factor_fits(w, pair.ndisp, f)).last().unwrap_or(1);
@@ -155,7 +145,7 @@ fn axis_table(len: usize, factor: usize) -> Vec<(usize, usize, f32)> {
 ///
 /// # Panics
 /// If `factor` is 0 or `low` is not `ceil(width / factor) × ceil(height / factor)`.
-pub fn upsample_plane(low: &Plane<f32>, factor: usize, width: usize, height: usize) -> Plane<f32> {
+pub(crate) fn upsample_plane(low: &Plane<f32>, factor: usize, width: usize, height: usize) -> Plane<f32> {
     resample_up(low, factor, width, height, 1.0, None)
 }
 
@@ -164,15 +154,8 @@ pub fn upsample_plane(low: &Plane<f32>, factor: usize, width: usize, height: usi
 ///
 /// # Panics
 /// If `factor` is 0 or `low` is not `ceil(width / factor) × ceil(height / factor)`.
-///
-/// # Examples
-/// ```
-/// use jem::image::Plane;
-/// let low = Plane::from_vec(2, 1, vec![1.0, f32::INFINITY]);
-/// let full = jem::scale::upsample_disparity(&low, 2, 4, 1);
-/// assert_eq!(full.data, vec![2.0, 2.0, f32::INFINITY, f32::INFINITY]);
-/// ```
-pub fn upsample_disparity(low: &DisparityMap, factor: usize, width: usize, height: usize) -> DisparityMap {
+#[cfg(test)]
+pub(crate) fn upsample_disparity(low: &DisparityMap, factor: usize, width: usize, height: usize) -> DisparityMap {
     resample_up(low, factor, width, height, factor as f32, None)
 }
 
@@ -181,12 +164,12 @@ pub fn upsample_disparity(low: &DisparityMap, factor: usize, width: usize, heigh
 ///
 /// # Panics
 /// If `factor` is 0 or `low` is empty.
-pub fn upsample_mask(low: &Plane<bool>, factor: usize, width: usize, height: usize) -> Plane<bool> {
+pub(crate) fn upsample_mask(low: &Plane<bool>, factor: usize, width: usize, height: usize) -> Plane<bool> {
     let (lw, lh) = low.dims();
     let data = (0..width * height)
         .map(|i| low.at(((i % width) / factor).min(lw - 1), ((i / width) / factor).min(lh - 1)))
         .collect();
-    Plane::from_vec(width, height, data)
+    Plane::from_parts(width, height, data)
 }
 
 /// [`upsample_disparity`], edge-aware (see the module doc): where the (up to) four disparities a pixel interpolates
@@ -197,7 +180,7 @@ pub fn upsample_mask(low: &Plane<bool>, factor: usize, width: usize, height: usi
 ///
 /// # Panics
 /// If `low` and `low_guide` differ in size, or as [`upsample_disparity`] for `guide`'s size.
-pub fn upsample_disparity_guided(
+pub(crate) fn upsample_disparity_guided(
     low: &DisparityMap,
     low_guide: &RgbImage,
     guide: &RgbImage,
@@ -296,6 +279,24 @@ fn resample_up(
 mod tests {
     use super::*;
 
+    #[test]
+    fn example_of_downsample_rgb() {
+        use crate::image::RgbImage;
+        let mut img = RgbImage::new(3, 1);
+        img.channels[0] = vec![10.0, 20.0, 60.0];
+        let small = crate::scale::downsample_rgb(&img, 2);
+        assert_eq!(small.dims(), (2, 1));
+        assert_eq!(small.channels[0], vec![15.0, 60.0]); // the partial block is the mean of the one pixel it has
+    }
+
+    #[test]
+    fn example_of_upsample_disparity() {
+        use crate::image::Plane;
+        let low = Plane::from_parts(2, 1, vec![1.0, f32::INFINITY]);
+        let full = crate::scale::upsample_disparity(&low, 2, 4, 1);
+        assert_eq!(full.data, vec![2.0, 2.0, f32::INFINITY, f32::INFINITY]);
+    }
+
     fn grey(w: usize, h: usize, v: &[f32]) -> RgbImage {
         let mut img = RgbImage::new(w, h);
         for (c, ch) in img.channels.iter_mut().enumerate() {
@@ -318,7 +319,7 @@ mod tests {
         // 1's mean is taken as dark), pixel 3 bright like the far one. Reduced: colour and disparity per block.
         let full = grey(8, 1, &[0.0, 0.0, 0.0, 200.0, 200.0, 200.0, 200.0, 200.0]);
         let low_guide = grey(4, 1, &[0.0, 40.0, 200.0, 200.0]);
-        let low = Plane::from_vec(4, 1, vec![10.0, 10.0, 2.0, 2.0]);
+        let low = Plane::from_parts(4, 1, vec![10.0, 10.0, 2.0, 2.0]);
         let plain = upsample_disparity(&low, 2, 8, 1);
         let guided = upsample_disparity_guided(&low, &low_guide, &full, 2, 1.0, 10.0);
         // Bilinear blends pixel 3 (between block centres 2.5 and 4.5) to 16; guided it takes the far surface's 4.
@@ -331,7 +332,7 @@ mod tests {
             assert_eq!(guided.data[i], plain.data[i], "pixel {i}");
         }
         // A ramp whose neighbours differ by less than edge_px is the plain bilinear result everywhere.
-        let ramp = Plane::from_vec(4, 1, vec![1.0, 1.2, 1.4, 1.6]);
+        let ramp = Plane::from_parts(4, 1, vec![1.0, 1.2, 1.4, 1.6]);
         assert_eq!(
             upsample_disparity_guided(&ramp, &low_guide, &full, 2, 1.0, 10.0).data,
             upsample_disparity(&ramp, 2, 8, 1).data
@@ -339,7 +340,7 @@ mod tests {
         // edge_px 0 is plain bilinear.
         assert_eq!(upsample_disparity_guided(&low, &low_guide, &full, 2, 0.0, 10.0).data, plain.data);
         // Invalid pixels stay invalid and are never chosen.
-        let holes = Plane::from_vec(4, 1, vec![10.0, f32::INFINITY, 2.0, 2.0]);
+        let holes = Plane::from_parts(4, 1, vec![10.0, f32::INFINITY, 2.0, 2.0]);
         let out = upsample_disparity_guided(&holes, &low_guide, &full, 2, 1.0, 10.0);
         assert!(!out.data[2].is_finite() && !out.data[3].is_finite());
         assert!(out.data.iter().all(|d| !d.is_finite() || *d == 20.0 || *d == 4.0 || (4.0..=20.0).contains(d)));
@@ -394,7 +395,7 @@ mod tests {
     #[test]
     fn upsample_interpolates_between_block_centres() {
         // 5 px at factor 2: block centres at 0.5, 2.5 and 4 (the partial block's single pixel).
-        let low = Plane::from_vec(3, 1, vec![0.0, 2.0, 6.0]);
+        let low = Plane::from_parts(3, 1, vec![0.0, 2.0, 6.0]);
         let d = upsample_disparity(&low, 2, 5, 1);
         // x = 0 clamps to the first centre; x = 1: 0 + 0.25·2; x = 2: 0.75·2; x = 3: 2 + (1/3)·4; x = 4: 6. All ×2.
         assert_close(&d.data, &[0.0, 1.0, 3.0, 2.0 * (2.0 + 4.0 / 3.0), 12.0]);
@@ -405,7 +406,7 @@ mod tests {
     #[test]
     fn upsample_two_dimensions() {
         // 2×2 low-res map of a 4×4 image: centres at 0.5 and 2.5 on both axes.
-        let low = Plane::from_vec(2, 2, vec![0.0, 4.0, 8.0, 12.0]);
+        let low = Plane::from_parts(2, 2, vec![0.0, 4.0, 8.0, 12.0]);
         let full = upsample_plane(&low, 2, 4, 4);
         #[rustfmt::skip]
         let want = [
@@ -422,7 +423,7 @@ mod tests {
         let inf = f32::INFINITY;
         // A 6×3 image at factor 2: 3×2 low-res with one invalid pixel. Column centres 0.5, 2.5, 4.5; row centres
         // 0.5 and 2 (the bottom blocks are one row high).
-        let low = Plane::from_vec(3, 2, vec![1.0, inf, 3.0, 5.0, 7.0, 9.0]);
+        let low = Plane::from_parts(3, 2, vec![1.0, inf, 3.0, 5.0, 7.0, 9.0]);
         let full = upsample_disparity(&low, 2, 6, 3);
         // The invalid block (x 2..4, y 0..2) stays invalid, and no valid pixel takes anything from it. At y = 1
         // (1/3 of the way to the bottom row), x = 1 (wx = 1/4): weights 1/2 on 1, 1/4 on 5, 1/12 on 7 (the 1/6 on
@@ -439,7 +440,7 @@ mod tests {
         let none = upsample_disparity(&Plane::new(3, 2, inf), 2, 6, 3);
         assert!(none.data.iter().all(|v| !v.is_finite()));
         // NaN counts as invalid too.
-        let nan = upsample_plane(&Plane::from_vec(2, 1, vec![f32::NAN, 4.0]), 2, 4, 1);
+        let nan = upsample_plane(&Plane::from_parts(2, 1, vec![f32::NAN, 4.0]), 2, 4, 1);
         assert_close(&nan.data, &[inf, inf, 4.0, 4.0]);
     }
 

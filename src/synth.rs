@@ -719,8 +719,8 @@ mod tests {
         params.post.sps.enabled = false;
         for seed in 1..=3 {
             let s = scene(seed);
-            let pair = crate::StereoPair::new(s.left.clone(), s.right.clone(), s.ndisp).unwrap();
-            let out = crate::run(&params, &pair).unwrap();
+            let pair = crate::image::StereoPair::new(s.left.clone(), s.right.clone(), s.ndisp).unwrap();
+            let out = crate::pipeline::run(&params, &pair).unwrap();
             let (mut n, mut good) = (0usize, 0usize);
             for ((&d, &g), &m) in out.disparity.data.iter().zip(&s.gt.data).zip(&s.mask.data) {
                 if m == MASK_VISIBLE {

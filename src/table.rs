@@ -4,7 +4,7 @@
 
 /// Rows of text cells, the first row being the header, and which columns are right-aligned.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct Table {
+pub(crate) struct Table {
     /// The rows, header first. A row may be shorter than the others: its missing cells are left out.
     pub rows: Vec<Vec<String>>,
     /// `right_aligned[c]`: column `c` is right-aligned (numbers); the others, and columns past the end of this
@@ -21,15 +21,7 @@ impl Table {
     /// Aligned columns, one line per row: each column is as wide as its widest cell (counted in `char`s),
     /// cells are padded on the left (right-aligned columns) or the right, joined by two spaces, and trailing
     /// spaces are trimmed. An empty table gives an empty string.
-    ///
-    /// # Examples
-    /// ```
-    /// use jem::table::Table;
-    /// let rows = vec![vec!["scene".into(), "err".into(), "ok".into()], vec!["A".into(), "1.25".into()]];
-    /// let table = Table { rows, right_aligned: vec![false, true] };
-    /// assert_eq!(table.text(), "scene   err  ok\nA      1.25\n");
-    /// ```
-    pub fn text(&self) -> String {
+    pub(crate) fn text(&self) -> String {
         let ncol = self.rows.iter().map(Vec::len).max().unwrap_or(0);
         let widths: Vec<usize> = (0..ncol)
             .map(|c| self.rows.iter().filter_map(|r| r.get(c)).map(|v| v.chars().count()).max().unwrap_or(0))
@@ -52,15 +44,7 @@ impl Table {
     /// A GitHub-flavoured Markdown table: the header row, a rule (`---:` under the columns of
     /// [`Table::right_aligned`] that are `true`, `---` under the others), then the other rows; `|` in a cell is
     /// escaped. An empty table gives an empty string.
-    ///
-    /// # Examples
-    /// ```
-    /// use jem::table::Table;
-    /// let rows = vec![vec!["scene".into(), "err".into()], vec!["a|b".into(), "1.25".into()]];
-    /// let table = Table { rows, right_aligned: vec![false, true] };
-    /// assert_eq!(table.markdown(), "| scene | err |\n|---|---:|\n| a\\|b | 1.25 |\n");
-    /// ```
-    pub fn markdown(&self) -> String {
+    pub(crate) fn markdown(&self) -> String {
         let Some((header, body)) = self.rows.split_first() else {
             return String::new();
         };
@@ -79,6 +63,22 @@ impl Table {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn example_of_text() {
+        use crate::table::Table;
+        let rows = vec![vec!["scene".into(), "err".into(), "ok".into()], vec!["A".into(), "1.25".into()]];
+        let table = Table { rows, right_aligned: vec![false, true] };
+        assert_eq!(table.text(), "scene   err  ok\nA      1.25\n");
+    }
+
+    #[test]
+    fn example_of_markdown() {
+        use crate::table::Table;
+        let rows = vec![vec!["scene".into(), "err".into()], vec!["a|b".into(), "1.25".into()]];
+        let table = Table { rows, right_aligned: vec![false, true] };
+        assert_eq!(table.markdown(), "| scene | err |\n|---|---:|\n| a\\|b | 1.25 |\n");
+    }
 
     fn table(rows: &[&[&str]], right_aligned: &[bool]) -> Table {
         Table {

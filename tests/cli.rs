@@ -43,7 +43,7 @@ fn readme_example_writes_a_valid_pfm() {
     assert!(out.status.success(), "{}", stderr(&out));
     let d = pfm::read_pfm(&dir.path().join("disp.pfm")).unwrap();
     assert_eq!(d.dims(), (320, 240));
-    assert!(d.data.iter().all(|v| v.is_finite() && (0.0..48.0).contains(v)), "the default pipeline is dense");
+    assert!(d.data().iter().all(|v| v.is_finite() && (0.0..48.0).contains(v)), "the default pipeline is dense");
     assert_eq!(files_in(dir.path()), ["disp.pfm"], "no temporary files left");
 }
 
@@ -60,7 +60,7 @@ fn output_formats_follow_the_extension() {
     let c = jem::io::read_disparity(&dir.path().join("d.png")).unwrap();
     assert_eq!(a, b);
     // 16-bit PNG: 1/256 px steps, and 0 means invalid, so a disparity of exactly 0 is stored as 1/256.
-    assert!(a.data.iter().zip(&c.data).all(|(x, y)| (x - y).abs() <= 1.0 / 256.0), "PNG round trip");
+    assert!(a.data().iter().zip(c.data()).all(|(x, y)| (x - y).abs() <= 1.0 / 256.0), "PNG round trip");
 }
 
 #[test]
@@ -200,7 +200,7 @@ fn tiny_images_never_panic() {
             assert!(out.status.success(), "{w}x{h}: {err}");
             let map = pfm::read_pfm(&d.join("o.pfm")).unwrap();
             assert_eq!(map.dims(), (w as usize, h as usize));
-            assert!(map.data.iter().all(|v| !v.is_nan()));
+            assert!(map.data().iter().all(|v| !v.is_nan()));
         }
         assert!(!err.contains("panicked"), "{err}");
     }
@@ -245,7 +245,7 @@ fn memory_limit_runs_in_tiles() {
     let d = pfm::read_pfm(&dir.path().join("t.pfm")).unwrap();
     let gt = example_gt();
     let err: f64 =
-        d.data.iter().zip(&gt.data).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / gt.data.len() as f64;
+        d.data().iter().zip(gt.data()).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / gt.data().len() as f64;
     assert!(err < 1.0, "mean error {err:.3} px");
 }
 
@@ -325,7 +325,7 @@ fn large_synthetic_scene_runs_tiled_within_the_limit() {
     }
     let d = pfm::read_pfm(&dir.path().join("d.pfm")).unwrap();
     let gt = pfm::read_pfm(&dir.path().join("s/disp0GT.pfm")).unwrap();
-    let mask = jem::io::png::load_grey8(&dir.path().join("s/mask0nocc.png")).unwrap();
+    let mask = jem::io::read_grey8(&dir.path().join("s/mask0nocc.png")).unwrap();
     let m = jem::eval::evaluate(&d, &gt, Some(&mask), 160, 1, jem::eval::MaskMode::Nonocc);
     assert_eq!(m.invalid, 0.0, "dense output");
     assert!(m.avgerr < 1.0 && m.bad1 < 2.0, "mean error {:.3} px, {:.2} % over 1 px", m.avgerr, m.bad1);
@@ -370,7 +370,7 @@ fn nan_and_inf_never_reach_the_output() {
     );
     assert!(out.status.success(), "{}", stderr(&out));
     let d = pfm::read_pfm(&dir.path().join("big.pfm")).unwrap();
-    assert!(d.data.iter().all(|v| !v.is_nan()), "NaN in the output");
+    assert!(d.data().iter().all(|v| !v.is_nan()), "NaN in the output");
 }
 
 /// Issue 7: `--downscale N` runs at 1/N resolution and writes a full-size map; the same bytes whatever the thread
@@ -390,7 +390,7 @@ fn downscale_flag_writes_a_full_size_map() {
     assert!(std::fs::read(d.join("t2.pfm")).unwrap() == first, "1 and 2 threads differ");
     let map = pfm::read_pfm(&d.join("t1.pfm")).unwrap();
     assert_eq!(map.dims(), (320, 240));
-    assert!(map.data.iter().all(|v| v.is_finite() && (0.0..48.0).contains(v)), "dense and in range");
+    assert!(map.data().iter().all(|v| v.is_finite() && (0.0..48.0).contains(v)), "dense and in range");
     let full = run_in(d, &["--threads", "1", &l, &r, "-o", "full.pfm"]);
     assert!(full.status.success(), "{}", stderr(&full));
     assert!(std::fs::read(d.join("full.pfm")).unwrap() != first, "--downscale 2 changes the result");
@@ -702,7 +702,7 @@ fn issue19_disparities_stay_in_the_search_range() {
             let out = run_in(dir.path(), &args);
             assert!(out.status.success(), "{}", stderr(&out));
             let d = pfm::read_pfm(&dir.path().join("d.pfm")).unwrap();
-            let finite = d.data.iter().filter(|v| v.is_finite());
+            let finite = d.data().iter().filter(|v| v.is_finite());
             let (lo, hi) = finite.fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
             assert!(lo >= 0.0 && hi <= (ndisp - 1) as f32, "{config}, ndisp {ndisp}: range {lo}..{hi}");
         }
@@ -789,7 +789,7 @@ fn issue18_depth_and_point_cloud() {
     let depth = pfm::read_pfm(&dir.path().join("z.pfm")).unwrap();
     let (f, b, cx, cy) = (96.0f64, 100.0f64, 47.5f64, 31.5f64);
     let mut valid = Vec::new();
-    for (i, (&d, &z)) in disp.data.iter().zip(&depth.data).enumerate() {
+    for (i, (&d, &z)) in disp.data().iter().zip(depth.data()).enumerate() {
         if d.is_finite() && d > 0.0 {
             assert!((f64::from(z) - f * b / f64::from(d)).abs() < 1e-3 * f64::from(z), "pixel {i}: d {d}, z {z}");
             valid.push((i, f64::from(z)));
@@ -803,7 +803,7 @@ fn issue18_depth_and_point_cloud() {
     let header = String::from_utf8_lossy(&ply[..at]).into_owned();
     assert!(header.contains(&format!("element vertex {}\n", valid.len())), "{header}");
     assert_eq!(ply.len() - at, valid.len() * 15);
-    let left = jem::io::png::load_rgb(&dir.path().join("S/im0.png")).unwrap();
+    let left = jem::io::read_image(&dir.path().join("S/im0.png")).unwrap();
     for (k, &(i, z)) in valid.iter().enumerate().step_by(97) {
         let p = &ply[at + 15 * k..at + 15 * (k + 1)];
         let v = |j: usize| f64::from(f32::from_le_bytes(p[4 * j..4 * j + 4].try_into().unwrap()));
@@ -841,7 +841,8 @@ fn issue18_jpeg_input() {
         assert!(out.status.success(), "{right}: {}", stderr(&out));
         let d = pfm::read_pfm(&dir.path().join("d.pfm")).unwrap();
         assert_eq!(d.dims(), gt.dims());
-        let err = d.data.iter().zip(&gt.data).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / d.data.len() as f64;
+        let err =
+            d.data().iter().zip(gt.data()).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / d.data().len() as f64;
         assert!(err < 1.5, "{right}: mean error {err:.3} px");
     }
 }
@@ -855,7 +856,8 @@ fn issue16_ndisp_equal_to_width_is_measured() {
     let gt = pfm::read_pfm(&dir.path().join("S/disp0GT.pfm")).unwrap();
     let mean_err = |name: &str| {
         let d = pfm::read_pfm(&dir.path().join(name)).unwrap();
-        d.data.iter().zip(&gt.data).map(|(a, b)| f64::from((a - b).abs().min(64.0))).sum::<f64>() / d.data.len() as f64
+        d.data().iter().zip(gt.data()).map(|(a, b)| f64::from((a - b).abs().min(64.0))).sum::<f64>()
+            / d.data().len() as f64
     };
     let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "true.pfm"]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -890,12 +892,12 @@ fn r38_jem_and_batch_search_up_to_the_same_limit() {
     let scene = dir.path().join("shifted");
     std::fs::create_dir(&scene).unwrap();
     let (w, h, d) = (96, 48, 60);
-    let mut rng = jem::rng::SplitMix64::new(38);
+    let mut rng = jem::internals::SplitMix64::new(38);
     let texture: Vec<u8> = (0..(w + d) * h).map(|_| (rng.next_u64() >> 56) as u8).collect();
     // Left pixel x shows texture column x, right pixel x texture column x + d: left x matches right x − d.
     for (f, from) in [("im0.png", 0), ("im1.png", d)] {
         let rgb: Vec<u8> = (0..w * h).flat_map(|i| [texture[(i / w) * (w + d) + i % w + from]; 3]).collect();
-        jem::io::png::write_rgb8_png(&scene.join(f), w, h, &rgb).unwrap();
+        jem::io::write_png_rgb8(&scene.join(f), w, h, &rgb).unwrap();
     }
     let wta = ["--set", "model=wta"];
     let out = run_in(&scene, &[&["im0.png", "im1.png", "-o", "match.pfm"][..], &wta].concat());
@@ -1117,7 +1119,7 @@ fn issue41_overflowing_geometry_writes_no_infinite_point() {
         ply[at..].chunks(15).map(|p| [0, 4, 8].map(|k| f32::from_le_bytes(p[k..k + 4].try_into().unwrap()))).collect();
     assert!(points.iter().flatten().all(|v| v.is_finite()), "a non-finite point");
     let depth = pfm::read_pfm(&dir.path().join("z.pfm")).unwrap();
-    assert_eq!(depth.data.iter().filter(|z| z.is_finite()).count(), points.len(), "depth and cloud disagree");
+    assert_eq!(depth.data().iter().filter(|z| z.is_finite()).count(), points.len(), "depth and cloud disagree");
 }
 
 /// Issue 41, item 11: the image decoder's own allocation limit is `--max-memory` (checked from the headers

@@ -8,8 +8,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use common::{run_in, stderr};
-use jem::image::Plane;
-use jem::io::{pfm, png};
+use jem::Plane;
+use jem::io::pfm;
 
 /// Renders a synthetic scene (MiddEval3 layout, 320×240, ndisp 48) into `dir`.
 fn synth(dir: &Path, seed: u32) {
@@ -38,14 +38,14 @@ fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
 /// KITTI ground truth from a synthetic scene: non-occluded (mask 255) or all pixels with truth (mask > 0).
 fn kitti_truth(scene: &Path, all: bool) -> Plane<f32> {
     let gt = pfm::read_pfm(&scene.join("disp0GT.pfm")).unwrap();
-    let mask = png::load_grey8(&scene.join("mask0nocc.png")).unwrap();
+    let mask = jem::io::read_grey8(&scene.join("mask0nocc.png")).unwrap();
     let data = gt
-        .data
+        .data()
         .iter()
-        .zip(&mask.data)
+        .zip(mask.data())
         .map(|(&d, &m)| if (all && m > 0) || m == 255 { d } else { f32::INFINITY })
         .collect();
-    Plane::from_vec(gt.width, gt.height, data)
+    Plane::from_vec(gt.width(), gt.height(), data).unwrap()
 }
 
 /// A KITTI 2015 training tree (`image_2/`, `image_3/`, `disp_noc_0/`, `disp_occ_0/`) with frames 000000_10 and
@@ -59,8 +59,8 @@ fn kitti2015(root: &Path, scenes: &[PathBuf]) -> PathBuf {
         let frame = format!("{k:06}_10.png");
         std::fs::copy(scene.join("im0.png"), tree.join("image_2").join(&frame)).unwrap();
         std::fs::copy(scene.join("im1.png"), tree.join("image_3").join(&frame)).unwrap();
-        png::write_disparity_png16(&tree.join("disp_noc_0").join(&frame), &kitti_truth(scene, false)).unwrap();
-        png::write_disparity_png16(&tree.join("disp_occ_0").join(&frame), &kitti_truth(scene, true)).unwrap();
+        jem::io::write_disparity(&tree.join("disp_noc_0").join(&frame), &kitti_truth(scene, false)).unwrap();
+        jem::io::write_disparity(&tree.join("disp_occ_0").join(&frame), &kitti_truth(scene, true)).unwrap();
         let next = format!("{k:06}_11.png");
         std::fs::copy(scene.join("im0.png"), tree.join("image_2").join(&next)).unwrap();
         std::fs::copy(scene.join("im1.png"), tree.join("image_3").join(&next)).unwrap();
@@ -71,7 +71,7 @@ fn kitti2015(root: &Path, scenes: &[PathBuf]) -> PathBuf {
 /// D1 by hand: % of truth pixels with |d − gt| > 3 and > 5 % of gt (no invalid pixels in `result`).
 fn d1_by_hand(result: &Plane<f32>, gt: &Plane<f32>) -> f64 {
     let (mut n, mut bad) = (0, 0);
-    for (&d, &g) in result.data.iter().zip(&gt.data) {
+    for (&d, &g) in result.data().iter().zip(gt.data()) {
         if g.is_finite() {
             n += 1;
             let e = (d - g).abs();
@@ -103,7 +103,7 @@ fn kitti2015_batch_and_eval() {
     assert_eq!(snapshot(&tree), before, "the data set is untouched");
     assert_eq!(common::files_in(&results.join("disp_0")), ["000000_10.png", "000001_10.png"], "only _10 frames");
     assert_eq!(common::files_in(&results.join("time")), ["000000_10.txt", "000001_10.txt"]);
-    let d = png::read_disparity_png16(&results.join("disp_0").join("000000_10.png")).unwrap();
+    let d = jem::io::read_disparity(&results.join("disp_0").join("000000_10.png")).unwrap();
     assert_eq!(d.dims(), (320, 240));
     // KITTI's default range, 192, is at least half of this 320-pixel width, so it is measured on the pair
     // instead (the synthetic disparities stay below 48).
@@ -117,8 +117,8 @@ fn kitti2015_batch_and_eval() {
     assert!(out.status.success(), "{}", stderr(&out));
     let json = String::from_utf8(out.stdout).unwrap();
     assert!(json.contains("\"layout\": \"kitti2015\""), "{json}");
-    let gt = png::read_disparity_png16(&tree.join("disp_noc_0").join("000000_10.png")).unwrap();
-    assert!(d.data.iter().all(|v| v.is_finite()));
+    let gt = jem::io::read_disparity(&tree.join("disp_noc_0").join("000000_10.png")).unwrap();
+    assert!(d.data().iter().all(|v| v.is_finite()));
     let want = d1_by_hand(&d, &gt);
     assert!((json_value(&json, "000000_10", "d1") - want).abs() < 1e-9, "{json} vs {want}");
     assert!(want < 10.0, "the synthetic scene is matched: D1 {want}");
@@ -126,9 +126,9 @@ fn kitti2015_batch_and_eval() {
     // A result made by hand: outliers where x % 4 == 0 (error 4 > 3 px and > 5 % of a disparity < 48), small
     // errors elsewhere, and the first column invalid (filled from its right neighbour, as KITTI's devkit does).
     let frame = results.join("disp_0").join("000001_10.png");
-    let gt = png::read_disparity_png16(&tree.join("disp_occ_0").join("000001_10.png")).unwrap();
-    let w = gt.width;
-    let truth_or_zero: Vec<f32> = gt.data.iter().map(|g| if g.is_finite() { *g } else { 10.0 }).collect();
+    let gt = jem::io::read_disparity(&tree.join("disp_occ_0").join("000001_10.png")).unwrap();
+    let w = gt.width();
+    let truth_or_zero: Vec<f32> = gt.data().iter().map(|g| if g.is_finite() { *g } else { 10.0 }).collect();
     let mut made: Vec<f32> = truth_or_zero
         .iter()
         .enumerate()
@@ -138,10 +138,10 @@ fn kitti2015_batch_and_eval() {
     for i in (0..made.len()).step_by(w) {
         made[i] = f32::INFINITY;
     }
-    png::write_disparity_png16(&frame, &Plane::from_vec(w, gt.height, made)).unwrap();
-    let want = d1_by_hand(&Plane::from_vec(w, gt.height, filled), &gt);
-    let invalid = 100.0 * (0..gt.data.len()).filter(|i| i % w == 0 && gt.data[*i].is_finite()).count() as f64
-        / gt.data.iter().filter(|g| g.is_finite()).count() as f64;
+    jem::io::write_disparity(&frame, &Plane::from_vec(w, gt.height(), made).unwrap()).unwrap();
+    let want = d1_by_hand(&Plane::from_vec(w, gt.height(), filled).unwrap(), &gt);
+    let invalid = 100.0 * (0..gt.data().len()).filter(|i| i % w == 0 && gt.data()[*i].is_finite()).count() as f64
+        / gt.data().iter().filter(|g| g.is_finite()).count() as f64;
     let out =
         run_in(dir.path(), &["eval", tree.to_str().unwrap(), "--alg", "Jem", "--mask", "all", "--format", "json"]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -180,8 +180,8 @@ fn kitti2012_grey_images() {
     for (src, sub) in [("im0.png", "image_0"), ("im1.png", "image_1")] {
         image::open(scene.join(src)).unwrap().to_luma8().save(tree.join(sub).join("000005_10.png")).unwrap();
     }
-    png::write_disparity_png16(&tree.join("disp_noc").join("000005_10.png"), &kitti_truth(&scene, false)).unwrap();
-    png::write_disparity_png16(&tree.join("disp_occ").join("000005_10.png"), &kitti_truth(&scene, true)).unwrap();
+    jem::io::write_disparity(&tree.join("disp_noc").join("000005_10.png"), &kitti_truth(&scene, false)).unwrap();
+    jem::io::write_disparity(&tree.join("disp_occ").join("000005_10.png"), &kitti_truth(&scene, true)).unwrap();
     let out = run_in(dir.path(), &["batch", tree.to_str().unwrap(), "--alg", "G", "--ndisp", "48"]);
     assert!(out.status.success(), "{}", stderr(&out));
     let result = dir.path().join("data_stereo_flow/results/G/training/disp_0/000005_10.png");
@@ -297,11 +297,12 @@ fn issue41_kitti_with_only_disp_occ_is_scored_with_mask_all() {
     std::fs::copy(dir.path().join("S/im0.png"), tree.join("image_2/000000_10.png")).unwrap();
     std::fs::copy(dir.path().join("S/im1.png"), tree.join("image_3/000000_10.png")).unwrap();
     let truth = kitti_truth(&dir.path().join("S"), true);
-    png::write_disparity_png16(&tree.join("disp_occ_0/000000_10.png"), &truth).unwrap();
+    jem::io::write_disparity(&tree.join("disp_occ_0/000000_10.png"), &truth).unwrap();
     let results = dir.path().join("k/results/A/training/disp_0");
     std::fs::create_dir_all(&results).unwrap();
-    let result = Plane::from_vec(64, 48, truth.data.iter().map(|g| if g.is_finite() { *g } else { 1.0 }).collect());
-    png::write_disparity_png16(&results.join("000000_10.png"), &result).unwrap();
+    let result =
+        Plane::from_vec(64, 48, truth.data().iter().map(|g| if g.is_finite() { *g } else { 1.0 }).collect()).unwrap();
+    jem::io::write_disparity(&results.join("000000_10.png"), &result).unwrap();
     let tree_arg = tree.to_str().unwrap();
     let out = run_in(dir.path(), &["eval", tree_arg, "--alg", "A", "--mask", "all", "--format", "json"]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -327,7 +328,7 @@ fn issue41_a_kitti_frame_without_its_right_image_is_reported() {
     let truth = kitti_truth(&dir.path().join("S"), false);
     for frame in ["000000_10.png", "000001_10.png"] {
         std::fs::copy(dir.path().join("S/im0.png"), tree.join("image_2").join(frame)).unwrap();
-        png::write_disparity_png16(&tree.join("disp_noc_0").join(frame), &truth).unwrap();
+        jem::io::write_disparity(&tree.join("disp_noc_0").join(frame), &truth).unwrap();
     }
     std::fs::copy(dir.path().join("S/im1.png"), tree.join("image_3/000000_10.png")).unwrap();
     let tree_arg = tree.to_str().unwrap();
@@ -389,7 +390,7 @@ fn kitti_split(dir: &Path, scene: &str, seed: u32, tree: &str) -> PathBuf {
     }
     std::fs::copy(s.join("im0.png"), tree.join("image_2/000000_10.png")).unwrap();
     std::fs::copy(s.join("im1.png"), tree.join("image_3/000000_10.png")).unwrap();
-    png::write_disparity_png16(&tree.join("disp_noc_0/000000_10.png"), &kitti_truth(&s, false)).unwrap();
+    jem::io::write_disparity(&tree.join("disp_noc_0/000000_10.png"), &kitti_truth(&s, false)).unwrap();
     tree
 }
 

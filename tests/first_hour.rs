@@ -29,7 +29,7 @@ fn issue42_every_command_ends_with_what_it_did() {
     assert!(head.starts_with("wrote d.pfm (96×64, ") && tail.contains(" s), point cloud p.ply ("), "{line}");
     let percent: f64 = head.rsplit(", ").next().unwrap().parse().unwrap_or_else(|_| panic!("{line}"));
     let map = jem::io::read_disparity(&d.join("d.pfm")).unwrap();
-    let valid = 100.0 * map.data.iter().filter(|v| v.is_finite()).count() as f64 / map.data.len() as f64;
+    let valid = 100.0 * map.data().iter().filter(|v| v.is_finite()).count() as f64 / map.data().len() as f64;
     assert!((percent - valid).abs() <= 0.5, "{line}: {valid} % valid");
 
     let line = last_line(d, &["batch", "set", "--alg", "T"]);
@@ -86,7 +86,7 @@ const INF: f32 = f32::INFINITY;
 /// Writes a disparity map in the format its extension names (16-bit PNG for KITTI, PFM).
 fn write_map(path: &Path, w: usize, h: usize, data: Vec<f32>) {
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-    let bytes = jem::io::encode_disparity(path, &jem::Plane::from_vec(w, h, data)).unwrap();
+    let bytes = jem::io::encode_disparity(path, &jem::Plane::from_vec(w, h, data).unwrap()).unwrap();
     std::fs::write(path, bytes).unwrap();
 }
 

@@ -4,11 +4,11 @@
 
 mod common;
 
-use jem::image::{DisparityMap, Plane, RgbImage};
+use jem::internals::SplitMix64;
+use jem::internals::post::planes::fit_slanted_planes;
+use jem::internals::post::wmedian::weighted_median;
 use jem::params::{SpsParams, WmedianParams};
-use jem::post::planes::fit_slanted_planes;
-use jem::post::wmedian::weighted_median;
-use jem::rng::SplitMix64;
+use jem::{DisparityMap, Plane, RgbImage};
 
 /// A standard normal sample (Box–Muller, cosine branch).
 fn gauss(rng: &mut SplitMix64) -> f64 {
@@ -61,12 +61,12 @@ fn synthetic_coloured(w: usize, h: usize, noise: f64, seed: u64, colours: [[f32;
             let pl = planes[r];
             truth[i] = pl[0] * xf + pl[1] * yf + pl[2];
             let tex = (rng.next_f64() as f32 - 0.5) * 30.0;
-            for (channel, base) in image.channels.iter_mut().zip(colours[r]) {
-                channel[i] = (base + tex).clamp(0.0, 255.0);
+            for (c, base) in colours[r].into_iter().enumerate() {
+                image.channel_mut(c)[i] = (base + tex).clamp(0.0, 255.0);
             }
             let stripe = x % 37 < 3;
-            disp.data[i] = if stripe || rng.next_f64() < 0.1 {
-                trusted.data[i] = false;
+            disp.data_mut()[i] = if stripe || rng.next_f64() < 0.1 {
+                trusted.data_mut()[i] = false;
                 f32::INFINITY
             } else if rng.next_f64() < 0.01 {
                 (rng.next_f64() * 40.0) as f32
@@ -107,7 +107,7 @@ struct ErrorStats {
 fn errors(s: &Synthetic, out: &DisparityMap, margin: usize, within: f64) -> ErrorStats {
     let (w, h) = out.dims();
     let inner = interior(&s.region, w, h, margin);
-    let err: Vec<f64> = out.data.iter().zip(&s.truth).map(|(d, t)| (f64::from(*d) - t).abs()).collect();
+    let err: Vec<f64> = out.data().iter().zip(&s.truth).map(|(d, t)| (f64::from(*d) - t).abs()).collect();
     let n_in = inner.iter().filter(|b| **b).count() as f64;
     let inner_err = || err.iter().zip(&inner).filter(|(_, b)| **b).map(|(e, _)| *e);
     ErrorStats {
@@ -130,7 +130,7 @@ fn sps_recovers_piecewise_planar_scene() {
     let (w, h) = (200, 150);
     let s = synthetic(w, h, 0.3, 42);
     let out = fit_slanted_planes(&s.image, &s.disp, &s.trusted, &sps(150));
-    assert!(out.data.iter().all(|d| d.is_finite()));
+    assert!(out.data().iter().all(|d| d.is_finite()));
     let e = errors(&s, &out, 3, 0.5);
     eprintln!(
         "mean {:.4}, interior mean {:.4}, interior <0.5: {:.4}, interior max {:.3}",
@@ -165,7 +165,7 @@ fn sps_is_exact_on_clean_planes() {
     let (w, h) = (120, 90);
     let mut s = synthetic(w, h, 0.0, 5);
     // Remove the gross outliers: every trusted pixel carries its true value.
-    for (i, d) in s.disp.data.iter_mut().enumerate() {
+    for (i, d) in s.disp.data_mut().iter_mut().enumerate() {
         if d.is_finite() {
             *d = s.truth[i] as f32;
         }
@@ -188,37 +188,41 @@ fn sps_is_independent_of_thread_count() {
             .install(|| fit_slanted_planes(&s.image, &s.disp, &s.trusted, &sps(40)))
     };
     let (a, b, c) = (run(1), run(2), run(3));
-    assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()));
-    assert!(a.data.iter().zip(&c.data).all(|(x, y)| x.to_bits() == y.to_bits()));
+    assert!(a.data().iter().zip(b.data()).all(|(x, y)| x.to_bits() == y.to_bits()));
+    assert!(a.data().iter().zip(c.data()).all(|(x, y)| x.to_bits() == y.to_bits()));
 }
 
 #[test]
 fn sps_degenerate_inputs_stay_finite() {
     let p = sps(1000);
     let check = |w: usize, h: usize, disp: Vec<f32>, trusted: Vec<bool>| {
-        let out =
-            fit_slanted_planes(&RgbImage::new(w, h), &Plane::from_vec(w, h, disp), &Plane::from_vec(w, h, trusted), &p);
+        let out = fit_slanted_planes(
+            &RgbImage::new(w, h),
+            &Plane::from_vec(w, h, disp).unwrap(),
+            &Plane::from_vec(w, h, trusted).unwrap(),
+            &p,
+        );
         assert_eq!(out.dims(), (w, h));
-        assert!(out.data.iter().all(|d| d.is_finite() && *d >= 0.0), "{w}x{h}: {:?}", out.data);
+        assert!(out.data().iter().all(|d| d.is_finite() && *d >= 0.0), "{w}x{h}: {:?}", out.data());
         out
     };
     // All invalid: 0 everywhere.
     let out = check(40, 30, vec![f32::INFINITY; 1200], vec![false; 1200]);
-    assert!(out.data.iter().all(|d| *d == 0.0));
+    assert!(out.data().iter().all(|d| *d == 0.0));
     // Finite but nothing trusted: with untrusted_weight 0 as if all invalid, with the default 0.1 the untrusted
     // values count.
     let no_untrusted = SpsParams { untrusted_weight: 0.0, ..p.clone() };
     let out =
         fit_slanted_planes(&RgbImage::new(20, 10), &Plane::new(20, 10, 7.0), &Plane::new(20, 10, false), &no_untrusted);
-    assert!(out.data.iter().all(|d| *d == 0.0));
+    assert!(out.data().iter().all(|d| *d == 0.0));
     let out = check(20, 10, vec![7.0; 200], vec![false; 200]);
-    assert!(out.data.iter().all(|d| *d == 7.0));
+    assert!(out.data().iter().all(|d| *d == 7.0));
     // Constant: reproduced exactly.
     let out = check(40, 30, vec![12.5; 1200], vec![true; 1200]);
-    assert!(out.data.iter().all(|d| *d == 12.5), "{:?}", &out.data[..8]);
+    assert!(out.data().iter().all(|d| *d == 12.5), "{:?}", out.data().get(..8));
     // 1×1, 1×n, n×1, 2×2, with and without data; more segments than pixels.
-    assert_eq!(check(1, 1, vec![3.0], vec![true]).data, vec![3.0]);
-    assert_eq!(check(1, 1, vec![f32::INFINITY], vec![false]).data, vec![0.0]);
+    assert_eq!(check(1, 1, vec![3.0], vec![true]).data(), vec![3.0]);
+    assert_eq!(check(1, 1, vec![f32::INFINITY], vec![false]).data(), vec![0.0]);
     check(1, 7, (0..7).map(|k| k as f32).collect(), vec![true; 7]);
     check(9, 1, (0..9).map(|k| 2.0 * k as f32).collect(), vec![true; 9]);
     check(2, 2, vec![1.0, f32::INFINITY, 3.0, 4.0], vec![true, false, true, true]);
@@ -227,12 +231,16 @@ fn sps_degenerate_inputs_stay_finite() {
     d[151] = 6.0;
     let t: Vec<bool> = d.iter().map(|v| v.is_finite()).collect();
     let p_low = SpsParams { min_support: 0.5, ..p.clone() };
-    let out =
-        fit_slanted_planes(&RgbImage::new(20, 15), &Plane::from_vec(20, 15, d), &Plane::from_vec(20, 15, t), &p_low);
-    assert!(out.data.iter().all(|v| *v == 6.0), "{:?}", out.data);
+    let out = fit_slanted_planes(
+        &RgbImage::new(20, 15),
+        &Plane::from_vec(20, 15, d).unwrap(),
+        &Plane::from_vec(20, 15, t).unwrap(),
+        &p_low,
+    );
+    assert!(out.data().iter().all(|v| *v == 6.0), "{:?}", out.data());
     // Empty.
     let out = fit_slanted_planes(&RgbImage::new(0, 0), &Plane::new(0, 0, 0.0), &Plane::new(0, 0, true), &p);
-    assert!(out.data.is_empty());
+    assert!(out.data().is_empty());
 }
 
 /// The output stays in [0, max finite input + τ] even where planes extrapolate steeply.
@@ -243,10 +251,18 @@ fn sps_output_is_clamped() {
     let disp: Vec<f32> = (0..w * h).map(|i| if i % w < 6 { 2.0 * (i % w) as f32 } else { f32::INFINITY }).collect();
     let trusted: Vec<bool> = disp.iter().map(|d| d.is_finite()).collect();
     let p = SpsParams { min_support: 1.0, ..sps(12) };
-    let out =
-        fit_slanted_planes(&RgbImage::new(w, h), &Plane::from_vec(w, h, disp), &Plane::from_vec(w, h, trusted), &p);
+    let out = fit_slanted_planes(
+        &RgbImage::new(w, h),
+        &Plane::from_vec(w, h, disp).unwrap(),
+        &Plane::from_vec(w, h, trusted).unwrap(),
+        &p,
+    );
     let max = 10.0 + p.inlier_thresh_px;
-    assert!(out.data.iter().all(|d| (0.0..=max).contains(d)), "max {}", out.data.iter().fold(0.0f32, |a, b| a.max(*b)));
+    assert!(
+        out.data().iter().all(|d| (0.0..=max).contains(d)),
+        "max {}",
+        out.data().iter().fold(0.0f32, |a, b| a.max(*b))
+    );
 }
 
 /// `min_support_fraction` scales the support a segment needs with its size: a cell with a small cluster of data
@@ -267,7 +283,7 @@ fn sparse_segments_borrow_with_min_support_fraction() {
     let trusted: Vec<bool> = disp.iter().map(|d| d.is_finite()).collect();
     let run = |fraction: f32| {
         let p = SpsParams { segments: 2, min_support: 10.0, min_support_fraction: fraction, ..SpsParams::default() };
-        let (d, t) = (Plane::from_vec(w, h, disp.clone()), Plane::from_vec(w, h, trusted.clone()));
+        let (d, t) = (Plane::from_vec(w, h, disp.clone()).unwrap(), Plane::from_vec(w, h, trusted.clone()).unwrap());
         fit_slanted_planes(&RgbImage::new(w, h), &d, &t, &p)
     };
     // Far from the cluster, in the right cell.
@@ -287,15 +303,15 @@ fn wmedian_fills_holes_from_the_right_side() {
     let (w, h) = (120, 90);
     let s = synthetic(w, h, 0.0, 3);
     let mut filled = s.disp.clone();
-    jem::post::fill::fill_occlusions_in_place(&mut filled);
-    let targets = Plane::from_vec(w, h, s.trusted.data.iter().map(|t| !t).collect());
+    jem::internals::post::fill::fill_occlusions_in_place(&mut filled);
+    let targets = Plane::from_vec(w, h, s.trusted.data().iter().map(|t| !t).collect()).unwrap();
     let p = WmedianParams { enabled: true, ..WmedianParams::default() };
     let out = weighted_median(&filled, &s.image, &targets, &p);
     let bad = |m: &DisparityMap| {
         targets
-            .data
+            .data()
             .iter()
-            .zip(&m.data)
+            .zip(m.data())
             .zip(&s.truth)
             .filter(|((t, d), g)| **t && (f64::from(**d) - **g).abs() > 1.0)
             .count()
@@ -304,7 +320,7 @@ fn wmedian_fills_holes_from_the_right_side() {
     eprintln!("targets with error > 1 px: fill {bad_fill}, weighted median {bad_wm}");
     assert!(bad_wm * 4 < bad_fill, "fill {bad_fill}, weighted median {bad_wm}");
     // Non-targets untouched.
-    assert!(targets.data.iter().zip(&out.data).zip(&filled.data).all(|((t, a), b)| *t || a == b));
+    assert!(targets.data().iter().zip(out.data()).zip(filled.data()).all(|((t, a), b)| *t || a == b));
 }
 
 /// Real data, for timings and sanity (not tuning): WTA + LRC (invalidate) on Motorcycle Q (or `JEM_SCENE`), then
@@ -318,12 +334,12 @@ fn motorcycle_timings() {
     let scene = std::env::var("JEM_SCENE").unwrap_or_else(|_| "Motorcycle".into());
     let Some(data) = common::data_dir() else { return };
     let dir = data.join("MiddEval3/trainingQ").join(&scene);
-    let left = jem::io::png::load_rgb(&dir.join("im0.png")).unwrap();
-    let right = jem::io::png::load_rgb(&dir.join("im1.png")).unwrap();
+    let left = jem::io::read_image(&dir.join("im0.png")).unwrap();
+    let right = jem::io::read_image(&dir.join("im1.png")).unwrap();
     let ndisp = jem::io::calib::read_ndisp(&dir.join("calib.txt")).unwrap();
     let gt = jem::io::pfm::read_pfm(&dir.join("disp0GT.pfm")).unwrap();
-    let mask = jem::io::png::load_grey8(&dir.join("mask0nocc.png")).unwrap();
-    let pair = jem::StereoPair::new(left, right, ndisp).unwrap();
+    let mask = jem::io::read_grey8(&dir.join("mask0nocc.png")).unwrap();
+    let pair = common::Pair::new(left, right, ndisp);
     // The pipeline's own post-processing off (it is on by default): `raw` keeps the holes of the check.
     let off: Vec<String> = [
         "model=wta",
@@ -335,16 +351,16 @@ fn motorcycle_timings() {
     .map(String::from)
     .to_vec();
     let params = jem::Params::load(None, &off).unwrap();
-    let raw = jem::run(&params, &pair).unwrap().disparity;
+    let raw = pair.run(&params).disparity;
     let (w, h) = raw.dims();
-    let trusted = Plane::from_vec(w, h, raw.data.iter().map(|d| d.is_finite()).collect());
-    let targets = Plane::from_vec(w, h, trusted.data.iter().map(|t| !t).collect());
-    let invalid = targets.data.iter().filter(|t| **t).count();
+    let trusted = Plane::from_vec(w, h, raw.data().iter().map(|d| d.is_finite()).collect()).unwrap();
+    let targets = Plane::from_vec(w, h, trusted.data().iter().map(|t| !t).collect()).unwrap();
+    let invalid = targets.data().iter().filter(|t| **t).count();
     let avg_err = |m: &DisparityMap| {
         let (mut sum, mut n, mut bad2) = (0.0f64, 0usize, 0usize);
         for i in 0..w * h {
-            if mask.data[i] == 255 && gt.data[i].is_finite() && m.data[i].is_finite() {
-                let e = 4.0 * f64::from((m.data[i].clamp(0.0, ndisp as f32) - gt.data[i]).abs());
+            if mask.data()[i] == 255 && gt.data()[i].is_finite() && m.data()[i].is_finite() {
+                let e = 4.0 * f64::from((m.data()[i].clamp(0.0, ndisp as f32) - gt.data()[i]).abs());
                 sum += e;
                 n += 1;
                 bad2 += usize::from(e > 2.0);
@@ -353,7 +369,7 @@ fn motorcycle_timings() {
         (sum / n as f64, 100.0 * bad2 as f64 / n as f64)
     };
     let mut filled = raw.clone();
-    jem::post::fill::fill_occlusions_in_place(&mut filled);
+    jem::internals::post::fill::fill_occlusions_in_place(&mut filled);
     let wm_params = WmedianParams { enabled: true, ..WmedianParams::default() };
     let sps_params = SpsParams { enabled: true, ..SpsParams::default() };
     // Best of 3 (the machine is shared): wall time with the default pool, then with one thread.
@@ -390,8 +406,8 @@ fn motorcycle_timings() {
     let t_sps = best_ms(&|| drop(fit_slanted_planes(&pair.left, &wm, &trusted, &sps_params)));
     let t_sps1 = one.install(|| best_cpu_ms(&|| drop(fit_slanted_planes(&pair.left, &wm, &trusted, &sps_params))));
     // The brief's reference load for the filter: ~15% targets (the invalid pixels of two rows in five).
-    let targets15 = Plane::from_vec(w, h, (0..w * h).map(|i| targets.data[i] && (i / w) % 5 < 2).collect());
-    let n15 = targets15.data.iter().filter(|t| **t).count();
+    let targets15 = Plane::from_vec(w, h, (0..w * h).map(|i| targets.data()[i] && (i / w) % 5 < 2).collect()).unwrap();
+    let n15 = targets15.data().iter().filter(|t| **t).count();
     let t_wm15 = best_ms(&|| drop(weighted_median(&filled, &pair.left, &targets15, &wm_params)));
     let t_wm15_1 = one.install(|| best_cpu_ms(&|| drop(weighted_median(&filled, &pair.left, &targets15, &wm_params))));
     let no_untrusted = SpsParams { untrusted_weight: 0.0, ..sps_params.clone() };
@@ -423,7 +439,7 @@ fn motorcycle_timings() {
     }
     let (fill, wmedian, chain) = (avg_err(&filled).0, avg_err(&wm).0, avg_err(&planes).0);
     assert!(wmedian < fill && chain < wmedian, "fill {fill:.3}, + weighted median {wmedian:.3}, + planes {chain:.3}");
-    assert!(planes.data.iter().all(|d| d.is_finite()), "the planes leave no hole");
+    assert!(planes.data().iter().all(|d| d.is_finite()), "the planes leave no hole");
 }
 
 /// Issue 41, item 6: more segments than the image can hold (`SpsParams::max_segments`: pixels / min_support) are
@@ -438,7 +454,7 @@ fn issue41_absurd_segment_counts_are_held_to_the_image() {
     assert_eq!(SpsParams { min_support: 0.0, ..sps(1) }.max_segments(w * h), w * h / 3, "3 points a plane");
     let at_bound = fit_slanted_planes(&s.image, &s.disp, &s.trusted, &sps(bound));
     let absurd = fit_slanted_planes(&s.image, &s.disp, &s.trusted, &sps(1 << 24));
-    let differ = absurd.data.iter().zip(&at_bound.data).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+    let differ = absurd.data().iter().zip(at_bound.data()).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
     assert_eq!(differ, 0, "held to the bound: {differ} of {} pixels differ", w * h);
     let e = errors(&s, &absurd, 3, 0.5);
     assert!(

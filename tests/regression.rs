@@ -16,20 +16,21 @@ mod common;
 
 use std::path::Path;
 
+use common::Pair;
 use jem::degrade::{View, degrade};
 use jem::eval::{MaskMode, evaluate, scene_weight};
-use jem::{DisparityMap, Params, RgbImage, StereoPair};
+use jem::{DisparityMap, Params, RgbImage};
 
 /// A trainingQ scene folder's pair (each view passed through `view`) and its scorer: the avgErr of a disparity map
 /// under MiddEval3's rules (nonocc, errors ×4).
-fn scene(dir: &Path, view: impl Fn(RgbImage, View) -> RgbImage) -> (StereoPair, impl Fn(&DisparityMap) -> f64) {
-    let left = view(jem::io::png::load_rgb(&dir.join("im0.png")).unwrap(), View::Left);
-    let right = view(jem::io::png::load_rgb(&dir.join("im1.png")).unwrap(), View::Right);
+fn scene(dir: &Path, view: impl Fn(RgbImage, View) -> RgbImage) -> (Pair, impl Fn(&DisparityMap) -> f64) {
+    let left = view(jem::io::read_image(&dir.join("im0.png")).unwrap(), View::Left);
+    let right = view(jem::io::read_image(&dir.join("im1.png")).unwrap(), View::Right);
     let ndisp = jem::io::calib::read_ndisp(&dir.join("calib.txt")).unwrap();
     let gt = jem::io::pfm::read_pfm(&dir.join("disp0GT.pfm")).unwrap();
-    let mask = jem::io::png::load_grey8(&dir.join("mask0nocc.png")).unwrap();
+    let mask = jem::io::read_grey8(&dir.join("mask0nocc.png")).unwrap();
     let score = move |d: &DisparityMap| evaluate(d, &gt, Some(&mask), ndisp, 4, MaskMode::Nonocc).avgerr;
-    (StereoPair::new(left, right, ndisp).unwrap(), score)
+    (Pair::new(left, right, ndisp), score)
 }
 
 /// The mean avgErr of `off` and of the default on Adirondack, Motorcycle and Teddy, each view passed through
@@ -40,7 +41,7 @@ fn off_and_default(data: &Path, off: &Params, view: impl Fn(RgbImage, View) -> R
         let dir = data.join("MiddEval3/trainingQ").join(name);
         let (pair, score) = scene(&dir, &view);
         for (k, params) in [off, &Params::default()].into_iter().enumerate() {
-            errors[k] += score(&jem::run(params, &pair).unwrap().disparity) / 3.0;
+            errors[k] += score(&pair.run(params).disparity) / 3.0;
         }
     }
     errors
@@ -54,7 +55,7 @@ fn weighted_avgerr(data: &Path, config: &str) -> (Vec<(String, f64)>, f64) {
     for dir in common::training_scenes(data) {
         let name = dir.file_name().unwrap().to_string_lossy().into_owned();
         let (pair, score) = scene(&dir, |image, _| image);
-        let m = score(&jem::run(&params, &pair).unwrap().disparity);
+        let m = score(&pair.run(&params).disparity);
         let w = scene_weight(&name);
         sum += w * m;
         weights += w;

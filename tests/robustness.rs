@@ -5,10 +5,11 @@
 
 mod common;
 
+use common::Pair;
 use common::repo;
 use jem::degrade::{Recipe, View, degrade};
 use jem::synth::{MASK_VISIBLE, SynthParams, SynthScene, render_scene};
-use jem::{Params, RgbImage, StereoPair};
+use jem::{Params, RgbImage};
 
 /// The paper's full pipeline, as shipped.
 fn paper() -> Params {
@@ -16,21 +17,21 @@ fn paper() -> Params {
 }
 
 /// Mean absolute error over the visible pixels of `scene`, matching `pair`.
-fn mean_error(params: &Params, pair: &StereoPair, scene: &SynthScene) -> f64 {
+fn mean_error(params: &Params, pair: &Pair, scene: &SynthScene) -> f64 {
     mean_error_where(params, pair, scene, |_| true)
 }
 
 /// [`mean_error`] over the visible pixels i with `keep(i)` only.
-fn mean_error_where(params: &Params, pair: &StereoPair, scene: &SynthScene, keep: impl Fn(usize) -> bool) -> f64 {
+fn mean_error_where(params: &Params, pair: &Pair, scene: &SynthScene, keep: impl Fn(usize) -> bool) -> f64 {
     mean_errors(params, pair, scene, keep).0
 }
 
 /// One run of `params` on `pair`, scored twice: the mean absolute error over the visible pixels i with `keep(i)`,
 /// and over all visible pixels.
-fn mean_errors(params: &Params, pair: &StereoPair, scene: &SynthScene, keep: impl Fn(usize) -> bool) -> (f64, f64) {
-    let out = jem::run(params, pair).unwrap();
+fn mean_errors(params: &Params, pair: &Pair, scene: &SynthScene, keep: impl Fn(usize) -> bool) -> (f64, f64) {
+    let out = pair.run(params);
     let ((mut sum, mut n), (mut sum_all, mut n_all)) = ((0.0, 0usize), (0.0, 0usize));
-    for (i, ((d, g), m)) in out.disparity.data.iter().zip(&scene.gt.data).zip(&scene.mask.data).enumerate() {
+    for (i, ((d, g), m)) in out.disparity.data().iter().zip(scene.gt.data()).zip(scene.mask.data()).enumerate() {
         if *m == MASK_VISIBLE {
             let e = f64::from((d - g).abs());
             (sum_all, n_all) = (sum_all + e, n_all + 1);
@@ -44,7 +45,7 @@ fn mean_errors(params: &Params, pair: &StereoPair, scene: &SynthScene, keep: imp
 
 /// `img` with its contrast cut to `contrast` around mid-grey (weak texture).
 fn flatten(mut img: RgbImage, contrast: f32) -> RgbImage {
-    img.channels.iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v = (127.5 + contrast * (*v - 127.5)).round()));
+    (0..3).for_each(|c| img.channel_mut(c).iter_mut().for_each(|v| *v = (127.5 + contrast * (*v - 127.5)).round()));
     img
 }
 
@@ -55,12 +56,12 @@ fn scene(seed: u64, contrast: f32) -> SynthScene {
 }
 
 /// The scene's pair with `recipe` applied to both views (`None`: clean).
-fn degraded(scene: &SynthScene, recipe: Option<&str>, seed: u64) -> StereoPair {
+fn degraded(scene: &SynthScene, recipe: Option<&str>, seed: u64) -> Pair {
     let apply = |img: &RgbImage, view| match recipe {
         Some(r) => degrade(img, &r.parse::<Recipe>().unwrap(), view, seed).unwrap(),
         None => img.clone(),
     };
-    StereoPair::new(apply(&scene.left, View::Left), apply(&scene.right, View::Right), scene.ndisp).unwrap()
+    Pair::new(apply(&scene.left, View::Left), apply(&scene.right, View::Right), scene.ndisp)
 }
 
 /// (paper, default) mean errors on `scene` degraded by `recipe`, printed.
@@ -135,11 +136,11 @@ fn jpeg_pair_default_beats_the_paper_pipeline() {
 fn untextured_surface() {
     let s = render_scene(&SynthParams { width: 360, height: 240, ndisp: 48, seed: 25 }).unwrap();
     let (w, h) = s.gt.dims();
-    let gmax = s.gt.data.iter().copied().fold(f32::MIN, f32::max);
-    let gmin = s.gt.data.iter().copied().fold(f32::MAX, f32::min);
+    let gmax = s.gt.data().iter().copied().fold(f32::MIN, f32::max);
+    let gmin = s.gt.data().iter().copied().fold(f32::MAX, f32::min);
     // The nearest quarter of the disparity range: one object in this scene.
     let cut = gmax - 0.25 * (gmax - gmin);
-    let region: Vec<bool> = s.gt.data.iter().map(|&g| g >= cut).collect();
+    let region: Vec<bool> = s.gt.data().iter().map(|&g| g >= cut).collect();
     let (mut left, mut right) = (s.left.clone(), s.right.clone());
     let colour = [200.0f32, 60.0, 160.0];
     for y in 0..h {
@@ -147,15 +148,15 @@ fn untextured_surface() {
         let (mut lo, mut hi) = (usize::MAX, 0usize);
         for x in (0..w).filter(|&x| region[y * w + x]) {
             let i = y * w + x;
-            (0..3).for_each(|c| left.channels[c][i] = colour[c]);
-            let xr = (x as f32 - s.gt.data[i]).round();
+            (0..3).for_each(|c| left.channel_mut(c)[i] = colour[c]);
+            let xr = (x as f32 - s.gt.data()[i]).round();
             if xr >= 0.0 {
                 lo = lo.min(xr as usize);
                 hi = hi.max(xr as usize);
             }
         }
         for x in lo..=hi.min(w - 1) {
-            (0..3).for_each(|c| right.channels[c][y * w + x] = colour[c]);
+            (0..3).for_each(|c| right.channel_mut(c)[y * w + x] = colour[c]);
         }
     }
     let flat = SynthScene { left, right, ..s };
@@ -188,7 +189,7 @@ fn untextured_surface() {
 fn thin_structures_under_noise() {
     let (w, h, ndisp) = (240usize, 120usize, 32usize);
     let (d_bg, d_fg) = (6usize, 18usize);
-    let mut rng = jem::rng::SplitMix64::new(31);
+    let mut rng = jem::internals::SplitMix64::new(31);
     // A smoothly shaded background (what a coarse level holds) and bright, textured bars (what it cannot).
     let bg: Vec<f32> = (0..w * h)
         .map(|i| {
@@ -219,12 +220,12 @@ fn thin_structures_under_noise() {
             }
         }
     }
-    let grey = |v: Vec<f32>| RgbImage { width: w, height: h, channels: [v.clone(), v.clone(), v] };
+    let grey = |v: Vec<f32>| RgbImage::from_channels(w, h, [v.clone(), v.clone(), v]).unwrap();
     let scene = SynthScene {
         left: grey(left),
         right: grey(right),
-        gt: jem::Plane { width: w, height: h, data: gt },
-        mask: jem::Plane { width: w, height: h, data: mask },
+        gt: jem::Plane::from_vec(w, h, gt).unwrap(),
+        mask: jem::Plane::from_vec(w, h, mask).unwrap(),
         ndisp,
         vmin: 0.0,
         vmax: (ndisp - 1) as f32,
@@ -253,11 +254,11 @@ fn depth_edges_under_noise() {
     let (mut near, mut all) = ([0.0f64; 2], [0.0f64; 2]);
     for seed in 11..=16 {
         let s = scene(seed, 1.0);
-        let w = s.gt.width;
+        let w = s.gt.width();
         // Within 8 px (on the row) of a step of more than 4 px in the ground truth.
         let near_edge = |i: usize| {
-            let (x, g) = (i % w, s.gt.data[i]);
-            (x.saturating_sub(8)..(x + 9).min(w)).any(|xx| (s.gt.data[i - x + xx] - g).abs() > 4.0)
+            let (x, g) = (i % w, s.gt.data()[i]);
+            (x.saturating_sub(8)..(x + 9).min(w)).any(|xx| (s.gt.data()[i - x + xx] - g).abs() > 4.0)
         };
         let pair = degraded(&s, Some("noise:8"), 5);
         for (k, params) in [&point, &Params::default()].into_iter().enumerate() {
@@ -279,13 +280,13 @@ fn depth_edges_under_noise() {
 /// within 0.15 px and removes it (mean error 0.47 px without, 0.22 px with, when written).
 #[test]
 fn vertical_misalignment_is_measured_and_removed() {
-    use jem::condition::vertical::{VerticalOffset, resample_right};
+    use jem::internals::vertical::{VerticalOffset, resample_right};
     let mut off = Params::default();
     off.condition.vertical.enabled = false;
     let (mut errors, mut worst) = ([0.0f64; 2], 0.0f64);
     for seed in 11..=16 {
         let s = scene(seed, 1.0);
-        let (w, h) = (s.gt.width, s.gt.height);
+        let (w, h) = (s.gt.width(), s.gt.height());
         let mut truth = VerticalOffset::zero(w, h);
         truth.coef = [1.2, 0.8, 0.0, 0.0, 1.2];
         // The right view whose row y + v(x, y) shows what the left view's row y does.
@@ -293,7 +294,7 @@ fn vertical_misalignment_is_measured_and_removed() {
         inverse.coef = truth.coef.map(|c| -c);
         let moved = SynthScene { right: resample_right(&s.right, &inverse), ..s.clone() };
         let pair = degraded(&moved, Some("noise:1"), 5);
-        let out = jem::run(&Params::default(), &pair).unwrap();
+        let out = pair.run(&Params::default());
         let measured = out.measured.and_then(|m| m.vertical).expect("the offset is measured");
         assert!(measured.corrected, "seed {seed}: not removed ({:?})", measured.range);
         let (lo, hi) = truth.range();

@@ -6,7 +6,7 @@ use std::process::{Command, Output};
 
 use jem::Plane;
 use jem::eval::{MaskMode, PaperResults, evaluate_files};
-use jem::rng::SplitMix64;
+use jem::internals::SplitMix64;
 use serde_json::Value;
 
 fn jem() -> Command {
@@ -57,7 +57,7 @@ fn wta_config(dir: &Path) -> PathBuf {
 fn write_gt_scene(dir: &Path, gt: &Plane<f32>, mask: &[u8], ndisp: usize, result: Option<(&str, &Plane<f32>)>) {
     std::fs::create_dir_all(dir).unwrap();
     jem::io::pfm::write_pfm(&dir.join("disp0GT.pfm"), gt).unwrap();
-    image::GrayImage::from_raw(gt.width as u32, gt.height as u32, mask.to_vec())
+    image::GrayImage::from_raw(gt.width() as u32, gt.height() as u32, mask.to_vec())
         .unwrap()
         .save(dir.join("mask0nocc.png"))
         .unwrap();
@@ -72,8 +72,8 @@ const INF: f32 = f32::INFINITY;
 /// The 4×2 scene of the hand computation below.
 fn hand_scene(dir: &Path) {
     //                    0    1      2    3    4     5     6     7
-    let gt = Plane::from_vec(4, 2, vec![1.0, 2.0, 3.0, INF, 5.0, 6.0, 7.0, 8.0]);
-    let result = Plane::from_vec(4, 2, vec![1.0, 2.625, INF, 4.0, 11.0, -1.0, 7.25, 8.0]);
+    let gt = Plane::from_vec(4, 2, vec![1.0, 2.0, 3.0, INF, 5.0, 6.0, 7.0, 8.0]).unwrap();
+    let result = Plane::from_vec(4, 2, vec![1.0, 2.625, INF, 4.0, 11.0, -1.0, 7.25, 8.0]).unwrap();
     write_gt_scene(dir, &gt, &[255, 255, 255, 255, 255, 128, 0, 255], 10, Some(("X", &result)));
 }
 
@@ -158,9 +158,9 @@ fn eval_without_a_resolution_in_the_path_asks_for_scale() {
 
 /// Three 2×1 scenes with a constant error: PianoL 2 (weight 0.5), Teddy 4, Mystery 1 (unknown: weight 1).
 fn weighted_scenes(root: &Path) {
-    let gt = Plane::from_vec(2, 1, vec![1.0, 1.0]);
+    let gt = Plane::from_vec(2, 1, vec![1.0, 1.0]).unwrap();
     for (name, d) in [("PianoL", 1.5), ("Teddy", 2.0), ("Mystery", 1.25)] {
-        let r = Plane::from_vec(2, 1, vec![d, d]);
+        let r = Plane::from_vec(2, 1, vec![d, d]).unwrap();
         write_gt_scene(&root.join(name), &gt, &[255, 255], 8, Some(("W", &r)));
         std::fs::write(root.join(name).join("timeW.txt"), format!("{}\n", d * 2.0)).unwrap();
     }
@@ -399,7 +399,7 @@ fn batch_skip_existing_leaves_finished_scenes_alone() {
     write_shift_scene(&root.join("A"), 32, 12, 2, 4, 7);
     write_shift_scene(&root.join("B"), 32, 12, 2, 4, 8);
     // A finished result: a PFM of the scene's size (its values are not looked at).
-    let finished = jem::io::pfm::encode_pfm(&jem::image::Plane::new(32, 12, 1.5f32));
+    let finished = jem::io::pfm::encode_pfm(&jem::Plane::new(32, 12, 1.5f32));
     std::fs::write(root.join("A/disp0K.pfm"), &finished).unwrap();
     let cfg = wta_config(tmp.path());
     let o = run(jem().arg("batch").arg(&root).args(["--alg", "K", "--skip-existing", "--config"]).arg(&cfg));
@@ -421,12 +421,12 @@ fn batch_skip_existing_leaves_finished_scenes_alone() {
 fn issue19_skip_existing_needs_a_complete_result() {
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path().join("set");
-    let full = jem::io::pfm::encode_pfm(&jem::image::Plane::new(32, 12, 1.5f32));
+    let full = jem::io::pfm::encode_pfm(&jem::Plane::new(32, 12, 1.5f32));
     let cases: [(&str, Vec<u8>); 4] = [
         ("Empty", Vec::new()),
         ("Truncated", full[..full.len() / 2].to_vec()),
         ("Foreign", b"placeholder".to_vec()),
-        ("WrongSize", jem::io::pfm::encode_pfm(&jem::image::Plane::new(31, 12, 1.5f32))),
+        ("WrongSize", jem::io::pfm::encode_pfm(&jem::Plane::new(31, 12, 1.5f32))),
     ];
     for (i, (name, bytes)) in cases.iter().enumerate() {
         write_shift_scene(&root.join(name), 32, 12, 2, 4, 20 + i as u64);

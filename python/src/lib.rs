@@ -1,17 +1,16 @@
 //! The `jem` Python module: numpy arrays in, numpy arrays out, over the `jem` library.
 //!
-//! Nothing here decides how a pair is matched: the range and the whole-or-tiles choice are
-//! [`jem::plan::plan_match`] (what `jem match` calls), the run is [`jem::tile::Strategy::run`], the config is
-//! [`jem::Params::load`], the pixel conversion is [`jem::io::png::to_rgb`] (what the image loader calls), so an
-//! array gives the map the command line writes for the same file, byte for byte. This file converts arrays and
+//! Nothing here decides how a pair is matched: the range, the whole-or-tiles choice and the run are
+//! [`jem::Matcher`]'s (what `jem match` calls), the config is [`jem::Params::load`], the pixel conversion is
+//! [`jem::io::image_from_dynamic`] (what the image loader calls), so an array gives the map the command line
+//! writes for the same file, byte for byte. This file converts arrays and
 //! errors, releases the GIL around the work and keeps panics from crossing into Python.
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
 
 use image::{DynamicImage, ImageBuffer, Luma, Rgb};
-use jem::plan::{NdispSource, plan_match};
-use jem::{Error, Params, Plane};
+use jem::{Error, Matcher, NdispSource, Params, Plane};
 use numpy::ndarray::Array2;
 use numpy::{PyArray2, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
@@ -179,17 +178,9 @@ fn positive(name: &str, value: Option<i64>) -> PyResult<Option<u64>> {
 
 /// A float plane as a numpy H×W float32 array, without copying.
 fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>> {
-    let array = Array2::from_shape_vec((plane.height, plane.width), plane.data)
-        .expect("a plane's data is width × height values");
+    let (w, h) = plane.dims();
+    let array = Array2::from_shape_vec((h, w), plane.into_data()).expect("a plane's data is width × height values");
     PyArray2::from_owned_array(py, array)
-}
-
-/// This process's peak resident set size in bytes (`VmHWM`; Linux only).
-fn peak_rss_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
 }
 
 /// The left view's disparity map of a rectified pair: float32 H×W, ``inf`` where invalid, exactly the map
@@ -238,24 +229,19 @@ fn match_pair<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let (l, r) = (to_image(left, "left")?, to_image(right, "right")?);
     let params = load_params(config, overrides)?;
-    let source = match (positive("ndisp", ndisp)?, positive("calib_ndisp", calib_ndisp)?) {
-        (Some(n), _) => NdispSource::Given(n as usize),
-        (None, Some(n)) => NdispSource::Stated(n as usize),
-        (None, None) => NdispSource::Unknown,
-    };
+    let given = positive("ndisp", ndisp)?.map(|n| n as usize);
+    let source = NdispSource::resolve(given, positive("calib_ndisp", calib_ndisp)?.map(|n| n as usize));
     let threads = positive("threads", threads)?.map(|n| n as usize);
     let limit = positive("max_memory", max_memory)?.unwrap_or_else(jem::default_memory_limit);
-    let (plan, out, seconds) = py.detach(|| {
+    let mut matcher = Matcher::new(params.clone()).map_err(|e| to_py(&e))?.with_ndisp(source).with_max_memory(limit);
+    let out = py.detach(|| {
         guarded(threads, || {
-            let (l, r) = (jem::io::png::to_rgb(&l), jem::io::png::to_rgb(&r));
-            let plan = plan_match(l, r, source, &params, limit)?;
-            let start = std::time::Instant::now();
-            let out = plan.strategy.run(&params, &plan.pair, &|_| {})?;
-            Ok((plan, out, start.elapsed().as_secs_f64()))
+            let (l, r) = (jem::io::image_from_dynamic(&l), jem::io::image_from_dynamic(&r));
+            matcher.match_pair(&l, &r)
         })
     })?;
     // Values too large for this image (held to a bound, as `jem` warns on stderr): a UserWarning each.
-    let (w, h) = plan.pair.left.dims();
+    let (w, h) = out.disparity.dims();
     for warning in params.image_warnings(w, h) {
         let message = std::ffi::CString::new(warning).unwrap_or_default();
         PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &message, 1)?;
@@ -266,9 +252,9 @@ fn match_pair<'py>(
     }
     if return_info {
         let info = PyDict::new(py);
-        info.set_item("ndisp", plan.pair.ndisp)?;
-        info.set_item("ndisp_measured", plan.ndisp_measured)?;
-        info.set_item("tiled", matches!(plan.strategy, jem::tile::Strategy::Tiled(_)))?;
+        info.set_item("ndisp", out.plan.ndisp)?;
+        info.set_item("ndisp_measured", out.plan.ndisp_measured)?;
+        info.set_item("tiled", out.plan.tiles.is_some())?;
         info.set_item("noise", out.measured.map(|m| (m.stats.noise[0], m.stats.noise[1])))?;
         let timings = PyDict::new(py);
         for (name, d) in &out.timings.stages {
@@ -276,9 +262,9 @@ fn match_pair<'py>(
             timings.set_item(name, sum + d.as_secs_f64())?;
         }
         info.set_item("timings", timings)?;
-        info.set_item("seconds", seconds)?;
-        info.set_item("memory_planned", plan.strategy.memory_bytes(w, h, plan.pair.ndisp, &params))?;
-        info.set_item("peak_rss", peak_rss_bytes())?;
+        info.set_item("seconds", out.seconds)?;
+        info.set_item("memory_planned", out.plan.memory_bytes)?;
+        info.set_item("peak_rss", jem::peak_rss_bytes())?;
         result.push(info.into_any());
     }
     if result.len() == 1 {
@@ -315,12 +301,12 @@ fn to_plane(array: &Bound<'_, PyAny>, name: &str) -> PyResult<Plane<f32>> {
     if let Ok(a) = array.cast::<PyArray2<f32>>() {
         let view = a.readonly();
         let (h, w) = view.as_array().dim();
-        return Ok(Plane::from_vec(w, h, view.as_array().iter().copied().collect()));
+        return Plane::from_vec(w, h, view.as_array().iter().copied().collect()).map_err(|e| to_py(&e));
     }
     if let Ok(a) = array.cast::<PyArray2<f64>>() {
         let view = a.readonly();
         let (h, w) = view.as_array().dim();
-        return Ok(Plane::from_vec(w, h, view.as_array().iter().map(|&v| v as f32).collect()));
+        return Plane::from_vec(w, h, view.as_array().iter().map(|&v| v as f32).collect()).map_err(|e| to_py(&e));
     }
     Err(bad())
 }
@@ -338,7 +324,7 @@ fn read_pfm(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArray2<f32>>>
 #[pyfunction]
 fn write_pfm(py: Python<'_>, path: PathBuf, array: &Bound<'_, PyAny>) -> PyResult<()> {
     let map = to_plane(array, "array")?;
-    if map.data.is_empty() {
+    if map.data().is_empty() {
         return Err(PyValueError::new_err("array: a PFM cannot hold an empty image"));
     }
     py.detach(|| jem::io::pfm::write_pfm(&path, &map)).map_err(|e| to_py(&e))

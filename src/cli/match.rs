@@ -9,9 +9,7 @@ use std::time::Instant;
 
 use clap::Args;
 use jem::io::calib;
-use jem::plan::{NdispSource, Plan, plan_match};
-use jem::tile::Strategy;
-use jem::{Error, Result};
+use jem::{Error, Matcher, NdispSource, Progress, Result};
 
 use super::config::ConfigArgs;
 use super::{GlobalArgs, MemoryArg, ThreadsArg};
@@ -113,47 +111,44 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     jem::io::check_outputs(&[left, right, &calib], &outputs)?;
     let params = args.config.params()?;
     let start = Instant::now();
-    // The size from the image header: a pair too large for the memory limit is refused before decoding.
-    // The range: --ndisp, else calib.txt's ndisp unless it is missing or not a real bound (≥ half the width),
-    // in which case it is measured on the pair (jem::range).
-    let stated = match (args.ndisp, &calib_file) {
-        (Some(n), _) => Some(n),
-        (None, Some(c)) => Some(c.ndisp().map_err(|msg| Error::Calib { path: calib.clone(), msg })?),
-        (None, None) => None,
+    // The range: --ndisp, else calib.txt's ndisp (measured instead when it is missing or no real bound: half the
+    // width or more).
+    let stated = match &calib_file {
+        Some(c) if args.ndisp.is_none() => Some(c.ndisp().map_err(|msg| Error::Calib { path: calib.clone(), msg })?),
+        _ => None,
     };
-    let source = match (args.ndisp, stated) {
-        (Some(n), _) => NdispSource::Given(n),
-        (None, Some(n)) => NdispSource::Stated(n),
-        (None, None) => NdispSource::Unknown,
-    };
-    // Both headers, then the limit, before either image is decoded (issue 41: the loading and the range
-    // measurement are checked too, and the right image's size before it is decoded).
-    let header = jem::io::png::read_pair_header(left, right)?;
+    let mut matcher = Matcher::new(params.clone())?
+        .with_ndisp(NdispSource::resolve(args.ndisp, stated))
+        .with_max_memory(args.memory.memory_limit());
+    let header = jem::io::read_pair_header(left, right)?;
     for warning in params.image_warnings(header.width, header.height).iter().filter(|_| !global.quiet) {
         note!("warning: {warning}");
     }
-    jem::plan::check_before_decode(&header, source, &params, args.memory.memory_limit())?;
-    let (l, r) = jem::io::png::load_rgb_pair_within(left, right, args.memory.memory_limit())?;
-    // The range and the way to run: shared with the Python module (jem::plan), so both give the same map.
-    let Plan { pair, strategy, ndisp_measured } = plan_match(l, r, source, &params, args.memory.memory_limit())?;
-    if ndisp_measured && !global.quiet {
-        let was = stated.map_or("no range given".to_string(), |s| format!("calib.txt says {s}"));
-        note!("ndisp {}, measured on the pair ({was}; --ndisp N sets it)", pair.ndisp);
-    }
-    if let (Strategy::Tiled(plan), false) = (strategy, global.quiet) {
-        note!(
-            "running in tiles of {} px after a coarse level at 1/{} (bounded memory)",
-            plan.core_px,
-            plan.coarse_factor
-        );
-    }
+    // Both headers are checked against the memory limit before either image is decoded.
+    let (l, r) = matcher.read_pair(left, right)?;
     let load_time = start.elapsed();
 
     let spinner = stage_spinner(global.quiet);
-    let out = strategy.run(&params, &pair, &|stage| {
-        if let Some(s) = &spinner {
-            s.set_message(stage.to_string());
+    let out = matcher.match_pair_with(&l, &r, &|progress| match progress {
+        Progress::Planned(plan) if !global.quiet => {
+            if plan.ndisp_measured {
+                let was = stated.map_or("no range given".to_string(), |s| format!("calib.txt says {s}"));
+                note!("ndisp {}, measured on the pair ({was}; --ndisp N sets it)", plan.ndisp);
+            }
+            if let Some(tiles) = plan.tiles {
+                note!(
+                    "running in tiles of {} px after a coarse level at 1/{} (bounded memory)",
+                    tiles.core_px,
+                    tiles.coarse_factor
+                );
+            }
         }
+        Progress::Stage(stage) => {
+            if let Some(s) = &spinner {
+                s.set_message(stage.to_string());
+            }
+        }
+        Progress::Planned(_) => {}
     })?;
     if let Some(s) = spinner {
         s.finish_and_clear();
@@ -169,7 +164,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
             files.push((d.as_path(), jem::io::encode_disparity(d, &depth)?));
         }
         if let Some(c) = &args.cloud {
-            files.push((c.as_path(), jem::geometry::encode_ply(&out.disparity, &pair.left, camera)));
+            files.push((c.as_path(), jem::geometry::encode_ply(&out.disparity, &l, camera)));
         }
     }
     let refs: Vec<(&Path, &[u8])> = files.iter().map(|(p, b)| (*p, b.as_slice())).collect();
@@ -181,17 +176,18 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         }
         note!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
         if let Some(m) = &out.measured {
-            note!("{}", describe_measured(m));
+            note!("{m}");
         }
-        let (w, h) = pair.left.dims();
-        let planned = strategy.memory_bytes(w, h, pair.ndisp, &params);
-        if let Some(peak) = peak_rss_bytes() {
-            note!("memory: peak {} (planned {})", human(peak), human(planned));
+        if let Some(peak) = jem::peak_rss_bytes() {
+            note!("memory: peak {} (planned {})", human(peak), human(out.plan.memory_bytes));
         }
     }
     if !global.quiet {
         let seconds = start.elapsed().as_secs_f64();
-        note!("{}", wrote_line(args, &out.disparity, pair.ndisp, ndisp_measured, seconds, camera.as_ref()));
+        note!(
+            "{}",
+            wrote_line(args, &out.disparity, out.plan.ndisp, out.plan.ndisp_measured, seconds, camera.as_ref())
+        );
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -206,8 +202,8 @@ fn wrote_line(
     camera: Option<&jem::geometry::Camera>,
 ) -> String {
     let (w, h) = disparity.dims();
-    let valid = disparity.data.iter().filter(|d| d.is_finite()).count();
-    let percent = 100.0 * valid as f64 / disparity.data.len().max(1) as f64;
+    let valid = disparity.data().iter().filter(|d| d.is_finite()).count();
+    let percent = 100.0 * valid as f64 / disparity.data().len().max(1) as f64;
     let measured = if measured { " measured" } else { "" };
     let output = args.output.as_deref().unwrap_or(Path::new("?")).display();
     let mut line = format!("wrote {output} ({w}×{h}, {percent:.0} % valid, ndisp {ndisp}{measured}, {seconds:.1} s)");
@@ -218,52 +214,15 @@ fn wrote_line(
         line.push_str(&format!(", depth {}", d.display()));
     }
     if let (Some(c), Some(camera)) = (&args.cloud, camera) {
-        let points = disparity.data.iter().enumerate().filter(|&(i, &d)| camera.point(i % w, i / w, d).is_some());
+        let points = disparity.data().iter().enumerate().filter(|&(i, &d)| camera.point(i % w, i / w, d).is_some());
         line.push_str(&format!(", point cloud {} ({} points)", c.display(), points.count()));
     }
     line
 }
 
-/// One line: what the adaptive front end measured on the pair and set from it.
-pub(super) fn describe_measured(m: &jem::Measured) -> String {
-    let [nl, nr] = m.stats.noise;
-    let [gl, gr] = m.stats.gain;
-    let gradient = m.gradient.map_or("raw".to_string(), |(mean, eps)| format!("local contrast {mean:.1}, ε {eps:.1}"));
-    let [bl, br] = m.stats.cost_blur;
-    let blur = if bl > 0.0 || br > 0.0 {
-        format!("; cost blur σ {bl:.2} / {br:.2} px (sharpness matched)")
-    } else {
-        String::new()
-    };
-    let jpeg = if m.stats.is_jpeg() {
-        let ([jl, jr], [bl, br]) = (m.stats.jpeg, m.stats.blocking);
-        format!("; JPEG: compression error σ {jl:.2} / {jr:.2}, block steps {bl:.2} / {br:.2}")
-    } else {
-        String::new()
-    };
-    let vertical = m.vertical.map_or(String::new(), |v| {
-        let (lo, hi) = v.range;
-        let done = if v.corrected { "removed" } else { "left" };
-        format!("; right view's vertical offset {lo:+.2} to {hi:+.2} px ({done})")
-    });
-    format!(
-        "measured: noise σ {nl:.2} / {nr:.2}, contrast gain {gl:.2} / {gr:.2} (left / right); prior λ {:.2} \
-         (at least {:.2} × the cost's flatness), Census support {:.1}, gradient {gradient}{blur}{jpeg}{vertical}",
-        m.prior_weight, m.prior_flat, m.census_support
-    )
-}
-
 /// Bytes as MiB with one decimal.
 fn human(bytes: u64) -> String {
     format!("{:.1} MiB", bytes as f64 / f64::from(1u32 << 20))
-}
-
-/// This process's peak resident set size (`VmHWM` of /proc/self/status; `None` where there is none).
-fn peak_rss_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
 }
 
 /// A spinner on stderr showing the current stage, only on a terminal and without --quiet.

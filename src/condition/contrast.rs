@@ -8,7 +8,7 @@ use crate::image::StereoPair;
 use crate::imgproc::stats::percentiles;
 
 /// The grey-level span the left view's 0.5–99.5 % range is stretched to (when it is smaller).
-pub const TARGET_RANGE: f32 = 230.0;
+pub(crate) const TARGET_RANGE: f32 = 230.0;
 
 /// Stretches each view of `guide` whose robust range (the 0.5th to the 99.5th percentile of grey) is below
 /// [`TARGET_RANGE`] / `min_gain` to span [`TARGET_RANGE`] grey levels (an affine map about the range's centre; see
@@ -24,7 +24,7 @@ pub(super) fn stretch(guide: &mut Cow<'_, StereoPair>, min_gain: f32) -> [f32; 2
             let (centre, gv) = (0.5 * (lo + hi), *g);
             let owned = guide.to_mut();
             let img = if view == 0 { &mut owned.left } else { &mut owned.right };
-            for ch in &mut img.channels {
+            for ch in &mut img.to_mut().channels {
                 ch.iter_mut().for_each(|v| *v = ((*v - centre) * gv + 127.5).clamp(0.0, 255.0));
             }
         }
@@ -55,7 +55,7 @@ mod tests {
             stretch: StretchParams { enabled: true, ..Default::default() },
             ..ConditionParams::off()
         };
-        let pair = |img: &RgbImage| StereoPair { left: img.clone(), right: img.clone(), ndisp: 4 };
+        let pair = |img: &RgbImage| StereoPair::new(img.clone(), img.clone(), 4).unwrap();
         let dark_pair = pair(&dark);
         let out = condition_pair(&dark_pair, &p, None);
         assert!(out.stats.gain[0] > 3.0 && out.stats.gain[0] == out.stats.gain[1], "gain {:?}", out.stats.gain);
@@ -67,6 +67,6 @@ mod tests {
         assert_eq!(out.stats.gain, [1.0, 1.0]);
         assert!(matches!(out.guide, Cow::Borrowed(_)), "a full-contrast pair is not copied");
         let out = condition_pair(&dark_pair, &ConditionParams::off(), None);
-        assert_eq!(out.guide.left, dark);
+        assert_eq!(*out.guide.left, dark);
     }
 }

@@ -150,15 +150,15 @@ mod tests {
             let off = ConditionParams::off();
             ConditionParams { denoise: DenoiseParams { strength: 3.0, min_sigma: 1.5, ..off.denoise }, ..off }
         };
-        let pair = StereoPair { left: noisy.clone(), right: noisy.clone(), ndisp: 4 };
+        let pair = StereoPair::new(noisy.clone(), noisy.clone(), 4).unwrap();
         let out = condition_pair(&pair, &p, None);
-        assert_eq!(out.guide.left, noisy, "the guidance keeps the original");
+        assert_eq!(*out.guide.left, noisy, "the guidance keeps the original");
         let err = |a: &RgbImage| {
             a.channels[0].iter().zip(&clean.channels[0]).map(|(p, q)| (p - q).abs()).sum::<f32>() / a.len() as f32
         };
         let denoised = &out.cost.as_ref().expect("σ 6 is above the gate").left;
         assert!(err(denoised) < 0.6 * err(&noisy), "{} vs {}", err(denoised), err(&noisy));
-        let clean_pair = StereoPair { left: clean.clone(), right: clean, ndisp: 4 };
+        let clean_pair = StereoPair::new(clean.clone(), clean, 4).unwrap();
         assert!(condition_pair(&clean_pair, &p, None).cost.is_none(), "a clean pair is below the gate");
     }
 }

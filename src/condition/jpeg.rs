@@ -9,7 +9,7 @@ use crate::image::Plane;
 /// rows) of an 8-pixel grid, at the grid's strongest phase, above the median step over the eight phases, less
 /// three standard errors of that phase's mean (so a strong random texture, whose phases differ by chance, reads
 /// as 0); 0 for an image without a block grid. Grey levels; the mean over both directions.
-pub fn blockiness(grey: &Plane<f32>) -> f32 {
+pub(crate) fn blockiness(grey: &Plane<f32>) -> f32 {
     let (w, h) = grey.dims();
     if w < 16 || h < 16 {
         return 0.0;
@@ -75,7 +75,7 @@ const JPEG_PROBES_NEEDED: usize = 6;
 /// reads 1.6–3.1 / 2.7–4.8 / 3.6–6.5 where the true error is 1.3–2.5 / 2.1–4.1 / 3.2–6.4; uncompressed images,
 /// noisy or not, read 0. Blocks on the grid from the image's origin (an image cropped after compression is not
 /// seen).
-pub fn jpeg_noise(grey: &Plane<f32>) -> f32 {
+pub(crate) fn jpeg_noise(grey: &Plane<f32>) -> f32 {
     let (w, h) = grey.dims();
     let (bw, bh) = (w / 8, h / 8);
     let blocks = bw * bh;
@@ -210,14 +210,14 @@ mod tests {
                     100.0 + 20.0 * offsets[y * (w / 8) + x] + 0.1 * (i % w) as f32
                 })
                 .collect();
-            Plane::from_vec(w, h, data)
+            Plane::from_parts(w, h, data)
         };
         let b = blockiness(&blocks(0));
         assert!(b > 2.0, "block grid: {b}");
         assert!((blockiness(&blocks(3)) - b).abs() < 0.6 * b, "shifted grid: {}", blockiness(&blocks(3)));
-        let ramp = Plane::from_vec(w, h, (0..w * h).map(|i| (i % w) as f32).collect());
+        let ramp = Plane::from_parts(w, h, (0..w * h).map(|i| (i % w) as f32).collect());
         assert!(blockiness(&ramp) < 1e-3);
-        let texture = Plane::from_vec(w, h, crate::test_util::rand_vec(w * h, 9).iter().map(|v| 255.0 * v).collect());
+        let texture = Plane::from_parts(w, h, crate::test_util::rand_vec(w * h, 9).iter().map(|v| 255.0 * v).collect());
         assert!(blockiness(&texture) < 0.1 * b, "texture: {}", blockiness(&texture));
     }
 

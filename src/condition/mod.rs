@@ -44,7 +44,7 @@ mod denoise;
 mod jpeg;
 mod noise;
 mod sharpness;
-pub mod vertical;
+pub(crate) mod vertical;
 
 use std::borrow::Cow;
 
@@ -52,13 +52,12 @@ use crate::image::{RgbImage, StereoPair};
 use crate::params::ConditionParams;
 
 use crate::imgproc::filter::gaussian_blur;
-pub use contrast::TARGET_RANGE;
 use contrast::stretch;
 use denoise::bilateral;
-pub use jpeg::{blockiness, jpeg_noise};
-pub use noise::{channel_noise, estimate_noise};
+pub(crate) use jpeg::{blockiness, jpeg_noise};
+pub(crate) use noise::channel_noise;
 use sharpness::matching_blur;
-pub use sharpness::sharpness;
+pub(crate) use sharpness::sharpness;
 
 /// What was measured on a pair, for diagnostics (`jem -v`) and the adaptive stages.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -97,19 +96,19 @@ impl PairStats {
 }
 
 /// A conditioned pair: what the guidance sees and, when it differs, what the matching cost sees.
-pub struct Conditioned<'a> {
+pub(crate) struct Conditioned<'a> {
     /// Aligned and stretched (the input itself, not a copy, when neither was needed): the colour weights of the
     /// mean field, the weighted median and the planes use it.
-    pub guide: Cow<'a, StereoPair>,
+    pub guide: Cow<'a, StereoPair<'a>>,
     /// The guide pair denoised, for the matching cost only; `None` when nothing was filtered.
-    pub cost: Option<StereoPair>,
+    pub cost: Option<StereoPair<'a>>,
     /// What was measured.
     pub stats: PairStats,
 }
 
-impl Conditioned<'_> {
+impl<'a> Conditioned<'a> {
     /// The pair the matching cost is computed from.
-    pub fn cost_pair(&self) -> &StereoPair {
+    pub(crate) fn cost_pair(&self) -> &StereoPair<'a> {
         self.cost.as_ref().unwrap_or(&self.guide)
     }
 }
@@ -122,8 +121,8 @@ impl Conditioned<'_> {
 /// (`None` elsewhere). A box average of F × F pixels divides independent noise by F, while the one-image estimate
 /// reads fine texture as noise where few flat pixels are left (1/8 of trainingQ: 0.7–1.2 grey levels on clean
 /// pairs against 0.2–0.4 at 1/4), so a coarse level keeps the smaller of its own estimate and this.
-pub fn condition_pair<'a>(
-    pair: &'a StereoPair,
+pub(crate) fn condition_pair<'a>(
+    pair: &'a StereoPair<'a>,
     p: &ConditionParams,
     noise_ceiling: Option<[f32; 2]>,
 ) -> Conditioned<'a> {
@@ -160,8 +159,8 @@ pub fn condition_pair<'a>(
     // Below `denoise.min_sigma` (a clean camera, quantisation noise) a view is not filtered.
     let range = |n: f32| if n >= p.denoise.min_sigma { p.denoise.strength * n } else { 0.0 };
     let cost = (range(nl) > 0.0 || range(nr) > 0.0).then(|| StereoPair {
-        left: bilateral(&guide.left, p.denoise.sigma_xy, range(nl)),
-        right: bilateral(&guide.right, p.denoise.sigma_xy, range(nr)),
+        left: Cow::Owned(bilateral(&guide.left, p.denoise.sigma_xy, range(nl))),
+        right: Cow::Owned(bilateral(&guide.right, p.denoise.sigma_xy, range(nr))),
         ndisp: pair.ndisp,
     });
     // One view sharper than the other (focus, a lens, motion): the Census codes of its fine texture have no
@@ -180,7 +179,7 @@ pub fn condition_pair<'a>(
             let sigma = matching_blur(&grey[sharper], s[1 - sharper]);
             let mut pair = cost.take().unwrap_or_else(|| guide.as_ref().clone());
             let view = if sharper == 0 { &mut pair.left } else { &mut pair.right };
-            *view = gaussian_blur(view, sigma);
+            *view = Cow::Owned(gaussian_blur(view, sigma));
             cost_blur[sharper] = sigma;
             cost = Some(pair);
         }

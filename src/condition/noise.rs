@@ -3,29 +3,24 @@
 
 use rayon::prelude::*;
 
-use crate::image::{Plane, RgbImage};
+use crate::image::RgbImage;
 use crate::imgproc::stats::rank_value;
 
 /// The fraction of pixels, those of lowest gradient, on which [`estimate_noise`] measures.
 const FLAT_FRACTION: f64 = 0.25;
 
 /// The mean of the three channels' noise σ ([`estimate_noise`]).
-pub fn channel_noise(img: &RgbImage) -> f32 {
+pub(crate) fn channel_noise(img: &RgbImage) -> f32 {
     let (w, h) = img.dims();
-    let sum: f32 = img.channels.par_iter().map(|c| noise_of(c, w, h)).sum();
+    let sum: f32 = img.channels.par_iter().map(|c| estimate_noise(c, w, h)).sum();
     sum / 3.0
 }
 
-/// Noise σ of a grey image in grey levels, robust to texture: the 3 × 3 operator
+/// Noise σ of a row-major `w` × `h` grey channel in grey levels, robust to texture: the 3 × 3 operator
 /// `[1 −2 1; −2 4 −2; 1 −2 1]` (Immerkær, 1996) cancels planes and smooth ramps, leaving 6σ of white noise; its
 /// absolute response is taken at the pixels whose Sobel gradient is in the lower half (flat regions), and the
 /// median of those, divided by 6 × 0.6745 (the median absolute value of a unit normal), estimates σ.
-pub fn estimate_noise(grey: &Plane<f32>) -> f32 {
-    noise_of(&grey.data, grey.width, grey.height)
-}
-
-/// [`estimate_noise`] on a row-major `w` × `h` channel.
-fn noise_of(data: &[f32], w: usize, h: usize) -> f32 {
+pub(crate) fn estimate_noise(data: &[f32], w: usize, h: usize) -> f32 {
     if w < 3 || h < 3 {
         return 0.0;
     }
@@ -113,7 +108,7 @@ mod tests {
                 .for_each(|(i, v)| *v = (*v + 30.0 * blocks[(i / w / f) * (w / f) + i % w / f]).min(255.0));
         }
         let coarse = crate::scale::downsample_rgb(&fine, f);
-        let pair = StereoPair { left: coarse.clone(), right: coarse, ndisp: 4 };
+        let pair = StereoPair::new(coarse.clone(), coarse, 4).unwrap();
         let reduced = sigma as f32 / f as f32;
         let own = condition_pair(
             &pair,

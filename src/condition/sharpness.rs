@@ -10,7 +10,7 @@ use crate::imgproc::filter::gaussian_blur_plane;
 /// |gradient| (central differences, both directions), interior pixels. Blur lowers the fine scale more than the
 /// coarse one (MiddEval3's views agree to within 6 %; a view blurred by σ 1.5 px reads 2.5–3 times lower);
 /// 0 for a flat image.
-pub fn sharpness(grey: &Plane<f32>) -> f32 {
+pub(crate) fn sharpness(grey: &Plane<f32>) -> f32 {
     let (w, h) = grey.dims();
     if w < 3 || h < 3 {
         return 0.0;
@@ -43,7 +43,7 @@ pub(super) fn matching_blur(grey: &Plane<f32>, target: f32) -> f32 {
     let mut at = |k: usize| {
         *seen[k].get_or_insert_with(|| {
             let blurred = gaussian_blur_plane(&grey.data, grey.width, grey.height, sigma(k));
-            sharpness(&Plane::from_vec(grey.width, grey.height, blurred))
+            sharpness(&Plane::from_parts(grey.width, grey.height, blurred))
         })
     };
     // The first k in 1..=STEPS with at(k) ≤ target (STEPS when there is none).
@@ -78,7 +78,7 @@ mod tests {
         }
         let img = gaussian_blur(&img, 0.7);
         let grey = img.to_grey();
-        let half = Plane::from_vec(96, 64, grey.data.iter().map(|v| 0.5 * v).collect());
+        let half = Plane::from_parts(96, 64, grey.data.iter().map(|v| 0.5 * v).collect());
         assert!((sharpness(&grey) - sharpness(&half)).abs() < 1e-4);
         let blurred = gaussian_blur(&img, 1.5);
         let target = sharpness(&blurred.to_grey());
@@ -92,13 +92,13 @@ mod tests {
             stretch: StretchParams { enabled: false, ..Default::default() },
             ..ConditionParams::default()
         };
-        let pair = StereoPair { left: img.clone(), right: blurred, ndisp: 8 };
+        let pair = StereoPair::new(img.clone(), blurred, 8).unwrap();
         let c = condition_pair(&pair, &p, None);
         assert!(c.stats.cost_blur[0] > 1.0 && c.stats.cost_blur[1] == 0.0, "{:?}", c.stats.cost_blur);
-        assert!(c.guide.left == img, "the guidance keeps the sharp view");
-        assert!(c.cost_pair().left != img, "the cost sees the blurred one");
+        assert!(*c.guide.left == img, "the guidance keeps the sharp view");
+        assert!(*c.cost_pair().left != img, "the cost sees the blurred one");
         // Two views alike are left alone.
-        let same = StereoPair { left: img.clone(), right: img.clone(), ndisp: 8 };
+        let same = StereoPair::new(img.clone(), img.clone(), 8).unwrap();
         assert_eq!(condition_pair(&same, &p, None).stats.cost_blur, [0.0, 0.0]);
     }
 }

@@ -23,7 +23,7 @@ use crate::imgproc::filter::central_differences;
 use crate::imgproc::sample::{keys, sample_bilinear};
 
 /// The side of the blocks that each give one measurement of the offset (px).
-pub const BLOCK: usize = 8;
+pub(crate) const BLOCK: usize = 8;
 
 /// Terms of the offset surface: 1, x, y, x·y, y² (x, y normalised to about ±½).
 const TERMS: usize = 5;
@@ -40,7 +40,7 @@ const MIN_STRUCTURE: f64 = 4.0;
 
 /// An estimate larger than this anywhere (px) is not trusted: the coarse disparities it rests on were found on
 /// rows that far apart, and the linearisation holds for about a pixel per iteration.
-pub const MAX_OFFSET: f32 = 4.0;
+pub(crate) const MAX_OFFSET: f32 = 4.0;
 
 /// The right view's vertical offset v(x, y) in pixels: the left pixel (x, y) at disparity d matches the right
 /// view at (x − d, y + v(x, y)). A quadratic surface, v = c₀ + c₁x′ + c₂y′ + c₃x′y′ + c₄y′² with
@@ -218,7 +218,7 @@ fn weighted_fit(rows: &[[f64; TERMS]], targets: &[f64], weights: &[f64]) -> Opti
 /// Measures the right view's vertical offset (see the module doc) from grey images of both views, the coarse
 /// disparities at this size and the pixels whose coarse left-right check passed. `None` when too few blocks
 /// carry a measurement (fewer than 20 per term), the fit is singular, or the estimate exceeds [`MAX_OFFSET`].
-pub fn estimate(
+pub(crate) fn estimate(
     left: &Plane<f32>,
     right: &Plane<f32>,
     disparity: &DisparityMap,

@@ -35,16 +35,16 @@ mod tests {
         // Rows 1 and 2 have no valid pixel and lie between valid rows: they stay invalid, as in the devkit.
         let rows: [[f32; 6]; 4] =
             [[INF, 5.0, INF, INF, 2.0, INF], [INF; 6], [INF; 6], [1.0, INF, 3.0, f32::NAN, 7.0, 8.0]];
-        let mut m = Plane::from_vec(6, 4, rows.concat());
+        let mut m = Plane::from_parts(6, 4, rows.concat());
         interpolate_background(&mut m);
         assert_eq!(&m.data[..6], &[5.0, 5.0, 2.0, 2.0, 2.0, 2.0]);
         assert!(m.data[6..18].iter().all(|d| d.is_infinite()), "{:?}", &m.data[6..18]);
         assert_eq!(&m.data[18..], &[1.0, 1.0, 3.0, 3.0, 7.0, 8.0]);
 
-        let mut m = Plane::from_vec(2, 3, vec![INF, INF, 4.0, INF, INF, INF]);
+        let mut m = Plane::from_parts(2, 3, vec![INF, INF, 4.0, INF, INF, INF]);
         interpolate_background(&mut m);
         assert_eq!(m.data, vec![4.0; 6]);
-        let mut empty = Plane::from_vec(2, 1, vec![INF, INF]);
+        let mut empty = Plane::from_parts(2, 1, vec![INF, INF]);
         interpolate_background(&mut empty);
         assert!(empty.data.iter().all(|d| d.is_infinite()));
     }

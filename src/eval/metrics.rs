@@ -136,10 +136,11 @@ impl Metrics {
 /// # Examples
 /// ```
 /// use jem::{Plane, eval::{evaluate, MaskMode}};
-/// let gt = Plane::from_vec(2, 1, vec![3.0, f32::INFINITY]);
-/// let result = Plane::from_vec(2, 1, vec![3.5, 1.0]);
+/// let gt = Plane::from_vec(2, 1, vec![3.0, f32::INFINITY])?;
+/// let result = Plane::from_vec(2, 1, vec![3.5, 1.0])?;
 /// let m = evaluate(&result, &gt, None, 16, 4, MaskMode::All);
 /// assert_eq!((m.avgerr, m.bad1, m.pixels), (2.0, 100.0, 1));
+/// # Ok::<(), jem::Error>(())
 /// ```
 pub fn evaluate(
     result: &DisparityMap,
@@ -291,7 +292,7 @@ mod tests {
         let gt = vec![1.0, 2.0, 3.0, INF, 5.0, 6.0, 7.0, 8.0];
         let result = vec![1.0, 2.625, INF, 4.0, 11.0, -1.0, 7.25, 8.0];
         let mask = vec![255, 255, 255, 255, 255, 128, 0, 255];
-        (Plane::from_vec(4, 2, result), Plane::from_vec(4, 2, gt), Plane::from_vec(4, 2, mask))
+        (Plane::from_parts(4, 2, result), Plane::from_parts(4, 2, gt), Plane::from_parts(4, 2, mask))
     }
 
     fn assert_close(m: &Metrics, want: [f64; 8], n: u64) {
@@ -343,22 +344,22 @@ mod tests {
     #[test]
     fn thresholds_are_strict_and_clip_is_inclusive() {
         // err exactly 0.5, 1, 2, 4 → never bad; d = ndisp exactly is not clipped.
-        let gt = Plane::from_vec(5, 1, vec![0.0, 0.0, 0.0, 0.0, 8.0]);
-        let r = Plane::from_vec(5, 1, vec![0.5, 1.0, 2.0, 4.0, 8.0]);
+        let gt = Plane::from_parts(5, 1, vec![0.0, 0.0, 0.0, 0.0, 8.0]);
+        let r = Plane::from_parts(5, 1, vec![0.5, 1.0, 2.0, 4.0, 8.0]);
         let got = evaluate(&r, &gt, None, 8, 1, MaskMode::All);
         assert_close(&got, [7.5 / 5.0, (21.25f64 / 5.0).sqrt(), 60.0, 40.0, 20.0, 0.0, 0.0, 20.0], 5);
-        let r = Plane::from_vec(5, 1, vec![0.0, 0.0, 0.0, 0.0, 9.0]);
+        let r = Plane::from_parts(5, 1, vec![0.0, 0.0, 0.0, 0.0, 9.0]);
         assert_eq!(evaluate(&r, &gt, None, 8, 1, MaskMode::All).avgerr, 0.0);
         // NaN and −inf are invalid too.
-        let r = Plane::from_vec(5, 1, vec![f32::NAN, f32::NEG_INFINITY, 0.0, 0.0, 8.0]);
+        let r = Plane::from_parts(5, 1, vec![f32::NAN, f32::NEG_INFINITY, 0.0, 0.0, 8.0]);
         let got = evaluate(&r, &gt, None, 8, 1, MaskMode::All);
         assert_close(&got, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 40.0, 40.0], 5);
     }
 
     #[test]
     fn all_invalid_gives_nan_errors() {
-        let gt = Plane::from_vec(2, 1, vec![1.0, 2.0]);
-        let r = Plane::from_vec(2, 1, vec![INF, INF]);
+        let gt = Plane::from_parts(2, 1, vec![1.0, 2.0]);
+        let r = Plane::from_parts(2, 1, vec![INF, INF]);
         let m = evaluate(&r, &gt, None, 8, 4, MaskMode::All);
         assert!(m.avgerr.is_nan() && m.rms.is_nan());
         assert_eq!((m.invalid, m.totbad2, m.bad2), (100.0, 100.0, 0.0));

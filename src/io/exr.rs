@@ -12,7 +12,7 @@ use crate::image::Plane;
 ///
 /// # Errors
 /// [`JemError::Exr`] naming `path` if the encoder fails.
-pub fn encode_exr(path: &Path, map: &Plane<f32>) -> Result<Vec<u8>> {
+pub(crate) fn encode_exr(path: &Path, map: &Plane<f32>) -> Result<Vec<u8>> {
     let channel = AnyChannel::new("Y", FlatSamples::F32(map.data.clone()));
     let layer = Layer::new(
         (map.width, map.height),
@@ -35,7 +35,8 @@ pub fn encode_exr(path: &Path, map: &Plane<f32>) -> Result<Vec<u8>> {
 ///
 /// # Errors
 /// [`JemError::Exr`] or [`JemError::Io`] naming the path.
-pub fn write_exr(path: &Path, map: &Plane<f32>) -> Result<()> {
+#[cfg(test)]
+pub(crate) fn write_exr(path: &Path, map: &Plane<f32>) -> Result<()> {
     let bytes = encode_exr(path, map)?;
     super::write_atomic(path, &bytes)
 }
@@ -44,7 +45,7 @@ pub fn write_exr(path: &Path, map: &Plane<f32>) -> Result<()> {
 ///
 /// # Errors
 /// [`JemError::Io`] or [`JemError::Exr`] naming the path.
-pub fn read_exr(path: &Path) -> Result<Plane<f32>> {
+pub(crate) fn read_exr(path: &Path) -> Result<Plane<f32>> {
     let bytes = std::fs::read(path).map_err(|e| JemError::io(path, e))?;
     let image = read()
         .no_deep_data()
@@ -65,7 +66,7 @@ pub fn read_exr(path: &Path) -> Result<Plane<f32>> {
     if data.len() != w * h {
         return Err(JemError::Input(format!("{}: EXR channel has the wrong number of samples", path.display())));
     }
-    Ok(Plane::from_vec(w, h, data))
+    Ok(Plane::from_parts(w, h, data))
 }
 
 #[cfg(test)]
@@ -76,7 +77,7 @@ mod tests {
     fn round_trip_keeps_orientation_and_inf() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("d.exr");
-        let map = Plane::from_vec(3, 2, vec![0.0, 1.5, f32::INFINITY, -2.0, 1e-3, 1e6]);
+        let map = Plane::from_parts(3, 2, vec![0.0, 1.5, f32::INFINITY, -2.0, 1e-3, 1e6]);
         write_exr(&p, &map).unwrap();
         assert_eq!(read_exr(&p).unwrap(), map);
     }
@@ -85,7 +86,7 @@ mod tests {
     #[test]
     fn encoding_is_deterministic() {
         let data = crate::test_util::rand_vec(640 * 480, 9);
-        let map = Plane::from_vec(640, 480, data);
+        let map = Plane::from_parts(640, 480, data);
         let first = encode_exr(Path::new("d.exr"), &map).unwrap();
         for _ in 0..4 {
             assert!(encode_exr(Path::new("d.exr"), &map).unwrap() == first, "different bytes for the same map");

@@ -4,15 +4,72 @@
 //! which is flushed and then renamed over the destination, so an interrupted run never leaves a truncated output.
 
 pub mod calib;
-pub mod exr;
+pub(crate) mod exr;
 pub mod pfm;
-pub mod png;
+pub(crate) mod png;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::image::DisparityMap;
+use crate::image::{DisparityMap, RgbImage};
+
+pub use png::{ImageHeader, PNG16_MAX_DISPARITY};
+
+/// An image file (PNG, PPM/PGM or JPEG; 8 or 16 bit; grey, RGB or RGBA) as an [`RgbImage`]: samples on the 8-bit
+/// scale (16-bit values divided by 257), grey as three equal channels, alpha dropped.
+///
+/// # Errors
+/// [`Error::Io`] naming the file when it cannot be read, [`Error::Image`] when it cannot be decoded.
+pub fn read_image(path: &Path) -> Result<RgbImage> {
+    png::load_rgb(path)
+}
+
+/// Both views of a pair ([`read_image`]), decoded in parallel.
+///
+/// # Errors
+/// As [`read_image`], for either file.
+pub fn read_image_pair(left: &Path, right: &Path) -> Result<(RgbImage, RgbImage)> {
+    png::load_rgb_pair(left, right)
+}
+
+/// An image file's size and the memory its decoding takes, from its header (the image is not decoded).
+///
+/// # Errors
+/// As [`read_image`], for the header.
+pub fn read_image_header(path: &Path) -> Result<ImageHeader> {
+    png::read_header(path)
+}
+
+/// Both views' headers ([`read_image_header`]), checked as a pair: the same size, at least 2 pixels wide.
+///
+/// # Errors
+/// As [`read_image_header`]; [`Error::SizeMismatch`] for unequal sizes, [`Error::Input`] for a pair too narrow.
+pub fn read_pair_header(left: &Path, right: &Path) -> Result<ImageHeader> {
+    png::read_pair_header(left, right)
+}
+
+/// An 8-bit grey image file (a MiddEval3 mask, say) as its samples, 0..=255; a colour file is converted to grey.
+///
+/// # Errors
+/// As [`read_image`].
+pub fn read_grey8(path: &Path) -> Result<crate::image::Plane<u8>> {
+    png::load_grey8(path)
+}
+
+/// Writes 8-bit RGB samples (`width × height × 3`, row-major, interleaved) as a PNG, atomically.
+///
+/// # Errors
+/// [`Error::Image`] or [`Error::Io`] naming the path.
+pub fn write_png_rgb8(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<()> {
+    png::write_rgb8_png(path, width, height, rgb)
+}
+
+/// A decoded image (from the `image` crate) as an [`RgbImage`], exactly as [`read_image`] converts a file's
+/// pixels.
+pub fn image_from_dynamic(img: &image::DynamicImage) -> RgbImage {
+    png::to_rgb(img)
+}
 
 /// Output formats for a disparity map.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -138,7 +138,7 @@ mod tests {
     use super::*;
 
     fn sample() -> Plane<f32> {
-        Plane::from_vec(3, 2, vec![0.0, 1.5, f32::INFINITY, -2.0, 1e-3, 1e6])
+        Plane::from_parts(3, 2, vec![0.0, 1.5, f32::INFINITY, -2.0, 1e-3, 1e6])
     }
 
     #[test]

@@ -18,7 +18,7 @@ pub struct ImageHeader {
     pub width: usize,
     /// Height in pixels.
     pub height: usize,
-    /// The memory [`load_rgb`] holds at its peak: the file, the decoded samples and the `f32` planes.
+    /// The memory `load_rgb` holds at its peak: the file, the decoded samples and the `f32` planes.
     pub load_bytes: u64,
 }
 
@@ -26,7 +26,7 @@ pub struct ImageHeader {
 ///
 /// # Errors
 /// As [`load_rgb`], for the header.
-pub fn read_header(path: &Path) -> Result<ImageHeader> {
+pub(crate) fn read_header(path: &Path) -> Result<ImageHeader> {
     use image::ImageDecoder;
     let file_bytes = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
     let reader = ImageReader::open(path).map_err(|e| Error::io(path, e))?;
@@ -47,7 +47,7 @@ pub fn read_header(path: &Path) -> Result<ImageHeader> {
 /// # Errors
 /// As [`read_header`]; [`Error::SizeMismatch`] for unequal sizes, [`Error::Input`] for empty images or images
 /// narrower than 2 pixels (no disparity range fits them).
-pub fn read_pair_header(left: &Path, right: &Path) -> Result<ImageHeader> {
+pub(crate) fn read_pair_header(left: &Path, right: &Path) -> Result<ImageHeader> {
     let (l, r) = (read_header(left)?, read_header(right)?);
     if (l.width, l.height) != (r.width, r.height) {
         return Err(Error::SizeMismatch { left: (l.width, l.height), right: (r.width, r.height) });
@@ -70,7 +70,7 @@ pub fn read_pair_header(left: &Path, right: &Path) -> Result<ImageHeader> {
 ///
 /// # Errors
 /// As [`load_rgb`]; the left image's error is reported if both fail.
-pub fn load_rgb_pair(left: &Path, right: &Path) -> Result<(RgbImage, RgbImage)> {
+pub(crate) fn load_rgb_pair(left: &Path, right: &Path) -> Result<(RgbImage, RgbImage)> {
     let (l, r) = rayon::join(|| load_rgb(left), || load_rgb(right));
     Ok((l?, r?))
 }
@@ -81,7 +81,7 @@ pub fn load_rgb_pair(left: &Path, right: &Path) -> Result<(RgbImage, RgbImage)> 
 ///
 /// # Errors
 /// As [`load_rgb_pair`].
-pub fn load_rgb_pair_within(left: &Path, right: &Path, max_bytes: u64) -> Result<(RgbImage, RgbImage)> {
+pub(crate) fn load_rgb_pair_within(left: &Path, right: &Path, max_bytes: u64) -> Result<(RgbImage, RgbImage)> {
     let (l, r) = rayon::join(|| load_rgb_within(left, Some(max_bytes)), || load_rgb_within(right, Some(max_bytes)));
     Ok((l?, r?))
 }
@@ -91,7 +91,7 @@ pub fn load_rgb_pair_within(left: &Path, right: &Path, max_bytes: u64) -> Result
 /// # Errors
 /// [`Error::Io`] if the file cannot be opened, [`Error::Image`] (naming the file and the decoder's reason) if it
 /// is not a readable PNG/PNM image.
-pub fn load_rgb(path: &Path) -> Result<RgbImage> {
+pub(crate) fn load_rgb(path: &Path) -> Result<RgbImage> {
     load_rgb_within(path, None)
 }
 
@@ -112,7 +112,7 @@ fn load_rgb_within(path: &Path, max_bytes: Option<u64>) -> Result<RgbImage> {
 }
 
 /// Converts a decoded image to planar RGB `f32` (0..=255).
-pub fn to_rgb(img: &DynamicImage) -> RgbImage {
+pub(crate) fn to_rgb(img: &DynamicImage) -> RgbImage {
     let (w, h) = (img.width() as usize, img.height() as usize);
     let mut out = RgbImage::new(w, h);
     let mut put = |i: usize, rgb: [f32; 3]| {
@@ -149,7 +149,7 @@ pub fn to_rgb(img: &DynamicImage) -> RgbImage {
 ///
 /// # Panics
 /// If `rgb.len() != width * height * 3`.
-pub fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<()> {
+pub(crate) fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<()> {
     assert_eq!(rgb.len(), width * height * 3);
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new(&mut bytes)
@@ -161,21 +161,13 @@ pub fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> R
 /// The largest disparity a 16-bit PNG holds: 65535 / 256.
 pub const PNG16_MAX_DISPARITY: f32 = 65535.0 / 256.0;
 
-/// Writes a disparity map as a 16-bit grey PNG, value = round(d × 256), 0 = invalid (KITTI convention).
+/// A disparity map encoded as a 16-bit grey PNG, value = round(d × 256), 0 = invalid (KITTI convention).
 /// A disparity of 0 is stored as 1/256 (0 means invalid); negative and non-finite ones become 0 (invalid).
 ///
 /// # Errors
 /// [`Error::Input`] naming the path if a disparity exceeds [`PNG16_MAX_DISPARITY`] (nothing is written: the
 /// format cannot hold it; `.pfm` or `.exr` can); [`Error::Image`] or [`Error::Io`] naming the path.
-pub fn write_disparity_png16(path: &Path, map: &DisparityMap) -> Result<()> {
-    super::write_atomic(path, &encode_disparity_png16(path, map)?)
-}
-
-/// [`write_disparity_png16`]'s bytes, nothing written (`path` only names the file in errors).
-///
-/// # Errors
-/// As [`write_disparity_png16`], except I/O.
-pub fn encode_disparity_png16(path: &Path, map: &DisparityMap) -> Result<Vec<u8>> {
+pub(crate) fn encode_disparity_png16(path: &Path, map: &DisparityMap) -> Result<Vec<u8>> {
     if let Some(max) = map.data.iter().copied().filter(|d| d.is_finite()).reduce(f32::max)
         && max * 256.0 > 65535.5
     {
@@ -202,7 +194,7 @@ pub fn encode_disparity_png16(path: &Path, map: &DisparityMap) -> Result<Vec<u8>
 ///
 /// # Errors
 /// [`Error::Io`] or [`Error::Image`] naming the path.
-pub fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
+pub(crate) fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
         .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
@@ -217,18 +209,18 @@ pub fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
     }
     let grey = img.to_luma16();
     let data = grey.pixels().map(|p| if p.0[0] == 0 { f32::INFINITY } else { f32::from(p.0[0]) / 256.0 }).collect();
-    Ok(Plane::from_vec(grey.width() as usize, grey.height() as usize, data))
+    Ok(Plane::from_parts(grey.width() as usize, grey.height() as usize, data))
 }
 
 /// Loads an 8-bit grey image (e.g. `mask0nocc.png`) as a plane of `u8`.
 ///
 /// # Errors
 /// [`Error::Io`] or [`Error::Image`] naming the path.
-pub fn load_grey8(path: &Path) -> Result<Plane<u8>> {
+pub(crate) fn load_grey8(path: &Path) -> Result<Plane<u8>> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let img = image::load_from_memory(&bytes).map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     let grey = img.to_luma8();
-    Ok(Plane::from_vec(grey.width() as usize, grey.height() as usize, grey.into_raw()))
+    Ok(Plane::from_parts(grey.width() as usize, grey.height() as usize, grey.into_raw()))
 }
 
 #[cfg(test)]
@@ -275,8 +267,8 @@ mod tests {
     fn disparity_png16_round_trip() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("d.png");
-        let map = Plane::from_vec(2, 2, vec![0.5, 100.25, f32::INFINITY, -1.0]);
-        write_disparity_png16(&p, &map).unwrap();
+        let map = Plane::from_parts(2, 2, vec![0.5, 100.25, f32::INFINITY, -1.0]);
+        crate::io::write_disparity(&p, &map).unwrap();
         let back = read_disparity_png16(&p).unwrap();
         assert_eq!(back.data[..2], [0.5, 100.25]);
         assert!(back.data[2].is_infinite() && back.data[3].is_infinite());

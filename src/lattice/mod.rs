@@ -41,7 +41,7 @@ use embed::{Features, LANES, elevation_scales};
 use keys::{Key, assign_vertex_ids};
 
 /// Feature dimension: x, y, r, g, b.
-pub const D: usize = 5;
+pub(crate) const D: usize = 5;
 /// Vertices per simplex.
 const D1: usize = D + 1;
 /// Marks a missing blur neighbour.
@@ -53,15 +53,15 @@ const NONE: u32 = u32::MAX;
 /// 2πσx² at σx = 5 (0.530 at σx = 3, 0.559 at σx = 8): the lattice kernel is piecewise linear and a little wider
 /// than the Gaussian (its mass/peak ratio is ~10% higher). Matching the mass, the quantity a message sums, gives
 /// this factor; the peak k̃(i, i) is then ~0.9–1.0 instead of 1. Checked by `lattice_output_scale_matches_mass`.
-pub const OUTPUT_SCALE: f32 = 1.0 / 0.5536;
+pub(crate) const OUTPUT_SCALE: f32 = 1.0 / 0.5536;
 
 /// The largest feature value (position/σxy or colour/σrgb) the lattice accepts: its 16-bit keys hold the
 /// elevated coordinates, which are at most ~34.6 × the largest feature (2d · (d+1)·√(2/3)/√2 for d = 5), plus
 /// d+1, so they stay within ±31 200 and a blur step (at most d+1) never leaves the 16-bit range.
-pub const MAX_FEATURE: f32 = 900.0;
+pub(crate) const MAX_FEATURE: f32 = 900.0;
 
 /// Whether an image of this size with these σ can be embedded (see [`MAX_FEATURE`]).
-pub fn features_fit(width: usize, height: usize, sigma_xy: f32, sigma_rgb: f32) -> bool {
+pub(crate) fn features_fit(width: usize, height: usize, sigma_xy: f32, sigma_rgb: f32) -> bool {
     (width.max(height) as f32 / sigma_xy) <= MAX_FEATURE && 255.0 / sigma_rgb <= MAX_FEATURE
 }
 

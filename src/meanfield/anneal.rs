@@ -19,7 +19,7 @@ use crate::params::MeanFieldParams;
 
 /// The weights `weights` with the label-aware local coupling of `p` applied for `m` labels: ω̃ × m /
 /// `lcm_weight_ref_labels`, or unchanged when that is 0.
-pub fn label_aware_weights(weights: PairwiseWeights, p: &MeanFieldParams, m: usize) -> PairwiseWeights {
+pub(crate) fn label_aware_weights(weights: PairwiseWeights, p: &MeanFieldParams, m: usize) -> PairwiseWeights {
     if p.lcm_weight_ref_labels == 0 {
         return weights;
     }
@@ -34,7 +34,7 @@ pub fn label_aware_weights(weights: PairwiseWeights, p: &MeanFieldParams, m: usi
 /// consecutive temperatures, reaching `unary_scale` exactly at step K and staying there. With T = 0 there is
 /// nothing to anneal and the initial marginals use `unary_scale`.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct UnarySchedule {
+pub(crate) struct UnarySchedule {
     start: f32,
     end: f32,
     iterations: usize,
@@ -42,13 +42,13 @@ pub struct UnarySchedule {
 
 impl UnarySchedule {
     /// The schedule configured in `p`.
-    pub fn new(p: &MeanFieldParams) -> Self {
+    pub(crate) fn new(p: &MeanFieldParams) -> Self {
         let iterations = if p.unary_anneal_iterations > 0 { p.unary_anneal_iterations } else { p.iterations };
         UnarySchedule { start: p.unary_scale_start, end: p.unary_scale, iterations }
     }
 
     /// The scale of step `t` (0 = the initial marginals, 1..=T the iterations).
-    pub fn at(&self, t: usize) -> f32 {
+    pub(crate) fn at(&self, t: usize) -> f32 {
         if self.start <= 0.0 || self.iterations == 0 || t >= self.iterations {
             return self.end;
         }

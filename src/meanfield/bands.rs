@@ -108,7 +108,7 @@ impl LabelBands {
 /// right pixel x − low (rounded; the right volume of [`crate::cost::derive_right_volume`] matches right pixel x at
 /// label d with left pixel x + d), and a right pixel that several left pixels land on allows all their ranges; `inf`
 /// where none lands (occluded in the left view).
-pub fn warp_to_right_view(low: &DisparityMap, high: &DisparityMap) -> (DisparityMap, DisparityMap) {
+pub(crate) fn warp_to_right_view(low: &DisparityMap, high: &DisparityMap) -> (DisparityMap, DisparityMap) {
     let (w, h) = (low.width, low.height);
     let mut right_low = Plane::new(w, h, f32::INFINITY);
     let mut right_high = Plane::new(w, h, f32::INFINITY);
@@ -163,15 +163,15 @@ mod tests {
     #[test]
     fn the_right_view_allows_what_lands_on_it() {
         let (w, h) = (8, 1);
-        let low = Plane::from_vec(w, h, vec![0.0, 1.0, 1.0, f32::INFINITY, 3.0, 2.0, 4.0, 2.0]);
-        let high = Plane::from_vec(w, h, vec![0.0, 1.0, 2.0, f32::INFINITY, 3.0, 2.0, 5.0, 2.0]);
+        let low = Plane::from_parts(w, h, vec![0.0, 1.0, 1.0, f32::INFINITY, 3.0, 2.0, 4.0, 2.0]);
+        let high = Plane::from_parts(w, h, vec![0.0, 1.0, 2.0, f32::INFINITY, 3.0, 2.0, 5.0, 2.0]);
         let (rl, rh) = warp_to_right_view(&low, &high);
         // x 0 → 0, 1 → 0, 2 → 1, 4 → 1, 5 → 3, 6 → 2, 7 → 5.
         let inf = f32::INFINITY;
         assert_eq!(rl.data, vec![0.0, 1.0, 4.0, 2.0, inf, 2.0, inf, inf]);
         assert_eq!(rh.data, vec![1.0, 3.0, 5.0, 2.0, inf, 2.0, inf, inf]);
         let (w, m) = (30, 12);
-        let coarse = Plane::from_vec(w, 2, (0..w * 2).map(|i| ((i % w) % 7) as f32).collect());
+        let coarse = Plane::from_parts(w, 2, (0..w * 2).map(|i| ((i % w) % 7) as f32).collect());
         let bands = LabelBands::around((&coarse, &coarse), &Plane::new(w, 2, f32::INFINITY), m, 1, 1.0, 0);
         let cut = bands.columns_from(4);
         assert_eq!((cut.width, cut.of(w - 4 + 3)), (w - 4, bands.of(w + 7)));

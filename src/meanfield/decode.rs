@@ -30,7 +30,7 @@ pub fn decode_marginals(q: &Marginals, subpixel: bool) -> (DisparityMap, Plane<f
 
 /// Vertex offset in [−0.5, 0.5] of the parabola through (−1, ln a), (0, ln b), (1, ln c), where b is the largest.
 #[inline]
-pub fn parabola_offset(a: f32, b: f32, c: f32) -> f32 {
+pub(crate) fn parabola_offset(a: f32, b: f32, c: f32) -> f32 {
     const FLOOR: f32 = 1e-30;
     let (la, lb, lc) = (a.max(FLOOR).ln(), b.max(FLOOR).ln(), c.max(FLOOR).ln());
     let curvature = la - 2.0 * lb + lc;

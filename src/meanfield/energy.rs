@@ -13,7 +13,7 @@ use crate::params::MeanFieldParams;
 
 /// Local edge weights w̃(i, j) towards the right and lower neighbours (the left/upper ones are their mirrors).
 #[derive(Clone, Debug)]
-pub struct LocalWeights {
+pub(crate) struct LocalWeights {
     /// w̃ between (x, y) and (x+1, y); 0 in the last column.
     pub right: Plane<f32>,
     /// w̃ between (x, y) and (x, y+1); 0 in the last row.
@@ -21,7 +21,7 @@ pub struct LocalWeights {
 }
 
 /// w̃ = λ1 if Σ_rgb |I_i − I_j| < μ1, λ2 if < μ2, else λ3 (paper eq. 8).
-pub fn local_edge_weight(a: [f32; 3], b: [f32; 3], p: &MeanFieldParams) -> f32 {
+pub(crate) fn local_edge_weight(a: [f32; 3], b: [f32; 3], p: &MeanFieldParams) -> f32 {
     let diff = (a[0] - b[0]).abs() + (a[1] - b[1]).abs() + (a[2] - b[2]).abs();
     if diff < p.mu1 {
         p.lambda1
@@ -33,7 +33,7 @@ pub fn local_edge_weight(a: [f32; 3], b: [f32; 3], p: &MeanFieldParams) -> f32 {
 }
 
 /// Computes the 4-neighbour edge weights of an image.
-pub fn local_weights(image: &RgbImage, p: &MeanFieldParams) -> LocalWeights {
+pub(crate) fn local_weights(image: &RgbImage, p: &MeanFieldParams) -> LocalWeights {
     let (w, h) = image.dims();
     let mut right = Plane::new(w, h, 0.0f32);
     let mut down = Plane::new(w, h, 0.0f32);
@@ -57,7 +57,8 @@ pub fn local_weights(image: &RgbImage, p: &MeanFieldParams) -> LocalWeights {
 /// The local term's contribution to E_i(d) for all d, given P̃_i (the O(M) form without the constant S_i):
 /// `out[d] += −ω̃·(P̃(d) + (1 − β)(P̃(d−1) + P̃(d+1)))`. (The update computes the same through
 /// its one-pass energy function; this form is for tests and callers with an unpadded P̃.)
-pub fn add_local_energy(p_tilde: &[f32], omega: f32, beta: f32, out: &mut [f32]) {
+#[cfg(test)]
+pub(crate) fn add_local_energy(p_tilde: &[f32], omega: f32, beta: f32, out: &mut [f32]) {
     let m = p_tilde.len();
     let mut padded = vec![0.0f32; m + 2];
     padded[1..=m].copy_from_slice(p_tilde);
@@ -135,7 +136,7 @@ fn non_negative(v: f32) -> f32 {
 /// of times slower (one JEM iteration of `jem-lrc.toml` on Motorcycle Q went from ~90 to ~160 ms at unary scale
 /// 1.0). At 1e−20 every value that reaches the lattice stays a normal float; the probabilities removed are far
 /// below anything that can change a decision.
-pub const MIN_RELATIVE_PROBABILITY: f32 = 1e-20;
+pub(crate) const MIN_RELATIVE_PROBABILITY: f32 = 1e-20;
 
 /// e^x for x ≤ 0, or 0 below [`MIN_RELATIVE_PROBABILITY`].
 #[inline(always)]

@@ -37,14 +37,14 @@
 //! never stored); each iteration is O(N·M) and allocation-free apart from a few `M`-long scratch vectors per
 //! thread.
 
-pub mod anneal;
-pub mod bands;
-pub mod decode;
-pub mod energy;
-pub mod full;
-pub mod pyramid;
-pub mod schedule;
-pub mod update;
+pub(crate) mod anneal;
+pub(crate) mod bands;
+pub(crate) mod decode;
+pub(crate) mod energy;
+pub(crate) mod full;
+pub(crate) mod pyramid;
+pub(crate) mod schedule;
+pub(crate) mod update;
 
 use rayon::prelude::*;
 
@@ -52,11 +52,11 @@ use crate::image::{CostVolume, RgbImage};
 use crate::lattice::LatticeScratch;
 use crate::params::{MeanFieldParams, Schedule};
 
-pub use anneal::{UnarySchedule, label_aware_weights};
-pub use bands::LabelBands;
-pub use decode::{decode_marginals, parabola_offset};
-pub use energy::{LocalWeights, MIN_RELATIVE_PROBABILITY, add_local_energy, local_edge_weight, local_weights};
-pub use pyramid::{downsample_volume, infer_coarse_to_fine};
+pub(crate) use anneal::{UnarySchedule, label_aware_weights};
+pub(crate) use bands::LabelBands;
+pub use decode::decode_marginals;
+pub(crate) use energy::{LocalWeights, local_weights};
+pub(crate) use pyramid::infer_coarse_to_fine;
 
 use energy::unary_marginals;
 use full::FullKernel;
@@ -65,7 +65,7 @@ use schedule::checkerboard_bands;
 use update::Pass;
 
 /// Per-pixel label distributions, laid out like a [`CostVolume`]: `data[(y·w + x)·M + d]`.
-pub type Marginals = CostVolume;
+pub(crate) type Marginals = CostVolume;
 
 /// The weights of the two pairwise terms for one run (0 switches a term off).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -88,7 +88,7 @@ pub struct Buffers {
 
 /// The most spare allocations [`Buffers`] keeps: a view's inference needs its cost volume and its marginals, and
 /// the next volume is built while they are alive.
-pub const MAX_SPARE: usize = 3;
+pub(crate) const MAX_SPARE: usize = 3;
 
 impl Buffers {
     /// Gives back an allocation that is no longer needed (old marginals, a dropped cost volume): the next
@@ -332,7 +332,7 @@ impl<'a> MeanField<'a> {
 }
 
 /// Runs mean-field inference and returns the marginals: `p.iterations` iterations, coarse to fine when
-/// `p.pyramid_levels` > 1 ([`infer_coarse_to_fine`]).
+/// `p.pyramid_levels` > 1 (`infer_coarse_to_fine`).
 pub fn infer_mean_field(
     cost: &CostVolume,
     image: &RgbImage,

@@ -33,7 +33,7 @@ pub(super) fn copy_from_coarse(q: &mut [f32], w: usize, h: usize, m: usize, coar
 
 /// The block means of a cost volume over `factor × factor` pixels (partial blocks at the right and bottom edges
 /// average the pixels they have); the labels are unchanged.
-pub fn downsample_volume(vol: &CostVolume, factor: usize) -> CostVolume {
+pub(crate) fn downsample_volume(vol: &CostVolume, factor: usize) -> CostVolume {
     let (w, h, m) = (vol.width, vol.height, vol.ndisp);
     let (sw, sh) = (crate::scale::reduced_len(w, factor), crate::scale::reduced_len(h, factor));
     let mut out = CostVolume::new(sw, sh, m, 0.0);
@@ -67,7 +67,7 @@ pub fn downsample_volume(vol: &CostVolume, factor: usize) -> CostVolume {
 ///
 /// Memory: besides the input volume and the final Q (in `buffers` when it holds an `N × M` allocation), the
 /// coarse levels' volumes and marginals, at most 2/3 of a volume more (Σ 2 · 4^−k).
-pub fn infer_coarse_to_fine(
+pub(crate) fn infer_coarse_to_fine(
     cost: &CostVolume,
     image: &RgbImage,
     p: &MeanFieldParams,

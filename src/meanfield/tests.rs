@@ -3,7 +3,7 @@
 
 #![allow(clippy::needless_range_loop)] // index loops read best in reference implementations
 
-use super::energy::softmax_neg_in_place;
+use super::energy::{MIN_RELATIVE_PROBABILITY, softmax_neg_in_place};
 use super::*;
 use crate::image::Plane;
 use crate::params::{CostParams, MeanFieldParams, Normalization, Params, Schedule};
@@ -264,10 +264,10 @@ fn meanfield_zero_iterations_is_softmax_of_the_unary() {
 fn meanfield_run_is_identical_with_1_and_2_threads() {
     let (w, h) = (64, 30);
     let (left, right, _) = banded_pair(w, h);
-    let pair = crate::StereoPair::new(left, right, 16).unwrap();
+    let pair = crate::image::StereoPair::new(left, right, 16).unwrap();
     let run = |threads| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| crate::run(&Params::default(), &pair).unwrap().disparity)
+        pool.install(|| crate::pipeline::run(&Params::default(), &pair).unwrap().disparity)
     };
     let (a, b) = (run(1), run(2));
     assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()));
@@ -361,8 +361,8 @@ const LCM_ONLY: PairwiseWeights = PairwiseWeights { fcm: 0.0, lcm: 1.0 };
 /// Random label bands for a `w × h` view of `m` labels, a fifth of them all labels.
 fn random_bands(w: usize, h: usize, m: usize, seed: u64) -> LabelBands {
     let r = rand_vec(2 * w * h, seed);
-    let centre = Plane::from_vec(w, h, (0..w * h).map(|i| (r[2 * i] * m as f32).floor()).collect());
-    let best = Plane::from_vec(
+    let centre = Plane::from_parts(w, h, (0..w * h).map(|i| (r[2 * i] * m as f32).floor()).collect());
+    let best = Plane::from_parts(
         w,
         h,
         (0..w * h).map(|i| if i % 5 == 0 { f32::INFINITY } else { (r[2 * i + 1] * m as f32).floor() }).collect(),

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use super::check_nonneg;
 use crate::error::{Error, Result};
 
-/// Input conditioning and the coarse prior ([`crate::condition`]): measured on each pair, so one setting serves
+/// Input conditioning and the coarse prior (`crate::condition`): measured on each pair, so one setting serves
 /// clean, noisy and dark pairs (docs/tuning-log.md, "Robustness").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -17,7 +17,7 @@ pub struct ConditionParams {
     /// The master switch: false turns every part off (the paper's configs use it).
     pub enabled: bool,
     /// When one view of the cost pair is sharper than the other by more than this factor
-    /// ([`crate::condition::sharpness`]), it is blurred until they match (0 = never).
+    /// (`crate::condition::sharpness`), it is blurred until they match (0 = never).
     pub sharpness_ratio: f32,
     /// `[condition.stretch]`: contrast of a low-contrast pair.
     pub stretch: StretchParams,
@@ -31,7 +31,7 @@ pub struct ConditionParams {
     pub vertical: VerticalParams,
 }
 
-/// `[condition.stretch]`: the contrast stretch ([`crate::condition`], "Contrast").
+/// `[condition.stretch]`: the contrast stretch (`crate::condition`, "Contrast").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct StretchParams {
@@ -42,7 +42,7 @@ pub struct StretchParams {
     pub min_gain: f32,
 }
 
-/// `[condition.denoise]`: the bilateral denoiser ([`crate::condition`], "Noise"); the guidance keeps the original.
+/// `[condition.denoise]`: the bilateral denoiser (`crate::condition`, "Noise"); the guidance keeps the original.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DenoiseParams {
@@ -54,15 +54,15 @@ pub struct DenoiseParams {
     pub min_sigma: f32,
 }
 
-/// `[condition.noise]`: what the measured noise σn changes in the cost ([`crate::condition::estimate_noise`],
-/// [`crate::condition::jpeg_noise`]).
+/// `[condition.noise]`: what the measured noise σn changes in the cost (`condition::noise::estimate_noise`,
+/// `crate::condition::jpeg_noise`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct NoiseParams {
-    /// Count a JPEG-decoded view's compression error as noise ([`crate::condition::jpeg_noise`]); the coarse
+    /// Count a JPEG-decoded view's compression error as noise (`crate::condition::jpeg_noise`); the coarse
     /// levels, whose images are reduced off the block grid, do not measure it.
     pub jpeg: bool,
-    /// Census dead band as a multiple of the measured JPEG blocking ([`crate::condition::blockiness`], the larger
+    /// Census dead band as a multiple of the measured JPEG blocking (`crate::condition::blockiness`, the larger
     /// view's): a bit is set only where the neighbour is darker by more than the block grid's own steps; 0 = none.
     pub block_band: f32,
     /// Widens `cost.census_support` by this multiple of σn (when the support is on): under noise the bits of strong
@@ -73,7 +73,7 @@ pub struct NoiseParams {
     pub grad_eps_per_sigma: f32,
 }
 
-/// `[condition.prior]`: the coarse prior ([`crate::pipeline`]'s coarse chain): the pipeline first runs on the pair
+/// `[condition.prior]`: the coarse prior (`crate::pipeline`'s coarse chain): the pipeline first runs on the pair
 /// reduced 2×, and the full-resolution cost of label d gets λ · min(max(|d − d_coarse| − `margin_px`, 0),
 /// `trunc_px`) with λ = `per_sigma` × σn (scaled as below).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -93,7 +93,7 @@ pub struct PriorParams {
     /// mean; this is k (0 = off).
     pub detail: f32,
     /// Where the full-resolution cost is flat the prior weighs at least this × 1 / (1 + s / s̄), s the pixel's
-    /// cost spread over the labels (mean − min) and s̄ its image median ([`crate::cost::flatness`]): an untextured
+    /// cost spread over the labels (mean − min) and s̄ its image median (`crate::cost::flatness`): an untextured
     /// surface follows the coarse answer even in a clean pair, whose noise-scaled weight is near 0; 0 = off.
     pub flat: f32,
     /// Beside a depth edge of the coarse answer the prior accepts the whole step: where the coarse disparities
@@ -107,7 +107,7 @@ pub struct PriorParams {
     pub trunc_px: f32,
 }
 
-/// `[condition.vertical]`: the right view's residual vertical offset ([`crate::condition::vertical`]).
+/// `[condition.vertical]`: the right view's residual vertical offset (`crate::condition::vertical`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct VerticalParams {

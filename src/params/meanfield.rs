@@ -40,7 +40,7 @@ pub struct MeanFieldParams {
     /// Deterministic annealing of the unary temperature; 0 = off (every iteration uses `unary_scale`). When > 0,
     /// the initial marginals use this scale and iteration t = 1..T uses the geometric interpolation
     /// `unary_scale_start` × (`unary_scale` / `unary_scale_start`)^(t / T), so the last iteration uses
-    /// `unary_scale` (start below `unary_scale` = start hot, end cold). See [`crate::meanfield`].
+    /// `unary_scale` (start below `unary_scale` = start hot, end cold). See `crate::meanfield`.
     pub unary_scale_start: f32,
     /// With annealing: the number of iterations K over which the scale goes from `unary_scale_start` to
     /// `unary_scale` (t / K in place of t / T), the remaining T − K iterations staying at `unary_scale`;
@@ -52,7 +52,7 @@ pub struct MeanFieldParams {
     pub lcm_weight: f32,
     /// Label-aware local coupling; 0 = off. When > 0, ω̃ is multiplied by M / `lcm_weight_ref_labels` for a scene
     /// with M labels, so the local term's gain around the uniform marginal, ~ω̃·Σλ·(3 − 2β) / M, is the same for
-    /// every M (ω̃ is the weight at M = `lcm_weight_ref_labels`). See [`crate::meanfield`].
+    /// every M (ω̃ is the weight at M = `lcm_weight_ref_labels`). See `crate::meanfield`.
     pub lcm_weight_ref_labels: usize,
     /// β, the local penalty for |d_i − d_j| = 1 (the penalty for > 1 is 1).
     pub beta: f32,
@@ -81,7 +81,7 @@ pub struct MeanFieldParams {
     /// Coarse-to-fine inference: the number of levels (1 = off). Level k runs on the image and cost volume
     /// reduced 2^k times (block means, the same labels); the coarsest level runs the configured `iterations`
     /// (and annealing) from the unary, every finer level starts from its parent's marginals and runs
-    /// `pyramid_iterations` at `unary_scale`. See [`crate::meanfield::infer_coarse_to_fine`].
+    /// `pyramid_iterations` at `unary_scale`. See `crate::meanfield::infer_coarse_to_fine`.
     pub pyramid_levels: usize,
     /// Iterations at each level finer than the coarsest (with `pyramid_levels` > 1).
     pub pyramid_iterations: usize,

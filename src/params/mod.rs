@@ -87,7 +87,7 @@ impl Default for PostParams {
 }
 
 /// `[upsample]`: bringing a reduced run (`downscale` > 1) back to the input size, edge-aware
-/// ([`crate::scale::upsample_disparity_guided`]).
+/// (`crate::scale::upsample_disparity_guided`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct UpsampleParams {
@@ -116,7 +116,7 @@ pub struct Params {
     /// Run at 1/N resolution (N×N box averaging, ceil(ndisp / N) labels) and bring the disparity map back to
     /// the input size (bilinear, edge-aware: `[upsample]`; × N); 1 = full resolution. About 1/N³ of the memory and
     /// time of inference.
-    /// See [`crate::scale`].
+    /// See `crate::scale`.
     pub downscale: usize,
     /// How the reduced run's disparity map is brought back to the input size (`downscale` > 1).
     pub upsample: UpsampleParams,

@@ -10,7 +10,7 @@ use crate::image::{CostVolume, DisparityMap, Plane, RgbImage, StereoPair};
 use crate::params::{self, LrcMode, Model, Params};
 use crate::{cost, meanfield, post};
 
-use super::output::{Output, Timings};
+use super::output::{PipelineOutput, Timings};
 use super::prior::Prior;
 
 /// Disparity and confidence of one view.
@@ -24,9 +24,9 @@ struct ViewEstimate {
 #[derive(Clone, Copy)]
 pub(crate) struct FineInput<'a> {
     /// The guidance pair.
-    pub guide: &'a StereoPair,
+    pub guide: &'a StereoPair<'a>,
     /// The pair the matching cost sees (the guidance itself when conditioning is off).
-    pub cost_pair: &'a StereoPair,
+    pub cost_pair: &'a StereoPair<'a>,
     /// The cost parameters for this pair ([`super::prepared::Prepared::cost_params`]).
     pub cost_params: &'a params::CostParams,
     /// ḡ of the gradient normalisation measured on the whole pair ([`super::prepared::Prepared::grad_norm_mean`];
@@ -49,7 +49,7 @@ pub(crate) fn fine_pass(
     buffers: &mut meanfield::Buffers,
     on_stage: &dyn Fn(&str),
     mut t: Timings,
-) -> Result<Output> {
+) -> Result<PipelineOutput> {
     let FineInput { guide: pair, cost_pair, cost_params, grad_norm_mean, prior, left_from } = *input;
     on_stage("cost volume");
     let c = &params.condition;
@@ -63,7 +63,7 @@ pub(crate) fn fine_pass(
     let row_prior = prior.filter(|p| !p.needs_flatness());
     // The rows' own best labels as one map (with label bands only).
     let best_of_rows = |rows: Vec<Option<Vec<f32>>>| {
-        prior_bands.map(|_| Plane::from_vec(w, h, rows.into_iter().flatten().flatten().collect()))
+        prior_bands.map(|_| Plane::from_parts(w, h, rows.into_iter().flatten().flatten().collect()))
     };
     let (mut cost_left, own_rows) = t.time("cost", || {
         let (left, right) = (&cost_pair.left, &cost_pair.right);
@@ -95,7 +95,7 @@ pub(crate) fn fine_pass(
     // allocated, page-faulted and freed per tile (that copy, on one thread, was 5 % of an Adirondack ×4 run).
     on_stage("inference (left)");
     let guide_left = match left_from {
-        0 => Cow::Borrowed(&pair.left),
+        0 => Cow::Borrowed(pair.left.as_ref()),
         _ => Cow::Owned(pair.left.columns_from(left_from)),
     };
     // The right volume, with its pixels' own best labels for the label bands (tiles) taken row by row.
@@ -159,7 +159,7 @@ pub(crate) fn fine_pass(
         t.time("fill", || post::fill::fill_occlusions_in_place(&mut disparity));
     }
     if post.wmedian.enabled {
-        let targets = Plane::from_vec(trusted.width, trusted.height, trusted.data.iter().map(|ok| !ok).collect());
+        let targets = Plane::from_parts(trusted.width, trusted.height, trusted.data.iter().map(|ok| !ok).collect());
         disparity =
             t.time("wmedian", || post::wmedian::weighted_median(&disparity, &guide_left, &targets, &post.wmedian));
     }
@@ -170,7 +170,7 @@ pub(crate) fn fine_pass(
         let top = (pair.ndisp - 1) as f32;
         disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
     }
-    Ok(Output { disparity, confidence: left.confidence, consistent: trusted, timings: t, measured: None })
+    Ok(PipelineOutput { disparity, confidence: left.confidence, consistent: trusted, timings: t, measured: None })
 }
 
 /// Inference for one view: WTA on the cost, or mean field with the view's own image, within `bands` if given

@@ -10,14 +10,13 @@
 //! Around it: `window.rs` (label windows: a tile's fine pass on the labels the coarse answer holds only), [`tile`]
 //! (pairs too large for one cost volume: a coarse level, then tiles over label windows), `memory.rs` (the memory
 //! model and guard: [`estimate_memory_bytes`], [`check_memory`]) and `output.rs` (what a run returns:
-//! [`Output`], [`Measured`], [`Timings`]).
+//! [`PipelineOutput`], [`Measured`], [`Timings`]).
 
 mod fine;
-mod memory;
 mod output;
 mod prepared;
 mod prior;
-pub mod tile;
+pub(crate) mod tile;
 mod window;
 
 use crate::error::{Error, Result};
@@ -26,28 +25,27 @@ use crate::params::Params;
 use crate::{lattice, scale};
 
 use fine::{FineInput, fine_pass};
-pub use memory::{PROCESS_BYTES, check_memory, default_memory_limit, estimate_memory_bytes};
-pub use output::{Measured, Output, Timings, VerticalMeasured};
+pub use output::{Measured, PipelineOutput, Timings, VerticalMeasured};
 use prepared::Prepared;
 use prior::CoarseLevel;
 
-/// Runs the whole pipeline on a pair (at 1/`params.downscale` resolution if that is > 1; see [`scale`]).
+/// Runs the whole pipeline on a pair (at 1/`params.downscale` resolution if that is > 1; see `scale`).
 ///
 /// # Errors
 /// [`Error::InvalidParam`] if `params` does not validate, or the downscale factor is too large for the pair.
-pub fn run(params: &Params, pair: &StereoPair) -> Result<Output> {
+pub fn run(params: &Params, pair: &StereoPair) -> Result<PipelineOutput> {
     run_observed(params, pair, &|_| {})
 }
 
 /// Like [`run`], calling `on_stage(name)` as each stage starts (for progress display).
 ///
-/// With `params.downscale` = N > 1: the pair is reduced by N ([`scale::downsample_pair`], stage `downsample`),
-/// the pipeline runs on it, and its disparity map ([`scale::upsample_disparity_guided`], `[upsample]`) and confidence
-/// ([`scale::upsample_plane`]) are brought back to the input size (stage `upsample`).
+/// With `params.downscale` = N > 1: the pair is reduced by N (`scale::downsample_pair`, stage `downsample`),
+/// the pipeline runs on it, and its disparity map (`scale::upsample_disparity_guided`, `[upsample]`) and confidence
+/// (`scale::upsample_plane`) are brought back to the input size (stage `upsample`).
 ///
 /// # Errors
 /// As [`run`].
-pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str)) -> Result<Output> {
+pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str)) -> Result<PipelineOutput> {
     run_level(params, pair, on_stage, None)
 }
 
@@ -58,7 +56,7 @@ fn run_level(
     pair: &StereoPair,
     on_stage: &dyn Fn(&str),
     noise_ceiling: Option<[f32; 2]>,
-) -> Result<Output> {
+) -> Result<PipelineOutput> {
     params.validate()?;
     let factor = params.downscale;
     if factor == 1 {
@@ -83,7 +81,7 @@ fn run_level(
     });
     drop(small);
     let consistent = scale::upsample_mask(&low.consistent, factor, w, h);
-    Ok(Output { disparity, confidence, consistent, timings: t, measured: low.measured })
+    Ok(PipelineOutput { disparity, confidence, consistent, timings: t, measured: low.measured })
 }
 
 /// The pipeline at the pair's own resolution, appending its stage times to `t`: prepare, coarse prior, fine pass.
@@ -93,7 +91,7 @@ fn run_pipeline(
     on_stage: &dyn Fn(&str),
     noise_ceiling: Option<[f32; 2]>,
     mut t: Timings,
-) -> Result<Output> {
+) -> Result<PipelineOutput> {
     check_features_fit(params, pair)?;
     let mut input = Prepared::of(params, pair, noise_ceiling, &mut t);
     // Before the full-resolution volume exists, so the two runs' buffers are never alive together.

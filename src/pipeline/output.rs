@@ -1,4 +1,4 @@
-//! What a run produces: the maps ([`Output`]), what the adaptive front end measured ([`Measured`]) and the time
+//! What a run produces: the maps ([`PipelineOutput`]), what the adaptive front end measured ([`Measured`]) and the time
 //! each stage took ([`Timings`]).
 
 use std::time::{Duration, Instant};
@@ -40,7 +40,7 @@ impl Timings {
 
 /// What a run produces.
 #[derive(Clone, Debug)]
-pub struct Output {
+pub struct PipelineOutput {
     /// The left view's disparity map (`inf` = invalid, when post-processing leaves holes).
     pub disparity: DisparityMap,
     /// Per-pixel confidence of the left view before post-processing: the max-marginal (mean-field models) or
@@ -55,7 +55,7 @@ pub struct Output {
     pub measured: Option<Measured>,
 }
 
-/// What the adaptive front end ([`crate::condition`]) measured on a pair and the values it derived (`jem -v`
+/// What the adaptive front end (`crate::condition`) measured on a pair and the values it derived (`jem -v`
 /// prints it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Measured {
@@ -69,11 +69,45 @@ pub struct Measured {
     pub census_support: f32,
     /// ḡ and ε of the gradient normalisation (`None`: the raw gradient).
     pub gradient: Option<(f32, f32)>,
-    /// The right view's residual vertical offset ([`crate::condition::vertical`]; `None`: not measured).
+    /// The right view's residual vertical offset (`crate::condition::vertical`; `None`: not measured).
     pub vertical: Option<VerticalMeasured>,
 }
 
-/// The right view's residual vertical offset as measured ([`crate::condition::vertical::estimate`]).
+impl std::fmt::Display for Measured {
+    /// One line: what the adaptive front end measured on the pair and set from it (what `jem -v` prints).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let m = self;
+        let [nl, nr] = m.stats.noise;
+        let [gl, gr] = m.stats.gain;
+        let gradient =
+            m.gradient.map_or("raw".to_string(), |(mean, eps)| format!("local contrast {mean:.1}, ε {eps:.1}"));
+        let [bl, br] = m.stats.cost_blur;
+        let blur = if bl > 0.0 || br > 0.0 {
+            format!("; cost blur σ {bl:.2} / {br:.2} px (sharpness matched)")
+        } else {
+            String::new()
+        };
+        let jpeg = if m.stats.is_jpeg() {
+            let ([jl, jr], [bl, br]) = (m.stats.jpeg, m.stats.blocking);
+            format!("; JPEG: compression error σ {jl:.2} / {jr:.2}, block steps {bl:.2} / {br:.2}")
+        } else {
+            String::new()
+        };
+        let vertical = m.vertical.map_or(String::new(), |v| {
+            let (lo, hi) = v.range;
+            let done = if v.corrected { "removed" } else { "left" };
+            format!("; right view's vertical offset {lo:+.2} to {hi:+.2} px ({done})")
+        });
+        write!(
+            f,
+            "measured: noise σ {nl:.2} / {nr:.2}, contrast gain {gl:.2} / {gr:.2} (left / right); prior λ {:.2} \
+             (at least {:.2} × the cost's flatness), Census support {:.1}, gradient {gradient}{blur}{jpeg}{vertical}",
+            m.prior_weight, m.prior_flat, m.census_support
+        )
+    }
+}
+
+/// The right view's residual vertical offset as measured (`crate::condition::vertical::estimate`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VerticalMeasured {
     /// Its smallest and largest value over the image (px, at the resolution the pipeline ran at).

@@ -8,7 +8,7 @@ use crate::cost;
 use crate::image::{Plane, StereoPair};
 use crate::params::{self, Params};
 
-use super::output::{Measured, Output, Timings, VerticalMeasured};
+use super::output::{Measured, PipelineOutput, Timings, VerticalMeasured};
 
 /// A pair after [`condition::condition_pair`] (when `[condition]` is active), with what follows from its
 /// measurements: the cost parameters (the Census dead band grows with JPEG's block steps, the support and the
@@ -31,7 +31,12 @@ pub(crate) struct Prepared<'a> {
 impl<'a> Prepared<'a> {
     /// Conditions `pair` as `params.condition` says (stage `condition`), its measured noise at most
     /// `noise_ceiling` (a coarse level's: [`condition::condition_pair`]).
-    pub(crate) fn of(params: &Params, pair: &'a StereoPair, noise_ceiling: Option<[f32; 2]>, t: &mut Timings) -> Self {
+    pub(crate) fn of(
+        params: &Params,
+        pair: &'a StereoPair<'a>,
+        noise_ceiling: Option<[f32; 2]>,
+        t: &mut Timings,
+    ) -> Self {
         let c = &params.condition;
         let mut cost_params = params.cost.clone();
         let (mut prior_weight, mut prior_flat, mut grad_norm_mean) = (0.0f32, 0.0f32, None);
@@ -63,7 +68,7 @@ impl<'a> Prepared<'a> {
         &mut self,
         c: &params::ConditionParams,
         grey_left: &Plane<f32>,
-        coarse: &Output,
+        coarse: &PipelineOutput,
         t: &mut Timings,
     ) {
         // (`conditioned` exists only when conditioning is enabled.)
@@ -77,20 +82,21 @@ impl<'a> Prepared<'a> {
         if corrected {
             t.time("vertical", || {
                 if let Some(cost) = &mut cond.cost {
-                    cost.right = vertical::resample_right(&cost.right, &v);
+                    cost.right = Cow::Owned(vertical::resample_right(&cost.right, &v));
                 }
                 let right = vertical::resample_right(&cond.guide.right, &v);
                 match &mut cond.guide {
-                    Cow::Owned(guide) => guide.right = right,
+                    Cow::Owned(guide) => guide.right = Cow::Owned(right),
                     Cow::Borrowed(guide) => {
-                        cond.guide = Cow::Owned(StereoPair { left: guide.left.clone(), right, ndisp: guide.ndisp });
+                        let left = Cow::Borrowed(guide.left.as_ref());
+                        cond.guide = Cow::Owned(StereoPair { left, right: Cow::Owned(right), ndisp: guide.ndisp });
                     }
                 }
             });
         }
     }
 
-    /// What was measured and derived, for [`Output::measured`] (`None` when conditioning is off).
+    /// What was measured and derived, for [`PipelineOutput::measured`] (`None` when conditioning is off).
     pub(crate) fn measured(&self) -> Option<Measured> {
         self.conditioned.as_ref().map(|cond| Measured {
             stats: cond.stats,
@@ -119,7 +125,7 @@ impl<'a> Prepared<'a> {
 
     /// The guidance pair (colour weights, post-processing) and the pair the matching cost sees; `pair` itself
     /// for both when conditioning is off.
-    pub(crate) fn pairs<'b>(&'b self, pair: &'b StereoPair) -> (&'b StereoPair, &'b StereoPair) {
+    pub(crate) fn pairs<'b>(&'b self, pair: &'b StereoPair<'b>) -> (&'b StereoPair<'b>, &'b StereoPair<'b>) {
         match &self.conditioned {
             Some(cond) => (&*cond.guide, cond.cost_pair()),
             None => (pair, pair),

@@ -12,9 +12,9 @@ use crate::image::{CostVolume, DisparityMap, Plane, StereoPair, window_extreme};
 use crate::params::{self, Params};
 use crate::{condition, cost, meanfield, scale};
 
-use super::output::{Output, Timings};
+use super::output::{PipelineOutput, Timings};
 use super::prepared::Prepared;
-use super::window::kernel_reach_px;
+use crate::setup::strategy::kernel_reach_px;
 
 /// The coarse level's downscale factor in the whole image's chain: each level is the one above it reduced 2×
 /// (`condition.prior.levels` levels in all).
@@ -119,7 +119,7 @@ impl CoarseLevel {
     ///
     /// # Errors
     /// As [`super::run`].
-    pub(crate) fn run(&self, params: &Params, pair: &StereoPair, input: &Prepared) -> Result<Output> {
+    pub(crate) fn run(&self, params: &Params, pair: &StereoPair, input: &Prepared) -> Result<PipelineOutput> {
         let coarse_params = self.params(params, input);
         let source = if self.on_conditioned_pair { input.pairs(pair).0 } else { pair };
         super::run_level(&coarse_params, source, &|_| {}, input.noise_ceiling(self.factor))
@@ -184,7 +184,7 @@ const OWN_BEST_BAND: usize = 2;
 impl Prior {
     /// The prior of a coarse run's output (brought to the fine size) with weight λ = `weight`: a pixel the coarse
     /// left-right check rejected was filled by a guess, so its factor is its confidence × `untrusted`.
-    pub(crate) fn from_coarse(coarse: Output, weight: f32, flat: f32, untrusted: f32) -> Prior {
+    pub(crate) fn from_coarse(coarse: PipelineOutput, weight: f32, flat: f32, untrusted: f32) -> Prior {
         let mut confidence = coarse.confidence;
         confidence.data.iter_mut().zip(&coarse.consistent.data).filter(|(_, ok)| !**ok).for_each(|(c, _)| {
             *c *= untrusted;
@@ -300,7 +300,7 @@ impl Prior {
 /// cost's flatness, relative to the image's own; on an image upscaled ×4 every pixel's cost is about as flat, and
 /// the fine cost alone drifts inside its label window (Adirondack upscaled ×4, native px, session 7: floor 0 →
 /// avgErr 4.80, 1 → 1.79, 2 → 1.75; the coarse level alone, upsampled, 1.71).
-pub const TILED_PRIOR_FLOOR: f32 = 2.0;
+pub(crate) const TILED_PRIOR_FLOOR: f32 = 2.0;
 
 /// The prior's floor in the tiles: [`TILED_PRIOR_FLOOR`] × min(1, 2·(1 − k)), k the share of the coarse level's
 /// sharpness ([`crate::condition::sharpness`], the cost pair's left view) that the full resolution keeps. A photo
@@ -308,7 +308,7 @@ pub const TILED_PRIOR_FLOOR: f32 = 2.0;
 /// a floor of 0.2–0.6); an image enlarged from a smaller one has none to add (the ×4 scenes: k 0.35–0.45, the
 /// full floor). A constant floor of 2 cost the photos: tiled trainingQ (`jem batch --max-memory 300M`) 3.83 with
 /// it, 3.67 with this one, 3.68 with none; the ×4 scenes are unchanged.
-pub fn tiled_prior_floor(full_grey: &Plane<f32>, coarse_grey: &Plane<f32>) -> f32 {
+pub(crate) fn tiled_prior_floor(full_grey: &Plane<f32>, coarse_grey: &Plane<f32>) -> f32 {
     let coarse = condition::sharpness(coarse_grey);
     let kept = if coarse > 0.0 { condition::sharpness(full_grey) / coarse } else { 1.0 };
     TILED_PRIOR_FLOOR * (2.0 * (1.0 - kept)).clamp(0.0, 1.0)
@@ -387,7 +387,7 @@ mod tests {
         // Two pixels, five labels: a flat cost and one with a clear winner at label 4; the coarse answer says 1.
         let data = vec![3.0, 3.0, 3.0, 3.0, 3.0, 6.0, 6.0, 6.0, 6.0, 0.0];
         let prior = |flat| Prior {
-            disparity: Plane::from_vec(2, 1, vec![1.0, 1.0]),
+            disparity: Plane::from_parts(2, 1, vec![1.0, 1.0]),
             free: None,
             confidence: Plane::new(2, 1, 1.0),
             weight: 0.0, // a noiseless pair: no noise-scaled weight
@@ -420,9 +420,9 @@ mod tests {
         let scene = synth::render_scene(&synth::SynthParams { width: 96, height: 64, ndisp: 24, seed: 3 }).unwrap();
         let (w, h, m) = (96, 64, scene.ndisp);
         let coarse: Vec<f32> = crate::test_util::rand_vec(w * h, 5).iter().map(|v| v * m as f32).collect();
-        let mut disparity = Plane::from_vec(w, h, coarse);
+        let mut disparity = Plane::from_parts(w, h, coarse);
         disparity.data[7] = f32::INFINITY; // no prior at that pixel
-        let confidence = Plane::from_vec(w, h, crate::test_util::rand_vec(w * h, 6));
+        let confidence = Plane::from_parts(w, h, crate::test_util::rand_vec(w * h, 6));
         let prior = Prior { disparity, free: None, confidence, weight: 1.5, flat: 1.0, in_bands: true };
         assert!(!prior.needs_flatness());
         let (c, p) = (params::ConditionParams::default(), params::CostParams::default());
@@ -458,7 +458,7 @@ mod tests {
         assert!(detailed < 0.1 * TILED_PRIOR_FLOOR, "floor {detailed} on white noise");
         let mut enlarged = RgbImage::new(4 * w, 4 * h);
         for (dst, src) in enlarged.channels.iter_mut().zip(&noise.channels) {
-            *dst = crate::scale::upsample_plane(&Plane::from_vec(w, h, src.clone()), 4, 4 * w, 4 * h).data;
+            *dst = crate::scale::upsample_plane(&Plane::from_parts(w, h, src.clone()), 4, 4 * w, 4 * h).data;
         }
         assert_eq!(tiled_prior_floor(&enlarged.to_grey(), &reduced(&enlarged, 4)), TILED_PRIOR_FLOOR);
         let flat = Plane::new(64, 64, 100.0);
@@ -494,7 +494,7 @@ mod tests {
     fn edge_range_frees_the_step_only_beside_depth_edges() {
         let (w, h) = (20, 5);
         // A step from 10 to 30 at x = 10, a gentle slope (0.1 px per px) on top, and one pixel without a prior.
-        let mut coarse = Plane::from_vec(
+        let mut coarse = Plane::from_parts(
             w,
             h,
             (0..w * h).map(|i| 0.1 * (i % w) as f32 + if i % w >= 10 { 20.0 } else { 10.0 }).collect(),

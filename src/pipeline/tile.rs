@@ -55,124 +55,23 @@ use crate::image::{Plane, StereoPair};
 use crate::params::Params;
 
 use super::fine::{FineInput, fine_pass};
-use super::memory::{check_memory, estimate_memory_bytes};
-use super::output::{Output, Timings};
+use super::output::{PipelineOutput, Timings};
 use super::prepared::Prepared;
 use super::prior::{CoarseLevel, Prior};
-pub use super::prior::{TILED_PRIOR_FLOOR, tiled_prior_floor};
-use super::window::{Rect, cut_pairs, cut_plane, kernel_reach_px, window_in};
-
-/// Pixels added on every side of a core: the fully connected kernel's reach, 3σx, plus the weighted median's
-/// radius (15 + 9 by default). Against the constant 32 of earlier sessions: 0.95× and 0.89× the time on the ×4
-/// scenes, avgErr 1.48 and 5.37 against 1.49 and 5.36; 16 (the kernel alone) cost Adirondack ×4 1.57.
-pub fn halo_px(params: &Params) -> usize {
-    kernel_reach_px(params) + if params.post.wmedian.enabled { params.post.wmedian.radius } else { 0 }
-}
-
-/// The smallest core a tile is split down to.
-pub const MIN_CORE_PX: usize = 64;
-
-/// Memory per full-resolution pixel beside the tiles: the pair, its conditioned copies and the vertically
-/// aligned right views ([`crate::condition::vertical`]; up to 6 RGB `f32` images), the coarse result at full size, the prior
-/// made of it and the stitched maps.
-pub const FULL_SIZE_BYTES_PER_PX: u64 = 6 * 12 + 6 * 4 + 2;
-
-/// How [`run_tiled`] cuts the problem.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct TilePlan {
-    /// The coarse level's downscale factor (≥ 2).
-    pub coarse_factor: usize,
-    /// Core size in pixels (≥ [`MIN_CORE_PX`]); a core whose tile exceeds `tile_budget_bytes` is split.
-    pub core_px: usize,
-    /// Memory one tile may use.
-    pub tile_budget_bytes: u64,
-    /// Split a core further where its four quarters are less work than it (crop pixels × labels; see
-    /// `TileJob::splitting_saves_work`). Off, a core is split only to fit the budget.
-    pub split_for_work: bool,
-}
-
-/// The memory a tiled run plans for (at most): it stays near this whatever the image size.
-pub const TILED_BUDGET_BYTES: u64 = 2 << 30;
-
-/// Chooses a plan for a `width × height` pair with `ndisp` labels within `limit_bytes`: after the full-size
-/// maps, the smallest coarse factor (a power of two) whose untiled run fits what is left, and cores of 1024
-/// pixels, split while a tile would not fit either. `None` when even the coarsest level does not fit.
-pub fn plan(width: usize, height: usize, ndisp: usize, params: &Params, limit_bytes: u64) -> Option<TilePlan> {
-    let beside = FULL_SIZE_BYTES_PER_PX * (width * height) as u64;
-    let budget = limit_bytes.checked_sub(beside)?;
-    // The smallest tile must fit even with the whole range as its window.
-    let side = MIN_CORE_PX + 2 * halo_px(params);
-    if estimate_memory_bytes((side + ndisp).min(width), side.min(height), ndisp, params) > tile_share(budget) {
-        return None;
-    }
-    let mut coarse = params.clone();
-    let factor = (1..8).map(|k| 1usize << k).find(|&f| {
-        coarse.downscale = f;
-        crate::scale::factor_fits(width, ndisp, f) && estimate_memory_bytes(width, height, ndisp, &coarse) <= budget
-    })?;
-    Some(TilePlan { coarse_factor: factor, core_px: 1024, tile_budget_bytes: budget, split_for_work: true })
-}
-
-/// The part of the budget one tile may plan for. The allocator keeps some of each tile's freed memory, so the
-/// heap grows over a run of tiles of different sizes (1280×960, ndisp 160, 200 MB limit: the peak rose by 30 MB
-/// over 60 tiles whose estimates all stayed within the budget, and passed the limit by 4%); a tenth is left for
-/// that.
-fn tile_share(budget: u64) -> u64 {
-    budget / 10 * 9
-}
-
-/// How a run is carried out within a memory limit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Strategy {
-    /// In one piece ([`crate::run_observed`]).
-    Whole,
-    /// In tiles ([`run_tiled`]).
-    Tiled(TilePlan),
-}
-
-impl Strategy {
-    /// Chooses: in one piece when the estimate fits `limit_bytes` (or the run is downscaled: `--downscale` is the
-    /// user's own way to fit), else in tiles within the smaller of `limit_bytes` and [`TILED_BUDGET_BYTES`].
-    ///
-    /// # Errors
-    /// [`crate::Error::OutOfMemory`] (as [`crate::check_memory`]) when neither fits.
-    pub fn choose(width: usize, height: usize, ndisp: usize, params: &Params, limit_bytes: u64) -> Result<Strategy> {
-        let whole = estimate_memory_bytes(width, height, ndisp, params);
-        if whole <= limit_bytes || params.downscale > 1 {
-            check_memory(width, height, ndisp, params, limit_bytes)?;
-            return Ok(Strategy::Whole);
-        }
-        match plan(width, height, ndisp, params, limit_bytes.min(TILED_BUDGET_BYTES)) {
-            Some(p) => Ok(Strategy::Tiled(p)),
-            None => check_memory(width, height, ndisp, params, limit_bytes).map(|()| Strategy::Whole),
-        }
-    }
-
-    /// The memory the run may use (the estimate in one piece; the tiled budget plus the full-size maps).
-    pub fn memory_bytes(&self, width: usize, height: usize, ndisp: usize, params: &Params) -> u64 {
-        match self {
-            Strategy::Whole => estimate_memory_bytes(width, height, ndisp, params),
-            Strategy::Tiled(p) => p.tile_budget_bytes + FULL_SIZE_BYTES_PER_PX * (width * height) as u64,
-        }
-    }
-
-    /// Runs `pair` this way.
-    ///
-    /// # Errors
-    /// As [`crate::run`].
-    pub fn run(&self, params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str)) -> Result<Output> {
-        match self {
-            Strategy::Whole => super::run_observed(params, pair, on_stage),
-            Strategy::Tiled(p) => run_tiled(params, pair, p, on_stage),
-        }
-    }
-}
+use super::window::{Rect, cut_pairs, cut_plane, window_in};
+use crate::setup::memory::estimate_memory_bytes;
+use crate::setup::strategy::{MIN_CORE_PX, TilePlan, halo_px, tile_share};
 
 /// Runs the pipeline on `pair` in tiles (see the module doc).
 ///
 /// # Errors
-/// As [`crate::run`]; [`crate::Error::InvalidParam`] if the coarse factor is too large for the pair.
-pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: &dyn Fn(&str)) -> Result<Output> {
+/// As `crate::run`; [`crate::Error::InvalidParam`] if the coarse factor is too large for the pair.
+pub fn run_tiled(
+    params: &Params,
+    pair: &StereoPair,
+    plan: &TilePlan,
+    on_stage: &dyn Fn(&str),
+) -> Result<PipelineOutput> {
     params.validate()?;
     let mut t = Timings::default();
     let (w, h) = pair.left.dims();
@@ -185,7 +84,7 @@ pub fn run_tiled(params: &Params, pair: &StereoPair, plan: &TilePlan, on_stage: 
     let (guide, cost_pair) = input.pairs(pair);
 
     on_stage("tiles");
-    let mut out = Output {
+    let mut out = PipelineOutput {
         disparity: Plane::new(w, h, f32::INFINITY),
         confidence: Plane::new(w, h, 0.0),
         consistent: Plane::new(w, h, false),
@@ -277,8 +176,8 @@ fn split(r: Rect) -> Vec<Rect> {
 /// What every tile shares.
 struct TileJob<'a> {
     params: &'a Params,
-    guide: &'a StereoPair,
-    cost_pair: &'a StereoPair,
+    guide: &'a StereoPair<'a>,
+    cost_pair: &'a StereoPair<'a>,
     cost_params: &'a crate::params::CostParams,
     grad_norm_mean: Option<f32>,
     prior: &'a Prior,
@@ -347,7 +246,7 @@ impl TileJob<'_> {
     }
 
     /// Runs the pipeline on one tile.
-    fn run(&self, tile: &Tile, buffers: &mut crate::meanfield::Buffers) -> Result<Output> {
+    fn run(&self, tile: &Tile, buffers: &mut crate::meanfield::Buffers) -> Result<PipelineOutput> {
         let (crop, lo) = (tile.crop, tile.lo);
         let (guide, cost_pair) = cut_pairs(self.guide, self.cost_pair, crop, lo, tile.labels)?;
         let prior = Prior {
@@ -374,7 +273,7 @@ impl TileJob<'_> {
     }
 
     /// Writes the core of a tile's `result` into `out` (with the window's `lo` added back).
-    fn keep(&self, tile: &Tile, result: &Output, out: &mut Output) {
+    fn keep(&self, tile: &Tile, result: &PipelineOutput, out: &mut PipelineOutput) {
         let (crop, lo) = (tile.crop, tile.lo);
         let w = self.guide.left.width;
         let x0 = crop.x0 + tile.left_from();
@@ -431,10 +330,10 @@ mod tests {
         let f = 4;
         let input = Prepared::of(&params, &pair, None, &mut Timings::default());
         let ceiling = input.noise_ceiling(f).expect("conditioning is on by default");
-        let noise = |out: Output| out.measured.expect("a conditioned run reports what it measured").stats.noise;
+        let noise = |out: PipelineOutput| out.measured.expect("a conditioned run reports what it measured").stats.noise;
         let level = CoarseLevel::tiles(f);
         assert_eq!(level.params(&params, &input).downscale, f);
-        let own = noise(crate::run(&Params { downscale: f, ..params.clone() }, &pair).unwrap());
+        let own = noise(crate::pipeline::run(&Params { downscale: f, ..params.clone() }, &pair).unwrap());
         let kept = noise(level.run(&params, &pair, &input).unwrap());
         eprintln!("full σn / {f} {ceiling:?}, coarse level's own estimate {own:?}, with the ceiling {kept:?}");
         for v in 0..2 {
@@ -548,7 +447,7 @@ mod tests {
             check(&job);
         };
         let prior_of = |f: &dyn Fn(usize, usize) -> f32| {
-            let disparity = Plane::from_vec(w, h, (0..w * h).map(|i| f(i % w, i / w)).collect());
+            let disparity = Plane::from_parts(w, h, (0..w * h).map(|i| f(i % w, i / w)).collect());
             Prior { disparity, free: None, confidence: Plane::new(w, h, 1.0), weight: 1.0, flat: 0.0, in_bands: false }
         };
         let core = Rect { x0: 0, y0: 0, x1: w, y1: h };

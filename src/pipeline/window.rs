@@ -3,13 +3,6 @@
 
 use crate::error::Result;
 use crate::image::{DisparityMap, Plane, RgbImage, StereoPair};
-use crate::params::Params;
-
-/// The fully connected kernel's reach in pixels, 3σx (`meanfield.sigma_xy`): beyond it a pixel's Gaussian weight
-/// is below about 1 % of its peak (e^−4.5).
-pub(crate) fn kernel_reach_px(params: &Params) -> usize {
-    (3.0 * params.meanfield.sigma_xy).ceil() as usize
-}
 
 /// A rectangle `[x0, x1) × [y0, y1)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -47,7 +40,7 @@ pub(crate) fn cut_pairs(
     r: Rect,
     lo: usize,
     labels: usize,
-) -> Result<(StereoPair, Option<StereoPair>)> {
+) -> Result<(StereoPair<'static>, Option<StereoPair<'static>>)> {
     let pair = |p: &StereoPair| StereoPair::new(cut(&p.left, r, 0), cut(&p.right, r, lo), labels);
     let cost = if std::ptr::eq(guide, cost) { None } else { Some(pair(cost)?) };
     Ok((pair(guide)?, cost))
@@ -76,7 +69,7 @@ pub(crate) fn cut_plane(p: &Plane<f32>, r: Rect, f: impl Fn(f32) -> f32) -> Plan
     for y in r.y0..r.y1 {
         data.extend(p.row(y)[r.x0..r.x1].iter().map(|&v| f(v)));
     }
-    Plane::from_vec(cw, ch, data)
+    Plane::from_parts(cw, ch, data)
 }
 
 #[cfg(test)]
@@ -85,7 +78,7 @@ mod tests {
 
     #[test]
     fn a_label_window_holds_the_finite_disparities_and_its_margin() {
-        let coarse = Plane::from_vec(3, 2, vec![10.2, f32::INFINITY, 20.7, 3.0, 40.0, 2.5]);
+        let coarse = Plane::from_parts(3, 2, vec![10.2, f32::INFINITY, 20.7, 3.0, 40.0, 2.5]);
         let top = Rect { x0: 0, y0: 0, x1: 3, y1: 1 };
         assert_eq!(window_in(&coarse, top, 100, 4), Some((6, 20)));
         assert_eq!(window_in(&coarse, top, 24, 4), Some((6, 18)), "clipped to the range");

@@ -42,7 +42,7 @@ mod tests {
 
     #[test]
     fn fills_with_the_smaller_neighbour() {
-        let mut d = Plane::from_vec(
+        let mut d = Plane::from_parts(
             8,
             2,
             vec![
@@ -57,7 +57,7 @@ mod tests {
 
     #[test]
     fn valid_pixels_are_untouched() {
-        let mut d = Plane::from_vec(4, 1, vec![1.5, 0.25, 3.0, 9.0]);
+        let mut d = Plane::from_parts(4, 1, vec![1.5, 0.25, 3.0, 9.0]);
         let before = d.clone();
         fill_occlusions_in_place(&mut d);
         assert_eq!(d, before);

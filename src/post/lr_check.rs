@@ -82,7 +82,7 @@ mod tests {
     use super::*;
 
     fn map(w: usize, v: &[f32]) -> DisparityMap {
-        Plane::from_vec(w, v.len() / w, v.to_vec())
+        Plane::from_parts(w, v.len() / w, v.to_vec())
     }
 
     #[test]

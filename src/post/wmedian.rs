@@ -19,7 +19,7 @@
 //!    value), find the bin holding the median, and run a weighted quickselect (three-way partition,
 //!    median-of-three pivot) on that bin's values only.
 //!
-//! The weights use [`crate::fastmath::exp_nonpositive`] (relative error < 5e-7 against `f32::exp`, tested) so the loop
+//! The weights use `crate::fastmath::exp_nonpositive` (relative error < 5e-7 against `f32::exp`, tested) so the loop
 //! vectorises; the reductions (min, max, sums) run in independent lanes combined in a fixed order, so that they
 //! are not one serial dependency chain. The weights are thus defined up to that rounding; the median of the
 //! weights as computed is exact.
@@ -35,7 +35,7 @@
 //! not targets are copied unchanged.
 //!
 //! The row kernel is compiled for AVX2 + FMA as well and picked at run time, with the same results; the
-//! `force-baseline` feature leaves only the baseline version (see [`crate::fastmath`], "SIMD in jem").
+//! `force-baseline` feature leaves only the baseline version (see `crate::fastmath`, "SIMD in jem").
 
 use rayon::prelude::*;
 
@@ -51,13 +51,13 @@ use crate::params::WmedianParams;
 ///
 /// # Examples
 /// ```
-/// use jem::image::{Plane, RgbImage};
+/// use jem::internals::post::wmedian::weighted_median;
 /// use jem::params::WmedianParams;
-/// use jem::post::wmedian::weighted_median;
-/// let disp = Plane::from_vec(3, 1, vec![2.0, 9.0, 2.0]);
-/// let targets = Plane::from_vec(3, 1, vec![false, true, false]);
+/// use jem::{Plane, RgbImage};
+/// let disp = Plane::from_vec(3, 1, vec![2.0, 9.0, 2.0]).unwrap();
+/// let targets = Plane::from_vec(3, 1, vec![false, true, false]).unwrap();
 /// let out = weighted_median(&disp, &RgbImage::new(3, 1), &targets, &WmedianParams::default());
-/// assert_eq!(out.data, vec![2.0, 2.0, 2.0]);
+/// assert_eq!(out.data(), [2.0, 2.0, 2.0]);
 /// ```
 pub fn weighted_median(
     disp: &DisparityMap,
@@ -620,7 +620,7 @@ mod tests {
         );
         assert!(out.data.is_empty());
         let out = weighted_median(
-            &Plane::from_vec(1, 1, vec![3.5]),
+            &Plane::from_parts(1, 1, vec![3.5]),
             &RgbImage::new(1, 1),
             &Plane::new(1, 1, true),
             &WmedianParams::default(),

@@ -344,7 +344,7 @@ mod tests {
 
     #[test]
     fn colorize_range_and_invalid() {
-        let d = Plane::from_vec(4, 1, vec![10.0, 30.0, f32::INFINITY, 100.0]);
+        let d = Plane::from_parts(4, 1, vec![10.0, 30.0, f32::INFINITY, 100.0]);
         let c = colorize(&d, 10.0, 30.0);
         assert_eq!(c.get(0, 0), colormap(0.0));
         assert_eq!(c.get(1, 0), colormap(1.0));
@@ -357,9 +357,9 @@ mod tests {
     #[test]
     fn error_map_classes() {
         // Scale 4: threshold 2 full-res px = 0.5 px here.
-        let gt = Plane::from_vec(6, 1, vec![1.0, 1.0, 1.0, 1.0, f32::INFINITY, 1.0]);
-        let r = Plane::from_vec(6, 1, vec![1.0, 1.5, 1.75, f32::INFINITY, 3.0, 1.75]);
-        let mask = Plane::from_vec(6, 1, vec![255, 255, 255, 255, 255, 128]);
+        let gt = Plane::from_parts(6, 1, vec![1.0, 1.0, 1.0, 1.0, f32::INFINITY, 1.0]);
+        let r = Plane::from_parts(6, 1, vec![1.0, 1.5, 1.75, f32::INFINITY, 3.0, 1.75]);
+        let mask = Plane::from_parts(6, 1, vec![255, 255, 255, 255, 255, 128]);
         let e = error_map(&r, &gt, Some(&mask), ErrorRule::Middlebury { scale: 4 });
         assert_eq!(e.get(0, 0), [255; 3]);
         assert_eq!(e.get(1, 0), [205; 3]); // err exactly 2: not bad
@@ -372,8 +372,8 @@ mod tests {
     #[test]
     fn error_rules_of_each_benchmark() {
         // KITTI D1: bad only above 3 px *and* 5 % of the truth (strict); ETH3D: above 1 px; MiddEval3 ×1: above 2.
-        let gt = Plane::from_vec(5, 1, vec![20.0, 100.0, 100.0, 20.0, 20.0]);
-        let r = Plane::from_vec(5, 1, vec![23.0, 105.0, 105.5, 21.0, 21.5]);
+        let gt = Plane::from_parts(5, 1, vec![20.0, 100.0, 100.0, 20.0, 20.0]);
+        let r = Plane::from_parts(5, 1, vec![23.0, 105.0, 105.5, 21.0, 21.5]);
         let kitti = error_map(&r, &gt, None, ErrorRule::KittiD1);
         let bad = |c: &Canvas| (0..5).map(|x| c.get(x, 0) == [230, 30, 30]).collect::<Vec<_>>();
         assert_eq!(bad(&kitti), [false, false, true, false, false]);

@@ -188,7 +188,7 @@ pub fn load_truth(
             let nonocc = crate::io::read_disparity(path)?;
             crate::eval::check_size(path, "non-occluded map", nonocc.dims(), "the ground truth", gt.dims())?;
             let data = nonocc.data.iter().map(|d| if d.is_finite() { 255 } else { 128 }).collect();
-            Some(Plane::from_vec(gt.width, gt.height, data))
+            Some(Plane::from_parts(gt.width, gt.height, data))
         }
     };
     Ok((gt, mask))

@@ -60,3 +60,24 @@ pub fn files_in(dir: &Path) -> Vec<String> {
 pub fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
+
+/// A pair of views with its search range, matched through the public API.
+#[derive(Clone, Debug)]
+pub struct Pair {
+    pub left: jem::RgbImage,
+    pub right: jem::RgbImage,
+    pub ndisp: usize,
+}
+
+impl Pair {
+    pub fn new(left: jem::RgbImage, right: jem::RgbImage, ndisp: usize) -> Pair {
+        Pair { left, right, ndisp }
+    }
+
+    /// The pair matched with `params` and its own range, as `jem --ndisp N` would.
+    pub fn run(&self, params: &jem::Params) -> jem::Output {
+        let matcher = jem::Matcher::new(params.clone()).expect("valid parameters");
+        let mut matcher = matcher.with_ndisp(jem::NdispSource::Given(self.ndisp));
+        matcher.match_pair(&self.left, &self.right).expect("the pair matches")
+    }
+}

@@ -135,14 +135,14 @@ use crate::params::SpsParams;
 ///
 /// # Examples
 /// ```
-/// use jem::image::{Plane, RgbImage};
+/// use jem::internals::post::planes::fit_slanted_planes;
 /// use jem::params::SpsParams;
-/// use jem::post::planes::fit_slanted_planes;
+/// use jem::{Plane, RgbImage};
 /// // A plane d = 0.1·x + 2 with a hole at (3, 2).
 /// let (w, h) = (8, 6);
-/// let mut disp = Plane::from_vec(w, h, (0..w * h).map(|i| 0.1 * (i % w) as f32 + 2.0).collect());
-/// disp.data[2 * w + 3] = f32::INFINITY;
-/// let trusted = Plane::from_vec(w, h, disp.data.iter().map(|d| d.is_finite()).collect());
+/// let mut disp = Plane::from_vec(w, h, (0..w * h).map(|i| 0.1 * (i % w) as f32 + 2.0).collect()).unwrap();
+/// disp.data_mut()[2 * w + 3] = f32::INFINITY;
+/// let trusted = Plane::from_vec(w, h, disp.data().iter().map(|d| d.is_finite()).collect()).unwrap();
 /// let out = fit_slanted_planes(&RgbImage::new(w, h), &disp, &trusted, &SpsParams { segments: 4, ..Default::default() });
 /// assert!((out.at(3, 2) - 2.3).abs() < 1e-4);
 /// ```

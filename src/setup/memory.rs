@@ -1,6 +1,8 @@
 //! The memory model: what a run will need, estimated before anything large is allocated, and the guard that
 //! refuses a run that would not fit ([`check_memory`]; [`super::tile`] runs such a pair in tiles instead).
 
+use std::sync::{Condvar, Mutex};
+
 use crate::error::{self, Error, Result};
 use crate::params::{LrcMode, Model, Params, Schedule};
 use crate::scale;
@@ -22,7 +24,7 @@ use crate::scale;
 /// - plus the process itself, [`PROCESS_BYTES`].
 ///
 /// With a downscale factor > 1, the full-size input pair and output maps (~32 bytes per input pixel) are added.
-pub fn estimate_memory_bytes(width: usize, height: usize, ndisp: usize, params: &Params) -> u64 {
+pub(crate) fn estimate_memory_bytes(width: usize, height: usize, ndisp: usize, params: &Params) -> u64 {
     estimate_at_factor(width, height, ndisp, params, params.downscale.max(1))
 }
 
@@ -50,7 +52,7 @@ fn estimate_at_factor(width: usize, height: usize, ndisp: usize, params: &Params
 
 /// The memory of the process before it holds any image: code, libraries, thread stacks (a 64 × 32 pair peaks at
 /// 8.9 MiB with 2 threads), counted with room to spare in [`estimate_memory_bytes`].
-pub const PROCESS_BYTES: u64 = 16 << 20;
+pub(crate) const PROCESS_BYTES: u64 = 16 << 20;
 
 /// Fails fast, before anything large is allocated, when a run would need more than `limit_bytes`.
 ///
@@ -58,7 +60,7 @@ pub const PROCESS_BYTES: u64 = 16 << 20;
 /// [`Error::OutOfMemory`] with the estimate, the limit and what to do about it: the smallest `--downscale`
 /// factor (above the current one) whose estimate fits, or, if none does, smaller images or a smaller ndisp; and
 /// `--max-memory` for a machine that has the memory.
-pub fn check_memory(width: usize, height: usize, ndisp: usize, params: &Params, limit_bytes: u64) -> Result<()> {
+pub(crate) fn check_memory(width: usize, height: usize, ndisp: usize, params: &Params, limit_bytes: u64) -> Result<()> {
     let needed = estimate_memory_bytes(width, height, ndisp, params);
     if needed <= limit_bytes {
         return Ok(());
@@ -85,13 +87,88 @@ pub fn check_memory(width: usize, height: usize, ndisp: usize, params: &Params, 
 
 /// A default memory limit: 80% of the machine's physical memory (from `/proc/meminfo`), or 8 GiB where that
 /// cannot be read.
-pub fn default_memory_limit() -> u64 {
+pub(crate) fn default_memory_limit() -> u64 {
     crate::process::physical_memory_bytes().map(|b| b / 1024 * 1024 / 5 * 4).unwrap_or(8 << 30)
+}
+
+/// Memory that concurrent runs share (the scenes of `jem batch`, matchers in threads): a run reserves its estimate
+/// before it loads its images and waits while the runs going on hold so much that its share would not fit. A run
+/// alone always gets what it asks for (its estimate was checked against the total before).
+#[derive(Debug)]
+pub struct MemoryBudget {
+    total: u64,
+    used: Mutex<u64>,
+    freed: Condvar,
+}
+
+/// Memory held from a [`MemoryBudget`] until dropped.
+pub struct Reservation<'a> {
+    budget: &'a MemoryBudget,
+    bytes: u64,
+}
+
+impl MemoryBudget {
+    /// A budget of `total` bytes.
+    pub fn new(total: u64) -> Self {
+        MemoryBudget { total, used: Mutex::new(0), freed: Condvar::new() }
+    }
+
+    /// Takes `bytes`, waiting until they fit beside what is held (at once when nothing is).
+    pub fn reserve(&self, bytes: u64) -> Reservation<'_> {
+        let mut used = self.used.lock().unwrap_or_else(|p| p.into_inner());
+        while *used > 0 && used.saturating_add(bytes) > self.total {
+            used = self.freed.wait(used).unwrap_or_else(|p| p.into_inner());
+        }
+        *used = used.saturating_add(bytes);
+        Reservation { budget: self, bytes }
+    }
+
+    /// The total.
+    pub fn total(&self) -> u64 {
+        self.total
+    }
+
+    /// Bytes held now.
+    pub fn in_use(&self) -> u64 {
+        *self.used.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+impl Drop for Reservation<'_> {
+    fn drop(&mut self) {
+        let mut used = self.budget.used.lock().unwrap_or_else(|p| p.into_inner());
+        *used = used.saturating_sub(self.bytes);
+        self.budget.freed.notify_all();
+    }
 }
 
 #[cfg(test)]
 mod tests {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
     use super::*;
+
+    /// Six concurrent holders of 40 of 100 bytes never hold more than 100 together; a request
+    /// larger than the total still runs alone.
+    #[test]
+    fn memory_budget_bounds_concurrent_scenes() {
+        let budget = MemoryBudget::new(100);
+        let peak = AtomicUsize::new(0);
+        std::thread::scope(|scope| {
+            for _ in 0..6 {
+                scope.spawn(|| {
+                    let _r = budget.reserve(40);
+                    peak.fetch_max(budget.in_use() as usize, Ordering::SeqCst);
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                });
+            }
+        });
+        assert!(peak.load(Ordering::SeqCst) <= 100 && peak.load(Ordering::SeqCst) >= 40);
+        assert_eq!(budget.in_use(), 0);
+        let alone = budget.reserve(150);
+        assert_eq!(budget.in_use(), 150);
+        drop(alone);
+    }
 
     #[test]
     fn memory_estimate_scales_with_pixels_and_labels() {

@@ -3,7 +3,7 @@
 //! The pairs come from [`crate::dataset::discover`]: MiddEval3 scene folders (`im0.png`, `im1.png`,
 //! `calib.txt`), KITTI 2012/2015 frames and ETH3D scenes, each with its layout. [`run_pair`] runs the pipeline on
 //! one pair, with `ndisp` from `--ndisp`, else its `calib.txt`, else the layout's default (KITTI: 192), and a
-//! range measured on the pair when none is given or the stated one is not a real bound ([`crate::range`]); it
+//! range measured on the pair when none is given or the stated one is not a real bound (`crate::range`); it
 //! writes, all or none, the disparity map and the run time (the seconds spent in the pipeline for that pair —
 //! image loading and file writing are not counted) where the layout's submission form puts them
 //! ([`crate::dataset::Pair::result_files`]: MiddEval3 `disp0<ALG>.pfm` and `time<ALG>.txt` in the scene folder;
@@ -16,18 +16,22 @@
 //! [`Shard`] splits a sorted list into N deterministic parts (item k goes to part `k mod N`), so a job array
 //! (Slurm, GNU parallel) can process a data set with no coordination; `--skip-existing` makes reruns resume.
 
+mod summary;
+
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Condvar, Mutex};
-use std::time::Instant;
+use std::sync::{Arc, Mutex};
 
 use crate::dataset::Pair;
 use crate::error::{Error, Result};
 use crate::io::calib;
-use crate::plan::NdispSource;
-use crate::{Params, StereoPair, Timings};
+use crate::matcher::{Matcher, Progress};
+use crate::setup::NdispSource;
+use crate::setup::memory::MemoryBudget;
+use crate::{Params, Timings};
+pub use summary::{one_line, summary};
 
 /// Checks an algorithm name: 1–64 ASCII letters, digits, `_` or `-` (it becomes part of file names), and not
 /// `GT` in any case: `disp0GT.pfm` is the dataset's ground truth, which a result must never overwrite (on a
@@ -131,7 +135,7 @@ pub enum Event<'a> {
     Stage {
         /// Position in the list.
         index: usize,
-        /// Stage name (as [`crate::run_observed`] reports it).
+        /// Stage name (as `crate::run_observed` reports it).
         stage: &'a str,
     },
     /// A scene has finished (in any way).
@@ -156,7 +160,7 @@ pub struct BatchOptions {
     pub jobs: usize,
     /// Skip pairs whose result exists and is complete.
     pub skip_existing: bool,
-    /// Memory limit of the whole batch (see [`crate::check_memory`]): concurrent scenes share it, a scene
+    /// Memory limit of the whole batch (see `crate::check_memory`): concurrent scenes share it, a scene
     /// waits while the ones running hold too much of it, and one that needs more than all of it fails.
     pub max_memory_bytes: u64,
 }
@@ -172,66 +176,28 @@ pub fn scene_name(dir: &Path) -> String {
 /// Unreadable images, a missing or malformed `calib.txt`, unequal sizes, invalid parameters, a result the
 /// output format cannot hold, or a failed write. (A panic is not caught here; [`run_batch`] catches it.)
 pub fn run_pair(pair: &Pair, params: &Params, opts: &BatchOptions, on_stage: &dyn Fn(&str)) -> Result<SceneRun> {
-    let budget = MemoryBudget::new(opts.max_memory_bytes);
-    run_pair_in(pair, params, opts, &budget, on_stage)
+    let budget = Arc::new(MemoryBudget::new(opts.max_memory_bytes));
+    run_pair_with(pair, &Matcher::new(params.clone())?.with_budget(budget), opts, on_stage)
 }
 
-/// [`run_pair`] drawing its memory from `budget`, shared with the pairs running beside it.
-fn run_pair_in(
-    pair: &Pair,
-    params: &Params,
-    opts: &BatchOptions,
-    budget: &MemoryBudget,
-    on_stage: &dyn Fn(&str),
-) -> Result<SceneRun> {
+/// [`run_pair`] with `matcher` (its range source is set here, per pair), whose memory budget the pairs running
+/// beside it share.
+fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: &dyn Fn(&str)) -> Result<SceneRun> {
     on_stage("loading");
     let files = pair.result_files(&opts.alg, opts.results.as_deref());
     let inputs: Vec<&Path> =
         [Some(pair.left.as_path()), Some(pair.right.as_path()), pair.calib.as_deref()].into_iter().flatten().collect();
     crate::io::check_outputs(&inputs, &[&files.disparity, &files.time])?;
-    let source = match (opts.ndisp, &pair.calib) {
-        (Some(n), _) => NdispSource::Given(n),
-        (None, Some(c)) => NdispSource::Stated(calib::read_ndisp(c)?),
-        (None, None) => pair.default_ndisp().map_or(NdispSource::Unknown, NdispSource::Stated),
+    let stated = match &pair.calib {
+        Some(c) => Some(calib::read_ndisp(c)?),
+        None => pair.default_ndisp(),
     };
-    // Both headers, then the budget, before either image is decoded (issue 41): the loading, the range
-    // measurement when the range is measured, and the run with the smallest range it can give.
-    let header = crate::io::png::read_pair_header(&pair.left, &pair.right)?;
-    crate::plan::check_before_decode(&header, source, params, budget.total)?;
-    let (w, h) = (header.width, header.height);
-    // No range, or a stated one of half the width or more, is no real bound: it is measured on the pair
-    // (crate::range), within the budget, before the memory of the run is checked and reserved for the measured
-    // range. --ndisp always wins.
-    let (stated, search) = source.rule(w);
-    let mut ndisp = stated.unwrap_or(w);
-    let mut loaded = None;
-    if search {
-        let max = crate::range::search_limit(stated, w);
-        let within = crate::plan::measure_budget(w, h, budget.total);
-        let factor = crate::range::measure_factor(w, h, max, within)
-            .ok_or_else(|| crate::range::too_large(w, h, max, within))?;
-        let need =
-            header.load_bytes.max(crate::plan::pair_bytes(w, h) + crate::range::measure_bytes(w, h, max, factor));
-        on_stage("waiting for memory");
-        let _held = budget.reserve(need);
-        on_stage("loading");
-        let (left, right) = crate::io::png::load_rgb_pair_within(&pair.left, &pair.right, budget.total)?;
-        ndisp = crate::plan::search_range(&left, &right, source, params, budget.total)?.0;
-        loaded = Some((left, right));
-    }
-    let strategy = crate::tile::Strategy::choose(w, h, ndisp, params, budget.total)?;
-    let need = strategy.memory_bytes(w, h, ndisp, params).max(header.load_bytes);
-    on_stage("waiting for memory");
-    let _held = budget.reserve(need);
-    on_stage("loading");
-    let (left, right) = match loaded {
-        Some(images) => images,
-        None => crate::io::png::load_rgb_pair_within(&pair.left, &pair.right, budget.total)?,
-    };
-    let stereo = StereoPair::new(left, right, ndisp)?;
-    let start = Instant::now();
-    let out = strategy.run(params, &stereo, on_stage)?;
-    let seconds = start.elapsed().as_secs_f64();
+    let mut matcher = matcher.clone().with_ndisp(NdispSource::resolve(opts.ndisp, stated));
+    let out = matcher.match_files(&pair.left, &pair.right, &|progress| {
+        if let Progress::Stage(stage) = progress {
+            on_stage(stage);
+        }
+    })?;
     on_stage("writing");
     let disparity = crate::io::encode_disparity(&files.disparity, &out.disparity)?;
     for dir in [files.disparity.parent(), files.time.parent()].into_iter().flatten() {
@@ -239,54 +205,10 @@ fn run_pair_in(
             std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         }
     }
-    let time = pair.time_text(seconds);
+    let time = pair.time_text(out.seconds);
     crate::io::write_all_or_none(&[(&files.disparity, &disparity), (&files.time, time.as_bytes())])?;
-    Ok(SceneRun { size: stereo.left.dims(), ndisp, seconds, timings: out.timings, measured: out.measured })
-}
-
-/// The memory the concurrent scenes of a batch share: a scene reserves its estimate before it loads its images
-/// and waits while the scenes running hold so much that its share would not fit. A scene alone always gets
-/// what it asks for (its estimate was checked against the total before).
-pub struct MemoryBudget {
-    total: u64,
-    used: Mutex<u64>,
-    freed: Condvar,
-}
-
-/// Memory held from a [`MemoryBudget`] until dropped.
-pub struct Reservation<'a> {
-    budget: &'a MemoryBudget,
-    bytes: u64,
-}
-
-impl MemoryBudget {
-    /// A budget of `total` bytes.
-    pub fn new(total: u64) -> Self {
-        MemoryBudget { total, used: Mutex::new(0), freed: Condvar::new() }
-    }
-
-    /// Takes `bytes`, waiting until they fit beside what is held (at once when nothing is).
-    pub fn reserve(&self, bytes: u64) -> Reservation<'_> {
-        let mut used = self.used.lock().unwrap_or_else(|p| p.into_inner());
-        while *used > 0 && used.saturating_add(bytes) > self.total {
-            used = self.freed.wait(used).unwrap_or_else(|p| p.into_inner());
-        }
-        *used = used.saturating_add(bytes);
-        Reservation { budget: self, bytes }
-    }
-
-    /// Bytes held now.
-    pub fn in_use(&self) -> u64 {
-        *self.used.lock().unwrap_or_else(|p| p.into_inner())
-    }
-}
-
-impl Drop for Reservation<'_> {
-    fn drop(&mut self) {
-        let mut used = self.budget.used.lock().unwrap_or_else(|p| p.into_inner());
-        *used = used.saturating_sub(self.bytes);
-        self.budget.freed.notify_all();
-    }
+    let size = out.disparity.dims();
+    Ok(SceneRun { size, ndisp: out.plan.ndisp, seconds: out.seconds, timings: out.timings, measured: out.measured })
 }
 
 /// The text of a panic payload.
@@ -301,17 +223,11 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
 }
 
 /// Runs (or skips) one pair, turning errors and panics into a [`SceneStatus`].
-fn process(
-    pair: &Pair,
-    params: &Params,
-    opts: &BatchOptions,
-    budget: &MemoryBudget,
-    on_stage: &dyn Fn(&str),
-) -> SceneStatus {
+fn process(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: &dyn Fn(&str)) -> SceneStatus {
     if opts.skip_existing && has_complete_result(pair, opts) {
         return SceneStatus::Skipped;
     }
-    guarded(|| run_pair_in(pair, params, opts, budget, on_stage))
+    guarded(|| run_pair_with(pair, matcher, opts, on_stage))
 }
 
 /// Whether the pair's result is there and finished: a file that parses as a disparity map of the pair's image
@@ -357,14 +273,24 @@ pub fn run_batch(
 ) -> Vec<SceneReport> {
     let slots: Mutex<Vec<Option<SceneReport>>> = Mutex::new(vec![None; scenes.len()]);
     let next = AtomicUsize::new(0);
-    let budget = MemoryBudget::new(opts.max_memory_bytes);
+    let matcher = match Matcher::new(params.clone()) {
+        Ok(m) => m.with_budget(Arc::new(MemoryBudget::new(opts.max_memory_bytes))),
+        Err(e) => {
+            let failed = |pair: &Pair| SceneReport {
+                dir: pair.location(),
+                name: pair.name.clone(),
+                status: SceneStatus::Failed(error_chain(&e)),
+            };
+            return scenes.iter().map(failed).collect();
+        }
+    };
     let worker = || {
         loop {
             let index = next.fetch_add(1, Ordering::Relaxed);
             let Some(pair) = scenes.get(index) else { break };
             let name = pair.name.clone();
             on_event(Event::Started { index, name: &name });
-            let status = process(pair, params, opts, &budget, &|stage| on_event(Event::Stage { index, stage }));
+            let status = process(pair, &matcher, opts, &|stage| on_event(Event::Stage { index, stage }));
             let report = SceneReport { dir: pair.location(), name, status };
             on_event(Event::Finished { index, report: &report });
             if let Ok(mut s) = slots.lock() {
@@ -413,28 +339,6 @@ mod tests {
             all.sort();
             assert_eq!(all, items, "N = {n}");
         }
-    }
-
-    /// Issue 19, item 6: six concurrent holders of 40 of 100 bytes never hold more than 100 together; a request
-    /// larger than the total still runs alone.
-    #[test]
-    fn memory_budget_bounds_concurrent_scenes() {
-        let budget = MemoryBudget::new(100);
-        let peak = AtomicUsize::new(0);
-        std::thread::scope(|scope| {
-            for _ in 0..6 {
-                scope.spawn(|| {
-                    let _r = budget.reserve(40);
-                    peak.fetch_max(budget.in_use() as usize, Ordering::SeqCst);
-                    std::thread::sleep(std::time::Duration::from_millis(20));
-                });
-            }
-        });
-        assert!(peak.load(Ordering::SeqCst) <= 100 && peak.load(Ordering::SeqCst) >= 40);
-        assert_eq!(budget.in_use(), 0);
-        let alone = budget.reserve(150);
-        assert_eq!(budget.in_use(), 150);
-        drop(alone);
     }
 
     #[test]

@@ -23,26 +23,26 @@ const DISTINCT_RATIO: f32 = 0.8;
 /// it. A surface is connected and its disparity varies smoothly; the chance matches of blank, repetitive or
 /// unmatched areas scatter, and where real matches are few they would otherwise stretch the range (MiddEval3 ArtL
 /// with ndisp = width: 244 instead of 80; RESULTS.md, "A stated range that is no bound").
-pub const MIN_COHERENT_NEIGHBOURS: usize = 2;
+pub(crate) const MIN_COHERENT_NEIGHBOURS: usize = 2;
 
 /// A stated range at least this fraction of the width is treated as "not a real bound".
-pub const SUSPECT_FRACTION: f64 = 0.5;
+pub(crate) const SUSPECT_FRACTION: f64 = 0.5;
 
 /// Whether the range of a `width`-pixel-wide pair should be measured: none given, or `stated` ≥ half the width.
-pub fn needs_search(stated: Option<usize>, width: usize) -> bool {
+pub(crate) fn needs_search(stated: Option<usize>, width: usize) -> bool {
     stated.is_none_or(|n| n as f64 >= SUSPECT_FRACTION * width as f64)
 }
 
 /// The largest range [`find_ndisp`] considers for a `width`-pixel-wide pair whose stated range is `stated`: the
 /// stated range, or the whole width when none is stated (no range is no bound, as ETH3D's ndisp = width is not:
 /// README, "ndisp"), never more than the largest range a pair of that width takes (width − 1: a disparity of
-/// width − 2 at most, as [`crate::StereoPair::new`] requires), nor below 1. `jem` and `jem batch` both ask this.
-pub fn search_limit(stated: Option<usize>, width: usize) -> usize {
+/// width − 2 at most, as [`crate::image::StereoPair::new`] requires), nor below 1. `jem` and `jem batch` both ask this.
+pub(crate) fn search_limit(stated: Option<usize>, width: usize) -> usize {
     stated.unwrap_or(width).min(width.saturating_sub(1)).max(1)
 }
 
 /// The smallest range [`find_ndisp`] returns for a search up to `max_ndisp`.
-pub fn min_ndisp(max_ndisp: usize) -> usize {
+pub(crate) fn min_ndisp(max_ndisp: usize) -> usize {
     16.min(max_ndisp)
 }
 
@@ -50,7 +50,7 @@ pub fn min_ndisp(max_ndisp: usize) -> usize {
 /// resolution: the two reduced images (12 bytes a pixel each), the cost volume and the right view's volume derived
 /// from it (both alive at once, 4 bytes a label), and the two winner-take-all maps and the list of consistent
 /// matches (4 bytes a pixel each).
-pub fn measure_bytes(width: usize, height: usize, max_ndisp: usize, factor: usize) -> u64 {
+pub(crate) fn measure_bytes(width: usize, height: usize, max_ndisp: usize, factor: usize) -> u64 {
     let n = crate::scale::reduced_len(width, factor) as u64 * crate::scale::reduced_len(height, factor) as u64;
     let labels = max_ndisp.div_ceil(factor).clamp(2, crate::scale::reduced_len(width, factor).max(2)) as u64;
     24 * n + 8 * n * labels + 12 * n
@@ -59,7 +59,7 @@ pub fn measure_bytes(width: usize, height: usize, max_ndisp: usize, factor: usiz
 /// The resolution factor [`find_ndisp`] measures at within `limit_bytes`: 1/4 (but at least 32 × 16 pixels left to
 /// match), or, when that does not fit, the smallest coarser factor that does and leaves at least 8 × 4 pixels;
 /// `None` when none does.
-pub fn measure_factor(width: usize, height: usize, max_ndisp: usize, limit_bytes: u64) -> Option<usize> {
+pub(crate) fn measure_factor(width: usize, height: usize, max_ndisp: usize, limit_bytes: u64) -> Option<usize> {
     let first = first_factor(width, height);
     std::iter::once(first)
         .chain((first + 1..).take_while(|f| width / f >= 8 && height / f >= 4))
@@ -78,7 +78,7 @@ fn first_factor(width: usize, height: usize) -> usize {
 ///
 /// # Errors
 /// [`Error::OutOfMemory`] when the measurement fits `limit_bytes` at no resolution.
-pub fn find_ndisp(
+pub(crate) fn find_ndisp(
     left: &RgbImage,
     right: &RgbImage,
     max_ndisp: usize,
@@ -141,7 +141,7 @@ pub fn find_ndisp(
 }
 
 /// The error of a range measurement that fits `limit_bytes` at no resolution.
-pub fn too_large(width: usize, height: usize, max_ndisp: usize, limit_bytes: u64) -> Error {
+pub(crate) fn too_large(width: usize, height: usize, max_ndisp: usize, limit_bytes: u64) -> Error {
     Error::OutOfMemory {
         needed: measure_bytes(width, height, max_ndisp, first_factor(width, height)),
         limit: limit_bytes,
@@ -175,7 +175,7 @@ mod tests {
         for w in [2, 3, 5, 40] {
             let img = RgbImage::new(w, 2);
             let n = find_ndisp(&img, &img, search_limit(None, w), &CostParams::default(), u64::MAX).unwrap();
-            assert!(crate::StereoPair::new(img.clone(), img, n).is_ok(), "width {w}: ndisp {n}");
+            assert!(crate::image::StereoPair::new(img.clone(), img, n).is_ok(), "width {w}: ndisp {n}");
         }
     }
     use crate::synth::{SynthParams, render_scene};

@@ -1,0 +1,264 @@
+//! [`Matcher`]: the library's front door. Built once from a configuration, it matches pairs: decoded images
+//! ([`Matcher::match_pair`]) or image files ([`Matcher::match_files`], whose size is checked against the memory
+//! limit from the headers, before decoding). Every front end (`jem`, `jem batch`, the Python module) matches
+//! through it.
+
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Instant;
+
+use crate::error::Result;
+use crate::image::{DisparityMap, Plane, RgbImage};
+use crate::params::Params;
+use crate::pipeline::{self, Measured, PipelineOutput, Timings};
+use crate::setup::memory::MemoryBudget;
+use crate::setup::strategy::Strategy;
+use crate::setup::{self, NdispSource, Plan};
+
+/// Matches rectified stereo pairs with one configuration.
+///
+/// ```
+/// use jem::{Matcher, NdispSource, Params, RgbImage};
+/// let (left, right) = (RgbImage::new(64, 32), RgbImage::new(64, 32));
+/// let mut matcher = Matcher::new(Params::default())?.with_ndisp(NdispSource::Given(16));
+/// let out = matcher.match_pair(&left, &right)?;
+/// assert_eq!(out.disparity.dims(), (64, 32));
+/// assert_eq!(out.plan.ndisp, 16);
+/// # Ok::<(), jem::Error>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Matcher {
+    params: Params,
+    ndisp: NdispSource,
+    max_memory_bytes: u64,
+    budget: Option<Arc<MemoryBudget>>,
+}
+
+/// How a match was set up: its range, whether it went in tiles, the memory it planned for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RunPlan {
+    /// The disparity search range: disparities 0..ndisp−1.
+    pub ndisp: usize,
+    /// Whether the range was measured on the pair (none given, or the stated one no real bound).
+    pub ndisp_measured: bool,
+    /// `Some` when the pair did not fit the memory limit in one piece and ran in tiles.
+    pub tiles: Option<Tiles>,
+    /// The memory the run planned for, in bytes (what the limit was checked against).
+    pub memory_bytes: u64,
+}
+
+/// How a tiled run was cut.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Tiles {
+    /// The side of a tile's core in pixels (before any split).
+    pub core_px: usize,
+    /// The downscale factor of the coarse level the tiles start from.
+    pub coarse_factor: usize,
+}
+
+/// What a match produces.
+#[derive(Clone, Debug)]
+pub struct Output {
+    /// The left view's disparity map in pixels, `inf` where invalid (when post-processing leaves holes).
+    pub disparity: DisparityMap,
+    /// Per-pixel confidence of the left view, 0..1: the max-marginal before post-processing (1 for winner-take-all).
+    pub confidence: Plane<f32>,
+    /// The pixels that passed the left-right check (all of them when it is off).
+    pub consistent: Plane<bool>,
+    /// Time per stage.
+    pub timings: Timings,
+    /// What the adaptive front end measured on the pair; `None` when `[condition]` is off.
+    pub measured: Option<Measured>,
+    /// How the match was set up.
+    pub plan: RunPlan,
+    /// Seconds in the pipeline: the run itself, without loading, the range measurement or writing (what
+    /// MiddEval3's `time*.txt` holds).
+    pub seconds: f64,
+}
+
+/// What a match reports while it runs (see [`Matcher::match_pair_with`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Progress<'a> {
+    /// The range is known and the run set up; the pipeline starts.
+    Planned(&'a RunPlan),
+    /// A stage of the pipeline starts (its name, as [`Timings`] reports it).
+    Stage(&'a str),
+}
+
+impl Matcher {
+    /// A matcher with these parameters, the range measured on each pair and 80 % of the machine's memory as the
+    /// limit.
+    ///
+    /// # Errors
+    /// [`crate::Error::InvalidParam`] if `params` do not validate.
+    pub fn new(params: Params) -> Result<Matcher> {
+        params.validate()?;
+        Ok(Matcher { params, ndisp: NdispSource::Unknown, max_memory_bytes: default_memory_limit(), budget: None })
+    }
+
+    /// Where the search range comes from ([`NdispSource`]; default: measured on each pair).
+    pub fn with_ndisp(mut self, ndisp: NdispSource) -> Matcher {
+        self.ndisp = ndisp;
+        self
+    }
+
+    /// The memory limit in bytes: a pair whose run would need more runs in tiles, and one that fits neither way is
+    /// refused before anything large is allocated ([`crate::Error::OutOfMemory`]).
+    pub fn with_max_memory(mut self, bytes: u64) -> Matcher {
+        self.max_memory_bytes = bytes;
+        self
+    }
+
+    /// Shares a memory budget with other matchers running at the same time ([`Matcher::match_files`] waits while
+    /// the others hold so much that its share would not fit). The limit becomes the budget's total.
+    pub fn with_budget(mut self, budget: Arc<MemoryBudget>) -> Matcher {
+        self.max_memory_bytes = budget.total();
+        self.budget = Some(budget);
+        self
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// Where the search range comes from.
+    pub fn ndisp(&self) -> NdispSource {
+        self.ndisp
+    }
+
+    /// The memory limit in bytes.
+    pub fn max_memory(&self) -> u64 {
+        self.max_memory_bytes
+    }
+
+    /// The left view's disparity map of a rectified pair (and the rest of [`Output`]).
+    ///
+    /// # Errors
+    /// [`crate::Error::SizeMismatch`] or [`crate::Error::Input`] for unequal, empty or 1-pixel-wide images,
+    /// [`crate::Error::InvalidParam`] for an impossible range or parameters the image cannot hold,
+    /// [`crate::Error::OutOfMemory`] when the run fits the limit neither in one piece nor in tiles.
+    pub fn match_pair(&mut self, left: &RgbImage, right: &RgbImage) -> Result<Output> {
+        self.match_pair_with(left, right, &|_| {})
+    }
+
+    /// [`Matcher::match_pair`], reporting its progress to `on_progress`.
+    ///
+    /// # Errors
+    /// As [`Matcher::match_pair`].
+    pub fn match_pair_with(
+        &mut self,
+        left: &RgbImage,
+        right: &RgbImage,
+        on_progress: &dyn Fn(Progress<'_>),
+    ) -> Result<Output> {
+        let plan = setup::plan_match(left, right, self.ndisp, &self.params, self.max_memory_bytes)?;
+        self.run(&plan, on_progress)
+    }
+
+    /// Reads a pair of image files (PNG, PPM/PGM or JPEG, 8 or 16 bit) as the matcher would match them: both
+    /// headers are checked against the memory limit first (the loading, the range measurement and the run), and
+    /// neither image is decoded when the pair cannot fit.
+    ///
+    /// # Errors
+    /// [`crate::Error::Io`] or [`crate::Error::Image`] naming the file, [`crate::Error::SizeMismatch`] from the
+    /// headers, [`crate::Error::OutOfMemory`] as above.
+    pub fn read_pair(&self, left: &Path, right: &Path) -> Result<(RgbImage, RgbImage)> {
+        let header = crate::io::png::read_pair_header(left, right)?;
+        setup::check_before_decode(&header, self.ndisp, &self.params, self.max_memory_bytes)?;
+        crate::io::png::load_rgb_pair_within(left, right, self.max_memory_bytes)
+    }
+
+    /// Reads and matches a pair of image files ([`Matcher::read_pair`], then [`Matcher::match_pair_with`]). With
+    /// a shared budget ([`Matcher::with_budget`]) it holds what the loading and the range measurement need before
+    /// decoding, and what the run needs before it starts, waiting while other matchers hold too much.
+    ///
+    /// # Errors
+    /// As [`Matcher::read_pair`] and [`Matcher::match_pair`].
+    pub fn match_files(&mut self, left: &Path, right: &Path, on_progress: &dyn Fn(Progress<'_>)) -> Result<Output> {
+        let header = crate::io::png::read_pair_header(left, right)?;
+        let need = setup::check_before_decode(&header, self.ndisp, &self.params, self.max_memory_bytes)?;
+        let budget = self.budget.clone();
+        let mut held = budget.as_deref().map(|b| wait_for(b, need, on_progress));
+        on_progress(Progress::Stage("loading"));
+        let (l, r) = crate::io::png::load_rgb_pair_within(left, right, self.max_memory_bytes)?;
+        let plan = setup::plan_match(&l, &r, self.ndisp, &self.params, self.max_memory_bytes)?;
+        if let Some(budget) = budget.as_deref() {
+            let (w, h) = l.dims();
+            let run = plan.strategy.memory_bytes(w, h, plan.pair.ndisp, &self.params).max(header.load_bytes);
+            if run != need {
+                drop(held.take());
+                held = Some(wait_for(budget, run, on_progress));
+            }
+        }
+        let out = self.run(&plan, on_progress);
+        drop(held);
+        out
+    }
+
+    /// Runs a planned pair.
+    fn run(&mut self, plan: &Plan<'_>, on_progress: &dyn Fn(Progress<'_>)) -> Result<Output> {
+        let (w, h) = plan.pair.left.dims();
+        let run_plan = RunPlan {
+            ndisp: plan.pair.ndisp,
+            ndisp_measured: plan.ndisp_measured,
+            tiles: match plan.strategy {
+                Strategy::Whole => None,
+                Strategy::Tiled(t) => Some(Tiles { core_px: t.core_px, coarse_factor: t.coarse_factor }),
+            },
+            memory_bytes: plan.strategy.memory_bytes(w, h, plan.pair.ndisp, &self.params),
+        };
+        on_progress(Progress::Planned(&run_plan));
+        let on_stage = |stage: &str| on_progress(Progress::Stage(stage));
+        let start = Instant::now();
+        let out = match plan.strategy {
+            Strategy::Whole => pipeline::run_observed(&self.params, &plan.pair, &on_stage)?,
+            Strategy::Tiled(tiles) => pipeline::tile::run_tiled(&self.params, &plan.pair, &tiles, &on_stage)?,
+        };
+        let seconds = start.elapsed().as_secs_f64();
+        let PipelineOutput { disparity, confidence, consistent, timings, measured } = out;
+        Ok(Output { disparity, confidence, consistent, timings, measured, plan: run_plan, seconds })
+    }
+}
+
+/// Holds `bytes` of `budget`, reporting the wait as a stage.
+fn wait_for<'b>(
+    budget: &'b MemoryBudget,
+    bytes: u64,
+    on_progress: &dyn Fn(Progress<'_>),
+) -> crate::setup::memory::Reservation<'b> {
+    on_progress(Progress::Stage("waiting for memory"));
+    budget.reserve(bytes)
+}
+
+/// A default memory limit: 80 % of the machine's physical memory, or 8 GiB where that cannot be read.
+pub fn default_memory_limit() -> u64 {
+    crate::setup::memory::default_memory_limit()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{SynthParams, render_scene};
+
+    /// The matcher gives the pipeline's map, byte for byte, and says how it set the run up.
+    #[test]
+    fn a_matcher_runs_the_pipeline_on_a_borrowed_pair() {
+        let scene = render_scene(&SynthParams { width: 96, height: 64, ndisp: 16, seed: 4 }).unwrap();
+        let params = Params::default();
+        let mut matcher = Matcher::new(params.clone()).unwrap().with_ndisp(NdispSource::Given(scene.ndisp));
+        let out = matcher.match_pair(&scene.left, &scene.right).unwrap();
+        let pair = crate::image::StereoPair::borrowed(&scene.left, &scene.right, scene.ndisp).unwrap();
+        let direct = pipeline::run(&params, &pair).unwrap();
+        assert_eq!(out.disparity.data, direct.disparity.data);
+        assert_eq!((out.plan.ndisp, out.plan.ndisp_measured, out.plan.tiles), (scene.ndisp, false, None));
+        assert!(out.plan.memory_bytes > 0 && out.seconds > 0.0);
+    }
+
+    #[test]
+    fn invalid_parameters_are_refused_when_the_matcher_is_built() {
+        let mut params = Params::default();
+        params.downscale = 0;
+        assert!(Matcher::new(params).is_err());
+    }
+}
