@@ -25,6 +25,7 @@
 //! | [`io`], [`image`], [`dataset`], [`batch`] | around | files, data types, data-set layouts, batch runs |
 //! | [`eval`], [`viz`], [`synth`], [`degrade`] | around | scoring, colour maps, synthetic and degraded pairs |
 //! | [`geometry`], [`table`], [`fastmath`], [`error`] | around | depth and point clouds, shared helpers, errors |
+//! | [`threads`], [`cleanup`] | around | the thread-count cap; what a stopped run removes |
 //!
 //! With `downscale = N > 1` ([`Params::downscale`]) the pipeline runs on the pair reduced by N
 //! (`scale::downsample_pair`) and the result is brought back to the input size (`scale::upsample_disparity`).
@@ -41,6 +42,7 @@
 #![deny(missing_docs)]
 
 pub mod batch;
+pub mod cleanup;
 pub mod condition;
 pub mod cost;
 pub mod dataset;
@@ -64,6 +66,7 @@ pub mod rng;
 pub mod scale;
 pub mod synth;
 pub mod table;
+pub mod threads;
 pub mod viz;
 
 pub use error::{Error, Result};

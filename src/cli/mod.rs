@@ -36,6 +36,7 @@ mod config;
 mod degrade;
 mod eval;
 mod r#match;
+mod signals;
 mod synth;
 mod viz;
 
@@ -249,11 +250,9 @@ enum Command {
     Viz(VizArgs),
 }
 
-/// The `--threads` cap is 4 per core, but never below this.
-const MIN_THREAD_CAP: usize = 16;
-
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> Result<ExitCode> {
+    signals::install();
     let threads = match &cli.command {
         None => &cli.match_args.threads,
         Some(Command::Match(a)) => &a.threads,
@@ -264,17 +263,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Config(_) | Command::Viz(_)) => &ThreadsArg::default(),
     };
     if let Some(n) = threads.threads {
-        // More threads than cores only adds switching (1000 threads took 73 s for a 0.4 s run); allow a few per
-        // core for machines that under-report, and refuse the rest before starting any.
-        let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
-        let max = (4 * cores).max(MIN_THREAD_CAP);
-        if n == 0 || n > max {
-            return Err(Error::param(
-                "--threads",
-                n,
-                format!("1 to {max} (4 per core on this machine, at least {MIN_THREAD_CAP})"),
-            ));
-        }
+        // Refused before any thread starts (the bound is jem::threads', shared with the Python module).
+        let n = jem::threads::check_threads("--threads", n as u64)?;
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()

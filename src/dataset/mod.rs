@@ -24,6 +24,7 @@
 mod kitti;
 mod lock;
 mod results;
+mod runner;
 pub mod walk;
 
 use std::path::{Path, PathBuf};
@@ -32,6 +33,7 @@ use std::str::FromStr;
 use crate::error::Result;
 
 pub use kitti::interpolate_background;
+pub(crate) use lock::lock_holds;
 pub use lock::{ResultsLock, lock_results, writers};
 pub use results::check_results_dirs;
 
