@@ -282,6 +282,42 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
+/// Handles what clap could not parse: `--help` and `--version` are printed as clap prints them (exit 0); an
+/// argument error is one line, `error: …`, as every other error (clap's own form adds a tip, the usage and "For
+/// more information, try '--help'." on 3 to 6 more lines), with exit code 2.
+pub fn usage_error(e: clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        let _ = e.print();
+        return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
+    }
+    note!("{}", one_line_usage_error(&e.render().to_string()));
+    ExitCode::from(2)
+}
+
+/// clap's message on one line: its first paragraph (the error, and the arguments it lists, joined) and its tip,
+/// without the usage and the pointer to --help that follow.
+fn one_line_usage_error(rendered: &str) -> String {
+    let mut line = String::new();
+    for part in rendered.lines().take_while(|l| !l.trim().is_empty()).map(str::trim) {
+        if !line.is_empty() {
+            line.push_str(if line.ends_with(':') { " " } else { ", " });
+        }
+        line.push_str(part);
+    }
+    if !line.starts_with("error:") {
+        line.insert_str(0, "error: ");
+    }
+    let tips: Vec<&str> = rendered.lines().map(str::trim).filter(|l| l.starts_with("tip:")).collect();
+    if !tips.is_empty() {
+        line.push_str(&format!(" ({})", tips.join("; ")));
+    }
+    line
+}
+
 /// Prints `error: ...` and each cause on one line.
 pub fn print_error(err: &Error) {
     let mut msg = format!("error: {err}");
