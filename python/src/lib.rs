@@ -2,21 +2,22 @@
 //!
 //! Nothing here decides how a pair is matched: the range and the whole-or-tiles choice are
 //! [`jem::plan::plan_match`] (what `jem match` calls), the run is [`jem::tile::Strategy::run`], the config is
-//! [`jem::Params::load`], the pixel conversion is [`jem::io::png::to_rgb`] (what the image loader calls), so an
-//! array gives the map the command line writes for the same file, byte for byte. This file converts arrays and
-//! errors, releases the GIL around the work and keeps panics from crossing into Python.
+//! [`jem::Params::load`], and the memory check before the arrays are copied is [`jem::plan::check_before_decode`]
+//! (what `jem match` calls with the image headers), so an array gives the map the command line writes for the same
+//! file, byte for byte. This file converts arrays (as [`jem::io::png::to_rgb`] converts a decoded image: 8-bit
+//! values as they are, 16-bit ones divided by 257) and errors, releases the GIL around the work and keeps panics
+//! and failed allocations from crossing into Python.
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
 
-use image::{DynamicImage, ImageBuffer, Luma, Rgb};
 use jem::plan::{NdispSource, plan_match};
-use jem::{Error, Params, Plane};
+use jem::{Error, Params, Plane, RgbImage};
 use numpy::ndarray::Array2;
-use numpy::{PyArray2, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
+use numpy::{PyArray2, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList, PyString};
+use pyo3::types::{PyDict, PyInt, PyList, PyMapping, PyString};
 
 /// A `jem::Error` as the Python exception a caller expects: `MemoryError` for a run that fits the memory limit
 /// neither whole nor in tiles, the matching `OSError` subclass (`FileNotFoundError`, ...) for a file the
@@ -66,42 +67,132 @@ fn guarded<T: Send>(threads: Option<usize>, work: impl FnOnce() -> jem::Result<T
     }
 }
 
-/// A view as a decoded image: H×W grey or H×W×3 RGB, 8 or 16 bit, any strides (copied in logical order).
-fn to_image(array: &Bound<'_, PyAny>, name: &str) -> PyResult<DynamicImage> {
-    let untyped = array.cast::<PyUntypedArray>().map_err(|_| {
-        let kind = array.get_type().name().map_or("?".to_string(), |n| n.to_string());
-        PyValueError::new_err(format!("{name}: expected a numpy array, got {kind}"))
-    })?;
-    let shape = untyped.shape().to_vec();
-    let (h, w, colour) = match shape[..] {
-        [h, w] => (h, w, false),
-        [h, w, 3] => (h, w, true),
-        _ => {
-            return Err(PyValueError::new_err(format!(
-                "{name}: shape {shape:?} is neither H×W (grey) nor H×W×3 (RGB)"
-            )));
+/// An image array as its shape and dtype tell it, before any of its data is read.
+struct ImageArray<'a, 'py> {
+    array: &'a Bound<'py, PyAny>,
+    name: &'static str,
+    width: usize,
+    height: usize,
+    colour: bool,
+    /// 16-bit samples (else 8-bit).
+    sixteen: bool,
+    /// 16-bit samples in the other byte order (`>u2` on a little-endian machine): converted by numpy first.
+    swapped: bool,
+}
+
+impl<'a, 'py> ImageArray<'a, 'py> {
+    /// H×W grey or H×W×3 RGB, uint8 or uint16 in either byte order, any strides.
+    fn inspect(array: &'a Bound<'py, PyAny>, name: &'static str) -> PyResult<Self> {
+        let untyped = array.cast::<PyUntypedArray>().map_err(|_| {
+            let kind = array.get_type().name().map_or("?".to_string(), |n| n.to_string());
+            PyValueError::new_err(format!("{name}: expected a numpy array, got {kind}"))
+        })?;
+        let shape = untyped.shape().to_vec();
+        let (height, width, colour) = match shape[..] {
+            [h, w] => (h, w, false),
+            [h, w, 3] => (h, w, true),
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "{name}: shape {shape:?} is neither H×W (grey) nor H×W×3 (RGB)"
+                )));
+            }
+        };
+        let dtype = untyped.dtype();
+        let (sixteen, swapped) = match (dtype.kind(), dtype.itemsize()) {
+            (b'u', 1) => (false, false),
+            (b'u', 2) => (true, dtype.is_native_byteorder() == Some(false)),
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "{name}: dtype {dtype} is not supported (expected uint8 or uint16)"
+                )));
+            }
+        };
+        Ok(ImageArray { array, name, width, height, colour, sixteen, swapped })
+    }
+
+    /// The memory its conversion holds at its peak: the three `f32` planes, and numpy's native-order copy of
+    /// swapped samples.
+    fn load_bytes(&self) -> u64 {
+        let px = self.width as u64 * self.height as u64;
+        let samples = px * if self.colour { 3 } else { 1 };
+        12 * px + if self.swapped { 2 * samples } else { 0 }
+    }
+
+    /// The pixels as planes of `f32` (as [`jem::io::png::to_rgb`] gives a decoded image), read in logical order.
+    /// Every large buffer is allocated fallibly: a failure is a `MemoryError`, never an abort.
+    fn to_rgb(&self) -> PyResult<RgbImage> {
+        let n = self.width.checked_mul(self.height).ok_or_else(|| self.too_large())?;
+        let mut channels: [Vec<f32>; 3] = Default::default();
+        for c in &mut channels {
+            c.try_reserve_exact(n).map_err(|_| {
+                PyMemoryError::new_err(format!(
+                    "{}: cannot allocate {} for a {}x{} image",
+                    self.name,
+                    jem::error::human_bytes(12 * n as u64),
+                    self.width,
+                    self.height
+                ))
+            })?;
         }
-    };
-    let too_large = || PyValueError::new_err(format!("{name}: {w}×{h} is too large"));
-    let (w, h) = (u32::try_from(w).map_err(|_| too_large())?, u32::try_from(h).map_err(|_| too_large())?);
-    if let Ok(a) = array.cast::<PyArrayDyn<u8>>() {
-        let data: Vec<u8> = a.readonly().as_array().iter().copied().collect();
-        return Ok(if colour {
-            DynamicImage::ImageRgb8(ImageBuffer::<Rgb<u8>, _>::from_raw(w, h, data).ok_or_else(too_large)?)
+        let mut put = |k: usize, v: f32| {
+            if self.colour {
+                channels[k % 3].push(v);
+            } else {
+                channels.iter_mut().for_each(|c| c.push(v));
+            }
+        };
+        if self.sixteen {
+            // Another byte order: numpy makes the native copy (its allocation failure is a MemoryError).
+            let native;
+            let array = if self.swapped {
+                native = self.array.call_method1("astype", ("=u2",))?;
+                &native
+            } else {
+                self.array
+            };
+            let a = array.cast::<PyArrayDyn<u16>>().map_err(|e| PyValueError::new_err(e.to_string()))?;
+            let view = a.readonly();
+            view.as_array().iter().enumerate().for_each(|(k, &v)| put(k, f32::from(v) / 257.0));
         } else {
-            DynamicImage::ImageLuma8(ImageBuffer::<Luma<u8>, _>::from_raw(w, h, data).ok_or_else(too_large)?)
-        });
+            let a = self.array.cast::<PyArrayDyn<u8>>().map_err(|e| PyValueError::new_err(e.to_string()))?;
+            let view = a.readonly();
+            view.as_array().iter().enumerate().for_each(|(k, &v)| put(k, f32::from(v)));
+        }
+        Ok(RgbImage { width: self.width, height: self.height, channels })
     }
-    if let Ok(a) = array.cast::<PyArrayDyn<u16>>() {
-        let data: Vec<u16> = a.readonly().as_array().iter().copied().collect();
-        return Ok(if colour {
-            DynamicImage::ImageRgb16(ImageBuffer::<Rgb<u16>, _>::from_raw(w, h, data).ok_or_else(too_large)?)
-        } else {
-            DynamicImage::ImageLuma16(ImageBuffer::<Luma<u16>, _>::from_raw(w, h, data).ok_or_else(too_large)?)
-        });
+
+    fn too_large(&self) -> PyErr {
+        PyValueError::new_err(format!("{}: {}×{} is too large", self.name, self.width, self.height))
     }
-    let dtype = untyped.dtype().to_string();
-    Err(PyValueError::new_err(format!("{name}: dtype {dtype} is not supported (expected uint8 or uint16)")))
+}
+
+/// Checks a pair of arrays, from their shapes alone, as `jem match` checks a pair from its image headers: equal
+/// sizes, at least 2 pixels wide, and a run that fits `limit` (with the memory of the conversion itself), so that a
+/// pair too large is refused before any of it is copied.
+fn check_pair(
+    left: &ImageArray<'_, '_>,
+    right: &ImageArray<'_, '_>,
+    source: NdispSource,
+    params: &Params,
+    limit: u64,
+) -> jem::Result<()> {
+    let (w, h) = (left.width, left.height);
+    if (w, h) != (right.width, right.height) {
+        return Err(Error::SizeMismatch { left: (w, h), right: (right.width, right.height) });
+    }
+    if w == 0 || h == 0 {
+        return Err(Error::Input("the images are empty (0 pixels)".into()));
+    }
+    if w < 2 {
+        return Err(Error::Input(format!("the images are {w}x{h}; a stereo pair must be at least 2 pixels wide")));
+    }
+    let load_bytes = left.load_bytes().saturating_add(right.load_bytes());
+    jem::plan::check_before_decode(
+        &jem::io::png::ImageHeader { width: w, height: h, load_bytes },
+        source,
+        params,
+        limit,
+    )
 }
 
 /// A Python value as a TOML value (what `--set key=value` would parse it to).
@@ -112,6 +203,11 @@ fn toml_value(value: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
     }
     if let Ok(i) = value.extract::<i64>() {
         return Ok(toml::Value::Integer(i));
+    }
+    if value.is_instance_of::<PyInt>() {
+        return Err(PyValueError::new_err(format!(
+            "config key {key}: {value} is too large (a config's whole numbers are 64-bit)"
+        )));
     }
     if let Ok(f) = value.extract::<f64>() {
         return Ok(toml::Value::Float(f));
@@ -126,15 +222,20 @@ fn toml_value(value: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
     Err(PyValueError::new_err(format!("config key {key}: {value} is not a bool, number, string or list")))
 }
 
-/// A config dict in the TOML's shape, flattened to `section.key=value` items (`--set` form).
-fn flatten(dict: &Bound<'_, PyDict>, prefix: &str, out: &mut Vec<String>) -> PyResult<()> {
-    for (k, v) in dict.iter() {
+/// The items of a mapping (a dict, a `types.MappingProxyType`, any `collections.abc.Mapping`).
+fn mapping_items<'py>(mapping: &Bound<'py, PyMapping>) -> PyResult<Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>)>> {
+    mapping.items()?.iter().map(|item| item.extract()).collect()
+}
+
+/// A config mapping in the TOML's shape, flattened to `section.key=value` items (`--set` form).
+fn flatten(mapping: &Bound<'_, PyMapping>, prefix: &str, out: &mut Vec<String>) -> PyResult<()> {
+    for (k, v) in mapping_items(mapping)? {
         let key = format!(
             "{prefix}{}",
             k.extract::<String>()
                 .map_err(|_| { PyValueError::new_err(format!("config keys are strings; {prefix}{k} is not")) })?
         );
-        match v.cast::<PyDict>() {
+        match v.cast::<PyMapping>() {
             Ok(section) => flatten(section, &format!("{key}."), out)?,
             Err(_) => out.push(format!("{key}={}", toml_value(&v, &key)?)),
         }
@@ -142,26 +243,43 @@ fn flatten(dict: &Bound<'_, PyDict>, prefix: &str, out: &mut Vec<String>) -> PyR
     Ok(())
 }
 
-/// The parameters of a call: the defaults, then `config` (a TOML file, or a dict applied key by key as `--set`
-/// items), then `overrides` (as `--set`: a string value is taken as the command line would, `"fcm"` or `"3"`).
-fn load_params(config: Option<&Bound<'_, PyAny>>, overrides: Option<&Bound<'_, PyDict>>) -> PyResult<Params> {
+/// The parameters of a call: the defaults, then `config` (a TOML file, or a mapping applied key by key as `--set`
+/// items), then `overrides` (a mapping, as `--set`: a string value is taken as the command line would, `"fcm"` or
+/// `"3"`).
+fn load_params(config: Option<&Bound<'_, PyAny>>, overrides: Option<&Bound<'_, PyAny>>) -> PyResult<Params> {
     let mut items = Vec::new();
     let mut path = None;
     match config {
         None => {}
-        Some(c) if c.is_instance_of::<PyDict>() => flatten(c.cast::<PyDict>()?, "", &mut items)?,
-        Some(c) => {
-            path = Some(c.extract::<PathBuf>().map_err(|_| {
-                PyValueError::new_err(format!("config: expected a TOML file's path or a dict, got {c}"))
-            })?);
-        }
+        Some(c) => match c.cast::<PyMapping>() {
+            Ok(mapping) => flatten(mapping, "", &mut items)?,
+            Err(_) => {
+                path = Some(c.extract::<PathBuf>().map_err(|_| {
+                    PyValueError::new_err(format!("config: expected a TOML file's path or a mapping, got {c}"))
+                })?);
+            }
+        },
     }
-    for (k, v) in overrides.into_iter().flat_map(|d| d.iter()) {
+    let overrides = match overrides {
+        None => Vec::new(),
+        Some(o) => {
+            let mapping = o.cast::<PyMapping>().map_err(|_| {
+                let kind = o.get_type().name().map_or("?".to_string(), |n| n.to_string());
+                PyValueError::new_err(format!(
+                    "overrides: expected a mapping of \"section.key\" to a value, got {kind}"
+                ))
+            })?;
+            mapping_items(mapping)?
+        }
+    };
+    for (k, v) in overrides {
         let key: String =
             k.extract().map_err(|_| PyValueError::new_err(format!("override key {k} is not a string")))?;
-        let value = match v.cast::<PyString>() {
-            Ok(s) => s.to_string(),
-            Err(_) => toml_value(&v, &key)?.to_string(),
+        let value = match (v.cast::<PyString>(), toml_value(&v, &key)?) {
+            (Ok(s), _) => s.to_string(),
+            // As Python spells it (`1e+30`, which TOML reads too), so that a message quotes what was given.
+            (Err(_), toml::Value::Float(_)) => v.repr()?.to_string(),
+            (Err(_), other) => other.to_string(),
         };
         items.push(format!("{key}={value}"));
     }
@@ -196,14 +314,15 @@ fn peak_rss_bytes() -> Option<u64> {
 /// ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings (``read_pfm`` gives the same array).
 ///
 /// ``left``, ``right``: numpy arrays H×W (grey) or H×W×3 (RGB order; OpenCV loads BGR: ``img[..., ::-1]``),
-/// uint8 or uint16 (16-bit values are divided by 257, as a 16-bit PNG is), any strides; grey and colour may be
-/// mixed. ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair as ``jem`` does without a
+/// uint8 or uint16 in either byte order (16-bit values are divided by 257, as a 16-bit PNG is), any strides; grey
+/// and colour may be mixed. They are checked against ``max_memory`` from their shapes before they are copied. ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair as ``jem`` does without a
 /// calib.txt (up to the width). ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one
 /// (measured instead, up to it, when it is half the width or more); ``ndisp`` wins. ``config``: a TOML file's
-/// path, or a dict in the TOML's shape (``{"meanfield": {"iterations": 5}}``). ``overrides``: a dict
-/// ``{"section.key": value}``, applied last, as ``--set``. ``threads``: worker threads for this call (default: one
-/// per core); the result is the same for any count. ``max_memory``: bytes (default 80 % of RAM); a pair too
-/// large for it runs in tiles, as ``--max-memory`` does.
+/// path, or a mapping in the TOML's shape (``{"meanfield": {"iterations": 5}}``; any ``Mapping``). ``overrides``:
+/// a mapping ``{"section.key": value}``, applied last, as ``--set``. ``threads``: worker threads for this call
+/// (default: one per core; at most 4 per core, at least 16, as ``--threads``); the result is the same for any
+/// count. ``max_memory``: bytes (default 80 % of RAM, and of the address space left under ``ulimit -v``); a pair
+/// too large for it runs in tiles, as ``--max-memory`` does.
 ///
 /// Returns the map; with ``confidence=True`` also the per-pixel confidence (max-marginal of the left view,
 /// float32 H×W), and with ``return_info=True`` also a dict: ``ndisp``, ``ndisp_measured``, ``tiled``, ``noise``
@@ -213,8 +332,9 @@ fn peak_rss_bytes() -> Option<u64> {
 /// The GIL is released while matching, so pairs can run in Python threads. Ctrl-C (KeyboardInterrupt) is
 /// honoured only when the call returns.
 ///
-/// Raises ValueError (bad shape, dtype, range, config key or value), MemoryError (the run fits ``max_memory``
-/// neither whole nor in tiles), OSError (an unreadable config file). Warns (UserWarning) for a value the image
+/// Raises ValueError (bad shape, dtype, range, config key or value, thread count), MemoryError (the run fits
+/// ``max_memory`` neither whole nor in tiles, or its memory cannot be allocated), OSError (an unreadable config
+/// file). Warns (UserWarning) for a value the image
 /// cannot use, held to a bound as ``jem`` does (``post.sps.segments`` above pixels / ``post.sps.min_support``).
 #[pyfunction]
 #[pyo3(
@@ -229,25 +349,29 @@ fn match_pair<'py>(
     right: &Bound<'py, PyAny>,
     ndisp: Option<i64>,
     config: Option<&Bound<'py, PyAny>>,
-    overrides: Option<&Bound<'py, PyDict>>,
+    overrides: Option<&Bound<'py, PyAny>>,
     threads: Option<i64>,
     max_memory: Option<i64>,
     confidence: bool,
     return_info: bool,
     calib_ndisp: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let (l, r) = (to_image(left, "left")?, to_image(right, "right")?);
+    let (left, right) = (ImageArray::inspect(left, "left")?, ImageArray::inspect(right, "right")?);
     let params = load_params(config, overrides)?;
     let source = match (positive("ndisp", ndisp)?, positive("calib_ndisp", calib_ndisp)?) {
         (Some(n), _) => NdispSource::Given(n as usize),
         (None, Some(n)) => NdispSource::Stated(n as usize),
         (None, None) => NdispSource::Unknown,
     };
-    let threads = positive("threads", threads)?.map(|n| n as usize);
+    // The command line's bound (jem::threads), checked before any thread starts.
+    let threads = positive("threads", threads)?.map(|n| jem::threads::check_threads("threads", n)).transpose();
+    let threads = threads.map_err(|e| to_py(&e))?;
     let limit = positive("max_memory", max_memory)?.unwrap_or_else(jem::default_memory_limit);
+    // From the shapes, before anything is copied: a pair too large for the limit costs no memory.
+    check_pair(&left, &right, source, &params, limit).map_err(|e| to_py(&e))?;
+    let (l, r) = (left.to_rgb()?, right.to_rgb()?);
     let (plan, out, seconds) = py.detach(|| {
         guarded(threads, || {
-            let (l, r) = (jem::io::png::to_rgb(&l), jem::io::png::to_rgb(&r));
             let plan = plan_match(l, r, source, &params, limit)?;
             let start = std::time::Instant::now();
             let out = plan.strategy.run(&params, &plan.pair, &|_| {})?;
@@ -309,9 +433,18 @@ fn depth<'py>(
     Ok(to_numpy(py, py.detach(|| jem::geometry::depth_map(&map, &camera))))
 }
 
-/// A 2-D float32 or float64 array (any strides) as a plane of f32.
+/// A 2-D floating-point array (any strides) as a plane of f32: float32 as it is, float64 rounded, and the other
+/// floating types (float16, longdouble) through numpy's conversion to float32.
 fn to_plane(array: &Bound<'_, PyAny>, name: &str) -> PyResult<Plane<f32>> {
-    let bad = || PyValueError::new_err(format!("{name}: expected a 2-D float32 or float64 numpy array"));
+    let bad = || PyValueError::new_err(format!("{name}: expected a 2-D floating-point numpy array (e.g. float32)"));
+    if let Ok(a) = array.cast::<PyUntypedArray>()
+        && a.ndim() == 2
+        && a.dtype().kind() == b'f'
+        && array.cast::<PyArray2<f32>>().is_err()
+        && array.cast::<PyArray2<f64>>().is_err()
+    {
+        return to_plane(&array.call_method1("astype", ("float32",))?, name);
+    }
     if let Ok(a) = array.cast::<PyArray2<f32>>() {
         let view = a.readonly();
         let (h, w) = view.as_array().dim();
@@ -333,8 +466,10 @@ fn read_pfm(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArray2<f32>>>
     Ok(to_numpy(py, map))
 }
 
-/// Writes a 2-D float array (float32, or float64 rounded to float32) as a greyscale little-endian PFM, rows
-/// bottom-up as Middlebury's files, atomically (a temporary file renamed into place): the bytes ``jem`` writes.
+/// Writes a 2-D float array (float32; any other floating type, float16 or float64, converted to float32) as a
+/// greyscale little-endian PFM, rows bottom-up as Middlebury's files, atomically (a temporary file renamed into
+/// place): the bytes ``jem`` writes. An existing ``path`` that is not a regular file (a device, a FIFO) is refused
+/// with ValueError, never replaced.
 #[pyfunction]
 fn write_pfm(py: Python<'_>, path: PathBuf, array: &Bound<'_, PyAny>) -> PyResult<()> {
     let map = to_plane(array, "array")?;

@@ -84,12 +84,25 @@ pub fn check_memory(width: usize, height: usize, ndisp: usize, params: &Params, 
 }
 
 /// A default memory limit: 80% of the machine's physical memory (from `/proc/meminfo`), or 8 GiB where that
-/// cannot be read.
+/// cannot be read; and under an address-space limit (`ulimit -v`), at most 80% of the room this process has left
+/// in it, since an allocation beyond it fails (and a failed allocation aborts the process).
 pub fn default_memory_limit() -> u64 {
     let total_kib = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
         s.lines().find(|l| l.starts_with("MemTotal:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
     });
-    total_kib.map(|k| k * 1024 / 5 * 4).unwrap_or(8 << 30)
+    let ram = total_kib.map(|k| k * 1024 / 5 * 4).unwrap_or(8 << 30);
+    address_space_room().map_or(ram, |room| ram.min(room / 5 * 4))
+}
+
+/// The bytes of address space this process may still map under its soft `ulimit -v` (from `/proc/self/limits`
+/// and the `VmSize` of `/proc/self/status`); `None` when there is no such limit or it cannot be read.
+fn address_space_room() -> Option<u64> {
+    let limits = std::fs::read_to_string("/proc/self/limits").ok()?;
+    let line = limits.lines().find(|l| l.starts_with("Max address space"))?;
+    let limit: u64 = line["Max address space".len()..].split_whitespace().next()?.parse().ok()?;
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let size_kib: u64 = status.lines().find(|l| l.starts_with("VmSize:"))?.split_whitespace().nth(1)?.parse().ok()?;
+    Some(limit.saturating_sub(size_kib * 1024))
 }
 
 #[cfg(test)]
