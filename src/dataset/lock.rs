@@ -597,7 +597,8 @@ mod tests {
             right: dir.path().join("im1.png"),
             calib: Some(dir.path().join("calib.txt")),
         };
-        let make: [(&str, &dyn Fn(&Path)); 6] = [
+        type Make<'a> = &'a dyn Fn(&Path);
+        let make: [(&str, Make); 6] = [
             ("it is a folder", &|f| std::fs::create_dir(f).unwrap()),
             ("symbolic link", &|f| std::os::unix::fs::symlink("nowhere", f).unwrap()),
             ("symbolic link", &|f| std::os::unix::fs::symlink("/proc/self/stat", f).unwrap()),
