@@ -224,22 +224,30 @@ fn a_live_batch_in_another_pid_namespace_keeps_its_lock() {
     };
     if let Some(a) = &mut a {
         wait_for(&lock, a);
-        let text = std::fs::read_to_string(&lock).unwrap();
-        let ours = std::fs::read_link("/proc/self/ns/pid").unwrap();
-        assert!(text.starts_with("pid 1\n") && text.contains("pidns pid:["), "{text}");
-        assert!(!text.contains(&format!("pidns {}", ours.display())), "{text}");
+    }
+    // Made empty, then written: read once it names its host.
+    let start = Instant::now();
+    let mut lock_text = String::new();
+    while !lock_text.contains("host ") && start.elapsed() < Duration::from_secs(10) {
+        lock_text = std::fs::read_to_string(&lock).unwrap_or_default();
+        std::thread::sleep(Duration::from_millis(2));
     }
     let args = batch("A", "post.fill=false");
     let out = output_within(jem().current_dir(d).args(&args), Duration::from_secs(300));
-    let text = stderr(&out);
+    let a_was_running = a.as_mut().is_none_or(|a| a.try_wait().unwrap().is_none());
     if let Some(a) = &mut a {
-        assert!(a.try_wait().unwrap().is_none(), "batch A ended before B was checked: the scene is too small");
         a.kill().unwrap();
         a.wait().unwrap();
     }
+    let text = stderr(&out);
+    assert!(!text.contains("took over"), "{text}");
     assert_eq!(out.status.code(), Some(2), "{text}");
     assert!(text.contains("another jem run (pid 1 on") && text.contains("is writing these results"), "{text}");
-    assert!(!text.contains("took over"), "{text}");
+    assert!(a_was_running, "batch A ended before B was checked: the scene is too small");
+    // A is pid 1 of its namespace, which the lock records: not this process's.
+    let ours = std::fs::read_link("/proc/self/ns/pid").unwrap();
+    assert!(lock_text.starts_with("pid 1\n") && lock_text.contains("pidns pid:["), "{lock_text}");
+    assert!(!lock_text.contains(&format!("pidns {}", ours.display())), "{lock_text}");
 }
 
 /// `jem synth DIR` into a copy of a scene replaced its images, ground truth and calib.txt and left its old
@@ -524,9 +532,6 @@ fn eval_says_when_the_ground_truth_or_calib_is_missing() {
     let out = run_in(d, &["eval", "set", "--alg", "A", "--scale", "1"]);
     let (listed, text) = (String::from_utf8_lossy(&out.stdout), stderr(&out));
     assert_eq!(out.status.code(), Some(2), "{text}");
-    assert!(listed.contains("nomask: no set/nomask/mask0nocc.png (needed for the nonocc mask)"), "{listed}");
-    assert!(listed.contains("nocalib: no set/nocalib/calib.txt (needed for the search range)"), "{listed}");
-    assert!(listed.contains("noresult: no result file set/noresult/disp0A.pfm"), "{listed}");
     let last = text.lines().last().unwrap();
     assert!(
         last.ends_with(
@@ -534,4 +539,7 @@ fn eval_says_when_the_ground_truth_or_calib_is_missing() {
         ),
         "{last}"
     );
+    assert!(listed.contains("nomask: no set/nomask/mask0nocc.png (needed for the nonocc mask)"), "{listed}");
+    assert!(listed.contains("nocalib: no set/nocalib/calib.txt (needed for the search range)"), "{listed}");
+    assert!(listed.contains("noresult: no result file set/noresult/disp0A.pfm"), "{listed}");
 }

@@ -6,6 +6,7 @@ import stat
 import subprocess
 import sys
 import types
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -129,3 +130,24 @@ def test_an_absurd_override_says_what_is_wrong(tmp_path, cli):
             jem.match(SMALL, SMALL, ndisp=8, overrides={"meanfield.iterations": value})
     proc = cli("config", "--set", "meanfield.iterations=1e30", check=False)
     assert proc.stderr == "error: --set: `meanfield.iterations` takes a whole number >= 0 (like 5), not 1e30\n"
+
+
+def test_the_dask_example_refuses_a_fifo_for_a_result(tmp_path, cli):
+    """examples/batch_dask.py renamed its files into place itself: a FIFO where disp0NAME.pfm goes is refused (that
+    scene fails, the other runs) and left as it was."""
+    for seed in (1, 2):
+        cli("synth", tmp_path / f"s{seed}", "--width", 64, "--height", 48, "--ndisp", 16, "--seed", seed)
+    fifo = tmp_path / "s1" / "disp0PY.pfm"
+    os.mkfifo(fifo)
+    example = Path(__file__).resolve().parents[1] / "examples" / "batch_dask.py"
+    proc = subprocess.run(
+        [sys.executable, str(example), str(tmp_path), "--alg", "PY", "--workers", "1", "--threads", "1",
+         "--set", "model=wta"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert f"{fifo}: not a regular file" in proc.stderr, proc.stderr
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    assert not (tmp_path / "s1" / "timePY.txt").exists() and (tmp_path / "s2" / "disp0PY.pfm").is_file()
