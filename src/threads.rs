@@ -1,8 +1,8 @@
 //! How many worker threads a caller may ask for: the command line's `--threads` and the Python module's
 //! `threads=` share this one bound.
 //!
-//! More threads than cores only add switching (1000 threads took 73 s for a 0.4 s run, and 5000 failed to start);
-//! a few per core are allowed for machines that under-report their cores.
+//! More threads than cores only add switching (thousands make a run many times slower, or fail to start); a few
+//! per core are allowed for machines that under-report their cores.
 
 use crate::error::{Error, Result};
 

@@ -1,5 +1,5 @@
-//! Files jem must never replace, locks that must survive containers, signals and time limits (or not hang on a
-//! FIFO), and messages that must say what is wrong: each test runs the command lines that found the defect.
+//! Files jem must never replace, locks that must hold across containers, signals and time limits (and never make
+//! a run wait on a FIFO), and messages that say what is wrong, each checked with the command lines of its case.
 
 mod common;
 
@@ -124,10 +124,9 @@ fn leftovers(dir: &Path) -> Vec<String> {
 }
 
 /// `jem L R -o dev.pfm` (also `--confidence`, `--depth`, `--cloud`, `viz -o`, and a batch's result files) where
-/// the output is a FIFO, a link to `/dev/null` or a device node: each replaced it with a plain file, exit 0 (as
-/// root, `-o /dev/null` would replace the system's /dev/null). Refused now, before any work, naming the file; the
-/// special file is left as it was and nothing else is written. `-o /dev/stdout` is refused too (a stream cannot
-/// be written all or none).
+/// the output is a FIFO, a link to `/dev/null` or a device node: a rename would put a plain file in its place (as
+/// root, in place of /dev/null itself). Refused before any work, naming the file; the special file is left as it
+/// is and nothing else is written. `-o /dev/stdout` is refused too (a stream cannot be written all or none).
 #[test]
 fn outputs_never_replace_a_device_node_or_a_fifo() {
     let dir = tempfile::tempdir().unwrap();
@@ -186,9 +185,9 @@ fn outputs_never_replace_a_device_node_or_a_fifo() {
 }
 
 /// Batch A runs in another PID namespace (`unshare --pid --fork --mount-proc`, as in a container sharing the
-/// host's name): it is pid 1 there. Batch B on the host took "pid 1 … no longer running" for a stale lock, took it
-/// over and wrote the same results beside A. Now the lock records A's namespace, and B, in another, cannot tell:
-/// refused. (Where `unshare` is not allowed, a lock naming another namespace is written by hand instead.)
+/// host's name): it is pid 1 there, and pid 1 on the host is another process, so B must not take A's lock for a
+/// stale one and write the same results beside it. The lock records A's namespace; B, in another, cannot tell,
+/// and is refused. (Where `unshare` is not allowed, a lock naming another namespace is written by hand instead.)
 #[test]
 fn a_live_batch_in_another_pid_namespace_keeps_its_lock() {
     let dir = tempfile::tempdir().unwrap();
@@ -250,9 +249,9 @@ fn a_live_batch_in_another_pid_namespace_keeps_its_lock() {
     assert!(!lock_text.contains(&format!("pidns {}", ours.display())), "{lock_text}");
 }
 
-/// `jem synth DIR` into a copy of a scene replaced its images, ground truth and calib.txt and left its old
-/// `disp0J.pfm` beside them. A folder that holds scene files is refused, as `jem degrade` refuses one that is not
-/// empty; nothing in it changes. A folder without scene files (or a new one) is fine.
+/// `jem synth DIR` into a copy of a scene would replace its images, ground truth and calib.txt and leave its old
+/// `disp0J.pfm` beside them: a folder that holds scene files is refused, as `jem degrade` refuses one that is not
+/// empty, and nothing in it changes. A folder without scene files (or a new one) is fine.
 #[test]
 fn synth_refuses_a_folder_that_holds_a_scene() {
     let dir = tempfile::tempdir().unwrap();
@@ -289,10 +288,9 @@ fn synth_refuses_a_folder_that_holds_a_scene() {
     assert_eq!(run_in(d, &["synth", "stale", "--width", "64", "--height", "48"]).status.code(), Some(2));
 }
 
-/// `kill -TERM` (Slurm at a task's time limit) or Ctrl-C during a batch left its `.jem-lock-*` behind: the
-/// resubmitted task, on another node, was refused for good. Now the run removes its locks and unfinished files,
-/// says so, and exits 143 (SIGTERM) or 130 (SIGINT); no partial result is left, and a rerun goes through. The same
-/// for `jem degrade`'s temporary tree.
+/// `kill -TERM` (Slurm at a task's time limit) or Ctrl-C during a batch: a lock left behind would refuse the
+/// resubmitted task on another node. The run removes its locks and unfinished files, says so, and exits 143
+/// (SIGTERM) or 130 (SIGINT), leaving no partial result. The same for `jem degrade`'s temporary tree.
 #[test]
 fn a_signal_releases_the_locks_and_leaves_no_partial_output() {
     let dir = tempfile::tempdir().unwrap();
@@ -335,9 +333,9 @@ fn a_signal_releases_the_locks_and_leaves_no_partial_output() {
 }
 
 /// A Slurm task killed on node-a left `.jem-lock-3-of-4`; the same task of the same job, requeued (Slurm's restart
-/// count one higher), landed on another node, where another host's lock always counted as live: "another jem run
-/// (pid 6302 on node-a) is writing these results". A rerun of the same job's same shard now takes over its own
-/// lock, with a note; the first run of another job, the same run count or another shard is still refused.
+/// count one higher), lands on another node, where another host's lock cannot be checked. A rerun of the same
+/// job's same shard takes over its own lock, with a note (Slurm runs a job once at a time); a run of another job,
+/// or of the same run count, is refused: "another jem run (pid 6302 on node-a) is writing these results".
 #[test]
 fn a_rerun_of_the_same_slurm_task_takes_over_its_own_lock() {
     let dir = tempfile::tempdir().unwrap();
@@ -379,10 +377,9 @@ fn a_rerun_of_the_same_slurm_task_takes_over_its_own_lock() {
     assert!(leftovers(d).is_empty(), "{:?}", leftovers(d));
 }
 
-/// A lock that is a folder, a dangling symbolic link, not UTF-8, or a FIFO: "could not take the lock (other runs
-/// are taking it at the same time)" without the file's name, one bad scene stopped a whole MiddEval3 batch, and a
-/// FIFO made `batch` and `eval` wait until killed; `eval` ignored the non-UTF-8 lock that `batch` refused. Now
-/// each is named, only its scene fails, nothing waits, and `eval` warns about each as `batch` refuses it.
+/// A lock that is a folder, a dangling symbolic link, not UTF-8, or a FIFO (which a plain read waits on until a
+/// writer comes): each is named with what it is, only its scene fails (the others run), nothing waits, and
+/// `eval` warns about each, as `batch` refuses it.
 #[test]
 fn unreadable_locks_fail_their_scene_and_never_hang() {
     let dir = tempfile::tempdir().unwrap();
@@ -425,9 +422,9 @@ fn unreadable_locks_fail_their_scene_and_never_hang() {
     }
 }
 
-/// Results accepted by their data set's fingerprint after a move kept naming the old folder in `source.txt`: once
-/// the data set grew (its fingerprint changed), they were "the results of /…/MV1/training", a folder that no longer
-/// existed. The batch that accepts a moved tree now rewrites `source.txt` (atomically) to name where it is.
+/// Results accepted by their data set's fingerprint after a move: if `source.txt` kept naming the old folder, they
+/// would be "the results of /…/MV1/training" (gone) once the data set grows and its fingerprint changes. The batch
+/// that accepts a moved tree rewrites `source.txt` (atomically) to name where it is.
 #[test]
 fn a_moved_data_set_is_named_in_its_results_source_file() {
     let dir = tempfile::tempdir().unwrap();
@@ -450,8 +447,8 @@ fn a_moved_data_set_is_named_in_its_results_source_file() {
     assert_eq!(files_in(&d.join("R/A/training")), ["disp_0", "source.txt", "time"]);
 }
 
-/// Argument errors printed 3 to 6 lines (a tip, the usage, "For more information, try '--help'.") where every
-/// other error is the one promised `error:` line.
+/// An argument error is one `error:` line, as every other error (not clap's 3 to 6: a tip, the usage, "For more
+/// information, try '--help'."); `--help` still prints the help.
 #[test]
 fn argument_errors_are_one_line() {
     let dir = tempfile::tempdir().unwrap();
@@ -471,8 +468,8 @@ fn argument_errors_are_one_line() {
     assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("Usage: jem batch"));
 }
 
-/// `--set meanfield.iterations=1e30` read "invalid type: floating point `1000000000000000000000000000000.0`,
-/// expected usize": now what the key takes, and the value as given.
+/// `--set meanfield.iterations=1e30`: the message says what the key takes and quotes the value as given (not
+/// "invalid type: floating point `1000000000000000000000000000000.0`, expected usize").
 #[test]
 fn a_value_of_the_wrong_type_says_what_the_key_takes() {
     let dir = tempfile::tempdir().unwrap();
@@ -488,8 +485,8 @@ fn a_value_of_the_wrong_type_says_what_the_key_takes() {
     }
 }
 
-/// An empty or garbage `source.txt` in a results folder read as "holds the results of another data set": now it
-/// is named as unreadable, with what would fix it.
+/// An empty or garbage `source.txt` in a results folder names no data set: it is named as unreadable, with what
+/// would fix it, not taken for "the results of another data set".
 #[test]
 fn an_empty_or_garbage_source_file_is_named_as_unreadable() {
     let dir = tempfile::tempdir().unwrap();
@@ -515,8 +512,8 @@ fn an_empty_or_garbage_source_file_is_named_as_unreadable() {
     }
 }
 
-/// `jem eval` closed with "N without a usable result" when what was missing was the ground truth's mask or the
-/// scene's calib.txt: now the closing line tells them apart, as the list above it does.
+/// `jem eval`'s closing line tells scenes without a usable result from scenes whose mask or calib.txt is missing,
+/// as the list above it does.
 #[test]
 fn eval_says_when_the_ground_truth_or_calib_is_missing() {
     let dir = tempfile::tempdir().unwrap();

@@ -315,8 +315,9 @@ fn peak_rss_bytes() -> Option<u64> {
 ///
 /// ``left``, ``right``: numpy arrays H×W (grey) or H×W×3 (RGB order; OpenCV loads BGR: ``img[..., ::-1]``),
 /// uint8 or uint16 in either byte order (16-bit values are divided by 257, as a 16-bit PNG is), any strides; grey
-/// and colour may be mixed. They are checked against ``max_memory`` from their shapes before they are copied. ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair as ``jem`` does without a
-/// calib.txt (up to the width). ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one
+/// and colour may be mixed; they are checked against ``max_memory`` from their shapes before they are copied.
+/// ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair as ``jem`` does without a calib.txt (up
+/// to the width). ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one
 /// (measured instead, up to it, when it is half the width or more); ``ndisp`` wins. ``config``: a TOML file's
 /// path, or a mapping in the TOML's shape (``{"meanfield": {"iterations": 5}}``; any ``Mapping``). ``overrides``:
 /// a mapping ``{"section.key": value}``, applied last, as ``--set``. ``threads``: worker threads for this call

@@ -1,5 +1,5 @@
-"""Input the module refused or mishandled: special files as outputs, arrays too large for the memory limit, thread
-counts, byte orders, mappings and float types the stub promises, and override values of the wrong type."""
+"""Special files as outputs, arrays too large for the memory limit, thread counts, byte orders, the mappings and
+float types the stub promises, and override values of the wrong type."""
 
 import os
 import stat
@@ -17,8 +17,8 @@ SMALL = np.zeros((16, 40, 3), np.uint8)
 
 
 def test_write_pfm_refuses_a_device_node_or_a_fifo(tmp_path):
-    """A rename would replace a device or a FIFO with a plain file (as root, `jem.write_pfm('/dev/null', a)`
-    replaced the system's /dev/null): refused, and the file is left as it was."""
+    """A rename would replace a device or a FIFO with a plain file (as root, `jem.write_pfm('/dev/null', a)` the
+    system's /dev/null): refused, and the file is left as it is."""
     fifo = tmp_path / "fifo.pfm"
     os.mkfifo(fifo)
     link = tmp_path / "null.pfm"
@@ -45,7 +45,7 @@ def run_python(code, limit_address_space=None):
 
 
 def test_memory_is_checked_before_the_arrays_are_copied():
-    """An 8000×8000×3 input with max_memory=64 MiB is refused from its shape: no copy (it peaked at ~2 GB)."""
+    """An 8000×8000×3 input with max_memory=64 MiB is refused from its shape, before a copy (which takes ~2 GB)."""
     proc = run_python(
         "a = np.broadcast_to(np.uint8(7), (8000, 8000, 3))\n"
         "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
@@ -63,9 +63,9 @@ def test_memory_is_checked_before_the_arrays_are_copied():
 
 @pytest.mark.parametrize("max_memory", [None, 1 << 40])
 def test_an_allocation_failure_is_a_memory_error_not_an_abort(max_memory):
-    """A 25000×25000×3 (broadcast) pair under a 2.5 GB address-space limit: a MemoryError, the interpreter alive
-    (it aborted: "memory allocation of 1875000000 bytes failed", SIGABRT). The default limit stays within the
-    address space; a larger one given makes the copy itself fail, as a MemoryError."""
+    """A 25000×25000×3 (broadcast) pair under a 2.5 GB address-space limit: a MemoryError and the interpreter alive,
+    never an abort ("memory allocation of 1875000000 bytes failed", SIGABRT). The default limit stays within the
+    address space; with a larger one given, the copy itself fails, as a MemoryError."""
     proc = run_python(
         "a = np.broadcast_to(np.uint8(7), (25000, 25000, 3))\n"
         "try:\n"
@@ -81,7 +81,7 @@ def test_an_allocation_failure_is_a_memory_error_not_an_abort(max_memory):
 
 @pytest.mark.parametrize("threads", [1000, 5000])
 def test_threads_are_capped_as_on_the_command_line(threads, cli, tmp_path):
-    """`threads=1000` took 4-7 s on an 80×60 pair, 5000 raised RuntimeError: refused as `--threads` is."""
+    """Thousands of threads only add switching (or fail to start): refused with the bound `--threads` has."""
     with pytest.raises(ValueError, match=rf"invalid threads = {threads} \(expected 1 to \d+ \(4 per core"):
         jem.match(SMALL, SMALL, ndisp=8, threads=threads)
     proc = cli("eval", tmp_path, "--alg", "A", "--threads", threads, check=False)
@@ -89,7 +89,7 @@ def test_threads_are_capped_as_on_the_command_line(threads, cli, tmp_path):
 
 
 def test_big_endian_uint16_is_read_as_its_values(synth_pair):
-    """`>u2` arrays (FITS, network data) were refused as "dtype >u2 is not supported": the same map as `<u2`."""
+    """`>u2` arrays (FITS, network data) give the same map as `<u2` ones."""
     native = [v.astype("<u2") * 257 for v in synth_pair]
     swapped = [v.astype(">u2") for v in native]
     assert swapped[0].dtype.byteorder in "><" and not swapped[0].dtype.isnative
@@ -99,7 +99,7 @@ def test_big_endian_uint16_is_read_as_its_values(synth_pair):
 
 
 def test_any_mapping_is_a_config_or_overrides(synth_pair):
-    """The stub promises Mapping: a `types.MappingProxyType` (and one nested in a config) was refused."""
+    """The stub promises Mapping: a `types.MappingProxyType` (also nested in a config) is one."""
     left, right = synth_pair
     want = jem.match(left, right, ndisp=48, config={"meanfield": {"iterations": 1}}, overrides={"model": "wta"})
     proxy = types.MappingProxyType
@@ -111,7 +111,7 @@ def test_any_mapping_is_a_config_or_overrides(synth_pair):
 
 
 def test_float16_and_other_floats_are_written_and_converted(tmp_path):
-    """The stub promises np.floating: float16 was refused by write_pfm and depth."""
+    """The stub promises np.floating: float16 (and longdouble, big-endian float32) are converted to float32."""
     values = np.array([[0.5, 1.25], [np.inf, 65504.0]], np.float16)
     for dtype in (np.float16, np.longdouble, ">f4"):
         jem.write_pfm(tmp_path / "x.pfm", values.astype(dtype))
@@ -121,7 +121,7 @@ def test_float16_and_other_floats_are_written_and_converted(tmp_path):
 
 
 def test_an_absurd_override_says_what_is_wrong(tmp_path, cli):
-    """An override of 1e30 read "invalid type: floating point `1e30`, expected usize": now what the key takes."""
+    """An override of 1e30 says what the key takes (not "invalid type: floating point …, expected usize")."""
     for value, message in [
         (1e30, r"`meanfield.iterations` takes a whole number >= 0 \(like 5\), not 1e\+30"),
         (10**30, r"meanfield.iterations: 1000000000000000000000000000000 is too large"),
@@ -133,8 +133,8 @@ def test_an_absurd_override_says_what_is_wrong(tmp_path, cli):
 
 
 def test_the_dask_example_refuses_a_fifo_for_a_result(tmp_path, cli):
-    """examples/batch_dask.py renamed its files into place itself: a FIFO where disp0NAME.pfm goes is refused (that
-    scene fails, the other runs) and left as it was."""
+    """examples/batch_dask.py renames its files into place itself: a FIFO where disp0NAME.pfm goes is refused (that
+    scene fails, the other runs) and left as it is."""
     for seed in (1, 2):
         cli("synth", tmp_path / f"s{seed}", "--width", 64, "--height", 48, "--ndisp", 16, "--seed", seed)
     fifo = tmp_path / "s1" / "disp0PY.pfm"

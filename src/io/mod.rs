@@ -429,7 +429,8 @@ mod tests {
     }
 
     /// A FIFO, a character device (a symbolic link to `/dev/null`, and a device node made with `mknod` where this
-    /// process may) are refused by every writer, before any temporary file is made, and left as they are.
+    /// process may) are refused by every writer and left as they are; no temporary file is left, and the other
+    /// file of an all-or-none pair is not written.
     #[test]
     fn writing_refuses_a_device_node_or_a_fifo() {
         use std::os::unix::fs::FileTypeExt;

@@ -1,5 +1,6 @@
-//! The config deserializer's type errors in the user's words: `invalid type: floating point `1e30`, expected
-//! usize; in `meanfield.iterations`` becomes "`meanfield.iterations` takes a whole number (like 5), not 1e30".
+//! The config deserializer's type errors in the user's words: "invalid type: floating point 1e30, expected usize;
+//! in meanfield.iterations" says nothing a user knows; "`meanfield.iterations` takes a whole number >= 0 (like 5),
+//! not 1e30" does.
 
 /// `msg` (a deserializer's message, on one line) with its type error, if any, said as what the key takes and what it
 /// was given; the value as the `--set` item that gave it wrote it, when one did.
