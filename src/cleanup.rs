@@ -3,7 +3,7 @@
 //!
 //! Each is registered here while it exists. The `jem` binary turns SIGTERM and SIGINT into a call to
 //! [`remove_all`], which removes them, and then ends the process while it still holds the registry. Renames into
-//! place happen while the registry is held ([`hold`]), so a signal waits for them: files written as one are all
+//! place happen while the registry is held (`hold`), so a signal waits for them: files written as one are all
 //! renamed, or none (a temporary file removed under a write stays unrenamed, and the write fails).
 
 use std::path::{Path, PathBuf};
