@@ -75,15 +75,17 @@ def match(
     """The left view's disparity map of a rectified pair: float32 H×W, ``inf`` where invalid, exactly the map
     ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings.
 
-    ``left``, ``right``: H×W (grey) or H×W×3 (RGB order; OpenCV loads BGR), uint8 or uint16, any strides.
+    ``left``, ``right``: H×W (grey) or H×W×3 (RGB order; OpenCV loads BGR), uint8 or uint16 (either byte order),
+    any strides; checked against ``max_memory`` from their shapes before they are copied.
     ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair, as ``jem`` does without calib.txt.
-    ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one. ``config``: a TOML path or a dict in
-    the TOML's shape. ``overrides``: ``{"section.key": value}`` as ``--set``. ``threads``: workers for this call.
-    ``max_memory``: bytes; larger runs go in tiles. With ``confidence=True`` also the confidence map, with
+    ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one. ``config``: a TOML path or a mapping in
+    the TOML's shape. ``overrides``: ``{"section.key": value}`` as ``--set``. ``threads``: workers for this call
+    (at most 4 per core, at least 16). ``max_memory``: bytes; larger runs go in tiles. With ``confidence=True`` also the confidence map, with
     ``return_info=True`` also a dict (ndisp, ndisp_measured, tiled, noise, timings, seconds, memory_planned,
     peak_rss). The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
 
-    Raises ValueError (shape, dtype, range, config), MemoryError (fits neither whole nor in tiles), OSError.
+    Raises ValueError (shape, dtype, range, config, threads), MemoryError (fits neither whole nor in tiles, or
+    cannot be allocated), OSError.
     Warns (UserWarning) for a value the image cannot use, held to a bound (post.sps.segments).
     """
 
@@ -94,7 +96,8 @@ def read_pfm(path: _Path) -> _Map:
     """A PFM file as float32 H×W, top row first, ``inf`` kept."""
 
 def write_pfm(path: _Path, array: npt.NDArray[np.floating[Any]]) -> None:
-    """Writes a 2-D float array as a little-endian greyscale PFM (Middlebury rows bottom-up), atomically."""
+    """Writes a 2-D float array (any floating type, as float32) as a little-endian greyscale PFM (Middlebury rows
+    bottom-up), atomically; an existing path that is not a regular file (a device, a FIFO) raises ValueError."""
 
 def read_image(path: _Path) -> _Image:
     """A PNG, PPM/PGM or JPEG as uint8 or uint16, H×W (grey) or H×W×3 (RGB), as ``jem`` reads it."""

@@ -362,8 +362,9 @@ pub const COPIED_FILES: [&str; 5] = ["calib.txt", "disp0GT.pfm", "mask0nocc.png"
 /// is itself a scene becomes `out/NAME`), and writes `out/degrade.txt` with the recipe, seed and jem version.
 /// Each scene's noise comes from `seed` and the scene's relative path, so scenes differ and a rerun is
 /// byte-identical. The tree is built in a temporary sibling folder and renamed into place at the end: a failed
-/// run leaves nothing behind, and the temporary tree of a killed run on this machine is removed by the next run
-/// into the same `out` (`sweep_stale`). Returns the degraded scene folders.
+/// run leaves nothing behind, nor does one stopped by a signal the `jem` binary handles ([`crate::cleanup`]), and
+/// the temporary tree of a killed run on this machine is removed by the next run into the same `out`
+/// (`sweep_stale`). Returns the degraded scene folders.
 ///
 /// # Errors
 /// [`Error::Input`] if `out` exists and is not an empty folder, or `out` and `src` contain one another, or `src`
@@ -403,6 +404,8 @@ pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Resul
         format!(".{}.jem-tmp-{}-", out.file_name().unwrap_or_default().to_string_lossy(), crate::process::host_name());
     sweep_stale(&parent, &prefix);
     let tmp = parent.join(format!("{prefix}{}", std::process::id()));
+    // A signal that stops the run removes the tree (crate::cleanup); the rename into place waits for it.
+    crate::cleanup::hold().add_tree(&tmp);
     let result = (|| {
         std::fs::create_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
         let rels: Vec<PathBuf> = scenes
@@ -418,20 +421,23 @@ pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Resul
             .try_for_each(|(scene, rel)| degrade_scene(scene, &tmp.join(rel), rel, recipe, seed))?;
         let note = format!("recipe {recipe}\nseed {seed}\njem {}\n", env!("CARGO_PKG_VERSION"));
         crate::io::write_atomic(&tmp.join("degrade.txt"), note.as_bytes())?;
+        let _held = crate::cleanup::hold();
         if out.exists() {
             std::fs::remove_dir(out).map_err(|e| Error::io(out, e))?;
         }
         std::fs::rename(&tmp, out).map_err(|e| Error::io(out, e))?;
         Ok(rels.iter().map(|r| out.join(r)).collect())
     })();
+    let mut held = crate::cleanup::hold();
     if result.is_err() {
         let _ = std::fs::remove_dir_all(&tmp);
     }
+    held.forget(&tmp);
     result
 }
 
 /// Removes the temporary trees `parent/PREFIX<pid>` that an earlier run on this machine left when it was killed
-/// (SIGTERM, SIGKILL: it could not clean up): those whose process is gone (`/proc/<pid>` missing). Nothing is
+/// (SIGKILL, a power cut: it could not clean up): those whose process is gone (`/proc/<pid>` missing). Nothing is
 /// removed where `/proc` cannot tell (no `/proc/self`).
 fn sweep_stale(parent: &Path, prefix: &str) {
     if !crate::process::proc_available() {

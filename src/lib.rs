@@ -45,6 +45,7 @@
 #![warn(unreachable_pub)]
 
 pub mod batch;
+pub mod cleanup;
 mod condition;
 mod cost;
 pub mod dataset;
@@ -68,6 +69,7 @@ mod scale;
 mod setup;
 pub mod synth;
 mod table;
+pub mod threads;
 pub mod viz;
 
 pub use error::{Error, Result};

@@ -7,7 +7,10 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
-    let args = cli::Cli::parse_from(cli::global_flags_after_subcommand(std::env::args_os().collect()));
+    let args = match cli::Cli::try_parse_from(cli::global_flags_after_subcommand(std::env::args_os().collect())) {
+        Ok(args) => args,
+        Err(e) => return cli::usage_error(e),
+    };
     match cli::run(args) {
         Ok(code) => code,
         Err(err) => {

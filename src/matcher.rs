@@ -156,6 +156,31 @@ impl Matcher {
         self.run(&plan, on_progress)
     }
 
+    /// Checks, before anything is allocated, that a pair of views of these sizes (width, height) can be matched:
+    /// equal sizes, at least 2 pixels wide, and within the memory limit with `input_bytes` for holding the input
+    /// (the range measurement and the run included, as [`Matcher::read_pair`] checks from the files' headers). For
+    /// callers that convert their own pixels ([`RgbImage::from_channels`]): check first, then convert.
+    ///
+    /// # Errors
+    /// [`crate::Error::SizeMismatch`], [`crate::Error::Input`] for empty or 1-pixel-wide views,
+    /// [`crate::Error::OutOfMemory`] when the pair cannot fit.
+    pub fn check_size(&self, left: (usize, usize), right: (usize, usize), input_bytes: u64) -> Result<()> {
+        let (w, h) = left;
+        if left != right {
+            return Err(crate::Error::SizeMismatch { left, right });
+        }
+        if w == 0 || h == 0 {
+            return Err(crate::Error::Input("the images are empty (0 pixels)".into()));
+        }
+        if w < 2 {
+            return Err(crate::Error::Input(format!(
+                "the images are {w}x{h}; a stereo pair must be at least 2 pixels wide"
+            )));
+        }
+        let header = crate::io::ImageHeader { width: w, height: h, load_bytes: input_bytes };
+        setup::check_before_decode(&header, self.ndisp, &self.params, self.max_memory_bytes).map(|_| ())
+    }
+
     /// Reads a pair of image files (PNG, PPM/PGM or JPEG, 8 or 16 bit) as the matcher would match them: both
     /// headers are checked against the memory limit first (the loading, the range measurement and the run), and
     /// neither image is decoded when the pair cannot fit.
@@ -257,8 +282,6 @@ mod tests {
 
     #[test]
     fn invalid_parameters_are_refused_when_the_matcher_is_built() {
-        let mut params = Params::default();
-        params.downscale = 0;
-        assert!(Matcher::new(params).is_err());
+        assert!(Matcher::new(Params { downscale: 0, ..Params::default() }).is_err());
     }
 }

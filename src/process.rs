@@ -12,6 +12,15 @@ pub(crate) fn host_name() -> String {
     name.trim().chars().filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '.')).collect()
 }
 
+/// The PID namespace of this process (`/proc/self/ns/pid`'s link target, `pid:[4026531836]`); `None` where
+/// there is none to read. Two processes' pids can be compared only within one namespace: in a container (or
+/// `unshare --pid`) a live run may be pid 1, which on the host is another process.
+pub(crate) fn pid_namespace() -> Option<String> {
+    let target = std::fs::read_link("/proc/self/ns/pid").ok()?;
+    let text = target.to_str()?;
+    (text.starts_with("pid:[") && text.ends_with(']')).then(|| text.to_string())
+}
+
 /// Whether `/proc` describes this machine's processes at all (without it nothing here can tell).
 pub(crate) fn proc_available() -> bool {
     Path::new("/proc/self").exists()
@@ -46,6 +55,17 @@ pub(crate) fn file_size_limit() -> Option<u64> {
     line["Max file size".len()..].split_whitespace().next()?.parse().ok()
 }
 
+/// The bytes of address space this process may still map under its soft `ulimit -v` (from `/proc/self/limits`
+/// and the `VmSize` of `/proc/self/status`); `None` when there is no such limit or it cannot be read.
+pub(crate) fn address_space_room() -> Option<u64> {
+    let limits = std::fs::read_to_string("/proc/self/limits").ok()?;
+    let line = limits.lines().find(|l| l.starts_with("Max address space"))?;
+    let limit: u64 = line["Max address space".len()..].split_whitespace().next()?.parse().ok()?;
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let size_kib: u64 = status.lines().find(|l| l.starts_with("VmSize:"))?.split_whitespace().nth(1)?.parse().ok()?;
+    Some(limit.saturating_sub(size_kib * 1024))
+}
+
 /// The machine's physical memory in bytes (`MemTotal` of `/proc/meminfo`).
 pub(crate) fn physical_memory_bytes() -> Option<u64> {
     let meminfo = std::fs::read_to_string("/proc/meminfo").ok()?;
@@ -67,6 +87,8 @@ mod tests {
         assert!(process_start("self").is_some());
         assert!(peak_rss_bytes().is_some_and(|b| b > 0));
         assert!(physical_memory_bytes().is_some_and(|b| b > 0));
+        let ns = pid_namespace().expect("/proc/self/ns/pid");
+        assert!(ns.starts_with("pid:[") && ns.ends_with(']'), "{ns}");
         // A pid above the kernel's pid_max (at most 2^22) names no process.
         assert_eq!(pid_exists(1 << 23), Some(false));
     }

@@ -24,7 +24,7 @@
 //! # Files ([`write_scene`])
 //! `im0.png`, `im1.png` (8-bit RGB), `calib.txt` (Middlebury keys; `f = width`, principal point at the image
 //! centre, `doffs = 0`, `baseline = 100`, `vmin`/`vmax` = floor/ceil of the ground truth's range),
-//! `disp0GT.pfm`, `mask0nocc.png` (8-bit grey). All are written atomically.
+//! `disp0GT.pfm`, `mask0nocc.png` (8-bit grey), written all or none, never into a folder that holds a scene.
 //!
 //! # Determinism and cost
 //! One SplitMix64 stream (`crate::rng`) seeded by [`SynthParams::seed`] draws the scene; textures are hashes of
@@ -147,28 +147,73 @@ fn render(scene: &Scene, params: &SynthParams) -> SynthScene {
 }
 
 /// Writes `im0.png`, `im1.png`, `calib.txt`, `disp0GT.pfm` and `mask0nocc.png` into `dir` (created if missing),
-/// each atomically.
+/// all or none ([`crate::io::write_all_or_none`]). A folder that already holds a scene is refused
+/// ([`check_scene_folder`]).
 ///
 /// # Errors
-/// [`Error::Io`] or [`Error::Image`] naming the file.
+/// [`Error::Input`] for a folder holding a scene; [`Error::Io`] or [`Error::Image`] naming the file.
 pub fn write_scene(dir: &Path, scene: &SynthScene) -> Result<()> {
+    check_scene_folder(dir)?;
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let (w, h) = scene.left.dims();
-    crate::io::png::write_rgb8_png(&dir.join("im0.png"), w, h, &interleave_rgb8(&scene.left))?;
-    crate::io::png::write_rgb8_png(&dir.join("im1.png"), w, h, &interleave_rgb8(&scene.right))?;
-    crate::io::write_atomic(&dir.join("calib.txt"), calib_text(scene).as_bytes())?;
-    crate::io::pfm::write_pfm(&dir.join("disp0GT.pfm"), &scene.gt)?;
-    let mask_path = dir.join("mask0nocc.png");
-    let mut png = Vec::new();
-    image::ImageEncoder::write_image(
-        image::codecs::png::PngEncoder::new(&mut png),
-        &scene.mask.data,
-        w as u32,
-        h as u32,
-        image::ExtendedColorType::L8,
-    )
-    .map_err(|source| Error::Image { path: mask_path.clone(), source })?;
-    crate::io::write_atomic(&mask_path, &png)
+    let png = |name: &str, data: &[u8], colour| {
+        let mut bytes = Vec::new();
+        image::ImageEncoder::write_image(
+            image::codecs::png::PngEncoder::new(&mut bytes),
+            data,
+            w as u32,
+            h as u32,
+            colour,
+        )
+        .map_err(|source| Error::Image { path: dir.join(name), source })
+        .map(|()| bytes)
+    };
+    let rgb = image::ExtendedColorType::Rgb8;
+    let files = [
+        ("im0.png", png("im0.png", &interleave_rgb8(&scene.left), rgb)?),
+        ("im1.png", png("im1.png", &interleave_rgb8(&scene.right), rgb)?),
+        ("calib.txt", calib_text(scene).into_bytes()),
+        ("disp0GT.pfm", crate::io::pfm::encode_pfm(&scene.gt)),
+        ("mask0nocc.png", png("mask0nocc.png", &scene.mask.data, image::ExtendedColorType::L8)?),
+    ];
+    let paths: Vec<std::path::PathBuf> = files.iter().map(|(name, _)| dir.join(name)).collect();
+    let refs: Vec<(&Path, &[u8])> = paths.iter().zip(&files).map(|(p, (_, b))| (p.as_path(), b.as_slice())).collect();
+    crate::io::write_all_or_none(&refs)
+}
+
+/// Refuses a folder that already holds files of a scene (images, calib.txt, ground truth, masks, results
+/// `disp0NAME.pfm`/`timeNAME.txt`), as `jem degrade` refuses a folder that is not empty: a new scene written over
+/// them would replace the old one, and leave its results beside images they do not belong to. A missing folder,
+/// or one holding none of them, is fine.
+///
+/// # Errors
+/// [`Error::Input`] naming the folder and the files found.
+pub fn check_scene_folder(dir: &Path) -> Result<()> {
+    let Ok(entries) = std::fs::read_dir(dir) else { return Ok(()) };
+    let mut found: Vec<String> = entries
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|name| is_scene_file(name))
+        .collect();
+    if found.is_empty() {
+        return Ok(());
+    }
+    found.sort();
+    Err(Error::Input(format!(
+        "{}: already holds a scene ({}); write the new one into a new or empty folder",
+        dir.display(),
+        found.join(", ")
+    )))
+}
+
+/// Whether `name` is one of the files a MiddEval3 scene folder holds.
+fn is_scene_file(name: &str) -> bool {
+    let result = |prefix: &str, ext: &str| name.starts_with(prefix) && name.ends_with(ext);
+    crate::dataset::SCENE_FILES.contains(&name)
+        || crate::degrade::COPIED_FILES.contains(&name)
+        || result("disp0", ".pfm")
+        || result("disp1", ".pfm")
+        || result("time", ".txt")
 }
 
 /// Middlebury `calib.txt`: identical cameras with focal length = width, principal point at the centre.

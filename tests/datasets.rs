@@ -400,6 +400,11 @@ fn host() -> String {
     name.trim().chars().filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '.')).collect()
 }
 
+/// The lock line of this process's PID namespace: a pid is checked only against a lock of the same namespace.
+fn pidns() -> String {
+    format!("pidns {}\n", std::fs::read_link("/proc/self/ns/pid").unwrap().display())
+}
+
 /// Issue 41, item 5: KITTI's training and testing splits share frame names; two batches started together, one per
 /// split, each write their own results folder (`results/A/training/`, `results/A/testing/`, each with its
 /// `source.txt`) and both succeed (1ea02dd: one `results/A/` for both; in 3 of 5 tries both exited 0 and one run's
@@ -463,7 +468,7 @@ fn issue41_each_split_its_own_results_folder_and_a_lock() {
     let mut gone = std::process::Command::new("true").spawn().unwrap();
     let dead = gone.id();
     gone.wait().unwrap();
-    std::fs::write(&lock, format!("pid {dead}\nhost {}\n", host())).unwrap();
+    std::fs::write(&lock, format!("pid {dead}\nhost {}\n{}", host(), pidns())).unwrap();
     let out = batch(&training, &[]).wait_with_output().unwrap();
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(stderr(&out).contains(&format!("took over the lock of pid {dead}")), "{}", stderr(&out));
@@ -536,7 +541,7 @@ fn eval_warns_while_a_batch_holds_the_results() {
     assert!(out.status.success(), "{}", stderr(&out));
     let live = format!("pid {}\nhost {}\n", std::process::id(), host());
     let mut child = std::process::Command::new("true").spawn().unwrap();
-    let dead = format!("pid {}\nhost {}\n", child.id(), host());
+    let dead = format!("pid {}\nhost {}\n{}", child.id(), host(), pidns());
     child.wait().unwrap();
     for (tree, lock) in
         [("k/training", dir.path().join("k/results/A/training/.jem-lock")), ("trainingQ", scene.join(".jem-lock-A"))]

@@ -63,8 +63,8 @@ fn synth_defaults_and_bad_sizes() {
 
 /// The committed example (the pair and its calib.txt; its ground truth and mask are not committed, the tests
 /// render them) is what the current renderer produces. If this fails after a deliberate change to the renderer,
-/// regenerate it: `cargo run --release -- synth examples/synth --seed 1`, then delete disp0GT.pfm and
-/// mask0nocc.png there.
+/// regenerate it: `cargo run --release -- synth NEW --seed 1` into a new folder, and copy its im0.png, im1.png and
+/// calib.txt into examples/synth.
 #[test]
 fn committed_example_is_up_to_date() {
     let tmp = tempfile::tempdir().unwrap();

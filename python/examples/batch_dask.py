@@ -57,9 +57,19 @@ def calib_ndisp(path):
     raise ValueError(f"{path}: no ndisp")
 
 
+def check_replaceable(path):
+    """Refuses a destination that exists and is not a regular file (a device, a FIFO, also through a symbolic
+    link): a rename would put a plain file in its place, as jem refuses to."""
+    if path.exists() and not path.is_file():
+        raise ValueError(f"{path}: not a regular file; jem writes only regular files and will not replace it")
+
+
 def write_all_or_none(files):
     """Writes each (path, writer) to a hidden temporary file beside it, then renames them all into place; on any
-    failure the temporary files are removed and no destination is touched."""
+    failure the temporary files are removed and no destination is touched. A destination that is not a regular
+    file is refused before anything is written."""
+    for path, _ in files:
+        check_replaceable(path)
     staged = []
     try:
         for path, write in files:
@@ -67,6 +77,7 @@ def write_all_or_none(files):
             staged.append((tmp, path))
             write(tmp)
         for tmp, path in staged:
+            check_replaceable(path)
             os.replace(tmp, path)
     finally:
         for tmp, _ in staged:

@@ -1,21 +1,21 @@
 //! The `jem` Python module: numpy arrays in, numpy arrays out, over the `jem` library.
 //!
 //! Nothing here decides how a pair is matched: the range, the whole-or-tiles choice and the run are
-//! [`jem::Matcher`]'s (what `jem match` calls), the config is [`jem::Params::load`], the pixel conversion is
-//! [`jem::io::image_from_dynamic`] (what the image loader calls), so an array gives the map the command line
-//! writes for the same file, byte for byte. This file converts arrays and
-//! errors, releases the GIL around the work and keeps panics from crossing into Python.
+//! [`jem::Matcher`]'s (what `jem match` calls), the config is [`jem::Params::load`], and the memory check before the
+//! arrays are copied is [`jem::Matcher::check_size`] (what `jem match` checks from the image headers), so an array
+//! gives the map the command line writes for the same file, byte for byte. This file converts arrays (as
+//! [`jem::io::read_image`] converts a decoded image: 8-bit values as they are, 16-bit ones divided by 257) and
+//! errors, releases the GIL around the work and keeps panics and failed allocations from crossing into Python.
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
 
-use image::{DynamicImage, ImageBuffer, Luma, Rgb};
-use jem::{Error, Matcher, NdispSource, Params, Plane};
+use jem::{Error, Matcher, NdispSource, Params, Plane, RgbImage};
 use numpy::ndarray::Array2;
-use numpy::{PyArray2, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
+use numpy::{PyArray2, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList, PyString};
+use pyo3::types::{PyDict, PyInt, PyList, PyMapping, PyString};
 
 /// A `jem::Error` as the Python exception a caller expects: `MemoryError` for a run that fits the memory limit
 /// neither whole nor in tiles, the matching `OSError` subclass (`FileNotFoundError`, ...) for a file the
@@ -65,42 +65,108 @@ fn guarded<T: Send>(threads: Option<usize>, work: impl FnOnce() -> jem::Result<T
     }
 }
 
-/// A view as a decoded image: H×W grey or H×W×3 RGB, 8 or 16 bit, any strides (copied in logical order).
-fn to_image(array: &Bound<'_, PyAny>, name: &str) -> PyResult<DynamicImage> {
-    let untyped = array.cast::<PyUntypedArray>().map_err(|_| {
-        let kind = array.get_type().name().map_or("?".to_string(), |n| n.to_string());
-        PyValueError::new_err(format!("{name}: expected a numpy array, got {kind}"))
-    })?;
-    let shape = untyped.shape().to_vec();
-    let (h, w, colour) = match shape[..] {
-        [h, w] => (h, w, false),
-        [h, w, 3] => (h, w, true),
-        _ => {
-            return Err(PyValueError::new_err(format!(
-                "{name}: shape {shape:?} is neither H×W (grey) nor H×W×3 (RGB)"
-            )));
+/// An image array as its shape and dtype tell it, before any of its data is read.
+struct ImageArray<'a, 'py> {
+    array: &'a Bound<'py, PyAny>,
+    name: &'static str,
+    width: usize,
+    height: usize,
+    colour: bool,
+    /// 16-bit samples (else 8-bit).
+    sixteen: bool,
+    /// 16-bit samples in the other byte order (`>u2` on a little-endian machine): converted by numpy first.
+    swapped: bool,
+}
+
+impl<'a, 'py> ImageArray<'a, 'py> {
+    /// H×W grey or H×W×3 RGB, uint8 or uint16 in either byte order, any strides.
+    fn inspect(array: &'a Bound<'py, PyAny>, name: &'static str) -> PyResult<Self> {
+        let untyped = array.cast::<PyUntypedArray>().map_err(|_| {
+            let kind = array.get_type().name().map_or("?".to_string(), |n| n.to_string());
+            PyValueError::new_err(format!("{name}: expected a numpy array, got {kind}"))
+        })?;
+        let shape = untyped.shape().to_vec();
+        let (height, width, colour) = match shape[..] {
+            [h, w] => (h, w, false),
+            [h, w, 3] => (h, w, true),
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "{name}: shape {shape:?} is neither H×W (grey) nor H×W×3 (RGB)"
+                )));
+            }
+        };
+        let dtype = untyped.dtype();
+        let (sixteen, swapped) = match (dtype.kind(), dtype.itemsize()) {
+            (b'u', 1) => (false, false),
+            (b'u', 2) => (true, dtype.is_native_byteorder() == Some(false)),
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "{name}: dtype {dtype} is not supported (expected uint8 or uint16)"
+                )));
+            }
+        };
+        Ok(ImageArray { array, name, width, height, colour, sixteen, swapped })
+    }
+
+    /// The memory its conversion holds at its peak: the three `f32` planes, and numpy's native-order copy of
+    /// swapped samples.
+    fn load_bytes(&self) -> u64 {
+        let px = self.width as u64 * self.height as u64;
+        let samples = px * if self.colour { 3 } else { 1 };
+        12 * px + if self.swapped { 2 * samples } else { 0 }
+    }
+
+    /// The pixels as planes of `f32` (as [`jem::io::read_image`] gives a decoded image), read in logical order.
+    /// Every large buffer is allocated fallibly: a failure is a `MemoryError`, never an abort.
+    fn to_rgb(&self) -> PyResult<RgbImage> {
+        let n = self.width.checked_mul(self.height).ok_or_else(|| self.too_large())?;
+        let mut channels: [Vec<f32>; 3] = Default::default();
+        for c in &mut channels {
+            c.try_reserve_exact(n).map_err(|_| {
+                PyMemoryError::new_err(format!(
+                    "{}: cannot allocate {} for a {}x{} image",
+                    self.name,
+                    mib(12 * n as u64),
+                    self.width,
+                    self.height
+                ))
+            })?;
         }
-    };
-    let too_large = || PyValueError::new_err(format!("{name}: {w}×{h} is too large"));
-    let (w, h) = (u32::try_from(w).map_err(|_| too_large())?, u32::try_from(h).map_err(|_| too_large())?);
-    if let Ok(a) = array.cast::<PyArrayDyn<u8>>() {
-        let data: Vec<u8> = a.readonly().as_array().iter().copied().collect();
-        return Ok(if colour {
-            DynamicImage::ImageRgb8(ImageBuffer::<Rgb<u8>, _>::from_raw(w, h, data).ok_or_else(too_large)?)
+        let mut put = |k: usize, v: f32| {
+            if self.colour {
+                channels[k % 3].push(v);
+            } else {
+                channels.iter_mut().for_each(|c| c.push(v));
+            }
+        };
+        if self.sixteen {
+            // Another byte order: numpy makes the native copy (its allocation failure is a MemoryError).
+            let native;
+            let array = if self.swapped {
+                native = self.array.call_method1("astype", ("=u2",))?;
+                &native
+            } else {
+                self.array
+            };
+            let a = array.cast::<PyArrayDyn<u16>>().map_err(|e| PyValueError::new_err(e.to_string()))?;
+            let view = a.readonly();
+            view.as_array().iter().enumerate().for_each(|(k, &v)| put(k, f32::from(v) / 257.0));
         } else {
-            DynamicImage::ImageLuma8(ImageBuffer::<Luma<u8>, _>::from_raw(w, h, data).ok_or_else(too_large)?)
-        });
+            let a = self.array.cast::<PyArrayDyn<u8>>().map_err(|e| PyValueError::new_err(e.to_string()))?;
+            let view = a.readonly();
+            view.as_array().iter().enumerate().for_each(|(k, &v)| put(k, f32::from(v)));
+        }
+        RgbImage::from_channels(self.width, self.height, channels).map_err(|e| to_py(&e))
     }
-    if let Ok(a) = array.cast::<PyArrayDyn<u16>>() {
-        let data: Vec<u16> = a.readonly().as_array().iter().copied().collect();
-        return Ok(if colour {
-            DynamicImage::ImageRgb16(ImageBuffer::<Rgb<u16>, _>::from_raw(w, h, data).ok_or_else(too_large)?)
-        } else {
-            DynamicImage::ImageLuma16(ImageBuffer::<Luma<u16>, _>::from_raw(w, h, data).ok_or_else(too_large)?)
-        });
+
+    fn too_large(&self) -> PyErr {
+        PyValueError::new_err(format!("{}: {}×{} is too large", self.name, self.width, self.height))
     }
-    let dtype = untyped.dtype().to_string();
-    Err(PyValueError::new_err(format!("{name}: dtype {dtype} is not supported (expected uint8 or uint16)")))
+}
+
+/// Bytes as MiB with one decimal.
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / f64::from(1u32 << 20))
 }
 
 /// A Python value as a TOML value (what `--set key=value` would parse it to).
@@ -111,6 +177,11 @@ fn toml_value(value: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
     }
     if let Ok(i) = value.extract::<i64>() {
         return Ok(toml::Value::Integer(i));
+    }
+    if value.is_instance_of::<PyInt>() {
+        return Err(PyValueError::new_err(format!(
+            "config key {key}: {value} is too large (a config's whole numbers are 64-bit)"
+        )));
     }
     if let Ok(f) = value.extract::<f64>() {
         return Ok(toml::Value::Float(f));
@@ -125,15 +196,20 @@ fn toml_value(value: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
     Err(PyValueError::new_err(format!("config key {key}: {value} is not a bool, number, string or list")))
 }
 
-/// A config dict in the TOML's shape, flattened to `section.key=value` items (`--set` form).
-fn flatten(dict: &Bound<'_, PyDict>, prefix: &str, out: &mut Vec<String>) -> PyResult<()> {
-    for (k, v) in dict.iter() {
+/// The items of a mapping (a dict, a `types.MappingProxyType`, any `collections.abc.Mapping`).
+fn mapping_items<'py>(mapping: &Bound<'py, PyMapping>) -> PyResult<Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>)>> {
+    mapping.items()?.iter().map(|item| item.extract()).collect()
+}
+
+/// A config mapping in the TOML's shape, flattened to `section.key=value` items (`--set` form).
+fn flatten(mapping: &Bound<'_, PyMapping>, prefix: &str, out: &mut Vec<String>) -> PyResult<()> {
+    for (k, v) in mapping_items(mapping)? {
         let key = format!(
             "{prefix}{}",
             k.extract::<String>()
                 .map_err(|_| { PyValueError::new_err(format!("config keys are strings; {prefix}{k} is not")) })?
         );
-        match v.cast::<PyDict>() {
+        match v.cast::<PyMapping>() {
             Ok(section) => flatten(section, &format!("{key}."), out)?,
             Err(_) => out.push(format!("{key}={}", toml_value(&v, &key)?)),
         }
@@ -141,26 +217,43 @@ fn flatten(dict: &Bound<'_, PyDict>, prefix: &str, out: &mut Vec<String>) -> PyR
     Ok(())
 }
 
-/// The parameters of a call: the defaults, then `config` (a TOML file, or a dict applied key by key as `--set`
-/// items), then `overrides` (as `--set`: a string value is taken as the command line would, `"fcm"` or `"3"`).
-fn load_params(config: Option<&Bound<'_, PyAny>>, overrides: Option<&Bound<'_, PyDict>>) -> PyResult<Params> {
+/// The parameters of a call: the defaults, then `config` (a TOML file, or a mapping applied key by key as `--set`
+/// items), then `overrides` (a mapping, as `--set`: a string value is taken as the command line would, `"fcm"` or
+/// `"3"`).
+fn load_params(config: Option<&Bound<'_, PyAny>>, overrides: Option<&Bound<'_, PyAny>>) -> PyResult<Params> {
     let mut items = Vec::new();
     let mut path = None;
     match config {
         None => {}
-        Some(c) if c.is_instance_of::<PyDict>() => flatten(c.cast::<PyDict>()?, "", &mut items)?,
-        Some(c) => {
-            path = Some(c.extract::<PathBuf>().map_err(|_| {
-                PyValueError::new_err(format!("config: expected a TOML file's path or a dict, got {c}"))
-            })?);
-        }
+        Some(c) => match c.cast::<PyMapping>() {
+            Ok(mapping) => flatten(mapping, "", &mut items)?,
+            Err(_) => {
+                path = Some(c.extract::<PathBuf>().map_err(|_| {
+                    PyValueError::new_err(format!("config: expected a TOML file's path or a mapping, got {c}"))
+                })?);
+            }
+        },
     }
-    for (k, v) in overrides.into_iter().flat_map(|d| d.iter()) {
+    let overrides = match overrides {
+        None => Vec::new(),
+        Some(o) => {
+            let mapping = o.cast::<PyMapping>().map_err(|_| {
+                let kind = o.get_type().name().map_or("?".to_string(), |n| n.to_string());
+                PyValueError::new_err(format!(
+                    "overrides: expected a mapping of \"section.key\" to a value, got {kind}"
+                ))
+            })?;
+            mapping_items(mapping)?
+        }
+    };
+    for (k, v) in overrides {
         let key: String =
             k.extract().map_err(|_| PyValueError::new_err(format!("override key {k} is not a string")))?;
-        let value = match v.cast::<PyString>() {
-            Ok(s) => s.to_string(),
-            Err(_) => toml_value(&v, &key)?.to_string(),
+        let value = match (v.cast::<PyString>(), toml_value(&v, &key)?) {
+            (Ok(s), _) => s.to_string(),
+            // As Python spells it (`1e+30`, which TOML reads too), so that a message quotes what was given.
+            (Err(_), toml::Value::Float(_)) => v.repr()?.to_string(),
+            (Err(_), other) => other.to_string(),
         };
         items.push(format!("{key}={value}"));
     }
@@ -187,14 +280,16 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 /// ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings (``read_pfm`` gives the same array).
 ///
 /// ``left``, ``right``: numpy arrays H×W (grey) or H×W×3 (RGB order; OpenCV loads BGR: ``img[..., ::-1]``),
-/// uint8 or uint16 (16-bit values are divided by 257, as a 16-bit PNG is), any strides; grey and colour may be
-/// mixed. ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair as ``jem`` does without a
-/// calib.txt (up to the width). ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one
+/// uint8 or uint16 in either byte order (16-bit values are divided by 257, as a 16-bit PNG is), any strides; grey
+/// and colour may be mixed; they are checked against ``max_memory`` from their shapes before they are copied.
+/// ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair as ``jem`` does without a calib.txt (up
+/// to the width). ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one
 /// (measured instead, up to it, when it is half the width or more); ``ndisp`` wins. ``config``: a TOML file's
-/// path, or a dict in the TOML's shape (``{"meanfield": {"iterations": 5}}``). ``overrides``: a dict
-/// ``{"section.key": value}``, applied last, as ``--set``. ``threads``: worker threads for this call (default: one
-/// per core); the result is the same for any count. ``max_memory``: bytes (default 80 % of RAM); a pair too
-/// large for it runs in tiles, as ``--max-memory`` does.
+/// path, or a mapping in the TOML's shape (``{"meanfield": {"iterations": 5}}``; any ``Mapping``). ``overrides``:
+/// a mapping ``{"section.key": value}``, applied last, as ``--set``. ``threads``: worker threads for this call
+/// (default: one per core; at most 4 per core, at least 16, as ``--threads``); the result is the same for any
+/// count. ``max_memory``: bytes (default 80 % of RAM, and of the address space left under ``ulimit -v``); a pair
+/// too large for it runs in tiles, as ``--max-memory`` does.
 ///
 /// Returns the map; with ``confidence=True`` also the per-pixel confidence (max-marginal of the left view,
 /// float32 H×W), and with ``return_info=True`` also a dict: ``ndisp``, ``ndisp_measured``, ``tiled``, ``noise``
@@ -204,8 +299,9 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 /// The GIL is released while matching, so pairs can run in Python threads. Ctrl-C (KeyboardInterrupt) is
 /// honoured only when the call returns.
 ///
-/// Raises ValueError (bad shape, dtype, range, config key or value), MemoryError (the run fits ``max_memory``
-/// neither whole nor in tiles), OSError (an unreadable config file). Warns (UserWarning) for a value the image
+/// Raises ValueError (bad shape, dtype, range, config key or value, thread count), MemoryError (the run fits
+/// ``max_memory`` neither whole nor in tiles, or its memory cannot be allocated), OSError (an unreadable config
+/// file). Warns (UserWarning) for a value the image
 /// cannot use, held to a bound as ``jem`` does (``post.sps.segments`` above pixels / ``post.sps.min_support``).
 #[pyfunction]
 #[pyo3(
@@ -220,26 +316,28 @@ fn match_pair<'py>(
     right: &Bound<'py, PyAny>,
     ndisp: Option<i64>,
     config: Option<&Bound<'py, PyAny>>,
-    overrides: Option<&Bound<'py, PyDict>>,
+    overrides: Option<&Bound<'py, PyAny>>,
     threads: Option<i64>,
     max_memory: Option<i64>,
     confidence: bool,
     return_info: bool,
     calib_ndisp: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let (l, r) = (to_image(left, "left")?, to_image(right, "right")?);
+    let (left, right) = (ImageArray::inspect(left, "left")?, ImageArray::inspect(right, "right")?);
     let params = load_params(config, overrides)?;
     let given = positive("ndisp", ndisp)?.map(|n| n as usize);
     let source = NdispSource::resolve(given, positive("calib_ndisp", calib_ndisp)?.map(|n| n as usize));
-    let threads = positive("threads", threads)?.map(|n| n as usize);
+    // The command line's bound (jem::threads), checked before any thread starts.
+    let threads = positive("threads", threads)?.map(|n| jem::threads::check_threads("threads", n)).transpose();
+    let threads = threads.map_err(|e| to_py(&e))?;
     let limit = positive("max_memory", max_memory)?.unwrap_or_else(jem::default_memory_limit);
     let mut matcher = Matcher::new(params.clone()).map_err(|e| to_py(&e))?.with_ndisp(source).with_max_memory(limit);
-    let out = py.detach(|| {
-        guarded(threads, || {
-            let (l, r) = (jem::io::image_from_dynamic(&l), jem::io::image_from_dynamic(&r));
-            matcher.match_pair(&l, &r)
-        })
-    })?;
+    // From the shapes, before anything is copied: a pair too large for the limit costs no memory.
+    let input_bytes = left.load_bytes().saturating_add(right.load_bytes());
+    let sizes = ((left.width, left.height), (right.width, right.height));
+    matcher.check_size(sizes.0, sizes.1, input_bytes).map_err(|e| to_py(&e))?;
+    let (l, r) = (left.to_rgb()?, right.to_rgb()?);
+    let out = py.detach(|| guarded(threads, || matcher.match_pair(&l, &r)))?;
     // Values too large for this image (held to a bound, as `jem` warns on stderr): a UserWarning each.
     let (w, h) = out.disparity.dims();
     for warning in params.image_warnings(w, h) {
@@ -295,9 +393,18 @@ fn depth<'py>(
     Ok(to_numpy(py, py.detach(|| jem::geometry::depth_map(&map, &camera))))
 }
 
-/// A 2-D float32 or float64 array (any strides) as a plane of f32.
+/// A 2-D floating-point array (any strides) as a plane of f32: float32 as it is, float64 rounded, and the other
+/// floating types (float16, longdouble) through numpy's conversion to float32.
 fn to_plane(array: &Bound<'_, PyAny>, name: &str) -> PyResult<Plane<f32>> {
-    let bad = || PyValueError::new_err(format!("{name}: expected a 2-D float32 or float64 numpy array"));
+    let bad = || PyValueError::new_err(format!("{name}: expected a 2-D floating-point numpy array (e.g. float32)"));
+    if let Ok(a) = array.cast::<PyUntypedArray>()
+        && a.ndim() == 2
+        && a.dtype().kind() == b'f'
+        && array.cast::<PyArray2<f32>>().is_err()
+        && array.cast::<PyArray2<f64>>().is_err()
+    {
+        return to_plane(&array.call_method1("astype", ("float32",))?, name);
+    }
     if let Ok(a) = array.cast::<PyArray2<f32>>() {
         let view = a.readonly();
         let (h, w) = view.as_array().dim();
@@ -319,8 +426,10 @@ fn read_pfm(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArray2<f32>>>
     Ok(to_numpy(py, map))
 }
 
-/// Writes a 2-D float array (float32, or float64 rounded to float32) as a greyscale little-endian PFM, rows
-/// bottom-up as Middlebury's files, atomically (a temporary file renamed into place): the bytes ``jem`` writes.
+/// Writes a 2-D float array (float32; any other floating type, float16 or float64, converted to float32) as a
+/// greyscale little-endian PFM, rows bottom-up as Middlebury's files, atomically (a temporary file renamed into
+/// place): the bytes ``jem`` writes. An existing ``path`` that is not a regular file (a device, a FIFO) is refused
+/// with ValueError, never replaced.
 #[pyfunction]
 fn write_pfm(py: Python<'_>, path: PathBuf, array: &Bound<'_, PyAny>) -> PyResult<()> {
     let map = to_plane(array, "array")?;

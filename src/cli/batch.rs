@@ -216,7 +216,33 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         std::panic::set_hook(Box::new(|_| {}));
         prev
     });
-    let reports = jem::batch::run_batch(&scenes, &params, &opts, &|e| display.on_event(e));
+    // A scene whose lock cannot be read fails without running (reported first); the others run.
+    let refused: Vec<Option<&String>> = scenes
+        .iter()
+        .map(|p| lock.refused().iter().find(|(dir, _)| p.layout == jem::dataset::Layout::Middlebury && *dir == p.root))
+        .map(|found| found.map(|(_, e)| e))
+        .collect();
+    let failed_report = |pair: &jem::dataset::Pair, e: &str| jem::batch::SceneReport {
+        dir: pair.location(),
+        name: pair.name.clone(),
+        status: SceneStatus::Failed(e.to_string()),
+    };
+    for (index, (pair, e)) in scenes.iter().zip(&refused).enumerate() {
+        if let Some(e) = e {
+            display.on_event(jem::batch::Event::Finished { index, report: &failed_report(pair, e) });
+        }
+    }
+    let runnable: Vec<jem::dataset::Pair> =
+        scenes.iter().zip(&refused).filter(|(_, e)| e.is_none()).map(|(p, _)| p.clone()).collect();
+    let mut ran = jem::batch::run_batch(&runnable, &params, &opts, &|e| display.on_event(e)).into_iter();
+    let reports: Vec<jem::batch::SceneReport> = scenes
+        .iter()
+        .zip(&refused)
+        .map(|(pair, e)| match e {
+            Some(e) => failed_report(pair, e),
+            None => ran.next().unwrap_or_else(|| failed_report(pair, "not run")),
+        })
+        .collect();
     drop(lock);
     if let Some(prev) = previous_hook {
         std::panic::set_hook(prev);

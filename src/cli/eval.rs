@@ -130,19 +130,28 @@ pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCod
 }
 
 /// The last line of an eval: `scored 15 scenes of JEM (middlebury, nonocc, errors ×4)`, and how many had no
-/// usable result.
+/// usable result, and how many no usable ground truth, mask or calib.txt.
 fn scored_line(reports: &[jem::eval::AlgReport]) -> String {
     let parts: Vec<String> = reports
         .iter()
         .map(|r| {
             let total = r.scenes.len();
-            let missing = r.excluded().count();
+            let excluded: Vec<&jem::eval::SceneResult> = r.scenes.iter().filter(|s| s.metrics.is_err()).collect();
+            let no_truth = excluded.iter().filter(|s| s.truth_unusable).count();
+            let no_result = excluded.len() - no_truth;
             let scale = if r.scale == 1 { String::new() } else { format!(", errors ×{}", r.scale) };
+            let mut missing = Vec::new();
+            if no_result > 0 {
+                missing.push(format!("{no_result} without a usable result"));
+            }
+            if no_truth > 0 {
+                missing.push(format!("{no_truth} without a usable ground truth, mask or calib.txt"));
+            }
             let note =
-                if missing > 0 { format!("; {missing} without a usable result (listed above)") } else { String::new() };
+                if missing.is_empty() { String::new() } else { format!("; {} (listed above)", missing.join(", ")) };
             format!(
                 "scored {} of {total} scene(s) of {} ({}, {}{scale}){note}",
-                total - missing,
+                total - excluded.len(),
                 r.alg,
                 r.layout.name(),
                 r.mask.name()

@@ -36,6 +36,7 @@ mod config;
 mod degrade;
 mod eval;
 mod r#match;
+mod signals;
 mod synth;
 mod viz;
 
@@ -249,11 +250,9 @@ enum Command {
     Viz(VizArgs),
 }
 
-/// The `--threads` cap is 4 per core, but never below this.
-const MIN_THREAD_CAP: usize = 16;
-
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> Result<ExitCode> {
+    signals::install();
     let threads = match &cli.command {
         None => &cli.match_args.threads,
         Some(Command::Match(a)) => &a.threads,
@@ -264,17 +263,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Config(_) | Command::Viz(_)) => &ThreadsArg::default(),
     };
     if let Some(n) = threads.threads {
-        // More threads than cores only adds switching (1000 threads took 73 s for a 0.4 s run); allow a few per
-        // core for machines that under-report, and refuse the rest before starting any.
-        let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
-        let max = (4 * cores).max(MIN_THREAD_CAP);
-        if n == 0 || n > max {
-            return Err(Error::param(
-                "--threads",
-                n,
-                format!("1 to {max} (4 per core on this machine, at least {MIN_THREAD_CAP})"),
-            ));
-        }
+        // Refused before any thread starts (the bound is jem::threads', shared with the Python module).
+        let n = jem::threads::check_threads("--threads", n as u64)?;
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()
@@ -290,6 +280,42 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Eval(args)) => eval::run(&args, &cli.global),
         Some(Command::Viz(args)) => viz::run(&args, &cli.global),
     }
+}
+
+/// Handles what clap could not parse: `--help` and `--version` are printed as clap prints them (exit 0); an
+/// argument error is one line, `error: …`, as every other error (clap's own form adds a tip, the usage and "For
+/// more information, try '--help'." on 3 to 6 more lines), with exit code 2.
+pub fn usage_error(e: clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        let _ = e.print();
+        return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
+    }
+    note!("{}", one_line_usage_error(&e.render().to_string()));
+    ExitCode::from(2)
+}
+
+/// clap's message on one line: its first paragraph (the error, and the arguments it lists, joined) and its tip,
+/// without the usage and the pointer to --help that follow.
+fn one_line_usage_error(rendered: &str) -> String {
+    let mut line = String::new();
+    for part in rendered.lines().take_while(|l| !l.trim().is_empty()).map(str::trim) {
+        if !line.is_empty() {
+            line.push_str(if line.ends_with(':') { " " } else { ", " });
+        }
+        line.push_str(part);
+    }
+    if !line.starts_with("error:") {
+        line.insert_str(0, "error: ");
+    }
+    let tips: Vec<&str> = rendered.lines().map(str::trim).filter(|l| l.starts_with("tip:")).collect();
+    if !tips.is_empty() {
+        line.push_str(&format!(" ({})", tips.join("; ")));
+    }
+    line
 }
 
 /// Prints `error: ...` and each cause on one line.

@@ -12,7 +12,7 @@ use super::{GlobalArgs, ThreadsArg};
 /// Arguments of `jem synth` (the help text is on [`Command::Synth`](super::Command::Synth)).
 #[derive(Args, Debug, Clone)]
 pub(super) struct SynthArgs {
-    /// Folder to write the scene into (created if missing).
+    /// Folder to write the scene into (created if missing; one that already holds a scene is refused).
     outdir: PathBuf,
     /// Random seed: the same seed gives byte-identical files.
     #[arg(long, default_value_t = 1)]
@@ -33,6 +33,8 @@ pub(super) struct SynthArgs {
 /// Renders and writes one scene.
 pub(super) fn run(args: &SynthArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let params = jem::synth::SynthParams { width: args.width, height: args.height, ndisp: args.ndisp, seed: args.seed };
+    // Before rendering: a folder that holds a scene is refused.
+    jem::synth::check_scene_folder(&args.outdir)?;
     let scene = jem::synth::render_scene(&params)?;
     jem::synth::write_scene(&args.outdir, &scene)?;
     if !global.quiet {

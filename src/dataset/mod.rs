@@ -24,6 +24,7 @@
 mod kitti;
 mod lock;
 mod results;
+mod runner;
 pub mod walk;
 
 use std::path::{Path, PathBuf};
@@ -31,6 +32,7 @@ use std::str::FromStr;
 
 use crate::error::Result;
 
+pub(crate) use lock::lock_holds;
 pub use lock::{ResultsLock, lock_results, writers};
 pub use results::check_results_dirs;
 

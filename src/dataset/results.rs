@@ -62,46 +62,73 @@ fn tidy(path: &Path) -> PathBuf {
     out
 }
 
-/// Whether the [`SOURCE_FILE`] text `have` of the results folder `dir` is `pair`'s data set (see the module
-/// doc); otherwise `Err` with the data set it names.
-fn holds(have: &str, pair: &Pair, dir: &Path) -> std::result::Result<(), String> {
+/// How a results folder's [`SOURCE_FILE`] matched a data set.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Match {
+    /// It names the data set's folder.
+    Folder,
+    /// It names another folder (or none that exists), but the fingerprints agree: the data set was moved or
+    /// copied.
+    Fingerprint,
+}
+
+/// Why a results folder's [`SOURCE_FILE`] does not match a data set.
+#[derive(Clone, Debug, PartialEq, Eq)]
+enum Mismatch {
+    /// It names another data set (its folder, tidied for messages), and whether that folder still exists.
+    Other(String, bool),
+    /// It is not a source file jem wrote: why.
+    Malformed(String),
+}
+
+/// Whether the [`SOURCE_FILE`] text `have` of the results folder `dir` is `pair`'s data set (see the module doc),
+/// and how it matched.
+fn holds(have: &str, pair: &Pair, dir: &Path) -> std::result::Result<Match, Mismatch> {
     let field = |key: &str| have.lines().find_map(|l| l.strip_prefix(key).map(str::trim));
-    let named = field("root ").map(|root| {
-        let root = Path::new(root);
-        if root.is_absolute() {
-            root.to_path_buf()
-        } else {
-            std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()).join(root)
-        }
-    });
-    let other = || named.as_deref().map_or("another data set".to_string(), |n| tidy(n).display().to_string());
-    if field("layout ") != Some(pair.layout.name()) {
+    let layout = match field("layout ") {
+        None | Some("") => return Err(Mismatch::Malformed("no layout line".into())),
+        Some(l) => l,
+    };
+    if layout.parse::<super::Layout>().is_err() {
+        return Err(Mismatch::Malformed(format!("unknown layout {layout:?}")));
+    }
+    let named = match field("root ") {
+        None | Some("") => return Err(Mismatch::Malformed("no root line".into())),
+        Some(root) if Path::new(root).is_absolute() => PathBuf::from(root),
+        Some(root) => std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()).join(root),
+    };
+    let other = || Mismatch::Other(tidy(&named).display().to_string(), named.exists());
+    if layout != pair.layout.name() {
         return Err(other());
     }
-    if let (Some(n), Ok(root)) = (&named, std::fs::canonicalize(&pair.root))
-        && std::fs::canonicalize(n).is_ok_and(|n| n == root)
+    if let Ok(root) = std::fs::canonicalize(&pair.root)
+        && std::fs::canonicalize(&named).is_ok_and(|n| n == root)
     {
-        return Ok(());
+        return Ok(Match::Folder);
     }
     match field("data ") {
-        Some(data) if data == fingerprint(pair) => Ok(()),
+        Some(data) if data == fingerprint(pair) => Ok(Match::Fingerprint),
         _ => Err(other()),
     }
 }
 
 /// Checks that the results folders of `alg` for these pairs are free for them: no folder is claimed by two data
-/// sets, none holds another data set's results (its [`SOURCE_FILE`] names another, see the module doc), none lies
-/// inside a data set's folder, and no results of the data set wait in the folder an older jem used (`RES/NAME/`,
-/// before each split had its own). With `claim`, creates the folders and writes the missing source files.
+/// sets, none holds another data set's results (its [`SOURCE_FILE`] names another, see the module doc) or has a
+/// source file that cannot be read, none lies inside a data set's folder, and no results of the data set wait in
+/// the folder an older jem used (`RES/NAME/`, before each split had its own). With `claim`, creates the folders and
+/// writes the missing source files, and rewrites (atomically) those that found their data set by its fingerprint
+/// only, so that they name where it is now: after a move, the data set may grow (and its fingerprint change)
+/// without its results being taken for another's.
 ///
 /// # Errors
-/// [`Error::Input`] naming the folder and the data sets; [`Error::Io`] if a folder or file cannot be made.
+/// [`Error::Input`] naming the folder and the data sets, or the source file and what is wrong with it;
+/// [`Error::Io`] if a folder or file cannot be made or a source file cannot be read.
 pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, claim: bool) -> Result<()> {
-    let mut claimed: std::collections::BTreeMap<PathBuf, &Pair> = Default::default();
+    let mut claimed: std::collections::BTreeMap<PathBuf, (&Pair, bool)> = Default::default();
     for pair in pairs {
         let Some(dir) = pair.results_dir(alg, results) else { continue };
         match claimed.get(&dir) {
-            Some(other) if other.root != pair.root => {
+            Some((other, _)) if other.root != pair.root => {
                 return Err(Error::Input(format!(
                     "{}: the results of {} and of {} would share this folder (same frame names); run them one at a \
                      time with different --alg or --results",
@@ -113,7 +140,6 @@ pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, cla
             Some(_) => continue,
             None => {}
         }
-        claimed.insert(dir.clone(), pair);
         if let (Ok(d), Ok(r)) = (resolve_to_existing(&dir), std::fs::canonicalize(&pair.root))
             && d.starts_with(&r)
         {
@@ -138,20 +164,46 @@ pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, cla
                 dir.display()
             )));
         }
-        if let Ok(have) = std::fs::read(dir.join(SOURCE_FILE))
-            && let Err(other) = holds(&String::from_utf8_lossy(&have), pair, &dir)
-        {
-            return Err(Error::Input(format!(
-                "{}: holds the results of {other}, not of {} (see {SOURCE_FILE}); choose another --alg or --results",
-                dir.display(),
-                pair.root.display()
-            )));
-        }
+        let source = dir.join(SOURCE_FILE);
+        let moved = match std::fs::read(&source) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => false,
+            Err(e) => return Err(Error::io(&source, e)),
+            Ok(have) => match holds(&String::from_utf8_lossy(&have), pair, &dir) {
+                Ok(how) => how == Match::Fingerprint,
+                Err(Mismatch::Malformed(why)) => {
+                    return Err(Error::Input(format!(
+                        "{}: unreadable ({why}), not a {SOURCE_FILE} jem wrote: it should name the data set whose \
+                         results this folder holds; if they are {}'s, remove it and run again",
+                        source.display(),
+                        pair.root.display()
+                    )));
+                }
+                Err(Mismatch::Other(other, true)) => {
+                    return Err(Error::Input(format!(
+                        "{}: holds the results of {other}, not of {} (see {SOURCE_FILE}); choose another --alg or \
+                         --results",
+                        dir.display(),
+                        pair.root.display()
+                    )));
+                }
+                Err(Mismatch::Other(other, false)) => {
+                    return Err(Error::Input(format!(
+                        "{}: holds the results of {other}, which no longer exists, and the data sets differ (see \
+                         {SOURCE_FILE}); if {} is that data set, moved and changed since, remove {} and run again; \
+                         otherwise choose another --alg or --results",
+                        dir.display(),
+                        pair.root.display(),
+                        source.display()
+                    )));
+                }
+            },
+        };
+        claimed.insert(dir, (pair, moved));
     }
     // Everything checked: only now is anything made.
-    for (dir, pair) in claimed.iter().filter(|_| claim) {
+    for (dir, (pair, moved)) in claimed.iter().filter(|_| claim) {
         let source = dir.join(SOURCE_FILE);
-        if !source.is_file() {
+        if *moved || !source.is_file() {
             std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
             crate::io::write_atomic(&source, source_text(pair, dir).as_bytes())?;
         }

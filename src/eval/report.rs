@@ -51,6 +51,9 @@ pub struct SceneResult {
     pub metrics: std::result::Result<Metrics, String>,
     /// Run time from `time<alg>.txt`, when present and readable.
     pub seconds: Option<f64>,
+    /// Left out for the data set's own files (its ground truth, mask or calib.txt is missing or unreadable), not
+    /// for its result.
+    pub truth_unusable: bool,
 }
 
 /// One algorithm's evaluation over a folder of scenes.
@@ -187,15 +190,50 @@ pub fn evaluate_dir(
         .par_iter()
         .zip(locations)
         .zip(names)
-        .map(|((pair, dir), name)| SceneResult {
-            weight: if layout == Layout::Middlebury { scene_weight(&name) } else { 1.0 },
-            metrics: score_pair(pair, alg, scale, mask_mode, src).map_err(|e| error_chain(&e)),
-            seconds: read_seconds(&pair.result_files(alg, src.results.as_deref()).time),
-            name,
-            dir,
+        .map(|((pair, dir), name)| {
+            let files = pair.result_files(alg, src.results.as_deref());
+            let metrics = check_truth(pair, mask_mode, src).and_then(|()| score_pair(pair, alg, scale, mask_mode, src));
+            SceneResult {
+                weight: if layout == Layout::Middlebury { scene_weight(&name) } else { 1.0 },
+                truth_unusable: metrics.as_ref().is_err_and(|e| !blames_result(e, &files.disparity)),
+                metrics: metrics.map_err(|e| error_chain(&e)),
+                seconds: read_seconds(&files.time),
+                name,
+                dir,
+            }
         })
         .collect();
     Ok(AlgReport { alg: alg.to_string(), layout, mask: mask_mode, scale, scenes, writers })
+}
+
+/// Checks that the files of the data set a pair's score needs are there: its ground truth, its mask (for
+/// `nonocc`, where the layout has one) and, for MiddEval3, its calib.txt; checked before the result, so a scene
+/// without them says so rather than that its result is missing.
+fn check_truth(pair: &Pair, mask_mode: MaskMode, src: &Sources) -> Result<()> {
+    let truth = pair.truth(mask_mode == MaskMode::All, src.gt.as_deref());
+    if !truth.disparity.is_file() {
+        return Err(Error::Input(format!("no ground truth {}", truth.disparity.display())));
+    }
+    if let Some(mask) = truth.mask.filter(|m| mask_mode == MaskMode::Nonocc && !m.is_file()) {
+        return Err(Error::Input(format!("no {} (needed for the nonocc mask)", mask.display())));
+    }
+    if let Some(calib) = pair.calib.as_ref().filter(|c| pair.layout == Layout::Middlebury && !c.is_file()) {
+        return Err(Error::Input(format!("no {} (needed for the search range)", calib.display())));
+    }
+    Ok(())
+}
+
+/// Whether a scene's error is about its result (missing, unreadable, of another size) rather than the data set's
+/// files.
+fn blames_result(e: &Error, result: &Path) -> bool {
+    match e {
+        Error::Io { path, .. } | Error::Image { path, .. } | Error::Pfm { path, .. } | Error::Exr { path, .. } => {
+            path == result
+        }
+        Error::Calib { .. } => false,
+        Error::Input(msg) => msg.starts_with("no result file") || msg.starts_with(&result.display().to_string()),
+        _ => true,
+    }
 }
 
 /// Scores one pair's result (see the [`eval`](crate::eval) module doc for each layout's rules).
@@ -315,6 +353,7 @@ pub(super) mod tests {
             weight: scene_weight(name),
             metrics: if ok { Ok(m) } else { Err("no result".into()) },
             seconds: Some(avgerr),
+            truth_unusable: false,
         }
     }
 

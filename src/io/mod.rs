@@ -2,6 +2,8 @@
 //!
 //! Every file jem writes goes through [`write_atomic`]: the bytes go to a hidden temporary file in the same folder,
 //! which is flushed and then renamed over the destination, so an interrupted run never leaves a truncated output.
+//! Only a regular file (or no file) is ever replaced: a rename would put a plain file in the place of a device, a
+//! FIFO or a socket (as root, of `/dev/null` itself), so those are refused ([`check_replaceable`]).
 
 pub mod calib;
 pub(crate) mod exr;
@@ -123,12 +125,14 @@ pub fn encode_disparity(path: &Path, map: &DisparityMap) -> Result<Vec<u8>> {
 
 /// Writes several files as one: each goes to its temporary file first; only when all of them are written and
 /// flushed are they renamed into place. If any write fails, no destination is touched and the temporary files
-/// are removed. If a rename fails (a destination that is a folder, say), the files renamed before it are undone:
-/// a destination that existed gets its old file back (kept under a hidden name, a hard link, until all are
-/// renamed), one that did not is removed; the error names the file that failed.
+/// are removed. If a rename fails (a destination that is a folder, say, or has become a special file:
+/// [`check_replaceable`]), the files renamed before it are undone: a destination that existed gets its old file
+/// back (kept under a hidden name, a hard link, until all are renamed), one that did not is removed; the error
+/// names the file that failed.
 ///
 /// # Errors
-/// [`Error::Io`] naming the first file that could not be written.
+/// [`Error::Io`] naming the first file that could not be written, [`Error::Input`] for a destination that is not
+/// a regular file.
 pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
     for &(path, bytes) in files {
         check_file_size_limit(path, bytes.len() as u64)?;
@@ -138,7 +142,11 @@ pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
         match stage(path, |file| file.write_all(bytes).map_err(|e| Error::io(path, e))) {
             Ok(tmp) => staged.push((tmp, path)),
             Err(e) => {
-                staged.iter().for_each(|(tmp, _)| drop(std::fs::remove_file(tmp)));
+                let mut held = crate::cleanup::hold();
+                for (tmp, _) in &staged {
+                    let _ = std::fs::remove_file(tmp);
+                    held.forget(tmp);
+                }
                 return Err(e);
             }
         }
@@ -149,6 +157,9 @@ pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
         Remove,
         Restore(Option<PathBuf>),
     }
+    // The renames happen with the registry of what a signal removes held: a signal waits until all are done or
+    // undone, so it never leaves some of the files renamed.
+    let mut held = crate::cleanup::hold();
     let mut done: Vec<(&Path, Undo)> = Vec::with_capacity(staged.len());
     for (i, (tmp, path)) in staged.iter().enumerate() {
         let undo = match std::fs::symlink_metadata(path) {
@@ -158,7 +169,8 @@ pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
                 Undo::Restore(std::fs::hard_link(path, &keep).is_ok().then_some(keep))
             }
         };
-        if let Err(e) = std::fs::rename(tmp, path) {
+        let renamed = check_replaceable(path).and_then(|()| std::fs::rename(tmp, path).map_err(|e| Error::io(path, e)));
+        if let Err(e) = renamed {
             staged[i..].iter().for_each(|(tmp, _)| drop(std::fs::remove_file(tmp)));
             if let Undo::Restore(Some(keep)) = &undo {
                 let _ = std::fs::remove_file(keep);
@@ -170,7 +182,8 @@ pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
                     Undo::Restore(None) => Ok(()),
                 };
             }
-            return Err(Error::io(path, e));
+            staged.iter().for_each(|(tmp, _)| held.forget(tmp));
+            return Err(e);
         }
         done.push((path, undo));
     }
@@ -179,7 +192,52 @@ pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
             let _ = std::fs::remove_file(keep);
         }
     }
+    staged.iter().for_each(|(tmp, _)| held.forget(tmp));
     Ok(())
+}
+
+/// Refuses to replace `path` when it exists (through symbolic links) and is not a regular file: a rename would
+/// put a plain file in the place of a device, a FIFO or a socket. Writing into one instead (`-o /dev/stdout`) is
+/// not done either: a stream cannot be written all or none.
+///
+/// # Errors
+/// [`Error::Input`] naming the path and what it is.
+pub fn check_replaceable(path: &Path) -> Result<()> {
+    let Ok(meta) = std::fs::metadata(path) else { return Ok(()) };
+    if meta.is_file() {
+        return Ok(());
+    }
+    if meta.is_dir() {
+        return Err(Error::Input(format!("{}: is a folder; an output must be a file name", path.display())));
+    }
+    Err(Error::Input(format!(
+        "{}: is {}, not a regular file; jem writes only regular files and will not replace it",
+        path.display(),
+        file_kind(&meta)
+    )))
+}
+
+/// What a file that is not a regular file or a folder is, in words.
+pub(crate) fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_char_device() {
+            return "a character device";
+        }
+        if t.is_block_device() {
+            return "a block device";
+        }
+        if t.is_fifo() {
+            return "a FIFO (named pipe)";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    let _ = meta;
+    "a special file"
 }
 
 /// What a path will name once written: the file itself when it exists (through symbolic links), else its
@@ -212,16 +270,14 @@ fn same_file(a: &Path, b: &Path) -> bool {
     false
 }
 
-/// Checks, before any work, that no output of a command is an existing folder, one of its inputs or another of
-/// its outputs (also through symbolic or hard links).
+/// Checks, before any work, that no output of a command is an existing folder or special file
+/// ([`check_replaceable`]), one of its inputs or another of its outputs (also through symbolic or hard links).
 ///
 /// # Errors
 /// [`Error::Input`] naming the path (and the other path).
 pub fn check_outputs(inputs: &[&Path], outputs: &[&Path]) -> Result<()> {
     for (k, out) in outputs.iter().enumerate() {
-        if out.is_dir() {
-            return Err(Error::Input(format!("{}: is a folder; an output must be a file name", out.display())));
-        }
+        check_replaceable(out)?;
         if let Some(input) = inputs.iter().find(|i| same_file(out, i)) {
             return Err(Error::Input(format!(
                 "{}: this output would overwrite an input of the same command ({}); choose another name",
@@ -276,7 +332,8 @@ pub const MAX_CALIB_BYTES: u64 = 64 << 10;
 /// Writes `bytes` to `path` atomically: a temporary file in the same folder, flushed, then renamed.
 ///
 /// # Errors
-/// [`Error::Io`] naming `path` (the temporary file is removed on failure).
+/// [`Error::Io`] naming `path` (the temporary file is removed on failure); [`Error::Input`] when `path` exists and
+/// is not a regular file ([`check_replaceable`]).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     check_file_size_limit(path, bytes.len() as u64)?;
     write_atomic_with(path, |file| file.write_all(bytes).map_err(|e| Error::io(path, e)))
@@ -299,17 +356,24 @@ fn check_file_size_limit(path: &Path, bytes: u64) -> Result<()> {
 /// # Errors
 /// Whatever `write` returns, or [`Error::Io`] naming `path`.
 pub fn write_atomic_with(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<()> {
+    check_replaceable(path)?;
     let tmp = stage(path, write)?;
-    std::fs::rename(&tmp, path).map_err(|e| {
+    // Checked again at the rename, which a signal waits for (see write_all_or_none).
+    let mut held = crate::cleanup::hold();
+    let renamed = check_replaceable(path).and_then(|()| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e)));
+    if renamed.is_err() {
         let _ = std::fs::remove_file(&tmp);
-        Error::io(path, e)
-    })
+    }
+    held.forget(&tmp);
+    renamed
 }
 
-/// Writes `path`'s temporary file ([`temp_path`]) with `write` and flushes it to disk; returns its name. On any
-/// error the temporary file is removed.
+/// Writes `path`'s temporary file ([`temp_path`]) with `write` and flushes it to disk; returns its name, registered
+/// with [`crate::cleanup`] until the caller renames it. On any error the temporary file is removed.
 fn stage(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<PathBuf> {
     let tmp = temp_path(path);
+    // Registered before it exists: a signal removes it (after a signal, this waits until the process ends).
+    crate::cleanup::hold().add_file(&tmp, None);
     let written = (|| {
         let mut file = std::fs::File::create(&tmp).map_err(|e| Error::io(path, e))?;
         write(&mut file)?;
@@ -318,7 +382,9 @@ fn stage(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> R
     match written {
         Ok(()) => Ok(tmp),
         Err(e) => {
+            let mut held = crate::cleanup::hold();
             let _ = std::fs::remove_file(&tmp);
+            held.forget(&tmp);
             Err(e)
         }
     }
@@ -409,6 +475,42 @@ mod tests {
         assert_eq!(std::fs::read(&old).unwrap(), b"old", "the replaced file is restored");
         assert_eq!(files(dir.path()), ["k.pfm", "old.txt"], "the new file is removed, nothing hidden is left");
         assert!(check_outputs(&[], &[&new, &folder]).unwrap_err().to_string().contains("is a folder"));
+    }
+
+    /// A FIFO, a character device (a symbolic link to `/dev/null`, and a device node made with `mknod` where this
+    /// process may) are refused by every writer and left as they are; no temporary file is left, and the other
+    /// file of an all-or-none pair is not written.
+    #[test]
+    fn writing_refuses_a_device_node_or_a_fifo() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("fifo.pfm");
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+        let null = dir.path().join("null.pfm");
+        std::os::unix::fs::symlink("/dev/null", &null).unwrap();
+        let mut specials = vec![fifo, null];
+        let node = dir.path().join("mynull.pfm");
+        let made = std::process::Command::new("mknod").arg(&node).args(["c", "1", "3"]).output();
+        if made.is_ok_and(|o| o.status.success()) {
+            specials.push(node);
+        }
+        let regular = dir.path().join("ok.pfm");
+        for special in &specials {
+            for result in [
+                write_atomic(special, b"x"),
+                write_all_or_none(&[(&regular, b"r"), (special, b"x")]),
+                check_outputs(&[], &[special]),
+            ] {
+                let e = result.unwrap_err().to_string();
+                assert!(e.contains(&*special.to_string_lossy()) && e.contains("not a regular file"), "{e}");
+            }
+            let t = std::fs::metadata(special).unwrap().file_type();
+            assert!(t.is_fifo() || t.is_char_device(), "{} left as it was", special.display());
+        }
+        assert!(std::fs::symlink_metadata(dir.path().join("null.pfm")).unwrap().file_type().is_symlink());
+        let mut names = files(dir.path());
+        names.retain(|n| n.starts_with('.') || n == "ok.pfm");
+        assert!(names.is_empty(), "no temporary file, and the other file of the pair not written: {names:?}");
     }
 
     /// The names in a folder, sorted.

@@ -22,6 +22,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 mod condition;
 mod cost;
+mod explain;
 mod lrc;
 mod meanfield;
 mod sps;
@@ -203,8 +204,10 @@ impl Params {
             );
             return Err(Error::Toml { path: origin, msg });
         }
-        let params = Params::deserialize(toml::Value::Table(table))
-            .map_err(|e| Error::Toml { path: origin, msg: one_line(&e.to_string()) })?;
+        let params = Params::deserialize(toml::Value::Table(table)).map_err(|e| Error::Toml {
+            path: origin,
+            msg: explain::explain_type_error(&one_line(&e.to_string()), overrides),
+        })?;
         params.validate()?;
         Ok(params)
     }

@@ -86,9 +86,11 @@ pub(crate) fn check_memory(width: usize, height: usize, ndisp: usize, params: &P
 }
 
 /// A default memory limit: 80% of the machine's physical memory (from `/proc/meminfo`), or 8 GiB where that
-/// cannot be read.
+/// cannot be read; and under an address-space limit (`ulimit -v`), at most 80% of the room this process has left
+/// in it, since an allocation beyond it fails (and a failed allocation aborts the process).
 pub(crate) fn default_memory_limit() -> u64 {
-    crate::process::physical_memory_bytes().map(|b| b / 1024 * 1024 / 5 * 4).unwrap_or(8 << 30)
+    let ram = crate::process::physical_memory_bytes().map(|b| b / 1024 * 1024 / 5 * 4).unwrap_or(8 << 30);
+    crate::process::address_space_room().map_or(ram, |room| ram.min(room / 5 * 4))
 }
 
 /// Memory that concurrent runs share (the scenes of `jem batch`, matchers in threads): a run reserves its estimate
