@@ -132,7 +132,6 @@ pub fn build_cost_volume(left: &RgbImage, right: &RgbImage, ndisp: usize, p: &Co
 /// normalisation given (`grad_norm_mean`: measured once for a whole pair, so that tiles and the whole image share
 /// it; `None` measures it on `left`), and `then(y, row)` called on each row of the volume as soon as it is written
 /// (in the same parallel task, while the row is still in cache); its results, row by row.
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn build_cost_volume_then<R: Send>(
     left: &RgbImage,
     right: &RgbImage,

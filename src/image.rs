@@ -5,8 +5,6 @@
 
 use std::borrow::Cow;
 
-use rayon::prelude::*;
-
 /// A single-channel image, row-major: sample (x, y) is `data()[y * width + x]`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Plane<T> {
@@ -26,10 +24,13 @@ impl<T> Plane<T> {
     /// Wraps `width × height` samples, row-major.
     ///
     /// # Errors
-    /// [`crate::Error::Input`] if `data.len()` is not `width × height`.
-    pub fn from_vec(width: usize, height: usize, data: Vec<T>) -> crate::Result<Self> {
+    /// [`crate::error::Error::Input`] if `data.len()` is not `width × height`.
+    pub fn from_vec(width: usize, height: usize, data: Vec<T>) -> crate::error::Result<Self> {
         if width.checked_mul(height) != Some(data.len()) {
-            return Err(crate::Error::Input(format!("{} samples cannot make a {width}x{height} plane", data.len())));
+            return Err(crate::error::Error::Input(format!(
+                "{} samples cannot make a {width}x{height} plane",
+                data.len()
+            )));
         }
         Ok(Plane { width, height, data })
     }
@@ -152,14 +153,17 @@ impl RgbImage {
     /// An image from its red, green and blue planes, each `width × height` samples, row-major.
     ///
     /// # Errors
-    /// [`crate::Error::Input`] if a plane has another length, or a sample is not finite.
-    pub fn from_channels(width: usize, height: usize, channels: [Vec<f32>; 3]) -> crate::Result<Self> {
+    /// [`crate::error::Error::Input`] if a plane has another length, or a sample is not finite.
+    pub fn from_channels(width: usize, height: usize, channels: [Vec<f32>; 3]) -> crate::error::Result<Self> {
         let n = width.checked_mul(height);
         if let Some(c) = channels.iter().find(|c| Some(c.len()) != n) {
-            return Err(crate::Error::Input(format!("{} samples cannot make a {width}x{height} channel", c.len())));
+            return Err(crate::error::Error::Input(format!(
+                "{} samples cannot make a {width}x{height} channel",
+                c.len()
+            )));
         }
         if channels.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(crate::Error::Input("an image sample is not finite".into()));
+            return Err(crate::error::Error::Input("an image sample is not finite".into()));
         }
         Ok(RgbImage { width, height, channels })
     }
@@ -315,7 +319,7 @@ impl StereoPair<'static> {
     ///
     /// # Errors
     /// As [`StereoPair::borrowed`].
-    pub fn new(left: RgbImage, right: RgbImage, ndisp: usize) -> crate::Result<Self> {
+    pub fn new(left: RgbImage, right: RgbImage, ndisp: usize) -> crate::error::Result<Self> {
         Self::checked(Cow::Owned(left), Cow::Owned(right), ndisp)
     }
 }
@@ -324,21 +328,21 @@ impl<'a> StereoPair<'a> {
     /// A pair of borrowed views; checks sizes and the search range.
     ///
     /// # Errors
-    /// [`crate::Error::SizeMismatch`] for unequal sizes, [`crate::Error::InvalidParam`] for an impossible `ndisp`
+    /// [`crate::error::Error::SizeMismatch`] for unequal sizes, [`crate::error::Error::InvalidParam`] for an impossible `ndisp`
     /// or an empty image.
-    pub fn borrowed(left: &'a RgbImage, right: &'a RgbImage, ndisp: usize) -> crate::Result<Self> {
+    pub fn borrowed(left: &'a RgbImage, right: &'a RgbImage, ndisp: usize) -> crate::error::Result<Self> {
         Self::checked(Cow::Borrowed(left), Cow::Borrowed(right), ndisp)
     }
 
-    fn checked(left: Cow<'a, RgbImage>, right: Cow<'a, RgbImage>, ndisp: usize) -> crate::Result<Self> {
+    fn checked(left: Cow<'a, RgbImage>, right: Cow<'a, RgbImage>, ndisp: usize) -> crate::error::Result<Self> {
         if left.dims() != right.dims() {
-            return Err(crate::Error::SizeMismatch { left: left.dims(), right: right.dims() });
+            return Err(crate::error::Error::SizeMismatch { left: left.dims(), right: right.dims() });
         }
         if left.is_empty() {
-            return Err(crate::Error::Input("the images are empty (0 pixels)".into()));
+            return Err(crate::error::Error::Input("the images are empty (0 pixels)".into()));
         }
         if ndisp == 0 || ndisp >= left.width {
-            return Err(crate::Error::param(
+            return Err(crate::error::Error::param(
                 "ndisp",
                 ndisp,
                 format!("at least 1 and less than the image width {}", left.width),
@@ -372,48 +376,6 @@ impl<'a> StereoPair<'a> {
     }
 }
 
-/// `pick` (`f32::min` or `f32::max`) of the finite values of `p` in the square of radius `r` around every
-/// pixel, in two separable passes; `empty` (the identity of `pick`: `inf` for the minimum) where there is none.
-pub(crate) fn window_extreme(
-    p: &Plane<f32>,
-    r: usize,
-    empty: f32,
-    pick: impl Fn(f32, f32) -> f32 + Copy + Sync,
-) -> Plane<f32> {
-    let (w, h) = (p.width, p.height);
-    let mut rows = Plane::new(w, h, empty);
-    rows.data.par_chunks_mut(w.max(1)).zip(p.data.par_chunks(w.max(1))).for_each(|(dst, src)| {
-        let finite: Vec<f32> = src.iter().map(|&v| if v.is_finite() { v } else { empty }).collect();
-        running_extreme(&finite, r, empty, pick, dst);
-    });
-    let mut out = Plane::new(w, h, empty);
-    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, dst)| {
-        for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
-            dst.iter_mut().zip(rows.row(yy)).for_each(|(o, &v)| *o = pick(*o, v));
-        }
-    });
-    out
-}
-
-/// `out[x]` = `pick` of `src[x − r ..= x + r]` (within the slice) for every x, in O(1) per value (van Herk /
-/// Gil–Werman: the running extremes from the start and from the end of blocks of 2r + 1, two per window).
-fn running_extreme(src: &[f32], r: usize, empty: f32, pick: impl Fn(f32, f32) -> f32, out: &mut [f32]) {
-    let k = 2 * r + 1;
-    let n = src.len() + 2 * r;
-    let padded = |i: usize| if i < r || i >= r + src.len() { empty } else { src[i - r] };
-    let (mut from_start, mut to_end) = (vec![empty; n], vec![empty; n]);
-    for i in 0..n {
-        from_start[i] = if i % k == 0 { padded(i) } else { pick(from_start[i - 1], padded(i)) };
-    }
-    for i in (0..n).rev() {
-        to_end[i] = if i % k == k - 1 || i + 1 == n { padded(i) } else { pick(to_end[i + 1], padded(i)) };
-    }
-    // Window x of the padded row is x ..= x + 2r: the end of x's block and the start of the next one.
-    for (x, o) in out.iter_mut().enumerate() {
-        *o = pick(to_end[x], from_start[x + 2 * r]);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -438,20 +400,5 @@ mod tests {
         assert_eq!(reuse_storage(Vec::new(), 3), vec![0.0; 3]);
         assert_eq!(reuse_storage(vec![7.0; 5], 2), vec![7.0; 2]);
         assert_eq!(reuse_storage(vec![7.0; 2], 4), vec![7.0, 7.0, 0.0, 0.0]);
-    }
-
-    #[test]
-    fn running_extreme_matches_the_direct_window() {
-        let src: Vec<f32> = crate::test_util::rand_vec(23, 5).iter().map(|v| v * 10.0).collect();
-        for r in [0, 1, 3, 11, 30] {
-            for (empty, pick) in [(f32::INFINITY, f32::min as fn(f32, f32) -> f32), (f32::NEG_INFINITY, f32::max)] {
-                let mut out = vec![0.0; src.len()];
-                running_extreme(&src, r, empty, pick, &mut out);
-                for (x, &o) in out.iter().enumerate() {
-                    let window = &src[x.saturating_sub(r)..(x + r + 1).min(src.len())];
-                    assert_eq!(o, window.iter().fold(empty, |a, &v| pick(a, v)), "r {r}, x {x}");
-                }
-            }
-        }
     }
 }

@@ -90,7 +90,7 @@ impl Matcher {
     /// limit.
     ///
     /// # Errors
-    /// [`crate::Error::InvalidParam`] if `params` do not validate.
+    /// [`crate::error::Error::InvalidParam`] if `params` do not validate.
     pub fn new(params: Params) -> Result<Matcher> {
         params.validate()?;
         Ok(Matcher { params, ndisp: NdispSource::Unknown, max_memory_bytes: default_memory_limit(), budget: None })
@@ -103,7 +103,7 @@ impl Matcher {
     }
 
     /// The memory limit in bytes: a pair whose run would need more runs in tiles, and one that fits neither way is
-    /// refused before anything large is allocated ([`crate::Error::OutOfMemory`]).
+    /// refused before anything large is allocated ([`crate::error::Error::OutOfMemory`]).
     pub fn with_max_memory(mut self, bytes: u64) -> Matcher {
         self.max_memory_bytes = bytes;
         self
@@ -135,9 +135,9 @@ impl Matcher {
     /// The left view's disparity map of a rectified pair (and the rest of [`Output`]).
     ///
     /// # Errors
-    /// [`crate::Error::SizeMismatch`] or [`crate::Error::Input`] for unequal, empty or 1-pixel-wide images,
-    /// [`crate::Error::InvalidParam`] for an impossible range or parameters the image cannot hold,
-    /// [`crate::Error::OutOfMemory`] when the run fits the limit neither in one piece nor in tiles.
+    /// [`crate::error::Error::SizeMismatch`] or [`crate::error::Error::Input`] for unequal, empty or 1-pixel-wide images,
+    /// [`crate::error::Error::InvalidParam`] for an impossible range or parameters the image cannot hold,
+    /// [`crate::error::Error::OutOfMemory`] when the run fits the limit neither in one piece nor in tiles.
     pub fn match_pair(&mut self, left: &RgbImage, right: &RgbImage) -> Result<Output> {
         self.match_pair_with(left, right, &|_| {})
     }
@@ -162,18 +162,18 @@ impl Matcher {
     /// callers that convert their own pixels ([`RgbImage::from_channels`]): check first, then convert.
     ///
     /// # Errors
-    /// [`crate::Error::SizeMismatch`], [`crate::Error::Input`] for empty or 1-pixel-wide views,
-    /// [`crate::Error::OutOfMemory`] when the pair cannot fit.
+    /// [`crate::error::Error::SizeMismatch`], [`crate::error::Error::Input`] for empty or 1-pixel-wide views,
+    /// [`crate::error::Error::OutOfMemory`] when the pair cannot fit.
     pub fn check_size(&self, left: (usize, usize), right: (usize, usize), input_bytes: u64) -> Result<()> {
         let (w, h) = left;
         if left != right {
-            return Err(crate::Error::SizeMismatch { left, right });
+            return Err(crate::error::Error::SizeMismatch { left, right });
         }
         if w == 0 || h == 0 {
-            return Err(crate::Error::Input("the images are empty (0 pixels)".into()));
+            return Err(crate::error::Error::Input("the images are empty (0 pixels)".into()));
         }
         if w < 2 {
-            return Err(crate::Error::Input(format!(
+            return Err(crate::error::Error::Input(format!(
                 "the images are {w}x{h}; a stereo pair must be at least 2 pixels wide"
             )));
         }
@@ -186,8 +186,8 @@ impl Matcher {
     /// neither image is decoded when the pair cannot fit.
     ///
     /// # Errors
-    /// [`crate::Error::Io`] or [`crate::Error::Image`] naming the file, [`crate::Error::SizeMismatch`] from the
-    /// headers, [`crate::Error::OutOfMemory`] as above.
+    /// [`crate::error::Error::Io`] or [`crate::error::Error::Image`] naming the file, [`crate::error::Error::SizeMismatch`] from the
+    /// headers, [`crate::error::Error::OutOfMemory`] as above.
     pub fn read_pair(&self, left: &Path, right: &Path) -> Result<(RgbImage, RgbImage)> {
         let header = crate::io::png::read_pair_header(left, right)?;
         setup::check_before_decode(&header, self.ndisp, &self.params, self.max_memory_bytes)?;

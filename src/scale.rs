@@ -1,4 +1,4 @@
-//! Running the pipeline at reduced resolution (the `downscale` key, `--downscale N`; issue 7).
+//! Running the pipeline at reduced resolution (the `downscale` key, `--downscale N`).
 //!
 //! With a factor N > 1, [`crate::run`] reduces both images by N×N box averaging ([`downsample_rgb`]), searches
 //! `ceil(ndisp / N)` labels, runs the normal pipeline on the small pair, and brings the disparity map back to the
@@ -20,8 +20,7 @@
 //!   disparities a pixel interpolates differ by more than `edge_px` (full-resolution px), it lies at a depth edge,
 //!   and blending them puts it on neither surface. It takes instead the one of the four whose reduced pixel's
 //!   colour is nearest its own, weighted by its bilinear weight (a joint-bilateral choice, not a blend):
-//!   the edge follows the full-resolution image. `configs/fast.toml` on trainingQ: weighted avgErr 5.295 -> 5.152,
-//!   better on 13 of the 15 scenes (docs/tuning-log.md, "Edge-aware upsampling").
+//!   the edge follows the full-resolution image (docs/tuning-log.md, "Edge-aware upsampling").
 //!
 //! Every parameter measured in pixels (σx of the bilateral kernel, the LRC threshold, the weighted-median
 //! window, the superpixel count, …) applies at the reduced resolution, unchanged.

@@ -1,4 +1,4 @@
-//! The `jem` binary end to end: outputs, formats, configs and clean failures on bad input (issues 2 and 8).
+//! The `jem` binary end to end: outputs, formats, configs and clean failures on bad input.
 
 mod common;
 
@@ -475,7 +475,7 @@ fn global_flags_before_a_subcommand() {
     );
 }
 
-/// `jem degrade` (issue 15's measuring stick): a whole tree, ground truth copied, images degraded, the same bytes
+/// `jem degrade` (the robustness suite's measuring stick): a whole tree, ground truth copied, images degraded, the same bytes
 /// on a rerun; never into (or around) its input, never into a non-empty folder, nothing left on failure.
 #[test]
 fn degrade_copies_a_tree_and_never_writes_into_its_input() {
@@ -515,7 +515,7 @@ fn degrade_copies_a_tree_and_never_writes_into_its_input() {
 /// Issue 19, item 3: a disparity a 16-bit PNG cannot hold is an error that names a format that can, and nothing
 /// is written (before: clipped at 255.996 without a word).
 #[test]
-fn issue19_png_output_refuses_disparities_it_cannot_hold() {
+fn png_output_refuses_disparities_it_cannot_hold() {
     let dir = tempfile::tempdir().unwrap();
     synth_scene(dir.path(), &["big", "--width", "1100", "--height", "64", "--ndisp", "540", "--seed", "4"]);
     let scene = dir.path().join("big");
@@ -533,7 +533,7 @@ fn issue19_png_output_refuses_disparities_it_cannot_hold() {
 
 /// Issue 19, item 5: `--threads` beyond what can help is refused at once, with the range.
 #[test]
-fn issue19_threads_are_capped() {
+fn threads_are_capped() {
     let dir = tempfile::tempdir().unwrap();
     let (l, r) = (example("im0.png"), example("im1.png"));
     for n in ["0", "100000", "99999999999"] {
@@ -544,7 +544,7 @@ fn issue19_threads_are_capped() {
 /// Issue 19, item 1: `--alg GT` (any case) would write `disp0GT.pfm` over the ground truth: refused by batch, and
 /// the scene's files are untouched.
 #[test]
-fn issue19_alg_gt_is_refused() {
+fn alg_gt_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     synth_scene(dir.path(), &["data/Scene", "--width", "96", "--height", "64", "--ndisp", "16"]);
     let scene = dir.path().join("data/Scene");
@@ -563,7 +563,7 @@ fn issue19_alg_gt_is_refused() {
 /// Issue 19, item 4: a PFM whose header has CRLF line ends is read correctly (it was scored as garbage), and one
 /// with bytes after the data is refused by eval, naming the file.
 #[test]
-fn issue19_pfm_headers_are_parsed_exactly() {
+fn pfm_headers_are_parsed_exactly() {
     let dir = tempfile::tempdir().unwrap();
     synth_scene(dir.path(), &["trainingQ/Scene", "--width", "96", "--height", "64", "--ndisp", "16"]);
     let scene = dir.path().join("trainingQ/Scene");
@@ -590,7 +590,7 @@ fn issue19_pfm_headers_are_parsed_exactly() {
 /// Issue 19, item 10: `jem viz` refuses an empty or non-finite colour range and an 8-bit photo given as a
 /// disparity map or as --gt (each gave a plausible picture and exit 0); nothing is written.
 #[test]
-fn issue19_viz_refuses_bad_ranges_and_photos() {
+fn viz_refuses_bad_ranges_and_photos() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path().join("d.pfm");
     pfm::write_pfm(&d, &jem::Plane::new(8, 4, 2.0f32)).unwrap();
@@ -614,7 +614,7 @@ fn issue19_viz_refuses_bad_ranges_and_photos() {
 /// Issue 19, item 2: an output that is (or links to) an input of the same command, or another of its outputs,
 /// is refused before any work; every file is left as it was.
 #[test]
-fn issue19_outputs_never_overwrite_inputs() {
+fn outputs_never_overwrite_inputs() {
     let dir = tempfile::tempdir().unwrap();
     synth_scene(dir.path(), &["trainingQ/S", "--width", "96", "--height", "64", "--ndisp", "16"]);
     let ok = run_in(dir.path(), &["trainingQ/S/im0.png", "trainingQ/S/im1.png", "-o", "trainingQ/S/disp0A.pfm"]);
@@ -660,7 +660,7 @@ fn ok_png16(dir: &Path, src: &str, dst: &str) {
 
 /// Issue 19, item 8: when the confidence cannot be written, the disparity map is not written either.
 #[test]
-fn issue19_all_outputs_or_none() {
+fn all_outputs_or_none() {
     let dir = tempfile::tempdir().unwrap();
     let (l, r) = (example("im0.png"), example("im1.png"));
     let args = [&l, &r, "-o", "d.pfm", "--confidence", "missing/c.pfm", "--set", "model=wta"];
@@ -672,7 +672,7 @@ fn issue19_all_outputs_or_none() {
 /// killed the process); a calib.txt with a UTF-8 byte-order mark is read; a --set value with a newline is
 /// refused (the part after it was dropped silently).
 #[test]
-fn issue19_capped_reads_bom_and_one_line_overrides() {
+fn capped_reads_bom_and_one_line_overrides() {
     let dir = tempfile::tempdir().unwrap();
     assert_clean_failure(dir.path(), &["config", "-c", "/dev/zero"], &["/dev/zero", "too large"]);
     let (l, r) = (example("im0.png"), example("im1.png"));
@@ -692,7 +692,7 @@ fn issue19_capped_reads_bom_and_one_line_overrides() {
 /// the searched range 0..ndisp−1 (with a range too short for the shipped example, 16 or 24 labels, the map
 /// reached 18.0 and 26.0).
 #[test]
-fn issue19_disparities_stay_in_the_search_range() {
+fn disparities_stay_in_the_search_range() {
     let dir = tempfile::tempdir().unwrap();
     for config in ["default.toml", "jem-sps.toml"] {
         let c = repo().join("configs").join(config).to_string_lossy().into_owned();
@@ -739,7 +739,7 @@ fn png_header_only(w: u32, h: u32) -> Vec<u8> {
 /// Issue 19, item 7: an image too large for the memory limit is refused from its header, before it is decoded
 /// (the refusal gives the estimate, not a decoding error).
 #[test]
-fn issue19_memory_guard_before_decoding() {
+fn memory_guard_before_decoding() {
     let dir = tempfile::tempdir().unwrap();
     let big = png_header_only(60_000, 40_000);
     std::fs::write(dir.path().join("l.png"), &big).unwrap();
@@ -760,7 +760,7 @@ fn issue19_memory_guard_before_decoding() {
 /// Issue 19, item 12: under a file-size limit (`ulimit -f`) too small for the output, the run fails with a
 /// clear error before writing; it was killed by SIGXFSZ and left its hidden temporary file.
 #[test]
-fn issue19_file_size_limit_is_an_error_not_a_leftover() {
+fn file_size_limit_is_an_error_not_a_leftover() {
     let dir = tempfile::tempdir().unwrap();
     let bin = env!("CARGO_BIN_EXE_jem");
     let script = format!(
@@ -779,7 +779,7 @@ fn issue19_file_size_limit_is_an_error_not_a_leftover() {
 /// doffs = 0: the depth map is f·B/d of the written disparity map, the PLY holds one point per valid pixel at
 /// (x − cx)·Z/f, (y − cy)·Z/f, Z with the left image's colour; a missing baseline is an error naming --baseline.
 #[test]
-fn issue18_depth_and_point_cloud() {
+fn depth_and_point_cloud() {
     let dir = tempfile::tempdir().unwrap();
     synth_scene(dir.path(), &["S", "--width", "96", "--height", "64", "--ndisp", "16", "--seed", "3"]);
     let args = ["S/im0.png", "S/im1.png", "-o", "d.pfm", "--depth", "z.pfm", "--cloud", "c.ply", "--set", "model=wta"];
@@ -822,7 +822,7 @@ fn issue18_depth_and_point_cloud() {
 
 /// Issue 18, item 4: JPEG input (8-bit, the image crate's decoder), also a grey JPEG beside a colour PNG.
 #[test]
-fn issue18_jpeg_input() {
+fn jpeg_input() {
     let dir = tempfile::tempdir().unwrap();
     for (name, grey) in [("im0.jpg", false), ("im1.jpg", false), ("im1g.jpg", true)] {
         let src = image::open(example(if name.starts_with("im0") { "im0.png" } else { "im1.png" })).unwrap();
@@ -850,7 +850,7 @@ fn issue18_jpeg_input() {
 /// Issue 16: a calib.txt whose ndisp is the image width (ETH3D style) is not trusted: the range is measured on
 /// the pair, the run is as accurate as with the true range, and far fewer labels are searched.
 #[test]
-fn issue16_ndisp_equal_to_width_is_measured() {
+fn ndisp_equal_to_width_is_measured() {
     let dir = tempfile::tempdir().unwrap();
     synth_scene(dir.path(), &["S", "--width", "320", "--height", "240", "--ndisp", "64", "--seed", "5"]);
     let gt = pfm::read_pfm(&dir.path().join("S/disp0GT.pfm")).unwrap();
@@ -887,7 +887,7 @@ fn ndisp_near_the_width_runs_with_the_defaults() {
 /// half the width). A random texture seen with a disparity of 60 px in a 96 px wide pair: both paths find a range
 /// past half the width, agree on it, and write the same map.
 #[test]
-fn r38_jem_and_batch_search_up_to_the_same_limit() {
+fn jem_and_batch_search_up_to_the_same_limit() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("shifted");
     std::fs::create_dir(&scene).unwrap();
@@ -918,7 +918,7 @@ fn r38_jem_and_batch_search_up_to_the_same_limit() {
 /// (which then runs within the limit) and the run. 1ea02dd decoded first (here: a decoding error, as the files
 /// are headers only; on real images, a 2872 × 1984 pair peaked at 1.17 GB under `--max-memory 20M`).
 #[test]
-fn issue41_memory_checked_before_decoding_when_the_range_is_measured() {
+fn memory_checked_before_decoding_when_the_range_is_measured() {
     let dir = tempfile::tempdir().unwrap();
     let big = png_header_only(2872, 1984);
     std::fs::write(dir.path().join("l.png"), &big).unwrap();
@@ -941,7 +941,7 @@ fn issue41_memory_checked_before_decoding_when_the_range_is_measured() {
 /// no range (no calib.txt, no `--ndisp`), views of different sizes are the same one-line error (1ea02dd: a panic
 /// in the cost volume, exit 101).
 #[test]
-fn issue41_right_header_read_before_decoding() {
+fn right_header_read_before_decoding() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::copy(example("im0.png"), dir.path().join("l.png")).unwrap();
     std::fs::write(dir.path().join("big.png"), png_header_only(8000, 6000)).unwrap();
@@ -958,7 +958,7 @@ fn issue41_right_header_read_before_decoding() {
 /// on the folder: exit 2 with `d.pfm` left). In batch, a time file that cannot be written (a folder in its
 /// place) leaves no disparity map that a later `--skip-existing` would trust.
 #[test]
-fn issue41_an_output_that_is_a_folder_is_refused_before_any_work() {
+fn an_output_that_is_a_folder_is_refused_before_any_work() {
     let dir = tempfile::tempdir().unwrap();
     synth_scene(dir.path(), &["S", "--width", "64", "--height", "48", "--ndisp", "16"]);
     std::fs::create_dir(dir.path().join("k.pfm")).unwrap();
@@ -977,7 +977,7 @@ fn issue41_an_output_that_is_a_folder_is_refused_before_any_work() {
 /// Issue 41, item 9: a closed stdout and stderr (`jem batch … 2>&1 | head -1`) do not stop the work: every scene
 /// is written and the exit code is 0 (1ea02dd panicked on its second progress line, exit 101, after one scene).
 #[test]
-fn issue41_a_closed_pipe_does_not_stop_the_batch() {
+fn a_closed_pipe_does_not_stop_the_batch() {
     let dir = tempfile::tempdir().unwrap();
     for name in ["S1", "S2", "S3"] {
         synth_scene(dir.path(), &[&format!("set/{name}"), "--width", "64", "--height", "48", "--ndisp", "16"]);
@@ -1002,7 +1002,7 @@ fn issue41_a_closed_pipe_does_not_stop_the_batch() {
 /// Issue 41, item 10: global flags before every subcommand, `degrade` included (1ea02dd: "the subcommand 'OUT'
 /// cannot be used with --threads"): a degrade run, and each subcommand's help.
 #[test]
-fn issue41_global_flags_before_every_subcommand() {
+fn global_flags_before_every_subcommand() {
     let dir = tempfile::tempdir().unwrap();
     synth_scene(dir.path(), &["src/S", "--width", "64", "--height", "48", "--ndisp", "16"]);
     let out = run_in(dir.path(), &["--threads", "1", "-q", "degrade", "src", "out", "--recipe", "noise:2"]);
@@ -1028,7 +1028,7 @@ fn issue41_global_flags_before_every_subcommand() {
 /// (match, batch); `config` and `viz` refuse both, before or after the subcommand, naming the flag. And `degrade
 /// --recipe`'s short help lists every recipe.
 #[test]
-fn issue42_resource_flags_only_where_they_mean_something() {
+fn resource_flags_only_where_they_mean_something() {
     let dir = tempfile::tempdir().unwrap();
     for (sub, threads, memory) in [
         ("match", true, true),
@@ -1061,7 +1061,7 @@ fn issue42_resource_flags_only_where_they_mean_something() {
 /// Issue 41, item 11: with no range given, a 1-pixel-wide pair is refused for its width, not with "invalid
 /// ndisp = 2" (1ea02dd) for a range nobody gave; pairs 2 pixels wide and more run, their range measured.
 #[test]
-fn issue41_a_one_pixel_wide_pair_is_refused_for_its_width() {
+fn a_one_pixel_wide_pair_is_refused_for_its_width() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     for (w, h) in [(1u32, 1u32), (1, 5), (2, 1), (3, 2), (5, 40)] {
@@ -1088,7 +1088,7 @@ fn issue41_a_one_pixel_wide_pair_is_refused_for_its_width() {
 /// Issue 41, item 11: `--max-memory 0.5` (half a byte) is refused with a clear error; 1ea02dd read it as a limit of
 /// 0 bytes ("the memory limit is 0 B").
 #[test]
-fn issue41_a_max_memory_below_one_byte_is_refused() {
+fn a_max_memory_below_one_byte_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     for size in ["0.5", "0.9B"] {
         let out = run_in(dir.path(), &["--max-memory", size, "batch", "--help"]);
@@ -1104,7 +1104,7 @@ fn issue41_a_max_memory_below_one_byte_is_refused() {
 /// before any work (1ea02dd: exit 0, a depth map of `inf` and a PLY of points at ±inf); products that stay finite
 /// but put every depth beyond `f32` give no point at all, and `inf` depth exactly where there is no point.
 #[test]
-fn issue41_overflowing_geometry_writes_no_infinite_point() {
+fn overflowing_geometry_writes_no_infinite_point() {
     let dir = tempfile::tempdir().unwrap();
     synth_scene(dir.path(), &["S", "--width", "64", "--height", "48", "--ndisp", "16"]);
     let run = ["S/im0.png", "S/im1.png", "-o", "d.pfm", "--depth", "z.pfm", "--cloud", "c.ply", "--set", "model=wta"];
@@ -1126,7 +1126,7 @@ fn issue41_overflowing_geometry_writes_no_infinite_point() {
 /// first), not its default of 512 MiB: a 20000 × 20000 header under `--max-memory 1T` reaches the decoder's
 /// real complaint (the data is missing) instead of 1ea02dd's "Memory limit exceeded".
 #[test]
-fn issue41_the_decoder_limit_is_the_memory_limit() {
+fn the_decoder_limit_is_the_memory_limit() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("h.png"), png_header_only(20_000, 20_000)).unwrap();
     let args = ["--max-memory", "1T", "h.png", "h.png", "--ndisp", "16", "-o", "d.pfm"];
@@ -1137,7 +1137,7 @@ fn issue41_the_decoder_limit_is_the_memory_limit() {
 /// Issue 41, item 11: a newline in a scene's folder name is shown escaped (`a\nb`), so it cannot break the batch
 /// table or the progress lines (1ea02dd printed the name as it is: the row split over two lines).
 #[test]
-fn issue41_a_newline_in_a_scene_name_keeps_the_batch_table_whole() {
+fn a_newline_in_a_scene_name_keeps_the_batch_table_whole() {
     let dir = tempfile::tempdir().unwrap();
     for name in ["set/a\nb", "set/c"] {
         synth_scene(dir.path(), &[name, "--width", "64", "--height", "48", "--ndisp", "16"]);
@@ -1155,7 +1155,7 @@ fn issue41_a_newline_in_a_scene_name_keeps_the_batch_table_whole() {
 /// run into the same folder when its process is gone; one whose process is alive is left alone (1ea02dd swept
 /// nothing: the leftover stayed for good).
 #[test]
-fn issue41_degrade_sweeps_the_tree_of_a_killed_run() {
+fn degrade_sweeps_the_tree_of_a_killed_run() {
     let dir = tempfile::tempdir().unwrap();
     synth_scene(dir.path(), &["src/S", "--width", "64", "--height", "48", "--ndisp", "16"]);
     let host: String = std::fs::read_to_string("/proc/sys/kernel/hostname")

@@ -286,7 +286,7 @@ fn slurm_array_tasks_cover_the_data_set() {
 /// `--mask all`, which needs only that folder (1ea02dd: "no scene with ground truth"); the default mask lists the
 /// frame as missing its `disp_noc_0/` truth.
 #[test]
-fn issue41_kitti_with_only_disp_occ_is_scored_with_mask_all() {
+fn kitti_with_only_disp_occ_is_scored_with_mask_all() {
     let dir = tempfile::tempdir().unwrap();
     let out = run_in(dir.path(), &["synth", "S", "--width", "64", "--height", "48", "--ndisp", "16"]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -317,7 +317,7 @@ fn issue41_kitti_with_only_disp_occ_is_scored_with_mask_all() {
 /// batch (exit 2, named; the other frames still run) and missing in eval (1ea02dd: batch exited 0 without listing
 /// it, and eval reported "1 of 1 evaluated" over the frames it kept).
 #[test]
-fn issue41_a_kitti_frame_without_its_right_image_is_reported() {
+fn a_kitti_frame_without_its_right_image_is_reported() {
     let dir = tempfile::tempdir().unwrap();
     let out = run_in(dir.path(), &["synth", "S", "--width", "64", "--height", "48", "--ndisp", "16"]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -347,7 +347,7 @@ fn issue41_a_kitti_frame_without_its_right_image_is_reported() {
 /// image is a failed scene in batch (exit 2, named; the other scene still runs) and missing in eval (1ea02dd: the
 /// folder was not taken for a scene at all, so batch exited 0 without listing it and eval reported "1 of 1").
 #[test]
-fn issue41_an_eth3d_scene_without_its_right_image_is_reported() {
+fn an_eth3d_scene_without_its_right_image_is_reported() {
     let dir = tempfile::tempdir().unwrap();
     let images = dir.path().join("two_view_training");
     let truth = dir.path().join("two_view_training_gt");
@@ -412,7 +412,7 @@ fn pidns() -> String {
 /// lock named, a stale lock (its process gone) is taken over with a note, another part of the same sharded run
 /// is let in, and MiddEval3 scene folders are locked the same way.
 #[test]
-fn issue41_each_split_its_own_results_folder_and_a_lock() {
+fn each_split_its_own_results_folder_and_a_lock() {
     let dir = tempfile::tempdir().unwrap();
     let training = kitti_split(dir.path(), "s1", 1, "k/training");
     let testing = kitti_split(dir.path(), "s2", 2, "k/testing");
@@ -492,7 +492,7 @@ fn issue41_each_split_its_own_results_folder_and_a_lock() {
 /// data set moved away from a `--results` folder; another data set's results are still refused (1ea02dd: an
 /// absolute path, so after `mv` eval refused "holds the results of …/k/training, not of …").
 #[test]
-fn issue42_results_move_and_copy_with_their_data_set() {
+fn results_move_and_copy_with_their_data_set() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     kitti_split(d, "s1", 1, "k/training");
@@ -526,7 +526,7 @@ fn issue42_results_move_and_copy_with_their_data_set() {
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
 }
 
-/// `jem eval` while a batch still holds the results' lock (noticed with issue 41, item 5): it scores them as they
+/// `jem eval` while a batch still holds the results' lock: it scores them as they
 /// are and says so in a warning naming the folder and the run, for a KITTI results folder and a MiddEval3 scene; a
 /// stale lock (its process gone) says nothing, and `-q` silences the warning.
 #[test]

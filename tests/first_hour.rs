@@ -17,7 +17,7 @@ fn last_line(dir: &Path, args: &[&str]) -> String {
 /// Issue 42, item 3: each command's last line says what it did and where; with `-q` there is nothing on stderr
 /// (and the files are written all the same).
 #[test]
-fn issue42_every_command_ends_with_what_it_did() {
+fn every_command_ends_with_what_it_did() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let small = ["--width", "96", "--height", "64", "--ndisp", "16"];
@@ -112,7 +112,7 @@ fn occluded_exact() -> [u8; 3] {
 /// disp_occ_0 but not in disp_noc_0 are shaded as occluded. (Before: "no scene folder with im0.png and
 /// disp0T.pfm", and a single map's error map used the 2 px rule.)
 #[test]
-fn issue42_viz_kitti_tree_with_d1() {
+fn viz_kitti_tree_with_d1() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let frame = "000000_10.png";
@@ -162,7 +162,7 @@ fn issue42_viz_kitti_tree_with_d1() {
 /// Issue 42, item 4: an ETH3D tree's contact sheet uses bad-1 (error > 1 px, native pixels; MiddEval3's rule would
 /// let 1.5 px pass) with the ground truth of the `_gt` tree, and ETH3D's mask: anything but 255 is occluded.
 #[test]
-fn issue42_viz_eth3d_tree_with_bad1() {
+fn viz_eth3d_tree_with_bad1() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let scene = d.join("two_view_training/S");
@@ -198,7 +198,7 @@ fn issue42_viz_eth3d_tree_with_bad1() {
 /// Issue 42, item 6 (`viz --scale`): a MiddEval3 error map outside a trainingQ/H/F folder no longer takes 1
 /// silently: the error asks for --scale, and --scale 4 makes 0.75 px (3 full-resolution px) bad.
 #[test]
-fn issue42_viz_scale_is_asked_for_when_the_path_does_not_tell() {
+fn viz_scale_is_asked_for_when_the_path_does_not_tell() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     write_map(&d.join("S/disp0GT.pfm"), 2, 1, vec![10.0, 10.0]);

@@ -1,4 +1,4 @@
-//! Parsers hammered with generated input (issue 8): random bytes, truncations and mutations of valid files.
+//! Parsers hammered with generated input: random bytes, truncations and mutations of valid files.
 //! Each must return `Ok` or `Err`, never panic, and never allocate more than the input can describe (the PFM
 //! reader checks the data length against the header before allocating; a header claiming 4·10⁹ × 4·10⁹ pixels
 //! is among the mutations).

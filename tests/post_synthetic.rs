@@ -1,4 +1,4 @@
-//! Post-processing on synthetic scenes with known answers (issue 5): slanted-plane smoothing recovers
+//! Post-processing on synthetic scenes with known answers: slanted-plane smoothing recovers
 //! piecewise-planar disparities from noisy, holed maps; degenerate inputs stay finite; outputs do not depend on the
 //! thread count. One `#[ignore]`d test runs both stages on a Middlebury scene for timings.
 
@@ -446,7 +446,7 @@ fn motorcycle_timings() {
 /// held to that bound, so 2^24 segments give exactly the map of the bound and still recover the planes (1a367fa:
 /// 2^24 segments on this 200 × 150 scene gave 1-px cells, none able to fit a plane alone; the map was wrecked).
 #[test]
-fn issue41_absurd_segment_counts_are_held_to_the_image() {
+fn absurd_segment_counts_are_held_to_the_image() {
     let (w, h) = (200, 150);
     let s = synthetic(w, h, 0.3, 42);
     let bound = sps(1).max_segments(w * h);

@@ -1,4 +1,4 @@
-//! Robustness on synthetic scenes with exact ground truth (issue 15): scenes rendered by `jem::synth` or the
+//! Robustness on synthetic scenes with exact ground truth: scenes rendered by `jem::synth` or the
 //! shipped example, degraded by `jem::degrade` (seeded), matched by the default pipeline and by the paper's
 //! (`configs/jem-all.toml`: no input conditioning, no coarse prior). Each test fails without the adaptive front
 //! end of `[condition]`.
@@ -128,10 +128,9 @@ fn jpeg_pair_default_beats_the_paper_pipeline() {
 
 /// A surface with no texture at all (the nearest object of a rendered scene, a slanted disc on 12 % of the image,
 /// painted one flat colour in both views): its matching cost is flat inside, so only its outline and the
-/// pairwise terms place it. Measured inside the disc: the paper's pipeline 6.82 px, the default 2.34 px (1.64 before
-/// the Census support of session 9, 2.24 with it, 1.92 since the gradient normalisation of session 10; the coarse
-/// prior sees the outline over a larger share of the disc; 2.34 since the third coarse level of session 14, at
-/// whose 1/8 the disc is about 9 px across), winner-take-all 34.7 px. Then the same pair as if noiseless (below).
+/// pairwise terms place it. Measured inside the disc: the paper's pipeline 6.82 px, the default 2.34 px (the coarse
+/// prior sees the outline over a larger share of the disc; at its 1/8 level the disc is about 9 px across),
+/// winner-take-all 34.7 px. Then the same pair as if noiseless (below).
 #[test]
 fn untextured_surface() {
     let s = render_scene(&SynthParams { width: 360, height: 240, ndisp: 48, seed: 25 }).unwrap();

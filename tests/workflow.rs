@@ -418,7 +418,7 @@ fn batch_skip_existing_leaves_finished_scenes_alone() {
 /// Issue 19, item 9: only a result that parses and has the scene's size counts as done; an empty, truncated,
 /// foreign or wrongly sized file is redone (it was skipped before).
 #[test]
-fn issue19_skip_existing_needs_a_complete_result() {
+fn skip_existing_needs_a_complete_result() {
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path().join("set");
     let full = jem::io::pfm::encode_pfm(&jem::Plane::new(32, 12, 1.5f32));
@@ -505,7 +505,7 @@ fn viz_single_map_error_map_and_contact_sheet() {
 /// bound (1a367fa: accepted silently up to 2^24; 50000 wrecked Teddy, avgErr 1.79 → 30.4). Under the bound
 /// nothing is said and nothing changes.
 #[test]
-fn issue41_absurd_segment_counts_are_held_to_the_image_with_a_warning() {
+fn absurd_segment_counts_are_held_to_the_image_with_a_warning() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("set").join("S");
     let jem_in = |args: &[&str]| run(jem().current_dir(dir.path()).args(args));

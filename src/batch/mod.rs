@@ -28,9 +28,10 @@ use crate::dataset::Pair;
 use crate::error::{Error, Result};
 use crate::io::calib;
 use crate::matcher::{Matcher, Progress};
+use crate::params::Params;
+use crate::pipeline::Timings;
 use crate::setup::NdispSource;
 use crate::setup::memory::MemoryBudget;
-use crate::{Params, Timings};
 pub use summary::{one_line, summary};
 
 /// Checks an algorithm name: 1–64 ASCII letters, digits, `_` or `-` (it becomes part of file names), and not
@@ -96,7 +97,7 @@ pub struct SceneRun {
     /// Per-stage times.
     pub timings: Timings,
     /// What the adaptive front end measured on the pair (`None` when conditioning is off).
-    pub measured: Option<crate::Measured>,
+    pub measured: Option<crate::pipeline::Measured>,
 }
 
 /// How a scene ended.
@@ -318,6 +319,59 @@ pub fn run_batch(
                 name: pair.name.clone(),
                 status: SceneStatus::Failed("not run (a worker thread stopped)".into()),
             })
+        })
+        .collect()
+}
+
+/// [`run_batch`] for the pairs of a batch that holds `lock` on their results: a MiddEval3 scene whose lock could
+/// not be taken (it could not be read: [`crate::dataset::ResultsLock::refused`]) fails without running, reported
+/// first; the others run. One report per scene, in list order.
+pub fn run_batch_locked(
+    scenes: &[Pair],
+    lock: &crate::dataset::ResultsLock,
+    params: &Params,
+    opts: &BatchOptions,
+    on_event: &(dyn Fn(Event<'_>) + Sync),
+) -> Vec<SceneReport> {
+    let refused: Vec<Option<&String>> = scenes
+        .iter()
+        .map(|p| {
+            lock.refused().iter().find(|(dir, _)| p.layout == crate::dataset::Layout::Middlebury && *dir == p.root)
+        })
+        .map(|found| found.map(|(_, e)| e))
+        .collect();
+    let failed = |pair: &Pair, e: &str| SceneReport {
+        dir: pair.location(),
+        name: pair.name.clone(),
+        status: SceneStatus::Failed(e.to_string()),
+    };
+    for (index, (pair, e)) in scenes.iter().zip(&refused).enumerate() {
+        if let Some(e) = e {
+            on_event(Event::Finished { index, report: &failed(pair, e) });
+        }
+    }
+    let (positions, runnable): (Vec<usize>, Vec<Pair>) = scenes
+        .iter()
+        .zip(&refused)
+        .enumerate()
+        .filter(|(_, (_, e))| e.is_none())
+        .map(|(k, (p, _))| (k, p.clone()))
+        .unzip();
+    // The events of the pairs that run carry their place in `scenes`.
+    let forward = |event: Event<'_>| {
+        on_event(match event {
+            Event::Started { index, name } => Event::Started { index: positions[index], name },
+            Event::Stage { index, stage } => Event::Stage { index: positions[index], stage },
+            Event::Finished { index, report } => Event::Finished { index: positions[index], report },
+        })
+    };
+    let mut ran = run_batch(&runnable, params, opts, &forward).into_iter();
+    scenes
+        .iter()
+        .zip(&refused)
+        .map(|(pair, e)| match e {
+            Some(e) => failed(pair, e),
+            None => ran.next().unwrap_or_else(|| failed(pair, "not run")),
         })
         .collect()
 }

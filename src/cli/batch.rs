@@ -153,6 +153,45 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         return Err(Error::param("--ndisp", 0, "at least 1"));
     }
     let params = args.config.params()?;
+    let (all, scenes) = find_pairs(args)?;
+    let lock = claim_results(args, &all, &scenes, global.quiet)?;
+    if !global.quiet {
+        announce(args, &all, &scenes);
+    }
+    let opts = BatchOptions {
+        alg: args.alg.clone(),
+        results: args.results.clone(),
+        ndisp: args.ndisp,
+        jobs: args.jobs,
+        skip_existing: args.skip_existing,
+        max_memory_bytes: args.memory.memory_limit(),
+    };
+    let display = BatchDisplay::new(scenes.len(), global.quiet, params.clone());
+    // Panics inside the pipeline are caught and reported per scene; keep the default hook's message and
+    // backtrace note off the terminal unless -v.
+    let previous_hook = (!global.verbose).then(|| {
+        let prev = std::panic::take_hook();
+        std::panic::set_hook(Box::new(|_| {}));
+        prev
+    });
+    let reports = jem::batch::run_batch_locked(&scenes, &lock, &params, &opts, &|e| display.on_event(e));
+    drop(lock);
+    if let Some(prev) = previous_hook {
+        std::panic::set_hook(prev);
+    }
+    if let Some(bar) = &display.bar {
+        bar.finish_and_clear();
+    }
+    let failed = reports.iter().filter(|r| matches!(r.status, SceneStatus::Failed(_))).count();
+    if !global.quiet {
+        out!("{}", jem::batch::summary(&reports, global.verbose));
+        note!("{}", results_line(&scenes, &reports, args));
+    }
+    Ok(if failed > 0 { ExitCode::from(2) } else { ExitCode::SUCCESS })
+}
+
+/// Every pair under the folders given, and this shard's part of them.
+fn find_pairs(args: &BatchArgs) -> Result<(Vec<jem::dataset::Pair>, Vec<jem::dataset::Pair>)> {
     let how = jem::dataset::Discovery { layout: args.layout, gt: None };
     let all = jem::dataset::discover(&args.dirs, jem::dataset::Purpose::Run, &how)?;
     if all.is_empty() {
@@ -172,91 +211,43 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         Some(shard) => shard.select(&all),
         None => all.clone(),
     };
-    // Every results folder is checked for the whole data set (another shard may claim it), then claimed for
-    // this shard's pairs, before any work.
-    jem::dataset::check_results_dirs(&all, &args.alg, args.results.as_deref(), false)?;
-    // A second batch writing the same results is kept out until this one ends (issue 41); checked again under
-    // the lock, which is when the source files are written.
+    Ok((all, scenes))
+}
+
+/// Claims the results folders of `scenes` for this run, before any work: each is checked for the whole data set
+/// `all` (another shard may claim it), locked against a second batch writing the same results until this one ends,
+/// and checked again under the lock (which is when the source files are written).
+fn claim_results(
+    args: &BatchArgs,
+    all: &[jem::dataset::Pair],
+    scenes: &[jem::dataset::Pair],
+    quiet: bool,
+) -> Result<jem::dataset::ResultsLock> {
+    jem::dataset::check_results_dirs(all, &args.alg, args.results.as_deref(), false)?;
     let shard = args.shard.map(|s| (s.index, s.count));
-    let lock = jem::dataset::lock_results(&scenes, &args.alg, args.results.as_deref(), shard)?;
-    for line in lock.taken_over().iter().filter(|_| !global.quiet) {
+    let lock = jem::dataset::lock_results(scenes, &args.alg, args.results.as_deref(), shard)?;
+    for line in lock.taken_over().iter().filter(|_| !quiet) {
         note!("note: {line}");
     }
-    jem::dataset::check_results_dirs(&scenes, &args.alg, args.results.as_deref(), true)?;
-    if !global.quiet {
-        let shard =
-            args.shard.map(|s| format!(" (shard {}/{} of {})", s.index, s.count, all.len())).unwrap_or_default();
-        note!("{} pair(s){shard}, alg {}, {} job(s)", scenes.len(), args.alg, args.jobs);
-        let dirs: std::collections::BTreeSet<(&str, PathBuf)> = scenes
-            .iter()
-            .filter(|p| p.layout != jem::dataset::Layout::Middlebury)
-            .filter_map(|p| {
-                let files = p.result_files(&args.alg, args.results.as_deref());
-                Some((p.layout.name(), files.disparity.parent()?.to_path_buf()))
-            })
-            .collect();
-        for (layout, dir) in dirs {
-            note!("{layout} results: {}", dir.display());
-        }
-    }
-    let opts = BatchOptions {
-        alg: args.alg.clone(),
-        results: args.results.clone(),
-        ndisp: args.ndisp,
-        jobs: args.jobs,
-        skip_existing: args.skip_existing,
-        max_memory_bytes: args.memory.memory_limit(),
-    };
-    let display = BatchDisplay::new(scenes.len(), global.quiet, params.clone());
+    jem::dataset::check_results_dirs(scenes, &args.alg, args.results.as_deref(), true)?;
+    Ok(lock)
+}
 
-    // Panics inside the pipeline are caught and reported per scene; keep the default hook's message and
-    // backtrace note off the terminal unless -v.
-    let previous_hook = (!global.verbose).then(|| {
-        let prev = std::panic::take_hook();
-        std::panic::set_hook(Box::new(|_| {}));
-        prev
-    });
-    // A scene whose lock cannot be read fails without running (reported first); the others run.
-    let refused: Vec<Option<&String>> = scenes
+/// The first lines of a batch: how many pairs, which shard, and where the results of KITTI and ETH3D go.
+fn announce(args: &BatchArgs, all: &[jem::dataset::Pair], scenes: &[jem::dataset::Pair]) {
+    let shard = args.shard.map(|s| format!(" (shard {}/{} of {})", s.index, s.count, all.len())).unwrap_or_default();
+    note!("{} pair(s){shard}, alg {}, {} job(s)", scenes.len(), args.alg, args.jobs);
+    let dirs: std::collections::BTreeSet<(&str, PathBuf)> = scenes
         .iter()
-        .map(|p| lock.refused().iter().find(|(dir, _)| p.layout == jem::dataset::Layout::Middlebury && *dir == p.root))
-        .map(|found| found.map(|(_, e)| e))
-        .collect();
-    let failed_report = |pair: &jem::dataset::Pair, e: &str| jem::batch::SceneReport {
-        dir: pair.location(),
-        name: pair.name.clone(),
-        status: SceneStatus::Failed(e.to_string()),
-    };
-    for (index, (pair, e)) in scenes.iter().zip(&refused).enumerate() {
-        if let Some(e) = e {
-            display.on_event(jem::batch::Event::Finished { index, report: &failed_report(pair, e) });
-        }
-    }
-    let runnable: Vec<jem::dataset::Pair> =
-        scenes.iter().zip(&refused).filter(|(_, e)| e.is_none()).map(|(p, _)| p.clone()).collect();
-    let mut ran = jem::batch::run_batch(&runnable, &params, &opts, &|e| display.on_event(e)).into_iter();
-    let reports: Vec<jem::batch::SceneReport> = scenes
-        .iter()
-        .zip(&refused)
-        .map(|(pair, e)| match e {
-            Some(e) => failed_report(pair, e),
-            None => ran.next().unwrap_or_else(|| failed_report(pair, "not run")),
+        .filter(|p| p.layout != jem::dataset::Layout::Middlebury)
+        .filter_map(|p| {
+            let files = p.result_files(&args.alg, args.results.as_deref());
+            Some((p.layout.name(), files.disparity.parent()?.to_path_buf()))
         })
         .collect();
-    drop(lock);
-    if let Some(prev) = previous_hook {
-        std::panic::set_hook(prev);
+    for (layout, dir) in dirs {
+        note!("{layout} results: {}", dir.display());
     }
-    if let Some(bar) = &display.bar {
-        bar.finish_and_clear();
-    }
-
-    let failed = reports.iter().filter(|r| matches!(r.status, SceneStatus::Failed(_))).count();
-    if !global.quiet {
-        out!("{}", jem::batch::summary(&reports, global.verbose));
-        note!("{}", results_line(&scenes, &reports, args));
-    }
-    Ok(if failed > 0 { ExitCode::from(2) } else { ExitCode::SUCCESS })
 }
 
 /// The last line of a batch: how many pairs were written, skipped and failed, and where the results are

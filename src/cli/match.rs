@@ -64,73 +64,120 @@ pub(super) struct MatchArgs {
 
 /// Matches one pair.
 pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
-    let (Some(left), Some(right), Some(output)) = (&args.left, &args.right, &args.output) else {
-        return Err(Error::Input("usage: jem LEFT RIGHT -o OUT (see --help)".into()));
-    };
-    // Check the output names before doing any work.
-    jem::io::DisparityFormat::from_path(output)?;
-    if let Some(c) = &args.confidence {
-        jem::io::DisparityFormat::from_path(c)?;
-    }
-    let calib = left.parent().unwrap_or(Path::new(".")).join("calib.txt");
-    if let Some(d) = &args.depth
-        && jem::io::DisparityFormat::from_path(d)? == jem::io::DisparityFormat::Png16
-    {
-        return Err(Error::Input(format!("{}: depth is written as .pfm or .exr (floats)", d.display())));
-    }
-    if let Some(c) = &args.cloud
-        && !c.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
-    {
-        return Err(Error::Input(format!("{}: a point cloud is written as .ply", c.display())));
-    }
-    // calib.txt, read once when something needs it (the range, or the camera).
-    let wants_camera = args.cloud.is_some() || args.depth.is_some();
-    let calib_file = if (args.ndisp.is_none() || wants_camera) && calib.is_file() {
-        Some(calib::Calib::load(&calib)?)
-    } else {
-        None
-    };
-    // The camera is resolved before any work: a missing focal length or baseline is an error at once.
-    let camera = if wants_camera {
-        let overrides = jem::geometry::CameraOverrides {
-            focal: args.focal,
-            cx: args.cx,
-            cy: args.cy,
-            baseline: args.baseline,
-            doffs: args.doffs,
-        };
-        Some(jem::geometry::Camera::resolve(calib_file.as_ref(), &overrides)?)
-    } else {
-        None
-    };
-    let outputs: Vec<&Path> = std::iter::once(output.as_path())
-        .chain(args.confidence.as_deref())
-        .chain(args.cloud.as_deref())
-        .chain(args.depth.as_deref())
-        .collect();
-    jem::io::check_outputs(&[left, right, &calib], &outputs)?;
+    let request = Request::check(args)?;
     let params = args.config.params()?;
     let start = Instant::now();
-    // The range: --ndisp, else calib.txt's ndisp (measured instead when it is missing or no real bound: half the
-    // width or more).
-    let stated = match &calib_file {
-        Some(c) if args.ndisp.is_none() => Some(c.ndisp().map_err(|msg| Error::Calib { path: calib.clone(), msg })?),
-        _ => None,
-    };
     let mut matcher = Matcher::new(params.clone())?
-        .with_ndisp(NdispSource::resolve(args.ndisp, stated))
+        .with_ndisp(NdispSource::resolve(args.ndisp, request.stated_ndisp))
         .with_max_memory(args.memory.memory_limit());
-    let header = jem::io::read_pair_header(left, right)?;
+    let header = jem::io::read_pair_header(request.left, request.right)?;
     for warning in params.image_warnings(header.width, header.height).iter().filter(|_| !global.quiet) {
         note!("warning: {warning}");
     }
     // Both headers are checked against the memory limit before either image is decoded.
-    let (l, r) = matcher.read_pair(left, right)?;
+    let (l, r) = matcher.read_pair(request.left, request.right)?;
     let load_time = start.elapsed();
+    let out = match_with_progress(&mut matcher, (&l, &r), request.stated_ndisp, global.quiet)?;
+    write_outputs(args, &request, &out, &l)?;
+    if global.verbose && !global.quiet {
+        note!("{:<14} {:>9.1} ms", "load", load_time.as_secs_f64() * 1e3);
+        for (name, d) in &out.timings.stages {
+            note!("{name:<14} {:>9.1} ms", d.as_secs_f64() * 1e3);
+        }
+        note!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
+        if let Some(m) = &out.measured {
+            note!("{m}");
+        }
+        if let Some(peak) = jem::peak_rss_bytes() {
+            note!("memory: peak {} (planned {})", human(peak), human(out.plan.memory_bytes));
+        }
+    }
+    if !global.quiet {
+        let seconds = start.elapsed().as_secs_f64();
+        note!("{}", wrote_line(args, &out, seconds, request.camera.as_ref()));
+    }
+    Ok(ExitCode::SUCCESS)
+}
 
-    let spinner = stage_spinner(global.quiet);
-    let out = matcher.match_pair_with(&l, &r, &|progress| match progress {
-        Progress::Planned(plan) if !global.quiet => {
+/// What a match is asked for, checked before any work: the input and output names, the range calib.txt states and
+/// the camera (a missing focal length or baseline is an error at once).
+struct Request<'a> {
+    left: &'a Path,
+    right: &'a Path,
+    /// The range `calib.txt` beside LEFT states, when no `--ndisp` is given.
+    stated_ndisp: Option<usize>,
+    /// For `--depth` and `--cloud`.
+    camera: Option<jem::geometry::Camera>,
+}
+
+impl<'a> Request<'a> {
+    fn check(args: &'a MatchArgs) -> Result<Request<'a>> {
+        let (Some(left), Some(right), Some(output)) = (&args.left, &args.right, &args.output) else {
+            return Err(Error::Input("usage: jem LEFT RIGHT -o OUT (see --help)".into()));
+        };
+        jem::io::DisparityFormat::from_path(output)?;
+        if let Some(c) = &args.confidence {
+            jem::io::DisparityFormat::from_path(c)?;
+        }
+        let calib = left.parent().unwrap_or(Path::new(".")).join("calib.txt");
+        if let Some(d) = &args.depth
+            && jem::io::DisparityFormat::from_path(d)? == jem::io::DisparityFormat::Png16
+        {
+            return Err(Error::Input(format!("{}: depth is written as .pfm or .exr (floats)", d.display())));
+        }
+        if let Some(c) = &args.cloud
+            && !c.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
+        {
+            return Err(Error::Input(format!("{}: a point cloud is written as .ply", c.display())));
+        }
+        // calib.txt, read once when something needs it (the range, or the camera).
+        let wants_camera = args.cloud.is_some() || args.depth.is_some();
+        let calib_file = if (args.ndisp.is_none() || wants_camera) && calib.is_file() {
+            Some(calib::Calib::load(&calib)?)
+        } else {
+            None
+        };
+        let camera = if wants_camera {
+            let overrides = jem::geometry::CameraOverrides {
+                focal: args.focal,
+                cx: args.cx,
+                cy: args.cy,
+                baseline: args.baseline,
+                doffs: args.doffs,
+            };
+            Some(jem::geometry::Camera::resolve(calib_file.as_ref(), &overrides)?)
+        } else {
+            None
+        };
+        let outputs: Vec<&Path> = std::iter::once(output.as_path())
+            .chain(args.confidence.as_deref())
+            .chain(args.cloud.as_deref())
+            .chain(args.depth.as_deref())
+            .collect();
+        jem::io::check_outputs(&[left, right, &calib], &outputs)?;
+        // The range: --ndisp, else calib.txt's (measured instead when it is missing or no real bound: half the
+        // width or more).
+        let stated_ndisp = match &calib_file {
+            Some(c) if args.ndisp.is_none() => {
+                Some(c.ndisp().map_err(|msg| Error::Calib { path: calib.clone(), msg })?)
+            }
+            _ => None,
+        };
+        Ok(Request { left, right, stated_ndisp, camera })
+    }
+}
+
+/// Matches the pair with a stage spinner on a terminal, and says (unless `quiet`) when the range was measured or
+/// the pair runs in tiles.
+fn match_with_progress(
+    matcher: &mut Matcher,
+    (left, right): (&jem::RgbImage, &jem::RgbImage),
+    stated: Option<usize>,
+    quiet: bool,
+) -> Result<jem::Output> {
+    let spinner = stage_spinner(quiet);
+    let out = matcher.match_pair_with(left, right, &|progress| match progress {
+        Progress::Planned(plan) if !quiet => {
             if plan.ndisp_measured {
                 let was = stated.map_or("no range given".to_string(), |s| format!("calib.txt says {s}"));
                 note!("ndisp {}, measured on the pair ({was}; --ndisp N sets it)", plan.ndisp);
@@ -149,58 +196,37 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
             }
         }
         Progress::Planned(_) => {}
-    })?;
+    });
     if let Some(s) = spinner {
         s.finish_and_clear();
     }
-    // Both outputs or neither: encode both, then write them as one.
-    let mut files = vec![(output.as_path(), jem::io::encode_disparity(output, &out.disparity)?)];
+    out
+}
+
+/// Writes the disparity map and what else was asked for, all or none: every file is encoded first, then they are
+/// written as one.
+fn write_outputs(args: &MatchArgs, request: &Request<'_>, out: &jem::Output, left: &jem::RgbImage) -> Result<()> {
+    let output = args.output.as_deref().unwrap_or(Path::new("?"));
+    let mut files = vec![(output, jem::io::encode_disparity(output, &out.disparity)?)];
     if let Some(c) = &args.confidence {
         files.push((c.as_path(), jem::io::encode_disparity(c, &out.confidence)?));
     }
-    if let Some(camera) = &camera {
+    if let Some(camera) = &request.camera {
         if let Some(d) = &args.depth {
             let depth = jem::geometry::depth_map(&out.disparity, camera);
             files.push((d.as_path(), jem::io::encode_disparity(d, &depth)?));
         }
         if let Some(c) = &args.cloud {
-            files.push((c.as_path(), jem::geometry::encode_ply(&out.disparity, &l, camera)));
+            files.push((c.as_path(), jem::geometry::encode_ply(&out.disparity, left, camera)));
         }
     }
     let refs: Vec<(&Path, &[u8])> = files.iter().map(|(p, b)| (*p, b.as_slice())).collect();
-    jem::io::write_all_or_none(&refs)?;
-    if global.verbose && !global.quiet {
-        note!("{:<14} {:>9.1} ms", "load", load_time.as_secs_f64() * 1e3);
-        for (name, d) in &out.timings.stages {
-            note!("{name:<14} {:>9.1} ms", d.as_secs_f64() * 1e3);
-        }
-        note!("{:<14} {:>9.1} ms", "total", start.elapsed().as_secs_f64() * 1e3);
-        if let Some(m) = &out.measured {
-            note!("{m}");
-        }
-        if let Some(peak) = jem::peak_rss_bytes() {
-            note!("memory: peak {} (planned {})", human(peak), human(out.plan.memory_bytes));
-        }
-    }
-    if !global.quiet {
-        let seconds = start.elapsed().as_secs_f64();
-        note!(
-            "{}",
-            wrote_line(args, &out.disparity, out.plan.ndisp, out.plan.ndisp_measured, seconds, camera.as_ref())
-        );
-    }
-    Ok(ExitCode::SUCCESS)
+    jem::io::write_all_or_none(&refs)
 }
 
 /// The last line of a match: `wrote d.pfm (741×497, 96 % valid, ndisp 70, 2.8 s)`, then the other files written.
-fn wrote_line(
-    args: &MatchArgs,
-    disparity: &jem::DisparityMap,
-    ndisp: usize,
-    measured: bool,
-    seconds: f64,
-    camera: Option<&jem::geometry::Camera>,
-) -> String {
+fn wrote_line(args: &MatchArgs, out: &jem::Output, seconds: f64, camera: Option<&jem::geometry::Camera>) -> String {
+    let (disparity, ndisp, measured) = (&out.disparity, out.plan.ndisp, out.plan.ndisp_measured);
     let (w, h) = disparity.dims();
     let valid = disparity.data().iter().filter(|d| d.is_finite()).count();
     let percent = 100.0 * valid as f64 / disparity.data().len().max(1) as f64;

@@ -11,7 +11,7 @@
 //! `eval.rs`, `viz.rs`.
 //!
 //! Everything the commands print goes through [`note!`] (stderr) and [`out!`] (stdout), which ignore a closed or
-//! failing stream: `jem batch … 2>&1 | head -1` must not stop the work (issue 41; `eprintln!` panics on a
+//! failing stream: `jem batch … 2>&1 | head -1` must not stop the work (`eprintln!` panics on a
 //! closed pipe).
 
 /// Writes a line to stderr, ignoring a closed or failing stderr.
@@ -112,7 +112,7 @@ impl MemoryArg {
 /// `--verbose` are taken by every subcommand, `--threads` and `--max-memory` only by those where they mean something
 /// ([`ThreadsArg`], [`MemoryArg`]): `jem --threads 1 config` is refused as `jem config --threads 1` is.
 ///
-/// Every subcommand's name comes from the parser itself, so none is missed (issue 41: `degrade` was).
+/// Every subcommand's name comes from the parser itself, so none is missed.
 pub fn global_flags_after_subcommand(mut args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsString> {
     let command = <Cli as clap::CommandFactory>::command();
     let is_subcommand = |arg: &str| arg == "help" || command.get_subcommands().any(|c| c.get_name() == arg);

@@ -1,5 +1,5 @@
 //! Input conditioning and the coarse prior (our addition, not in the paper): measure the pair, then adapt to it,
-//! so that one configuration serves clean, noisy, dark and unevenly exposed pairs (issue 15).
+//! so that one configuration serves clean, noisy, dark and unevenly exposed pairs.
 //!
 //! 1. **Contrast** (`stretch.enabled`). A view whose robust range (the 0.5th to the 99.5th percentile of grey) is below
 //!    [`TARGET_RANGE`] / `stretch.min_gain` is stretched by an affine map to span [`TARGET_RANGE`] grey levels,

@@ -1,4 +1,4 @@
-//! Residual vertical misalignment (our addition, issue 15): measured on the pair and removed.
+//! Residual vertical misalignment (our addition): measured on the pair and removed.
 //!
 //! A rectified pair should have its matches on the same row, but real calibrations leave a residual: MiddEval3's
 //! "imperfect" pairs (Playtable against PlaytableP) and most pairs from users' own rigs have the right view's
@@ -21,6 +21,7 @@ use rayon::prelude::*;
 use crate::image::{DisparityMap, Plane, RgbImage};
 use crate::imgproc::filter::central_differences;
 use crate::imgproc::sample::{keys, sample_bilinear};
+use crate::params::VerticalParams;
 
 /// The side of the blocks that each give one measurement of the offset (px).
 pub(crate) const BLOCK: usize = 8;
@@ -38,9 +39,8 @@ const REWEIGHTS: usize = 5;
 /// levels² per px²): the block must have gradients in both directions.
 const MIN_STRUCTURE: f64 = 4.0;
 
-/// An estimate larger than this anywhere (px) is not trusted: the coarse disparities it rests on were found on
-/// rows that far apart, and the linearisation holds for about a pixel per iteration.
-pub(crate) const MAX_OFFSET: f32 = 4.0;
+/// An estimate larger than this anywhere (px) is not trusted ([`VerticalParams::MAX_OFFSET_PX`]).
+const MAX_OFFSET: f32 = VerticalParams::MAX_OFFSET_PX;
 
 /// The right view's vertical offset v(x, y) in pixels: the left pixel (x, y) at disparity d matches the right
 /// view at (x − d, y + v(x, y)). A quadratic surface, v = c₀ + c₁x′ + c₂y′ + c₃x′y′ + c₄y′² with
@@ -128,19 +128,21 @@ struct BlockStep {
     structure: f64,
 }
 
+/// What the blocks' steps read: both views in grey with their central differences, and the coarse answer (its
+/// disparities and the pixels that passed its left-right check).
+struct Measurement<'a> {
+    left: &'a Plane<f32>,
+    lgrad: &'a (Plane<f32>, Plane<f32>),
+    right: &'a Plane<f32>,
+    rgrad: &'a (Plane<f32>, Plane<f32>),
+    disparity: &'a DisparityMap,
+    trusted: &'a Plane<bool>,
+}
+
 /// The Lucas–Kanade step of the block with top-left (`bx`, `by`) at the current estimate `v`, or `None` where
 /// the block has too few usable pixels or no two-dimensional structure.
-#[allow(clippy::too_many_arguments)]
-fn block_step(
-    left: &Plane<f32>,
-    lgrad: &(Plane<f32>, Plane<f32>),
-    right: &Plane<f32>,
-    rgrad: &(Plane<f32>, Plane<f32>),
-    disparity: &DisparityMap,
-    trusted: &Plane<bool>,
-    v: &VerticalOffset,
-    (bx, by): (usize, usize),
-) -> Option<BlockStep> {
+fn block_step(m: &Measurement<'_>, v: &VerticalOffset, (bx, by): (usize, usize)) -> Option<BlockStep> {
+    let Measurement { left, lgrad, right, rgrad, disparity, trusted } = *m;
     let (w, h) = left.dims();
     let mut s = [0.0f64; 9]; // n, Σgx, Σgy, Σe, Σgx², Σgxgy, Σgy², Σgx·e, Σgy·e
     let mut terms = [0.0f64; TERMS];
@@ -229,16 +231,14 @@ pub(crate) fn estimate(
         return None;
     }
     let (lgrad, rgrad) = rayon::join(|| central_differences(left), || central_differences(right));
+    let measurement = Measurement { left, lgrad: &lgrad, right, rgrad: &rgrad, disparity, trusted };
     let blocks: Vec<(usize, usize)> =
         (0..h / BLOCK).flat_map(|j| (0..w / BLOCK).map(move |i| (i * BLOCK, j * BLOCK))).collect();
     let mut v = VerticalOffset::zero(w, h);
     // The Lucas–Kanade steps converge from within about a pixel: start from the best whole-pixel shift.
     v.coef[0] = f64::from(best_whole_shift(left, right, disparity, trusted));
     for _ in 0..ITERATIONS {
-        let steps: Vec<BlockStep> = blocks
-            .par_iter()
-            .filter_map(|&b| block_step(left, &lgrad, right, &rgrad, disparity, trusted, &v, b))
-            .collect();
+        let steps: Vec<BlockStep> = blocks.par_iter().filter_map(|&b| block_step(&measurement, &v, b)).collect();
         if steps.len() < 20 * TERMS {
             return None;
         }

@@ -33,7 +33,7 @@ pub(super) fn recognise(dir: &Path) -> Option<Layout> {
 
 /// The frames of the KITTI tree at `dir`: every `*_10.png` of the left folder, sorted by name. A frame whose
 /// right image is missing is listed all the same, so that `jem batch` reports it as a failed scene and `jem eval`
-/// as missing its result (issue 41: it disappeared without a word). For [`Purpose::Score`], none unless the tree has a truth folder: the non-occluded one or the
+/// as missing its result (never dropped without a word). For [`Purpose::Score`], none unless the tree has a truth folder: the non-occluded one or the
 /// one of all pixels (many published samples ship only `disp_occ_0/`, which `--mask all` needs alone).
 pub(super) fn frames(dir: &Path, layout: Layout, purpose: Purpose) -> Vec<Pair> {
     let Some((_, left, right)) = image_folders(dir) else { return Vec::new() };

@@ -1,4 +1,4 @@
-//! The lock that keeps a second `jem batch` out of a results folder while one writes to it (issue 41: two batches
+//! The lock that keeps a second `jem batch` out of a results folder while one writes to it (two batches
 //! into one folder overwrote each other's results, both exiting 0).
 //!
 //! A lock is a file created atomically (`create_new`, `O_EXCL`) in the folder, holding the writer's pid, host,

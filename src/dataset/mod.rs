@@ -142,7 +142,7 @@ impl Pair {
 
     /// The results folder of `alg` for this pair's data set: `base/alg/SPLIT`, `base` = `results` or the folder
     /// `results/` beside the data set, `SPLIT` the data set's folder name (`training`, `testing`,
-    /// `two_view_training`: each split its own folder, issue 41); `None` for MiddEval3, whose results go into the
+    /// `two_view_training`: each split its own folder); `None` for MiddEval3, whose results go into the
     /// scene folder.
     pub fn results_dir(&self, alg: &str, results: Option<&Path>) -> Option<PathBuf> {
         if self.layout == Layout::Middlebury {
@@ -285,7 +285,7 @@ fn scene(dir: &Path, purpose: Purpose, how: &Discovery) -> Option<Option<Pair>> 
     let parent = dir.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let eth3d = || how.gt.is_some() || is_eth3d_tree(parent);
     // In an ETH3D tree a folder with any of the scene files is a scene, listed even when one is missing, so that
-    // `jem batch` fails it naming the file and `jem eval` counts it as missing (issue 41: it disappeared).
+    // `jem batch` fails it naming the file and `jem eval` counts it as missing (it must not disappear).
     let partial_eth3d = || {
         SCENE_FILES.iter().any(|f| has(f))
             && match how.layout {

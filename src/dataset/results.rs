@@ -5,7 +5,7 @@
 //! and a fingerprint of the data set: its pair names and the byte sizes of their images (metadata only; KITTI's
 //! training and testing frames share names but not sizes). A results folder holds a data set's results when the
 //! layouts agree and either the recorded folder is the data set's folder, or the fingerprints agree (the data set
-//! was moved or copied away from its results, issue 42). Anything else is refused. A file of an older jem, with an
+//! was moved or copied away from its results). Anything else is refused. A file of an older jem, with an
 //! absolute `root` and no fingerprint, still matches its folder.
 
 use std::path::{Component, Path, PathBuf};

@@ -24,7 +24,7 @@ fn recognises_each_layout() {
             "kitti15/training/image_2/000000_11.png",
             "kitti15/training/image_3/000000_10.png",
             "kitti15/training/image_3/000000_11.png",
-            "kitti15/training/image_2/000001_10.png", // no right view: listed, to fail loudly (issue 41)
+            "kitti15/training/image_2/000001_10.png", // no right view: listed, to fail loudly
             "kitti15/training/disp_noc_0/000000_10.png",
             "kitti12/training/colored_0/000007_10.png",
             "kitti12/training/colored_1/000007_10.png",
@@ -34,7 +34,7 @@ fn recognises_each_layout() {
             "eth/two_view_training/delivery_area_1l/im1.png",
             "eth/two_view_training/delivery_area_1l/calib.txt",
             "eth/two_view_training_gt/delivery_area_1l/disp0GT.pfm",
-            "eth/two_view_training/forest_1s/im0.png", // no right view: listed, to fail loudly (issue 41)
+            "eth/two_view_training/forest_1s/im0.png", // no right view: listed, to fail loudly
             "eth/two_view_training/forest_1s/calib.txt",
             "eth/two_view_training_gt/forest_1s/disp0GT.pfm",
             "mid/trainingQ/Lone/im0.png", // no right view, outside an ETH3D tree: no scene
@@ -142,7 +142,7 @@ fn a_results_folder_belongs_to_one_data_set() {
     std::fs::write(root.join("k/testing/image_2/000000_10.png"), b"other").unwrap();
     let all = discover(&[root.join("k")], Purpose::Run, &Discovery::default()).unwrap();
     assert_eq!(all.len(), 2);
-    // Each split its own folder (issue 41): both at once are fine.
+    // Each split its own folder: both at once are fine.
     check_results_dirs(&all, "A", None, true).unwrap();
     let source = std::fs::read_to_string(root.join("k/results/A/training").join(SOURCE_FILE)).unwrap();
     assert!(source.starts_with("layout kitti2015\nroot ../../../training\ndata 1 pairs, fingerprint "), "{source}");

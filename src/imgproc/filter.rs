@@ -1,5 +1,6 @@
 //! Neighbourhood filters on planes and images: replicated padding, the horizontal Sobel gradient, central
-//! differences, a local mean of |v|, and a separable Gaussian blur. Borders are replicated everywhere.
+//! differences, a local mean of |v|, a separable Gaussian blur, and the minimum or maximum over a square window.
+//! Borders are replicated everywhere.
 
 use rayon::prelude::*;
 
@@ -117,4 +118,66 @@ pub(crate) fn gaussian_blur_plane(data: &[f32], w: usize, h: usize, sigma: f32) 
         }
     });
     out
+}
+
+/// `pick` (`f32::min` or `f32::max`) of the finite values of `p` in the square of radius `r` around every
+/// pixel, in two separable passes; `empty` (the identity of `pick`: `inf` for the minimum) where there is none.
+pub(crate) fn window_extreme(
+    p: &Plane<f32>,
+    r: usize,
+    empty: f32,
+    pick: impl Fn(f32, f32) -> f32 + Copy + Sync,
+) -> Plane<f32> {
+    let (w, h) = (p.width, p.height);
+    let mut rows = Plane::new(w, h, empty);
+    rows.data.par_chunks_mut(w.max(1)).zip(p.data.par_chunks(w.max(1))).for_each(|(dst, src)| {
+        let finite: Vec<f32> = src.iter().map(|&v| if v.is_finite() { v } else { empty }).collect();
+        running_extreme(&finite, r, empty, pick, dst);
+    });
+    let mut out = Plane::new(w, h, empty);
+    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, dst)| {
+        for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+            dst.iter_mut().zip(rows.row(yy)).for_each(|(o, &v)| *o = pick(*o, v));
+        }
+    });
+    out
+}
+
+/// `out[x]` = `pick` of `src[x − r ..= x + r]` (within the slice) for every x, in O(1) per value (van Herk /
+/// Gil–Werman: the running extremes from the start and from the end of blocks of 2r + 1, two per window).
+fn running_extreme(src: &[f32], r: usize, empty: f32, pick: impl Fn(f32, f32) -> f32, out: &mut [f32]) {
+    let k = 2 * r + 1;
+    let n = src.len() + 2 * r;
+    let padded = |i: usize| if i < r || i >= r + src.len() { empty } else { src[i - r] };
+    let (mut from_start, mut to_end) = (vec![empty; n], vec![empty; n]);
+    for i in 0..n {
+        from_start[i] = if i % k == 0 { padded(i) } else { pick(from_start[i - 1], padded(i)) };
+    }
+    for i in (0..n).rev() {
+        to_end[i] = if i % k == k - 1 || i + 1 == n { padded(i) } else { pick(to_end[i + 1], padded(i)) };
+    }
+    // Window x of the padded row is x ..= x + 2r: the end of x's block and the start of the next one.
+    for (x, o) in out.iter_mut().enumerate() {
+        *o = pick(to_end[x], from_start[x + 2 * r]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn running_extreme_matches_the_direct_window() {
+        let src: Vec<f32> = crate::test_util::rand_vec(23, 5).iter().map(|v| v * 10.0).collect();
+        for r in [0, 1, 3, 11, 30] {
+            for (empty, pick) in [(f32::INFINITY, f32::min as fn(f32, f32) -> f32), (f32::NEG_INFINITY, f32::max)] {
+                let mut out = vec![0.0; src.len()];
+                running_extreme(&src, r, empty, pick, &mut out);
+                for (x, &o) in out.iter().enumerate() {
+                    let window = &src[x.saturating_sub(r)..(x + r + 1).min(src.len())];
+                    assert_eq!(o, window.iter().fold(empty, |a, &v| pick(a, v)), "r {r}, x {x}");
+                }
+            }
+        }
+    }
 }

@@ -198,7 +198,7 @@ mod tests {
         }
     }
 
-    /// A header with CRLF line ends is read correctly; a body with bytes left over is an error (issue 19, item 4:
+    /// A header with CRLF line ends is read correctly; a body with bytes left over is an error (
     /// both were read as garbage before).
     #[test]
     fn crlf_headers_and_exact_body_length() {

@@ -226,7 +226,7 @@ impl Lattice {
         let zero: &[f32] = zero;
         let (mut cur, mut next) = (a, b);
 
-        self.splat(input, pixel_scale, bands, nc, cur);
+        self.splat(SplatInput { values: input, pixel_scale, bands, channels: nc }, cur);
         const CHUNK: usize = 256;
 
         // Blur along each of the d+1 directions: v ← v + ½(down + up), a missing neighbour counting as 0.
@@ -245,14 +245,8 @@ impl Lattice {
     /// `input[p]`. Each range of vertices (in parallel) scans the pixels that contribute to it in order, so the
     /// pixels' values are read in order rather than gathered, and every sum is taken in pixel order whatever
     /// the ranges: the result does not depend on the thread count.
-    fn splat(
-        &self,
-        input: &[f32],
-        pixel_scale: Option<&[f32]>,
-        bands: Option<&[[u32; 2]]>,
-        nc: usize,
-        vals: &mut [f32],
-    ) {
+    fn splat(&self, input: SplatInput<'_>, vals: &mut [f32]) {
+        let nc = input.channels;
         let mut parts = Vec::with_capacity(self.splat_ranges.len());
         let mut rest: &mut [f32] = vals;
         for &(v0, v1, p0, p1) in &self.splat_ranges {
@@ -261,7 +255,7 @@ impl Lattice {
             parts.push((v0, p0..p1, part));
         }
         parts.into_par_iter().for_each(|(v0, pixels, acc)| {
-            splat_scatter(self, input, pixel_scale, bands, v0, pixels, acc, nc);
+            splat_scatter(self, &input, v0, pixels, acc);
         });
     }
 
@@ -327,22 +321,29 @@ fn splat_ranges(pix_vertex: &[u32], nvert: usize, count: usize) -> Vec<(usize, u
         .collect()
 }
 
+/// What a splat reads: `channels` values per pixel, each pixel's scaled by `pixel_scale[p]` when given, and only
+/// those in the pixel's band `bands[p]` when given.
+#[derive(Clone, Copy)]
+pub(crate) struct SplatInput<'a> {
+    pub(crate) values: &'a [f32],
+    pub(crate) pixel_scale: Option<&'a [f32]>,
+    pub(crate) bands: Option<&'a [[u32; 2]]>,
+    pub(crate) channels: usize,
+}
+
 /// Splats into the vertices `first..first + acc.len() / nc` by scanning the pixels `pixels` (which include
 /// every pixel contributing to them) in order and adding each one's value to those of its vertices in the range:
 /// every vertex sums its contributions in pixel order. With `bands`, pixel p's values are read and added only in
 /// its band `bands[p]` (see [`Lattice::splat_blur`]). Compiled for AVX2 + FMA as well (same results).
-#[allow(clippy::too_many_arguments)]
 #[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
-fn splat_scatter(
+fn splat_scatter<'s>(
     lat: &Lattice,
-    input: &[f32],
-    pixel_scale: Option<&[f32]>,
-    bands: Option<&[[u32; 2]]>,
+    splat: &SplatInput<'s>,
     first: usize,
     pixels: std::ops::Range<usize>,
     acc: &mut [f32],
-    nc: usize,
 ) {
+    let SplatInput { values: input, pixel_scale, bands, channels: nc } = *splat;
     acc.fill(0.0);
     let count = acc.len() / nc;
     for p in pixels {

@@ -205,7 +205,7 @@ fn lattice_splat_matches_per_vertex_sums() {
     for count in [1, 2, 5, 64] {
         lat.splat_ranges = splat_ranges(&lat.pix_vertex, nv, count);
         let mut vals = vec![0.0; nv * nc];
-        lat.splat(&input, Some(&scale), None, nc, &mut vals);
+        lat.splat(SplatInput { values: &input, pixel_scale: Some(&scale), bands: None, channels: nc }, &mut vals);
         assert!(vals.iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()), "{count} ranges");
     }
 }

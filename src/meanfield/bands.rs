@@ -11,7 +11,8 @@
 
 use rayon::prelude::*;
 
-use crate::image::{DisparityMap, Plane, window_extreme};
+use crate::image::{DisparityMap, Plane};
+use crate::imgproc::filter::window_extreme;
 
 /// Per pixel, the labels `lo..hi` its marginal may hold (the rest are 0), for a `width × height` view of `ndisp`
 /// labels.

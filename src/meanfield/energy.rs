@@ -133,9 +133,8 @@ fn non_negative(v: f32) -> f32 {
 ///
 /// Without a floor, cold marginals (a large unary scale) carry values down to e^−87 ≈ 1e−38, which the lattice's
 /// splat weights and blur turn into subnormal floats, and x86 computes with those through microcode assists, tens
-/// of times slower (one JEM iteration of `jem-lrc.toml` on Motorcycle Q went from ~90 to ~160 ms at unary scale
-/// 1.0). At 1e−20 every value that reaches the lattice stays a normal float; the probabilities removed are far
-/// below anything that can change a decision.
+/// of times slower. At 1e−20 every value that reaches the lattice stays a normal float; the probabilities removed
+/// are far below anything that can change a decision.
 pub(crate) const MIN_RELATIVE_PROBABILITY: f32 = 1e-20;
 
 /// e^x for x ≤ 0, or 0 below [`MIN_RELATIVE_PROBABILITY`].

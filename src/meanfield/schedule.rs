@@ -10,40 +10,55 @@ use rayon::prelude::*;
 use super::MeanField;
 use super::update::{NeighbourRows, Pass, RowScratch, split_rows, update_row};
 
-/// One pass over row y of a band `[a, b)` in [`MeanField::checkerboard_in_place`]: the band's interior rows
-/// a + 1 … b − 2 are `interior` (updated in place), its first and last rows `first` and `last` (the edge
-/// buffers); rows a − 1 and b, outside the band, are `outside_above` and `outside_below` when needed.
-#[allow(clippy::too_many_arguments)]
-fn band_step(
-    mf: &MeanField<'_>,
-    pass: Pass,
-    y: usize,
-    (a, b): (usize, usize),
-    interior: &mut [f32],
-    first: &mut [f32],
-    last: &mut [f32],
-    outside_above: Option<&[f32]>,
-    outside_below: Option<&[f32]>,
-    vals: &[f32],
-    s: &mut RowScratch,
-) {
-    let len = first.len();
-    if y == a {
-        let below = if b - a > 2 { &interior[..len] } else { &*last };
-        let nbrs = NeighbourRows { above: outside_above, same: None, below: Some(below) };
-        update_row(mf, y, pass, nbrs, None, vals, first, s);
-    } else if y + 1 == b {
-        let above = if b - a > 2 { &interior[interior.len() - len..] } else { &*first };
-        let nbrs = NeighbourRows { above: Some(above), same: None, below: outside_below };
-        update_row(mf, y, pass, nbrs, None, vals, last, s);
-    } else {
-        let r = y - a - 1;
-        let (before, rest) = interior.split_at_mut(r * len);
-        let (row, after) = rest.split_at_mut(len);
-        let above: &[f32] = if r == 0 { first } else { &before[(r - 1) * len..] };
-        let below: &[f32] = if after.is_empty() { last } else { &after[..len] };
-        let nbrs = NeighbourRows { above: Some(above), same: None, below: Some(below) };
-        update_row(mf, y, pass, nbrs, None, vals, row, s);
+/// A band of rows `[a, b)` of [`MeanField::checkerboard_in_place`] as one task sees it: its interior rows
+/// a + 1 … b − 2 (`interior`, updated in place), the new values of its first and last rows (`first`, `last`: the
+/// edge buffers), the old values of those two rows (`old_first`, `old_last`, read by the neighbouring bands), and
+/// the rows a − 1 and b outside it (`outside`: the neighbouring bands' old edge rows; `None` at the image's edge).
+struct Band<'b> {
+    rows: (usize, usize),
+    interior: &'b mut [f32],
+    first: &'b mut [f32],
+    last: &'b mut [f32],
+    outside: (Option<&'b [f32]>, Option<&'b [f32]>),
+}
+
+impl Band<'_> {
+    /// One pass over row y of the band (the rows outside it are read on pass 1 only).
+    fn step(&mut self, mf: &MeanField<'_>, pass: Pass, y: usize, vals: &[f32], s: &mut RowScratch) {
+        let (a, b) = self.rows;
+        let len = self.first.len();
+        let interior = &mut *self.interior;
+        let (outside_above, outside_below) = if pass == Pass::Even { self.outside } else { (None, None) };
+        if y == a {
+            let below = if b - a > 2 { &interior[..len] } else { &*self.last };
+            let nbrs = NeighbourRows { above: outside_above, same: None, below: Some(below), own: None };
+            update_row(mf, y, pass, nbrs, vals, self.first, s);
+        } else if y + 1 == b {
+            let above = if b - a > 2 { &interior[interior.len() - len..] } else { &*self.first };
+            let nbrs = NeighbourRows { above: Some(above), same: None, below: outside_below, own: None };
+            update_row(mf, y, pass, nbrs, vals, self.last, s);
+        } else {
+            let r = y - a - 1;
+            let (before, rest) = interior.split_at_mut(r * len);
+            let (row, after) = rest.split_at_mut(len);
+            let above: &[f32] = if r == 0 { self.first } else { &before[(r - 1) * len..] };
+            let below: &[f32] = if after.is_empty() { self.last } else { &after[..len] };
+            let nbrs = NeighbourRows { above: Some(above), same: None, below: Some(below), own: None };
+            update_row(mf, y, pass, nbrs, vals, row, s);
+        }
+    }
+
+    /// The band's sweep: pass 1 of each row y, then pass 2 of the interior row y − 1 (rows a + 1 ..= b − 2),
+    /// whose neighbours' pass 1 is then done. The first and last rows' pass 2 waits for the neighbouring bands.
+    fn sweep(&mut self, mf: &MeanField<'_>, vals: &[f32]) {
+        let (a, b) = self.rows;
+        let mut s = RowScratch::new(mf.cost.ndisp);
+        for y in a..b {
+            self.step(mf, Pass::Even, y, vals, &mut s);
+            if y >= a + 2 && b - a > 2 {
+                self.step(mf, Pass::Odd, y - 1, vals, &mut s);
+            }
+        }
     }
 }
 
@@ -78,9 +93,42 @@ impl MeanField<'_> {
             || RowScratch::new(m),
             |s, (y, row)| {
                 let own = own_in_src.then(|| &src[y * len..][..len]);
-                update_row(self, y, pass, NeighbourRows::of(src, y, len), own, vals, row, s);
+                update_row(self, y, pass, NeighbourRows { own, ..NeighbourRows::of(src, y, len) }, vals, row, s);
             },
         );
+    }
+
+    /// Pass 1 of every row and pass 2 of the bands' interior rows, the bands in parallel: each band's first and
+    /// last rows of `q` stay old (the neighbouring bands read them), their pass 1 going into `edges` (two rows per
+    /// band, starting as copies of the old rows).
+    fn sweep_bands(&self, q: &mut [f32], vals: &[f32], bands: &[(usize, usize)], edges: &mut [f32]) {
+        let len = self.cost.width * self.cost.ndisp;
+        let h = self.cost.height;
+        let mut parts = Vec::with_capacity(bands.len());
+        let (mut rest, mut edge_rest): (&mut [f32], &mut [f32]) = (q, edges);
+        for &(a, b) in bands {
+            let (band, r) = std::mem::take(&mut rest).split_at_mut((b - a) * len);
+            rest = r;
+            let (first, r) = band.split_at_mut(len);
+            let (interior, last) = r.split_at_mut((b - a - 2) * len);
+            let (edge, r) = std::mem::take(&mut edge_rest).split_at_mut(2 * len);
+            edge_rest = r;
+            let (first_new, last_new) = edge.split_at_mut(len);
+            first_new.copy_from_slice(first);
+            last_new.copy_from_slice(last);
+            parts.push(((a, b), (&*first, &*last), interior, (first_new, last_new)));
+        }
+        let olds: Vec<(&[f32], &[f32])> = parts.iter().map(|p| p.1).collect();
+        let tasks: Vec<Band<'_>> = parts
+            .into_iter()
+            .enumerate()
+            .map(|(k, ((a, b), _, interior, (first, last)))| {
+                let above = (a > 0).then(|| olds[k - 1].1);
+                let below = (b < h).then(|| olds[k + 1].0);
+                Band { rows: (a, b), interior, first, last, outside: (above, below) }
+            })
+            .collect();
+        tasks.into_par_iter().for_each(|mut band| band.sweep(self, vals));
     }
 
     /// The same update as `checkerboard_two_pass` (the test reference) in place, in one buffer: pass 1 writes the even
@@ -107,74 +155,12 @@ impl MeanField<'_> {
             for pass in [Pass::Even, Pass::Odd] {
                 for y in 0..h {
                     let (nbrs, row) = split_rows(q, y, len);
-                    update_row(self, y, pass, nbrs, None, vals, row, &mut s);
+                    update_row(self, y, pass, nbrs, vals, row, &mut s);
                 }
             }
             return;
         }
-        {
-            // Per band: its first and last rows of Q (read-only here), its interior rows (updated in place), and
-            // its two edge buffers.
-            let mut tasks = Vec::with_capacity(bands.len());
-            let mut rest: &mut [f32] = q;
-            let mut edge_rest: &mut [f32] = edges;
-            for &(a, b) in bands {
-                let (band, r) = std::mem::take(&mut rest).split_at_mut((b - a) * len);
-                rest = r;
-                let (first, r) = band.split_at_mut(len);
-                let (interior, last) = r.split_at_mut((b - a - 2) * len);
-                let (edge, r) = std::mem::take(&mut edge_rest).split_at_mut(2 * len);
-                edge_rest = r;
-                let (first_new, last_new) = edge.split_at_mut(len);
-                tasks.push(((a, b), (&*first, &*last), interior, (first_new, last_new)));
-            }
-            let olds: Vec<(&[f32], &[f32])> = tasks.iter().map(|t| t.1).collect();
-            let olds = &olds;
-            tasks.into_par_iter().enumerate().for_each(
-                |(k, ((a, b), (first, last), interior, (first_new, last_new)))| {
-                    first_new.copy_from_slice(first);
-                    last_new.copy_from_slice(last);
-                    let mut s = RowScratch::new(m);
-                    let interior_rows = b - a - 2;
-                    for y in a..b {
-                        // Pass 1 of row y: rows a − 1 and b are the neighbouring bands' (old) edge rows.
-                        {
-                            let outside_above = (y == a && a > 0).then(|| olds[k - 1].1);
-                            let outside_below = (y + 1 == b && b < h).then(|| olds[k + 1].0);
-                            band_step(
-                                self,
-                                Pass::Even,
-                                y,
-                                (a, b),
-                                interior,
-                                first_new,
-                                last_new,
-                                outside_above,
-                                outside_below,
-                                vals,
-                                &mut s,
-                            );
-                        }
-                        // Pass 2 of the interior row y − 1 (rows a + 1 ..= b − 2), now that pass 1 of y is done.
-                        if y >= a + 2 && interior_rows > 0 {
-                            band_step(
-                                self,
-                                Pass::Odd,
-                                y - 1,
-                                (a, b),
-                                interior,
-                                first_new,
-                                last_new,
-                                None,
-                                None,
-                                vals,
-                                &mut s,
-                            );
-                        }
-                    }
-                },
-            );
-        }
+        self.sweep_bands(q, vals, bands, edges);
         // Pass 1 of the edge rows back into Q, then their pass 2 (reading only the even pixels of the rows
         // around, all final now).
         for (&(a, b), edge) in bands.iter().zip(edges.chunks_exact(2 * len)) {
@@ -184,7 +170,7 @@ impl MeanField<'_> {
         for &(a, b) in bands {
             for y in [a, b - 1] {
                 let (nbrs, row) = split_rows(q, y, len);
-                update_row(self, y, Pass::Odd, nbrs, None, vals, row, &mut s);
+                update_row(self, y, Pass::Odd, nbrs, vals, row, &mut s);
             }
         }
     }

@@ -45,17 +45,15 @@ impl RowScratch {
 
 /// Computes the new Q for row `y` into `out_row`: neighbours' marginals come from `nbrs` (rows y − 1, y, y + 1;
 /// row y from `out_row` itself when `nbrs.same` is `None`), the pixel's own previous marginal (for the self
-/// term) from `own_row`, or from `out_row` itself when `None`. `pass` picks the pixels to compute; with
+/// term) from `nbrs.own`, or from `out_row` itself when `None`. `pass` picks the pixels to compute; with
 /// [`Pass::Odd`] and a separate `nbrs.same`, the even pixels are copied from it.
 /// Compiled for AVX2 + FMA as well, picked at run time (same results: no contraction of a·b + c).
-#[allow(clippy::too_many_arguments)]
 #[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 pub(super) fn update_row<'c, 'r>(
     mf: &MeanField<'c>,
     y: usize,
     pass: Pass,
     nbrs: NeighbourRows<'r>,
-    own_row: Option<&[f32]>,
     vals: &[f32],
     out_row: &mut [f32],
     s: &mut RowScratch,
@@ -83,7 +81,7 @@ pub(super) fn update_row<'c, 'r>(
         let (before, rest) = out_row.split_at_mut(x * m);
         let (e, after) = rest.split_at_mut(m);
         let (before, after): (&[f32], &[f32]) = (before, after);
-        let own: &[f32] = match own_row {
+        let own: &[f32] = match nbrs.own {
             Some(r) => &r[x * m..][..m],
             None => e,
         };
@@ -141,6 +139,8 @@ pub(super) struct NeighbourRows<'s> {
     pub(super) above: Option<&'s [f32]>,
     pub(super) same: Option<&'s [f32]>,
     pub(super) below: Option<&'s [f32]>,
+    /// Row y's own previous marginals (the self term), when the row being written does not hold them.
+    pub(super) own: Option<&'s [f32]>,
 }
 
 impl<'s> NeighbourRows<'s> {
@@ -151,6 +151,7 @@ impl<'s> NeighbourRows<'s> {
             above: (y > 0).then(|| &volume[(y - 1) * len..][..len]),
             same: Some(&volume[y * len..][..len]),
             below: (y + 1 < h).then(|| &volume[(y + 1) * len..][..len]),
+            own: None,
         }
     }
 }
@@ -162,5 +163,5 @@ pub(super) fn split_rows(volume: &mut [f32], y: usize, len: usize) -> (Neighbour
     let (row, after) = rest.split_at_mut(len);
     let above = (y > 0).then(|| &before[(y - 1) * len..]);
     let below = (!after.is_empty()).then(|| &after[..len]);
-    (NeighbourRows { above, same: None, below }, row)
+    (NeighbourRows { above, same: None, below, own: None }, row)
 }

@@ -158,6 +158,12 @@ pub(crate) fn renamed_key(key: &str, value: &toml::Value) -> Option<&'static str
     RENAMED.iter().find(|(old, _)| *old == key).map(|(_, new)| *new)
 }
 
+impl VerticalParams {
+    /// The largest offset (px) the measurement trusts: the coarse disparities it rests on were found on rows that far
+    /// apart, and its linearisation holds for about a pixel per iteration. `min_px` cannot exceed it.
+    pub const MAX_OFFSET_PX: f32 = 4.0;
+}
+
 impl Default for StretchParams {
     /// Stretch only a view that uses less than 1/1.5 of the range.
     fn default() -> Self {
@@ -276,7 +282,7 @@ impl ConditionParams {
             return Err(Error::param("condition.sharpness_ratio", self.sharpness_ratio, "0 (off) or at least 1"));
         }
         let v = &self.vertical;
-        if !(v.min_px.is_finite() && (0.0..=crate::condition::vertical::MAX_OFFSET).contains(&v.min_px)) {
+        if !(v.min_px.is_finite() && (0.0..=VerticalParams::MAX_OFFSET_PX).contains(&v.min_px)) {
             return Err(Error::param("condition.vertical.min_px", v.min_px, "0 to 4"));
         }
         check_nonneg("condition.prior.margin_px", p.margin_px)?;

@@ -8,7 +8,7 @@
 //! `meanfield.rs`, `lrc.rs`, `wmedian.rs`, `sps.rs`), as one struct with `#[serde(deny_unknown_fields, default)]`,
 //! an `impl Default` holding the documented defaults, and a `validate()` that names the offending key. The stage's
 //! module imports its struct from here; this module imports nothing from the stages (only a bound that validation
-//! checks, `condition::vertical::MAX_OFFSET`, and `io`'s capped file read for the config). Adding a stage: add its
+//! checks, `VerticalParams::MAX_OFFSET_PX`, and `io`'s capped file read for the config). Adding a stage: add its
 //! file here, a field to [`Params`] (or [`PostParams`]), and a call to its `validate()` in the parent's.
 //!
 //! Defaults are the paper's values where the paper gives them (σx = 5, σf = 55, μ1 = 7, μ2 = 15, λ = 3.5/3.0/1.0,
@@ -94,15 +94,17 @@ impl Default for PostParams {
 pub struct UpsampleParams {
     /// Where the reduced disparities a pixel interpolates span more than this (input px), it takes the one whose
     /// reduced pixel's colour is nearest its own instead of their blend; 0 = off (plain bilinear). The coarse
-    /// prior's levels always upsample plainly: edge-aware there, trainingQ's default 3.584 -> 3.645.
+    /// prior's levels always upsample plainly: a prior that keeps a coarse level's edges where it put them is the
+    /// worse prior (docs/tuning-log.md, "Edge-aware upsampling").
     pub edge_px: f32,
     /// The colour distance's σ (RGB, 0..255 per channel).
     pub sigma_rgb: f32,
 }
 
 impl Default for UpsampleParams {
-    /// `configs/fast.toml` on trainingQ (weighted avgErr; 5.295 plain bilinear): 2 px / σ 10: 5.152 (docs/tuning-log.md,
-    /// "Edge-aware upsampling", with the other settings tried).
+    /// A jump of 2 px marks a depth edge at any resolution a preset reduces to, and σ 10 tells two surfaces' colours
+    /// apart without following texture (chosen on `configs/fast.toml`: docs/tuning-log.md, "Edge-aware
+    /// upsampling").
     fn default() -> Self {
         UpsampleParams { edge_px: 2.0, sigma_rgb: 10.0 }
     }

@@ -76,8 +76,7 @@ const MIN_PLANE_POINTS: f32 = 3.0;
 impl SpsParams {
     /// The most segments an image of `pixels` pixels can hold (at least 1): the grid's cells must each be able to
     /// carry the data weight a plane of its own needs, `min_support` (at least 3 points). Above it no segment can
-    /// fit a plane alone and the map is wrecked (issue 41: Teddy Q avgErr 1.79 → 30.4 at 50000 segments, its
-    /// bound being 16875), so [`crate::post::planes::fit_slanted_planes`] uses at most this many.
+    /// fit a plane alone and the map is wrecked, so the planes use at most this many (RESULTS.md, "Bad input").
     pub fn max_segments(&self, pixels: usize) -> usize {
         let need = f64::from(self.min_support.max(MIN_PLANE_POINTS));
         ((pixels as f64 / need).floor() as usize).max(1)

@@ -50,127 +50,188 @@ pub(crate) fn fine_pass(
     on_stage: &dyn Fn(&str),
     mut t: Timings,
 ) -> Result<PipelineOutput> {
-    let FineInput { guide: pair, cost_pair, cost_params, grad_norm_mean, prior, left_from } = *input;
+    let pass = Pass { params, input: *input, prior_bands: input.prior.filter(|p| p.in_bands) };
     on_stage("cost volume");
-    let c = &params.condition;
-    let post = &params.post;
-    let need_right = post.lrc.mode != LrcMode::Off;
-    let (w, h) = pair.left.dims();
-    let storage = buffers.take(w * h * pair.ndisp);
-    // Label bands (tiles): each pixel's own best label is taken before the prior is added. Both are done row by row
-    // as the volume is written, unless the prior needs the cost's flatness (a median over the whole volume) first.
-    let prior_bands = prior.filter(|p| p.in_bands);
-    let row_prior = prior.filter(|p| !p.needs_flatness());
-    // The rows' own best labels as one map (with label bands only).
-    let best_of_rows = |rows: Vec<Option<Vec<f32>>>| {
-        prior_bands.map(|_| Plane::from_parts(w, h, rows.into_iter().flatten().flatten().collect()))
-    };
-    let (mut cost_left, own_rows) = t.time("cost", || {
-        let (left, right) = (&cost_pair.left, &cost_pair.right);
-        cost::build_cost_volume_then(left, right, pair.ndisp, cost_params, grad_norm_mean, storage, |y, row| {
-            let own = prior_bands.map(|_| cost::row_argmins(row, pair.ndisp));
-            if let Some(prior) = row_prior {
-                prior.add_to_row(y, w, row, c);
-            }
-            own
-        })
-    });
-    let own_best = best_of_rows(own_rows);
-    if let Some(prior) = prior.filter(|p| p.needs_flatness()) {
-        prior.add_to(&mut cost_left, c, &mut t);
-    }
-    let left_bands = own_best.zip(prior_bands).map(|(best, prior)| {
-        t.time("bands", || {
-            let bands = prior.label_bands(&best, pair.ndisp, false, params);
-            if left_from > 0 { bands.columns_from(left_from) } else { bands }
-        })
-    });
-
-    // Left inference first, then the right volume from the left one; the left volume is spent before the right
-    // inference: at most one volume plus one view's inference buffers are alive at a time (three N × M buffers
-    // in all, plus the lattice's). Spent buffers go back to `buffers` for the next volume, view or call.
-    // With the extension (a tile) the right volume comes first, while the left volume still has every column; the
-    // columns the left view keeps then move to the front of the left volume's own storage. The left inference has
-    // the same three buffers alive (the two volumes and its marginals), and no copy of the kept columns is
-    // allocated, page-faulted and freed per tile (that copy, on one thread, was 5 % of an Adirondack ×4 run).
+    let volume = pass.left_volume(buffers, &mut t);
     on_stage("inference (left)");
-    let guide_left = match left_from {
-        0 => Cow::Borrowed(pair.left.as_ref()),
-        _ => Cow::Owned(pair.left.columns_from(left_from)),
+    let guide = pass.input.guide;
+    let guide_left = match pass.input.left_from {
+        0 => Cow::Borrowed(guide.left.as_ref()),
+        from => Cow::Owned(guide.left.columns_from(from)),
     };
-    // The right volume, with its pixels' own best labels for the label bands (tiles) taken row by row.
-    let derive_right = |cost_left: &CostVolume, buffers: &mut meanfield::Buffers, t: &mut Timings| {
-        let storage = buffers.take(cost_left.data.len());
-        let out_of_view = cost::truncation_cost(&params.cost);
-        let (cost_right, best_rows) = t.time("cost right", || {
-            cost::derive_right_volume_then(cost_left, out_of_view, storage, |_, row| {
-                prior_bands.map(|_| cost::row_argmins(row, pair.ndisp))
+    let (left, right) = pass.infer_views(volume, &guide_left, buffers, on_stage, &mut t);
+    on_stage("post-processing");
+    let (disparity, trusted) = pass.post_process(left.disparity, right.as_ref(), &guide_left, &mut t);
+    Ok(PipelineOutput { disparity, confidence: left.confidence, consistent: trusted, timings: t, measured: None })
+}
+
+/// One fine pass: its parameters, its input, and the prior when it comes with label bands (tiles).
+struct Pass<'a> {
+    params: &'a Params,
+    input: FineInput<'a>,
+    prior_bands: Option<&'a Prior>,
+}
+
+/// The left view's cost volume, the prior added, and its label bands (tiles).
+struct LeftVolume {
+    cost: CostVolume,
+    bands: Option<meanfield::LabelBands>,
+}
+
+impl Pass<'_> {
+    /// The rows' own best labels as one map (with label bands only).
+    fn best_of_rows(&self, rows: Vec<Option<Vec<f32>>>) -> Option<Plane<f32>> {
+        let (w, h) = self.input.guide.left.dims();
+        self.prior_bands.map(|_| Plane::from_parts(w, h, rows.into_iter().flatten().flatten().collect()))
+    }
+
+    /// The left view's cost volume with the coarse prior added, and (tiles) each pixel's label band. Each pixel's
+    /// own best label is taken before the prior is added; both are done row by row as the volume is written,
+    /// unless the prior needs the cost's flatness (a median over the whole volume) first.
+    fn left_volume(&self, buffers: &mut meanfield::Buffers, t: &mut Timings) -> LeftVolume {
+        let FineInput { guide: pair, cost_pair, cost_params, grad_norm_mean, prior, left_from } = self.input;
+        let c = &self.params.condition;
+        let (w, h) = pair.left.dims();
+        let storage = buffers.take(w * h * pair.ndisp);
+        let prior_bands = self.prior_bands;
+        let row_prior = prior.filter(|p| !p.needs_flatness());
+        let (mut cost, own_rows) = t.time("cost", || {
+            let (left, right) = (&cost_pair.left, &cost_pair.right);
+            cost::build_cost_volume_then(left, right, pair.ndisp, cost_params, grad_norm_mean, storage, |y, row| {
+                let own = prior_bands.map(|_| cost::row_argmins(row, pair.ndisp));
+                if let Some(prior) = row_prior {
+                    prior.add_to_row(y, w, row, c);
+                }
+                own
             })
         });
-        (cost_right, best_of_rows(best_rows))
-    };
-    let (left, cost_right) = if left_from > 0 {
-        let cost_right = need_right.then(|| derive_right(&cost_left, buffers, &mut t));
-        let kept = t.time("cost", || cost_left.into_columns_from(left_from));
-        let left = estimate_view(params, &guide_left, &kept, left_bands, &mut t, buffers);
-        buffers.recycle(kept.data);
-        (left, cost_right)
-    } else {
-        let left = estimate_view(params, &guide_left, &cost_left, left_bands, &mut t, buffers);
-        // The right volume goes into the left view's spent marginals, and the left volume's storage becomes the
-        // right view's marginals: no new allocation for the right view.
-        let cost_right = need_right.then(|| derive_right(&cost_left, buffers, &mut t));
-        buffers.recycle(cost_left.data);
-        (left, cost_right)
-    };
-    let right = cost_right.map(|(cost_right, best)| {
-        let right_bands = prior_bands
-            .zip(best)
-            .map(|(prior, best)| t.time("bands", || prior.label_bands(&best, pair.ndisp, true, params)));
-        on_stage("inference (right)");
-        let right = estimate_view(params, &pair.right, &cost_right, right_bands, &mut t, buffers);
-        buffers.recycle(cost_right.data);
-        right
-    });
-
-    on_stage("post-processing");
-    let mut disparity = left.disparity;
-    let mut trusted = Plane::new(disparity.width, disparity.height, true);
-    if let Some(right) = &right {
-        let (checked, mask) = t.time("lrc", || {
-            let check = |left: &DisparityMap| {
-                post::lr_check::left_right_check(left, &right.disparity, post.lrc.mode, post.lrc.thresh_px)
-            };
-            if left_from == 0 {
-                return check(&disparity);
-            }
-            // The left map at the right view's width (unknown in the extension), checked, and cut again.
-            let mut full = Plane::new(right.disparity.width, right.disparity.height, f32::INFINITY);
-            for y in 0..full.height {
-                full.row_mut(y)[left_from..].copy_from_slice(disparity.row(y));
-            }
-            let (checked, mask) = check(&full);
-            (checked.columns_from(left_from), mask.columns_from(left_from))
+        let own_best = self.best_of_rows(own_rows);
+        if let Some(prior) = prior.filter(|p| p.needs_flatness()) {
+            prior.add_to(&mut cost, c, t);
+        }
+        let bands = own_best.zip(prior_bands).map(|(best, prior)| {
+            t.time("bands", || {
+                let bands = prior.label_bands(&best, pair.ndisp, false, self.params);
+                if left_from > 0 { bands.columns_from(left_from) } else { bands }
+            })
         });
-        disparity = checked;
-        trusted = mask;
+        LeftVolume { cost, bands }
     }
-    if post.fill {
-        t.time("fill", || post::fill::fill_occlusions_in_place(&mut disparity));
+
+    /// The right view's cost volume derived from the left one, with (tiles) its pixels' own best labels taken row by
+    /// row.
+    fn right_volume(
+        &self,
+        cost_left: &CostVolume,
+        buffers: &mut meanfield::Buffers,
+        t: &mut Timings,
+    ) -> (CostVolume, Option<Plane<f32>>) {
+        let storage = buffers.take(cost_left.data.len());
+        let out_of_view = cost::truncation_cost(&self.params.cost);
+        let ndisp = self.input.guide.ndisp;
+        let (cost_right, best_rows) = t.time("cost right", || {
+            cost::derive_right_volume_then(cost_left, out_of_view, storage, |_, row| {
+                self.prior_bands.map(|_| cost::row_argmins(row, ndisp))
+            })
+        });
+        (cost_right, self.best_of_rows(best_rows))
     }
-    if post.wmedian.enabled {
-        let targets = Plane::from_parts(trusted.width, trusted.height, trusted.data.iter().map(|ok| !ok).collect());
-        disparity =
-            t.time("wmedian", || post::wmedian::weighted_median(&disparity, &guide_left, &targets, &post.wmedian));
+
+    /// Inference for the left view, then (with the left-right check) the right one.
+    ///
+    /// Left inference first, then the right volume from the left one; the left volume is spent before the right
+    /// inference: at most one volume plus one view's inference buffers are alive at a time (three N × M buffers in
+    /// all, plus the lattice's). Spent buffers go back to `buffers` for the next volume, view or call. With the
+    /// extension (a tile) the right volume comes first, while the left volume still has every column; the columns
+    /// the left view keeps then move to the front of the left volume's own storage. The left inference has the same
+    /// three buffers alive (the two volumes and its marginals), and no copy of the kept columns is allocated,
+    /// page-faulted and freed per tile.
+    fn infer_views(
+        &self,
+        volume: LeftVolume,
+        guide_left: &RgbImage,
+        buffers: &mut meanfield::Buffers,
+        on_stage: &dyn Fn(&str),
+        t: &mut Timings,
+    ) -> (ViewEstimate, Option<ViewEstimate>) {
+        let (params, left_from) = (self.params, self.input.left_from);
+        let need_right = params.post.lrc.mode != LrcMode::Off;
+        let LeftVolume { cost: cost_left, bands: left_bands } = volume;
+        let (left, cost_right) = if left_from > 0 {
+            let cost_right = need_right.then(|| self.right_volume(&cost_left, buffers, t));
+            let kept = t.time("cost", || cost_left.into_columns_from(left_from));
+            let left = estimate_view(params, guide_left, &kept, left_bands, t, buffers);
+            buffers.recycle(kept.data);
+            (left, cost_right)
+        } else {
+            let left = estimate_view(params, guide_left, &cost_left, left_bands, t, buffers);
+            // The right volume goes into the left view's spent marginals, and the left volume's storage becomes the
+            // right view's marginals: no new allocation for the right view.
+            let cost_right = need_right.then(|| self.right_volume(&cost_left, buffers, t));
+            buffers.recycle(cost_left.data);
+            (left, cost_right)
+        };
+        let right = cost_right.map(|(cost_right, best)| {
+            let ndisp = self.input.guide.ndisp;
+            let right_bands = self
+                .prior_bands
+                .zip(best)
+                .map(|(prior, best)| t.time("bands", || prior.label_bands(&best, ndisp, true, params)));
+            on_stage("inference (right)");
+            let right = estimate_view(params, &self.input.guide.right, &cost_right, right_bands, t, buffers);
+            buffers.recycle(cost_right.data);
+            right
+        });
+        (left, right)
     }
-    if post.sps.enabled {
-        disparity = t.time("sps", || post::planes::fit_slanted_planes(&guide_left, &disparity, &trusted, &post.sps));
-        // A plane extrapolated to a segment's far corner can leave the search range: the answer is never
-        // outside the range that was searched.
-        let top = (pair.ndisp - 1) as f32;
-        disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
+
+    /// Left-right check (with `right`), fill, weighted median and planes on the left view's `disparity`; returns the
+    /// map and the pixels that passed the check.
+    fn post_process(
+        &self,
+        mut disparity: DisparityMap,
+        right: Option<&ViewEstimate>,
+        guide_left: &RgbImage,
+        t: &mut Timings,
+    ) -> (DisparityMap, Plane<bool>) {
+        let (post, left_from) = (&self.params.post, self.input.left_from);
+        let mut trusted = Plane::new(disparity.width, disparity.height, true);
+        if let Some(right) = right {
+            let (checked, mask) = t.time("lrc", || {
+                let check = |left: &DisparityMap| {
+                    post::lr_check::left_right_check(left, &right.disparity, post.lrc.mode, post.lrc.thresh_px)
+                };
+                if left_from == 0 {
+                    return check(&disparity);
+                }
+                // The left map at the right view's width (unknown in the extension), checked, and cut again.
+                let mut full = Plane::new(right.disparity.width, right.disparity.height, f32::INFINITY);
+                for y in 0..full.height {
+                    full.row_mut(y)[left_from..].copy_from_slice(disparity.row(y));
+                }
+                let (checked, mask) = check(&full);
+                (checked.columns_from(left_from), mask.columns_from(left_from))
+            });
+            disparity = checked;
+            trusted = mask;
+        }
+        if post.fill {
+            t.time("fill", || post::fill::fill_occlusions_in_place(&mut disparity));
+        }
+        if post.wmedian.enabled {
+            let targets = Plane::from_parts(trusted.width, trusted.height, trusted.data.iter().map(|ok| !ok).collect());
+            disparity =
+                t.time("wmedian", || post::wmedian::weighted_median(&disparity, guide_left, &targets, &post.wmedian));
+        }
+        if post.sps.enabled {
+            disparity = t.time("sps", || post::planes::fit_slanted_planes(guide_left, &disparity, &trusted, &post.sps));
+            // A plane extrapolated to a segment's far corner can leave the search range: the answer is never
+            // outside the range that was searched.
+            let top = (self.input.guide.ndisp - 1) as f32;
+            disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
+        }
+        (disparity, trusted)
     }
-    Ok(PipelineOutput { disparity, confidence: left.confidence, consistent: trusted, timings: t, measured: None })
 }
 
 /// Inference for one view: WTA on the cost, or mean field with the view's own image, within `bands` if given

@@ -8,7 +8,8 @@
 use rayon::prelude::*;
 
 use crate::error::Result;
-use crate::image::{CostVolume, DisparityMap, Plane, StereoPair, window_extreme};
+use crate::image::{CostVolume, DisparityMap, Plane, StereoPair};
+use crate::imgproc::filter::window_extreme;
 use crate::params::{self, Params};
 use crate::{condition, cost, meanfield, scale};
 
@@ -39,9 +40,9 @@ pub(crate) struct CoarseLevel {
     /// (tiles), it keeps the count: it is the base answer, as good as a run at that resolution can be.
     pub same_segment_size: bool,
     /// The prior leaves a coarse depth edge's whole step free (`condition.prior.spread`). Off (tiles), it is a point
-    /// prior: the coarse level is the base answer there, and freeing its depth edges let the fine level move them
-    /// on the ×4 scenes (Adirondack 1.66 -> 1.74, Vintage 8.45 -> 8.51; docs/tuning-log.md, "The prior at coarse
-    /// depth edges"). The coarse level's own chain has the spread.
+    /// prior: the coarse level is the base answer there, and freeing its depth edges lets the fine level move them
+    /// away from where they are (docs/tuning-log.md, "The prior at coarse depth edges"). The coarse level's own
+    /// chain has the spread.
     pub spread_at_edges: bool,
     /// The prior's weight has a floor where the full resolution adds little detail to the coarse level
     /// ([`tiled_prior_floor`]; tiles, where the coarse answer is the base of the run).
@@ -87,8 +88,9 @@ impl CoarseLevel {
     pub(crate) fn params(&self, params: &Params, input: &Prepared) -> Params {
         let mut coarse = params.clone();
         coarse.downscale = self.factor;
-        // The prior is made of the plain bilinear upsampling: edge-aware, it is worse (trainingQ 3.584 -> 3.645;
-        // docs/tuning-log.md, "Edge-aware upsampling").
+        // The prior is made of the plain bilinear upsampling: an edge-aware one fixes a coarse edge where the coarse
+        // level put it, which the fine level should be free to correct (docs/tuning-log.md, "Edge-aware
+        // upsampling").
         coarse.upsample.edge_px = 0.0;
         if self.same_segment_size {
             // A 1/F² of the pixels gets a 1/F² of the segments.
@@ -115,7 +117,7 @@ impl CoarseLevel {
     /// Runs the coarse level on `pair` (or, [`CoarseLevel::on_conditioned_pair`], on the pair as conditioned in
     /// `input`). Its noise is at most this level's, reduced by the F × F box average (σ / F: the `noise_ceiling` of
     /// [`condition::condition_pair`]): its own one-image estimate reads texture as noise, and the gradient term's ε
-    /// that follows it hides faint shading (Vintage ×4 in tiles 4.82 -> 4.73).
+    /// that follows it hides faint shading (docs/tuning-log.md, "The tiled coarse level's noise").
     ///
     /// # Errors
     /// As [`super::run`].
@@ -298,8 +300,8 @@ impl Prior {
 /// The least weight of the coarse prior in a tile whose full resolution holds no more detail than its coarse
 /// level (see [`tiled_prior_floor`]). The untiled default weighs the prior by the measured noise (0.5·σn) and the
 /// cost's flatness, relative to the image's own; on an image upscaled ×4 every pixel's cost is about as flat, and
-/// the fine cost alone drifts inside its label window (Adirondack upscaled ×4, native px, session 7: floor 0 →
-/// avgErr 4.80, 1 → 1.79, 2 → 1.75; the coarse level alone, upsampled, 1.71).
+/// the fine cost alone drifts inside its label window: the floor holds it to the coarse answer (docs/tuning-log.md,
+/// "Label bands in tiles").
 pub(crate) const TILED_PRIOR_FLOOR: f32 = 2.0;
 
 /// The prior's floor in the tiles: [`TILED_PRIOR_FLOOR`] × min(1, 2·(1 − k)), k the share of the coarse level's

@@ -1,4 +1,4 @@
-//! Tiled inference with label windows: pairs too large for one cost volume, in bounded memory (issue 16).
+//! Tiled inference with label windows: pairs too large for one cost volume, in bounded memory.
 //!
 //! Memory and time of the pipeline grow with pixels × labels, but at any pixel only a narrow band of labels
 //! around the answer carries probability. [`run_tiled`] therefore:
@@ -34,8 +34,8 @@
 //!
 //! **Work.** A tile costs about its crop's pixels × its labels. A core whose disparities span a wide range (a
 //! depth edge, a steep slant) is cheaper in quarters, each with a narrower window, even with their own halos; so
-//! a core is split while its four quarters are less work in all than it is by a fifth (Adirondack and Vintage
-//! ×4: 4 % faster, avgErr 1.69 and 9.04 against 1.69 and 9.03).
+//! a core is split while its four quarters are less work in all than it is by a fifth (docs/tuning-log.md,
+//! "Serial work in the tiles").
 //!
 //! **Memory.** Each tile needs [`crate::estimate_memory_bytes`] for its crop and window, plus one volume for what
 //! the allocator keeps of freed volumes and one for the right view's volume, derived before the left view's
@@ -128,15 +128,14 @@ pub fn run_tiled(
     }
     // The volumes and marginals of one tile are the next one's. They are allocated once, at the size of the largest
     // tile's volume (which that tile needs anyway), so that no tile grows them: a grown buffer is copied and its new
-    // pages are faulted in and zeroed (page faults were 8 % of an Adirondack ×4 run).
+    // pages are faulted in and zeroed, a cost paid again for every tile.
     let mut buffers = crate::meanfield::Buffers::default();
     let largest = tiles.iter().map(Tile::work).max().unwrap_or(0) as usize;
     for _ in 0..crate::meanfield::MAX_SPARE {
         buffers.recycle(vec![0.0; largest]);
     }
-    // One tile at a time: tiles side by side (each on its own thread, as many as fit the budget together) were
-    // 5–7 % faster on 2 cores, but the allocator's per-thread arenas each keep their tile's freed memory, and the
-    // peak passed the limit (395 MiB at 300 MB on the large-scene test of tests/cli.rs).
+    // One tile at a time: with tiles side by side (each on its own thread) the allocator's per-thread arenas each
+    // keep their tile's freed memory, and the peak passes the limit the tiles were planned for.
     for tile in &tiles {
         let result = job.run(tile, &mut buffers)?;
         in_tiles.add_summed(&result.timings);
@@ -239,7 +238,7 @@ impl TileJob<'_> {
     /// Whether the four quarters of a tile's core, each with its own halo and label window, are clearly less work
     /// in all (crop pixels × labels) than the tile, by a fifth: a core spanning a wide range of disparities is
     /// cheaper in pieces whose windows are narrower, despite their halos. Not for any saving: each split adds
-    /// seams (Vintage ×4, avgErr: never split 9.03, a fifth 9.04, any saving 9.11, as fast as a fifth).
+    /// seams, which cost accuracy when the saving is small.
     fn splitting_saves_work(&self, tile: &Tile) -> bool {
         let parts: u64 = split(tile.core).into_iter().map(|c| self.tile(c).work()).sum();
         5 * parts < 4 * tile.work()

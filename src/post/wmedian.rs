@@ -14,7 +14,7 @@
 //! Per target pixel, O(n) for the n ≤ (2r+1)² window values, so the stage is O(T·r²) for T targets:
 //! 1. gather the finite values and their exponents (branch-free when a window row has no `inf`);
 //! 2. compute the weights and test the previous result on the row as a guess (m is the lower weighted median iff
-//!    Σ_{v<m} w < ½ΣW ≤ Σ_{v≤m} w) — neighbouring targets mostly share their median (76% hits on Motorcycle);
+//!    Σ_{v<m} w < ½ΣW ≤ Σ_{v≤m} w) — neighbouring targets mostly share their median;
 //! 3. otherwise count the weights into 128 equal-width value bins (ordered, since the bin index is monotone in the
 //!    value), find the bin holding the median, and run a weighted quickselect (three-way partition,
 //!    median-of-three pivot) on that bin's values only.

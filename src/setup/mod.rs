@@ -1,6 +1,6 @@
 //! Setting up a run, before anything large is allocated: the search range ([`NdispSource`]: given, stated by
 //! the data, or measured on the pair, [`range`]), the memory model ([`memory`]) and whether the run goes in one
-//! piece or in tiles ([`strategy`]). [`crate::Matcher`] is the one caller: `jem`, `jem batch` and the Python module
+//! piece or in tiles ([`strategy`]). The `Matcher` is the one caller: `jem`, `jem batch` and the Python module
 //! all match through it, so the same pair and settings give the same disparity map, byte for byte, whichever way
 //! it is run.
 //!

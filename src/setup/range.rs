@@ -1,4 +1,4 @@
-//! The disparity range of a pair when none is given, or when the given one is not a real bound (issue 16).
+//! The disparity range of a pair when none is given, or when the given one is not a real bound.
 //!
 //! Some data sets state no range, and some state one that is not a bound at all: ETH3D's calib.txt says
 //! ndisp = the image width, where the real disparities stay below a few dozen. Inference costs time and memory
@@ -157,7 +157,7 @@ mod tests {
     use super::*;
 
     /// One rule for every caller: no range searches the whole width, a stated one up to itself, never past the
-    /// width (issue 38: `jem` searched up to half the width, `jem batch` up to the width).
+    /// width, whichever front end asks.
     #[test]
     fn search_limit_is_the_stated_range_or_the_width() {
         assert_eq!(search_limit(None, 640), 639);

@@ -13,8 +13,8 @@ pub(crate) fn kernel_reach_px(params: &Params) -> usize {
 }
 
 /// Pixels added on every side of a core: the fully connected kernel's reach, 3σx, plus the weighted median's
-/// radius (15 + 9 by default). Against the constant 32 of earlier sessions: 0.95× and 0.89× the time on the ×4
-/// scenes, avgErr 1.48 and 5.37 against 1.49 and 5.36; 16 (the kernel alone) cost Adirondack ×4 1.57.
+/// radius (15 + 9 by default): beyond it no pixel of the core sees the crop's border (docs/tuning-log.md, "Label
+/// bands in tiles").
 pub(crate) fn halo_px(params: &Params) -> usize {
     kernel_reach_px(params) + if params.post.wmedian.enabled { params.post.wmedian.radius } else { 0 }
 }
@@ -70,9 +70,8 @@ pub(crate) fn plan_tiles(
 }
 
 /// The part of the budget one tile may plan for. The allocator keeps some of each tile's freed memory, so the
-/// heap grows over a run of tiles of different sizes (1280×960, ndisp 160, 200 MB limit: the peak rose by 30 MB
-/// over 60 tiles whose estimates all stayed within the budget, and passed the limit by 4%); a tenth is left for
-/// that.
+/// heap grows over a run of tiles of different sizes even when every tile's estimate stays within the budget; a
+/// tenth is left for that.
 pub(crate) fn tile_share(budget: u64) -> u64 {
     budget / 10 * 9
 }
