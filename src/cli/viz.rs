@@ -134,7 +134,7 @@ fn sheet(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     // The sheet reads these files of every row: the output must be none of them.
     let read: Vec<&Path> = rows.iter().flat_map(viz::SheetRow::paths).collect();
     jem::io::check_outputs(&read, &[&args.output])?;
-    let sheet = viz::contact_sheet(rows, args.panel_width)?;
+    let sheet = viz::contact_sheet(rows, alg, args.panel_width)?;
     sheet.canvas.write_png(&args.output)?;
     for (row, e) in &sheet.skipped {
         note!("warning: {} left out: {e}", row.location.display());

@@ -27,11 +27,12 @@
 //!
 //! Images are [`Canvas`]es: interleaved 8-bit RGB, row-major, `data[(y·w + x)·3 + c]`. Everything is O(pixels).
 
+pub(crate) mod font;
 mod sheet;
 
 pub use sheet::{
-    Occlusion, Sheet, SheetOptions, SheetRow, TruthFiles, contact_sheet, draw_row, gt_rule, load_truth, resolved_scale,
-    sheet_rows,
+    Occlusion, RowPictures, RowScore, Sheet, SheetOptions, SheetRow, TruthFiles, contact_sheet, gt_rule, load_truth,
+    render_row, resolved_scale, sheet_rows,
 };
 
 use std::path::Path;
@@ -94,7 +95,7 @@ impl ErrorRule {
 }
 
 /// Background of sheets and panels without content.
-const BACKGROUND: [u8; 3] = [24, 24, 24];
+pub(crate) const BACKGROUND: [u8; 3] = [24, 24, 24];
 /// Pixels without ground truth in an error map.
 pub(crate) const NO_GT: [u8; 3] = [48, 48, 48];
 

@@ -1,6 +1,6 @@
 //! Where a picture's files are, for each benchmark layout: the rows of a contact sheet ([`sheet_rows`]: MiddEval3
 //! scene folders, KITTI frames, ETH3D scenes, with their results where `jem batch` writes them), the ground truth
-//! of one map and its benchmark's [`ErrorRule`] ([`gt_rule`]), and drawing them ([`draw_row`],
+//! of one map and its benchmark's [`ErrorRule`] ([`gt_rule`]), and drawing them ([`render_row`],
 //! [`contact_sheet`]).
 //!
 //! Occlusions: MiddEval3's `mask0nocc.png` is used as it is (255 visible, 128 occluded, 0 no truth); ETH3D's marks
@@ -9,7 +9,9 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{Canvas, ErrorRule, NO_GT, calib_range, colorize, error_map, finite_range, fit_width, hstack, vstack};
+use super::{
+    BACKGROUND, Canvas, ErrorRule, NO_GT, calib_range, colorize, error_map, finite_range, fit_width, hstack, vstack,
+};
 use crate::dataset::{Discovery, Layout, Pair, Purpose};
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane};
@@ -302,13 +304,45 @@ fn middlebury_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<She
         .collect()
 }
 
-/// One contact-sheet row: `left image | result coloured | error map` (a dark panel without ground truth), each
-/// panel at most `panel_width` wide. The colour range is `vmin`/`vmax` from the row's `calib.txt`, else the ground
-/// truth's finite range, else the result's.
+/// One row's pictures at full size, and what a reader needs beside them.
+#[derive(Clone, Debug)]
+pub struct RowPictures {
+    /// The left image.
+    pub left: Canvas,
+    /// The result in colour ([`colorize`] over [`RowPictures::range`]).
+    pub colour: Canvas,
+    /// The error map under the row's rule ([`error_map`]); a dark panel without ground truth.
+    pub error: Canvas,
+    /// The disparities the colours span: `vmin`/`vmax` of the row's `calib.txt`, else the ground truth's finite
+    /// range, else the result's.
+    pub range: (f32, f32),
+    /// The row's headline scores under its benchmark's rule, when it has ground truth.
+    pub score: Option<RowScore>,
+}
+
+/// A row's headline scores, as `jem eval` computes them (non-occluded pixels).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RowScore {
+    /// Mean absolute error over the valid pixels (full-resolution pixels for MiddEval3).
+    pub avgerr: f64,
+    /// The benchmark's bad-pixel share, in % ([`RowScore::bad_name`]).
+    pub bad: f64,
+    /// Its name: `bad-2` (MiddEval3, invalid pixels counted), `D1` (KITTI), `bad-1` (ETH3D).
+    pub bad_name: &'static str,
+}
+
+impl RowScore {
+    /// `avgErr 1.53, bad-2 9.1 %`.
+    pub fn describe(&self) -> String {
+        format!("avgErr {:.2}, {} {:.1} %", self.avgerr, self.bad_name, self.bad)
+    }
+}
+
+/// Draws one row at full size (see [`RowPictures`]).
 ///
 /// # Errors
 /// Unreadable files or unequal sizes.
-pub fn draw_row(row: &SheetRow, panel_width: usize) -> Result<Canvas> {
+pub fn render_row(row: &SheetRow) -> Result<RowPictures> {
     let result = crate::io::read_disparity(&row.result)?;
     let left = Canvas::from_rgb_image(&crate::io::png::load_rgb(&row.left)?);
     if (left.width, left.height) != result.dims() {
@@ -331,12 +365,34 @@ pub fn draw_row(row: &SheetRow, panel_width: usize) -> Result<Canvas> {
         .or_else(|| finite_range(&result))
         .unwrap_or((0.0, 1.0));
     let colour = colorize(&result, range.0, range.1);
-    let error = match &gt {
-        Some((g, m)) => error_map(&result, g, m.as_ref(), row.rule),
-        None => Canvas::new(result.width, result.height, NO_GT),
+    let (error, score) = match &gt {
+        Some((g, m)) => (error_map(&result, g, m.as_ref(), row.rule), Some(score(&result, g, m.as_ref(), row))),
+        None => (Canvas::new(result.width, result.height, NO_GT), None),
     };
-    let panels: Vec<Canvas> = [left, colour, error].iter().map(|c| fit_width(c, panel_width)).collect();
-    Ok(hstack(&panels, 4))
+    Ok(RowPictures { left, colour, error, range, score })
+}
+
+/// The row's scores under its rule, on its non-occluded pixels: MiddEval3's avgErr and bad-2 + invalid, KITTI's D1
+/// (the result filled as the devkit fills it first), ETH3D's bad-1.
+fn score(result: &DisparityMap, gt: &DisparityMap, mask: Option<&Plane<u8>>, row: &SheetRow) -> RowScore {
+    use crate::eval::{MaskMode, evaluate};
+    let ndisp = row.calib.as_deref().and_then(|c| crate::io::calib::read_ndisp(c).ok()).unwrap_or(usize::MAX / 2);
+    match row.rule {
+        ErrorRule::Middlebury { scale } => {
+            let m = evaluate(result, gt, mask, ndisp, scale, MaskMode::Nonocc);
+            RowScore { avgerr: m.avgerr, bad: m.totbad2, bad_name: "bad-2" }
+        }
+        ErrorRule::KittiD1 => {
+            let mut filled = result.clone();
+            crate::eval::interpolate_background(&mut filled);
+            let m = evaluate(&filled, gt, mask, ndisp, 1, MaskMode::Nonocc);
+            RowScore { avgerr: m.avgerr, bad: m.d1, bad_name: "D1" }
+        }
+        ErrorRule::Eth3d => {
+            let m = evaluate(result, gt, mask, ndisp, 1, MaskMode::Nonocc);
+            RowScore { avgerr: m.avgerr, bad: m.bad1 + m.invalid, bad_name: "bad-1" }
+        }
+    }
 }
 
 /// What [`contact_sheet`] drew.
@@ -350,25 +406,126 @@ pub struct Sheet {
     pub skipped: Vec<(SheetRow, String)>,
 }
 
-/// A contact sheet of `rows` (from [`sheet_rows`]), one [`draw_row`] each, 8 pixels apart. A row whose files
-/// cannot be drawn is left out and listed in [`Sheet::skipped`].
+/// Labels are drawn at this many canvas pixels per font pixel.
+const TEXT_SCALE: usize = 2;
+/// Label colours: names and headers, figures.
+const TEXT: [u8; 3] = [235, 235, 235];
+const DIM_TEXT: [u8; 3] = [170, 170, 170];
+/// Room around labels.
+const PAD: usize = 8;
+/// The width of the label column, in characters.
+const LABEL_CHARS: usize = 15;
+
+/// A contact sheet of `rows` (from [`sheet_rows`]) under a header naming the columns (`alg` names the result's):
+/// each row `name and scores | left image | result in colour | error map`, the panels at most `panel_width`
+/// wide; below them a colour bar (the colours from each row's low to its high disparity, the row's range beside
+/// its name) and the error map's legend. A row whose files cannot be drawn is left out and listed in
+/// [`Sheet::skipped`].
 ///
 /// # Errors
 /// None of the rows could be drawn.
-pub fn contact_sheet(rows: Vec<SheetRow>, panel_width: usize) -> Result<Sheet> {
-    let (mut canvases, mut drawn, mut skipped) = (Vec::new(), Vec::new(), Vec::new());
+pub fn contact_sheet(rows: Vec<SheetRow>, alg: &str, panel_width: usize) -> Result<Sheet> {
+    let (mut drawn_rows, mut drawn, mut skipped) = (Vec::new(), Vec::new(), Vec::new());
     for row in rows {
-        match draw_row(&row, panel_width) {
-            Ok(c) => {
-                canvases.push(c);
+        match render_row(&row) {
+            Ok(p) => {
+                drawn_rows.push(labelled_row(&row, &p, panel_width));
                 drawn.push(row);
             }
             Err(e) => skipped.push((row, e.to_string())),
         }
     }
-    if canvases.is_empty() {
+    if drawn_rows.is_empty() {
         let why: Vec<String> = skipped.iter().map(|(_, e)| e.clone()).collect();
         return Err(Error::Input(format!("no scene could be drawn: {}", why.join("; "))));
     }
-    Ok(Sheet { canvas: vstack(&canvases, 8), rows: drawn, skipped })
+    let rule = drawn.iter().find(|r| r.truth.is_some()).map(|r| r.rule);
+    let header = header(&drawn_rows[0], alg, rule, panel_width);
+    let body_width = drawn_rows.iter().map(|c| c.width).max().unwrap_or(0);
+    let footer = footer(body_width.max(header.width));
+    let mut parts = vec![header];
+    parts.extend(drawn_rows);
+    parts.push(footer);
+    Ok(Sheet { canvas: vstack(&parts, PAD), rows: drawn, skipped })
+}
+
+/// The width of the label column in pixels.
+fn label_width() -> usize {
+    super::font::text_size(&"M".repeat(LABEL_CHARS), TEXT_SCALE).0 + PAD
+}
+
+/// A row: its label (name, scores, disparity range) beside its three panels.
+fn labelled_row(row: &SheetRow, p: &RowPictures, panel_width: usize) -> Canvas {
+    let panels: Vec<Canvas> = [&p.left, &p.colour, &p.error].iter().map(|c| fit_width(c, panel_width)).collect();
+    let panels = hstack(&panels, 4);
+    let line = super::font::GLYPH.1 * TEXT_SCALE + 4;
+    let mut label = Canvas::new(label_width(), panels.height.max(4 * line), BACKGROUND);
+    let name: String = row.name.chars().take(LABEL_CHARS).collect();
+    super::font::draw_text(&mut label, (0, 0), &name, TEXT, TEXT_SCALE);
+    let mut lines = Vec::new();
+    if let Some(s) = p.score {
+        lines.push(format!("avgErr {:.2}", s.avgerr));
+        lines.push(format!("{} {:.1}%", s.bad_name, s.bad));
+    }
+    lines.push(format!("d {:.0}..{:.0}", p.range.0, p.range.1));
+    for (k, text) in lines.iter().enumerate() {
+        super::font::draw_text(&mut label, (0, (k + 1) * line), text, DIM_TEXT, TEXT_SCALE);
+    }
+    hstack(&[label, panels], 0)
+}
+
+/// The column titles over the first row's panels.
+fn header(first: &Canvas, alg: &str, rule: Option<ErrorRule>, panel_width: usize) -> Canvas {
+    let line = super::font::GLYPH.1 * TEXT_SCALE;
+    let mut c = Canvas::new(first.width, line + 2, BACKGROUND);
+    let error_title = match rule {
+        Some(ErrorRule::Middlebury { .. }) => "error: bad-2",
+        Some(ErrorRule::KittiD1) => "error: D1",
+        Some(ErrorRule::Eth3d) => "error: bad-1",
+        None => "error (no truth)",
+    };
+    let titles = ["scene", "left image", alg, error_title];
+    // The panels' left edges: after the label column, then each panel's width and the 4-pixel gap.
+    let step = (first.width - label_width() + 4) / 3;
+    let x = [0, label_width(), label_width() + step, label_width() + 2 * step];
+    for (title, x) in titles.iter().zip(x) {
+        let max_chars = (panel_width / ((super::font::GLYPH.0 + 1) * TEXT_SCALE)).max(4);
+        let t: String = title.chars().take(max_chars).collect();
+        super::font::draw_text(&mut c, (x, 0), &t, TEXT, TEXT_SCALE);
+    }
+    c
+}
+
+/// The colour bar (low to high disparity) and the error map's legend.
+fn footer(width: usize) -> Canvas {
+    let line = super::font::GLYPH.1 * TEXT_SCALE;
+    let mut c = Canvas::new(width.max(600), 2 * line + 3 * PAD, BACKGROUND);
+    let (far, near) = ("low d (far)", "high d (near)");
+    let far_w = super::font::text_size(far, TEXT_SCALE).0;
+    super::font::draw_text(&mut c, (0, 0), far, DIM_TEXT, TEXT_SCALE);
+    let bar = 256;
+    for x in 0..bar {
+        let colour = super::colormap(x as f32 / (bar - 1) as f32);
+        for y in 0..line {
+            let i = (y * c.width + far_w + PAD + x) * 3;
+            c.data[i..i + 3].copy_from_slice(&colour);
+        }
+    }
+    super::font::draw_text(&mut c, (far_w + 2 * PAD + bar, 0), near, DIM_TEXT, TEXT_SCALE);
+    let y = line + 2 * PAD;
+    let mut x = 0;
+    let legend: [([u8; 3], &str); 4] =
+        [([205, 205, 205], "good"), ([230, 30, 30], "bad"), ([0, 0, 0], "invalid"), (NO_GT, "no truth")];
+    for (colour, text) in legend {
+        for yy in y..y + line {
+            for xx in x..(x + line).min(c.width) {
+                let i = (yy * c.width + xx) * 3;
+                c.data[i..i + 3].copy_from_slice(&colour);
+            }
+        }
+        let after = x + line + PAD / 2;
+        super::font::draw_text(&mut c, (after, y), text, DIM_TEXT, TEXT_SCALE);
+        x = after + super::font::text_size(text, TEXT_SCALE).0 + 2 * PAD;
+    }
+    c
 }
