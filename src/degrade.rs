@@ -18,7 +18,8 @@
 //!   about its centre, bilinear: an imperfectly rectified rig (the ground truth is left as it is, so a rotation
 //!   also moves matches horizontally, which no matcher can undo);
 //! - `jpeg:Q` — JPEG compression of both views at quality Q (1–100; the `image` crate's baseline encoder);
-//! - several degradations separated by `+` apply in order (e.g. `blur:1+noise:4`).
+//! - several degradations separated by `+` apply in order (e.g. `blur:1+noise:4`);
+//! - `none` leaves the images as they are (a clean sequence with `--frames`).
 //!
 //! [`degrade_tree`] makes a degraded copy of a whole MiddEval3-style tree (every scene folder with `im0.png`,
 //! `im1.png` and `calib.txt`): the images degraded, the ground truth, masks and calibration copied unchanged, so
@@ -191,6 +192,9 @@ impl FromStr for Recipe {
     type Err = String;
 
     fn from_str(text: &str) -> std::result::Result<Self, String> {
+        if text == "none" {
+            return Ok(Recipe(Vec::new()));
+        }
         let steps = text.split('+').map(str::parse).collect::<std::result::Result<Vec<_>, _>>()?;
         Ok(Recipe(steps))
     }
@@ -198,6 +202,9 @@ impl FromStr for Recipe {
 
 impl fmt::Display for Recipe {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0.is_empty() {
+            return f.write_str("none");
+        }
         for (k, step) in self.0.iter().enumerate() {
             if k > 0 {
                 f.write_str("+")?;
@@ -464,7 +471,7 @@ pub(crate) fn host_name() -> String {
 /// Removes the temporary trees `parent/PREFIX<pid>` that an earlier run on this machine left when it was killed
 /// (SIGTERM, SIGKILL: it could not clean up): those whose process is gone (`/proc/<pid>` missing). Nothing is
 /// removed where `/proc` cannot tell (no `/proc/self`).
-fn sweep_stale(parent: &Path, prefix: &str) {
+pub(crate) fn sweep_stale(parent: &Path, prefix: &str) {
     if !Path::new("/proc/self").exists() {
         return;
     }

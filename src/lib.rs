@@ -22,7 +22,7 @@
 //! | [`pipeline`] (with [`tile`]) | ours | the orchestrator: coarse prior, label windows, tiles, memory |
 //! | [`condition`], [`rectify`] | ours | measuring and conditioning the pair; its vertical offset |
 //! | [`range`], [`scale`], [`plan`] | ours | the search range when none is given; `--downscale`; setting up a match |
-//! | [`io`], [`image`], [`dataset`], [`batch`] | around | files, data types, data-set layouts, batch runs |
+//! | [`io`], [`image`], [`dataset`], [`batch`], [`sequence`] | around | files, data types, data-set layouts, batch runs, stereo sequences |
 //! | [`eval`], [`viz`], [`synth`], [`degrade`] | around | scoring, colour maps, synthetic and degraded pairs |
 //! | [`geometry`], [`table`], [`fastmath`], [`error`] | around | depth and point clouds, shared helpers, errors |
 //!
@@ -62,6 +62,7 @@ pub mod rectify;
 #[doc(hidden)]
 pub mod rng;
 pub mod scale;
+pub mod sequence;
 pub mod synth;
 pub mod table;
 pub mod viz;

@@ -7,8 +7,8 @@
 //! `--max-memory` ([`MemoryArg`]) for the commands they mean something to, and `Command`, whose doc
 //! comments are the subcommands' help), [`run`], which hands each command to its own file, and
 //! [`print_error`]. One file per command: `match.rs` (also the default, `jem LEFT RIGHT -o OUT`), `config.rs`
-//! (and the `--config`/`--set`/`--downscale` flags that `match` and `batch` share), `synth.rs`, `batch.rs`,
-//! `eval.rs`, `viz.rs`.
+//! (and the `--config`/`--set`/`--downscale` flags that `match`, `batch` and `sequence` share), `synth.rs`,
+//! `degrade.rs`, `batch.rs`, `sequence.rs`, `eval.rs`, `viz.rs`.
 //!
 //! Everything the commands print goes through [`note!`] (stderr) and [`out!`] (stdout), which ignore a closed or
 //! failing stream: `jem batch … 2>&1 | head -1` must not stop the work (issue 41; `eprintln!` panics on a
@@ -36,6 +36,7 @@ mod config;
 mod degrade;
 mod eval;
 mod r#match;
+mod sequence;
 mod synth;
 mod viz;
 
@@ -49,6 +50,7 @@ use config::ConfigArgs;
 use degrade::DegradeArgs;
 use eval::EvalArgs;
 use r#match::MatchArgs;
+use sequence::SequenceArgs;
 use synth::SynthArgs;
 use viz::VizArgs;
 
@@ -80,7 +82,7 @@ pub struct GlobalArgs {
     verbose: bool,
 }
 
-/// `--threads`, for the commands that run work in parallel (`match`, `batch`, `synth`, `degrade`, `eval`; not
+/// `--threads`, for the commands that run work in parallel (`match`, `batch`, `sequence`, `synth`, `degrade`, `eval`; not
 /// `config` or `viz`, which have nothing to share out).
 #[derive(Args, Debug, Clone, Default)]
 pub struct ThreadsArg {
@@ -89,7 +91,7 @@ pub struct ThreadsArg {
     threads: Option<usize>,
 }
 
-/// `--max-memory`, for the commands that run the pipeline (`match`, `batch`).
+/// `--max-memory`, for the commands that run the pipeline (`match`, `batch`, `sequence`).
 #[derive(Args, Debug, Clone, Default)]
 pub struct MemoryArg {
     /// Refuse runs estimated to need more memory than this, before allocating (e.g. 1500M, 8G; default: 80% of
@@ -180,7 +182,13 @@ enum Command {
     ///                  rectification; the ground truth is unchanged)
     ///   jpeg:Q         JPEG compression at quality Q (1-100), both views
     ///   A+B            A, then B
+    ///   none           nothing (with --frames: a clean sequence)
     /// OUT is written as a whole or not at all; it must not exist (or be empty) and must be outside SRC.
+    /// With --frames N, SRC is one scene and OUT becomes a stereo sequence (as `jem sequence` reads it): frame k is
+    /// the scene degraded with its own seed (fresh noise each frame), its window moved k × --pan columns right
+    /// (a panning camera; both views and the ground truth cropped alike, so the truth stays exact; matches that
+    /// leave the window are marked occluded in mask/), ground truth in gt/<stem>.pfm, calib.txt with the window's
+    /// width.
     #[command(verbatim_doc_comment)]
     Degrade(DegradeArgs),
     /// Run the pipeline on every stereo pair under DIR... (MiddEval3, KITTI 2012/2015, ETH3D, as distributed).
@@ -201,6 +209,20 @@ enum Command {
     /// failed.
     #[command(verbatim_doc_comment)]
     Batch(BatchArgs),
+    /// Match every frame of a stereo sequence: `jem sequence DIR -o OUTDIR --independent`.
+    ///
+    /// DIR holds left/ and right/ with the frames (PNG, PPM/PGM or JPEG), paired by file stem in sorted order,
+    /// and optionally calib.txt (Middlebury keys), gt/<stem>.pfm and mask/<stem>.png (for `jem eval OUTDIR`); or it
+    /// is a KITTI raw drive folder (image_02/data, image_03/data). Unequal counts or unpaired names are refused.
+    /// Writes OUTDIR/<stem>.pfm (--ext exr|png for the other formats) per frame, times.txt (a line per frame: stem
+    /// and seconds from the decoded pair to its map), sequence.txt (what made the folder) and config.toml.
+    /// --independent matches each frame alone, byte-identical to `jem LEFT RIGHT -o OUT --ndisp N` on that pair
+    /// (N: --ndisp, else calib.txt's ndisp; without either the range is measured on each frame, as `jem match`
+    /// measures it; --range-once measures it on the first frame and holds it).
+    /// A rerun into OUTDIR skips the frames already written (and says so); a folder another run wrote (other
+    /// sequence, format or configuration) is refused. Each frame's map and times.txt are written all or none.
+    #[command(verbatim_doc_comment)]
+    Sequence(SequenceArgs),
     /// Score results against the ground truth: MiddEval3 `evaldisp` style, KITTI devkit D1, ETH3D.
     ///
     /// Every pair under DIR with ground truth is scored, in the layout `jem batch` wrote it (one data set layout
@@ -260,6 +282,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Synth(a)) => &a.threads,
         Some(Command::Degrade(a)) => &a.threads,
         Some(Command::Batch(a)) => &a.threads,
+        Some(Command::Sequence(a)) => &a.threads,
         Some(Command::Eval(a)) => &a.threads,
         Some(Command::Config(_) | Command::Viz(_)) => &ThreadsArg::default(),
     };
@@ -287,6 +310,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Synth(args)) => synth::run(&args, &cli.global),
         Some(Command::Degrade(args)) => degrade::run(&args, &cli.global),
         Some(Command::Batch(args)) => batch::run(&args, &cli.global),
+        Some(Command::Sequence(args)) => sequence::run(&args, &cli.global),
         Some(Command::Eval(args)) => eval::run(&args, &cli.global),
         Some(Command::Viz(args)) => viz::run(&args, &cli.global),
     }

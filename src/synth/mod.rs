@@ -167,16 +167,24 @@ pub fn write_scene(dir: &Path, scene: &SynthScene) -> Result<()> {
     crate::io::write_atomic(&dir.join("calib.txt"), calib_text(scene).as_bytes())?;
     crate::io::pfm::write_pfm(&dir.join("disp0GT.pfm"), &scene.gt)?;
     let mask_path = dir.join("mask0nocc.png");
+    crate::io::write_atomic(&mask_path, &encode_mask_png(&mask_path, &scene.mask)?)
+}
+
+/// A mask encoded as an 8-bit grey PNG (`path` names it in errors).
+///
+/// # Errors
+/// [`Error::Image`] naming `path`.
+pub(crate) fn encode_mask_png(path: &Path, mask: &Plane<u8>) -> Result<Vec<u8>> {
     let mut png = Vec::new();
     image::ImageEncoder::write_image(
         image::codecs::png::PngEncoder::new(&mut png),
-        &scene.mask.data,
-        w as u32,
-        h as u32,
+        &mask.data,
+        mask.width as u32,
+        mask.height as u32,
         image::ExtendedColorType::L8,
     )
-    .map_err(|source| Error::Image { path: mask_path.clone(), source })?;
-    crate::io::write_atomic(&mask_path, &png)
+    .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
+    Ok(png)
 }
 
 /// Middlebury `calib.txt`: identical cameras with focal length = width, principal point at the centre.
@@ -191,7 +199,7 @@ fn calib_text(scene: &SynthScene) -> String {
 }
 
 /// Interleaved 8-bit RGB from a planar image (values are already whole numbers in 0..=255).
-fn interleave_rgb8(img: &RgbImage) -> Vec<u8> {
+pub(crate) fn interleave_rgb8(img: &RgbImage) -> Vec<u8> {
     (0..img.len()).flat_map(|i| img.rgb(i).map(|v| v.round().clamp(0.0, 255.0) as u8)).collect()
 }
 
