@@ -167,7 +167,13 @@ enum Command {
     Match(MatchArgs),
     /// Print the effective configuration (defaults ← --config ← --set) as TOML.
     Config(ConfigArgs),
-    /// Render a synthetic scene with exact ground truth in MiddEval3 layout.
+    /// Render a synthetic scene with exact ground truth in MiddEval3 layout (--frames N: a sequence).
+    ///
+    /// `jem synth OUTDIR` writes im0.png, im1.png, calib.txt, disp0GT.pfm and mask0nocc.png. With --frames N it
+    /// writes a stereo sequence as `jem sequence` reads it, exact ground truth per frame: --motion static, pan (the
+    /// camera sideways: near objects move faster than the background), dolly (the camera forward: disparities
+    /// grow), object (one object moves, the camera stands), cut (another scene from frame N/2); --noise S adds
+    /// fresh sensor noise to every frame. truth.txt lists each frame's camera position, scene and object shift.
     Synth(SynthArgs),
     /// Write a degraded copy of a scene tree (noise, low light, exposure mismatch, blur, misalignment, JPEG), seeded.
     ///

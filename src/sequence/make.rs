@@ -100,8 +100,8 @@ pub fn sequence_from_scene(scene: &Path, out: &Path, how: &FromScene) -> Result<
         });
         Ok(SequenceFrame { left: crop_rgb(&left, View::Left)?, right: crop_rgb(&right, View::Right)?, gt, mask })
     };
-    let files = [("calib.txt", calib), ("made.txt", note)];
-    Ok(write_sequence(out, how.frames, &mut frame, &files)?.len())
+    let mut files = || vec![("calib.txt", calib.clone()), ("made.txt", note.clone())];
+    Ok(write_sequence(out, how.frames, &mut frame, &mut files)?.len())
 }
 
 /// Columns `x0 .. x0 + width` of a plane.

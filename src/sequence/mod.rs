@@ -41,7 +41,8 @@ pub use make::{FromScene, frame_seed, sequence_from_scene};
 pub use run::{
     CONFIG_FILE, Event, FrameRun, RUN_FILE, RangeRule, RunOptions, RunSummary, TIMES_FILE, recorded_source, run,
 };
-pub use write::{SequenceFrame, write_sequence};
+pub(crate) use write::frame_stem;
+pub use write::{ROOT_FILES, SequenceFrame, write_sequence};
 
 /// The image extensions a frame may have (compared without case).
 pub const IMAGE_EXTENSIONS: [&str; 6] = ["png", "ppm", "pgm", "pnm", "jpg", "jpeg"];

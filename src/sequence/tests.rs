@@ -152,7 +152,8 @@ fn frame(value: f32) -> SequenceFrame {
 fn a_written_sequence_reads_back() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("new/seq");
-    let stems = write_sequence(&out, 3, &mut |k| Ok(frame(k as f32)), &[("calib.txt", "ndisp=4\n".into())]).unwrap();
+    let stems =
+        write_sequence(&out, 3, &mut |k| Ok(frame(k as f32)), &mut || vec![("calib.txt", "ndisp=4\n".into())]).unwrap();
     assert_eq!(stems, ["000000", "000001", "000002"]);
     let seq = Sequence::open(&out).unwrap();
     assert_eq!(seq.frames.len(), 3);
@@ -175,7 +176,7 @@ fn writing_refuses_a_folder_holding_a_scene_or_sequence() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join(taken);
         if taken == "left" { std::fs::create_dir(&path) } else { std::fs::write(&path, "x") }.unwrap();
-        let e = write_sequence(dir.path(), 2, &mut |k| Ok(frame(k as f32)), &[("made.txt", String::new())])
+        let e = write_sequence(dir.path(), 2, &mut |k| Ok(frame(k as f32)), &mut || vec![("made.txt", String::new())])
             .unwrap_err()
             .to_string();
         assert!(e.contains("already holds a scene or a sequence") && e.contains(taken), "{e}");
@@ -184,7 +185,7 @@ fn writing_refuses_a_folder_holding_a_scene_or_sequence() {
     // Other files are no reason to refuse, and stay.
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("README"), "x").unwrap();
-    write_sequence(dir.path(), 2, &mut |k| Ok(frame(k as f32)), &[]).unwrap();
+    write_sequence(dir.path(), 2, &mut |k| Ok(frame(k as f32)), &mut Vec::new).unwrap();
     assert!(dir.path().join("README").is_file() && dir.path().join("left/000001.png").is_file());
 }
 
@@ -194,18 +195,23 @@ fn a_failed_write_leaves_no_part_of_a_sequence() {
     let out = dir.path().join("seq");
     let mut failing =
         |k: usize| if k < 2 { Ok(frame(k as f32)) } else { Err(crate::Error::Input("frame 2 broke".into())) };
-    let e = write_sequence(&out, 4, &mut failing, &[]).unwrap_err().to_string();
+    let e = write_sequence(&out, 4, &mut failing, &mut Vec::new).unwrap_err().to_string();
     assert_eq!(e, "frame 2 broke");
     assert!(!out.exists(), "the folder it created is removed");
     std::fs::create_dir(&out).unwrap();
     std::fs::write(out.join("keep.txt"), "x").unwrap();
-    assert!(write_sequence(&out, 4, &mut failing, &[]).is_err());
+    assert!(write_sequence(&out, 4, &mut failing, &mut Vec::new).is_err());
     let names: Vec<_> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(names, ["keep.txt"], "an existing folder keeps only what it had");
     // Frames that carry ground truth only sometimes are refused.
     let mut mixed =
         |k: usize| Ok(SequenceFrame { gt: None, ..frame(k as f32) }).map(|f| if k == 0 { frame(0.0) } else { f });
-    assert!(write_sequence(&dir.path().join("mixed"), 2, &mut mixed, &[]).unwrap_err().to_string().contains("frame 1"));
+    assert!(
+        write_sequence(&dir.path().join("mixed"), 2, &mut mixed, &mut Vec::new)
+            .unwrap_err()
+            .to_string()
+            .contains("frame 1")
+    );
 }
 
 /// A synthetic scene written as a MiddEval3 scene folder.
@@ -288,7 +294,7 @@ fn small_sequence(dir: &Path) -> (Sequence, crate::Params) {
         let s = scenes.next().unwrap();
         Ok(SequenceFrame { left: s.left, right: s.right, gt: Some(s.gt), mask: Some(s.mask) })
     };
-    write_sequence(&seq, 3, &mut frame, &[("calib.txt", "ndisp=16\n".into())]).unwrap();
+    write_sequence(&seq, 3, &mut frame, &mut || vec![("calib.txt", "ndisp=16\n".into())]).unwrap();
     let mut params = crate::Params { model: crate::Model::Wta, ..Default::default() };
     params.post.sps.enabled = false;
     (Sequence::open(&seq).unwrap(), params)

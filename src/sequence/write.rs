@@ -20,13 +20,17 @@ pub struct SequenceFrame {
     pub mask: Option<Plane<u8>>,
 }
 
+/// The files a sequence may have at its root besides its folders: [`write_sequence`] writes no others.
+pub const ROOT_FILES: [&str; 3] = ["calib.txt", "made.txt", "truth.txt"];
+
 /// Names in a folder that say it holds a scene or a sequence already: [`write_sequence`] refuses such a folder.
-const TAKEN: [&str; 8] = ["left", "right", "gt", "mask", "calib.txt", "im0.png", "im1.png", "disp0GT.pfm"];
+const TAKEN: [&str; 10] =
+    ["left", "right", "gt", "mask", "calib.txt", "made.txt", "truth.txt", "im0.png", "im1.png", "disp0GT.pfm"];
 
 /// Writes a sequence of `count` frames into `out` (created if missing): `left/<stem>.png`, `right/<stem>.png`,
-/// `gt/<stem>.pfm` and `mask/<stem>.png` when the frames have them, and each `(name, text)` of `files` at the
-/// root (`calib.txt`, notes). Frame `k` is made by `frame(k)` when it is written, so one frame is in memory at a
-/// time; its stem is `k` zero-padded to six digits.
+/// `gt/<stem>.pfm` and `mask/<stem>.png` when the frames have them, then each `(name, text)` that `files` returns
+/// (called once all frames are made; the names among [`ROOT_FILES`]) at the root. Frame `k` is made by `frame(k)`
+/// when it is written, so one frame is in memory at a time; its stem is `k` zero-padded to six digits.
 ///
 /// Everything is written into a hidden temporary folder inside `out` and moved into place at the end: a failed
 /// or interrupted run leaves no part of a sequence (a temporary folder a killed run left is removed by the next
@@ -36,16 +40,19 @@ const TAKEN: [&str; 8] = ["left", "right", "gt", "mask", "calib.txt", "im0.png",
 /// [`Error::Input`] when `out` is a file or already holds a scene or a sequence (`left/`, `calib.txt`, `im0.png`,
 /// …), or the frames differ in what they carry; whatever `frame` returns; [`Error::Io`] / [`Error::Image`] naming
 /// the file that could not be written.
+///
+/// # Panics
+/// If `files` names a file outside [`ROOT_FILES`].
 pub fn write_sequence(
     out: &Path,
     count: usize,
     frame: &mut dyn FnMut(usize) -> Result<SequenceFrame>,
-    files: &[(&str, String)],
+    files: &mut dyn FnMut() -> Vec<(&'static str, String)>,
 ) -> Result<Vec<String>> {
     if out.exists() && !out.is_dir() {
         return Err(Error::Input(format!("{}: exists and is not a folder", out.display())));
     }
-    let taken = TAKEN.iter().copied().chain(files.iter().map(|(n, _)| *n)).find(|n| out.join(n).exists());
+    let taken = TAKEN.iter().find(|n| out.join(n).exists());
     if let Some(name) = taken {
         return Err(Error::Input(format!(
             "{}: already holds a scene or a sequence ({name}); refusing to write into it",
@@ -59,7 +66,8 @@ pub fn write_sequence(
     let tmp = out.join(format!("{prefix}{}", std::process::id()));
     let result = (|| {
         let stems = write_frames(&tmp, count, frame)?;
-        for (name, text) in files {
+        for (name, text) in files() {
+            assert!(ROOT_FILES.contains(&name), "{name} is not a sequence's root file");
             crate::io::write_atomic(&tmp.join(name), text.as_bytes())?;
         }
         publish(&tmp, out)?;

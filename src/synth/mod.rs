@@ -32,9 +32,14 @@
 //! every pixel is computed independently (rows in parallel), so the same parameters give byte-identical files
 //! whatever the thread count. Cost: O(W·H·S) for S surfaces (~0.2 s at 320×240 in release, writing included).
 //!
+//! # Sequences
+//! [`write_synth_sequence`] renders a sequence of frames of one scene with exact ground truth per frame: a camera
+//! that pans or moves forward, an object that moves, a cut to another scene ([`Motion`]; see `sequence.rs`).
+//!
 //! # Files of this module
 //! `mod.rs` (the parameters, rendering a scene, writing it), `scene.rs` (the scene model: surfaces, shapes, drawing
-//! one from a seed, which surface a ray meets), `texture.rs` (the surfaces' seeded textures).
+//! one from a seed, which surface a ray of a camera meets), `texture.rs` (the surfaces' seeded textures),
+//! `sequence.rs` (sequences: the motions, a frame's cameras, writing them).
 
 use std::path::Path;
 
@@ -44,9 +49,11 @@ use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane, RgbImage};
 
 mod scene;
+mod sequence;
 mod texture;
 
 use scene::Scene;
+pub use sequence::{FrameTruth, Motion, SequenceParams, render_frame, write_synth_sequence};
 
 /// Mask value: the pixel is visible in both views.
 pub const MASK_VISIBLE: u8 = 255;
@@ -164,7 +171,8 @@ pub fn write_scene(dir: &Path, scene: &SynthScene) -> Result<()> {
     let (w, h) = scene.left.dims();
     crate::io::png::write_rgb8_png(&dir.join("im0.png"), w, h, &interleave_rgb8(&scene.left))?;
     crate::io::png::write_rgb8_png(&dir.join("im1.png"), w, h, &interleave_rgb8(&scene.right))?;
-    crate::io::write_atomic(&dir.join("calib.txt"), calib_text(scene).as_bytes())?;
+    let calib = calib_text(w, h, scene.ndisp, scene.vmin, scene.vmax);
+    crate::io::write_atomic(&dir.join("calib.txt"), calib.as_bytes())?;
     crate::io::pfm::write_pfm(&dir.join("disp0GT.pfm"), &scene.gt)?;
     let mask_path = dir.join("mask0nocc.png");
     crate::io::write_atomic(&mask_path, &encode_mask_png(&mask_path, &scene.mask)?)
@@ -188,13 +196,12 @@ pub(crate) fn encode_mask_png(path: &Path, mask: &Plane<u8>) -> Result<Vec<u8>> 
 }
 
 /// Middlebury `calib.txt`: identical cameras with focal length = width, principal point at the centre.
-fn calib_text(scene: &SynthScene) -> String {
-    let (w, h) = scene.left.dims();
+fn calib_text(w: usize, h: usize, ndisp: usize, vmin: f32, vmax: f32) -> String {
     let cam = format!("[{w} 0 {}; 0 {w} {}; 0 0 1]", (w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
     format!(
         "cam0={cam}\ncam1={cam}\ndoffs=0\nbaseline=100\nwidth={w}\nheight={h}\nndisp={}\nisint=0\nvmin={}\nvmax={}\n\
          dyavg=0\ndymax=0\n",
-        scene.ndisp, scene.vmin, scene.vmax
+        ndisp, vmin, vmax
     )
 }
 

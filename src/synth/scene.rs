@@ -60,6 +60,71 @@ impl Shape {
     }
 }
 
+impl Shape {
+    /// The shape moved by `(dx, dy)`.
+    pub(super) fn translated(&self, dx: f64, dy: f64) -> Shape {
+        match self {
+            Shape::Everywhere => Shape::Everywhere,
+            Shape::Rect { x0, y0, x1, y1 } => Shape::Rect { x0: x0 + dx, y0: y0 + dy, x1: x1 + dx, y1: y1 + dy },
+            Shape::Disc { cx, cy, r } => Shape::Disc { cx: cx + dx, cy: cy + dy, r: *r },
+            Shape::Polygon(v) => Shape::Polygon(v.iter().map(|p| [p[0] + dx, p[1] + dy]).collect()),
+        }
+    }
+
+    /// A point inside the shape's bounds: the centre of a rectangle or disc, the mean vertex of a polygon (`None`
+    /// for the background).
+    pub(super) fn centre(&self) -> Option<[f64; 2]> {
+        match self {
+            Shape::Everywhere => None,
+            Shape::Rect { x0, y0, x1, y1 } => Some([0.5 * (x0 + x1), 0.5 * (y0 + y1)]),
+            Shape::Disc { cx, cy, .. } => Some([*cx, *cy]),
+            Shape::Polygon(v) => {
+                let n = v.len().max(1) as f64;
+                Some([v.iter().map(|p| p[0]).sum::<f64>() / n, v.iter().map(|p| p[1]).sum::<f64>() / n])
+            }
+        }
+    }
+}
+
+/// A camera of a sequence's frame, relative to the reference left camera (the one [`Scene::visible_left`] looks
+/// through): moved `x_baselines` baselines along the baseline and forward along the optical axis by `forward` ×
+/// f·B (a point of disparity d at the reference camera has disparity d / (1 − d·forward) here), principal point
+/// `(cx, cy)`. Its right camera is one baseline further along.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Camera {
+    pub(super) x_baselines: f64,
+    pub(super) forward: f64,
+    pub(super) cx: f64,
+    pub(super) cy: f64,
+}
+
+impl Camera {
+    /// The right camera of the pair this camera is the left one of.
+    pub(super) fn right(&self) -> Camera {
+        Camera { x_baselines: self.x_baselines + 1.0, ..*self }
+    }
+}
+
+impl Surface {
+    /// Where the ray of `cam` through its image point `(x, y)` meets the surface's plane: the disparity there in
+    /// `cam`'s pair and the point's reference coordinates; `None` when it meets it behind the camera or not at all.
+    ///
+    /// A reference point `(x₀, y₀)` of disparity d is seen by `cam` at `x − cx = (x₀ − cx − X·d) / (1 − d·F)`,
+    /// `y − cy = (y₀ − cy) / (1 − d·F)` (X = `x_baselines`, F = `forward`), with disparity `d / (1 − d·F)`;
+    /// on the plane `d = a·x₀ + b·y₀ + c` that solves to `d = (a·x + b·y + c) / (1 − a·X + F·(a·(x − cx) + b·(y −
+    /// cy)))`.
+    pub(super) fn meet(&self, cam: &Camera, x: f64, y: f64) -> Option<(f64, f64, f64)> {
+        let (u, v) = (x - cam.cx, y - cam.cy);
+        let den = 1.0 - self.a * cam.x_baselines + cam.forward * (self.a * u + self.b * v);
+        let d = (self.a * x + self.b * y + self.c) / den;
+        let depth = 1.0 - d * cam.forward;
+        if !(den > 0.0 && d > 0.0 && depth > 0.0) {
+            return None;
+        }
+        Some((d / depth, cam.cx + u * depth + cam.x_baselines * d, cam.cy + v * depth))
+    }
+}
+
 impl Surface {
     #[inline]
     pub(super) fn disparity(&self, x: f64, y: f64) -> f64 {
@@ -110,6 +175,32 @@ impl Scene {
                 }
                 let xl = t.left_x_of_right(xr, y);
                 !(xl - xr > d && t.shape.covers(xl, y))
+            })
+    }
+
+    /// The surface `cam` sees at its image point `(x, y)`: its index, the disparity there in `cam`'s pair and the
+    /// point's reference coordinates (the nearest surface whose shape covers the point); `None` where no surface
+    /// is in front of the camera.
+    pub(super) fn seen_by(&self, cam: &Camera, x: f64, y: f64) -> Option<(usize, f64, f64, f64)> {
+        let mut best: Option<(usize, f64, f64, f64)> = None;
+        for (i, s) in self.surfaces.iter().enumerate() {
+            if let Some((d, x0, y0)) = s.meet(cam, x, y)
+                && best.is_none_or(|b| d > b.1)
+                && s.shape.covers(x0, y0)
+            {
+                best = Some((i, d, x0, y0));
+            }
+        }
+        best
+    }
+
+    /// [`Scene::seen_from_right`] for the pair of `cam`: the point of surface `s` that `cam` sees at `(x, y)` with
+    /// disparity `d` has its match `x − d` in the image and no other surface in front of it on the right ray.
+    pub(super) fn seen_by_right_of(&self, cam: &Camera, s: usize, x: f64, y: f64, d: f64) -> bool {
+        let (right, xr) = (cam.right(), x - d);
+        xr >= 0.0
+            && self.surfaces.iter().enumerate().all(|(i, t)| {
+                i == s || !matches!(t.meet(&right, xr, y), Some((dt, x0, y0)) if dt > d && t.shape.covers(x0, y0))
             })
     }
 

@@ -10,6 +10,9 @@ pub(super) struct Texture {
     key: u64,
     colours: [[f64; 3]; 2],
     detail: f64,
+    /// Where the pattern has moved to (a moving object carries its texture): the colour at `(x, y)` is the
+    /// unmoved pattern's at `(x, y) − offset`.
+    pub(super) offset: [f64; 2],
 }
 
 impl Texture {
@@ -17,10 +20,11 @@ impl Texture {
         let key = rng.next_u64();
         let mut colour = || [rng.range(30.0, 225.0), rng.range(30.0, 225.0), rng.range(30.0, 225.0)];
         let colours = [colour(), colour()];
-        Texture { key, colours, detail: rng.range(110.0, 160.0) }
+        Texture { key, colours, detail: rng.range(110.0, 160.0), offset: [0.0; 2] }
     }
 
     pub(super) fn colour(&self, x: f64, y: f64) -> [f64; 3] {
+        let (x, y) = (x - self.offset[0], y - self.offset[1]);
         const COARSE: [(f64, f64); 2] = [(16.0, 0.4), (32.0, 0.6)];
         const FINE: [(f64, f64); 3] = [(2.0, 0.45), (4.0, 0.35), (8.0, 0.2)];
         let mix = smooth(fbm(self.key, 3, &COARSE, x, y) * 2.0 - 0.5);
