@@ -251,6 +251,16 @@ enum Command {
     /// {...}}, plus "excluded": {SCENE: reason} when scenes were left out and "paper": {...} with --paper; NaN is
     /// null. KITTI: the keys are "d1", "avgerr", "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid".
     ///
+    /// A sequence: `jem eval OUTDIR` scores the per-frame maps `jem sequence` wrote against the sequence's
+    /// gt/<stem>.pfm (and mask/<stem>.png where there are masks; without them every GT pixel), --gt naming the
+    /// sequence when OUTDIR does not record it. Per frame avgErr, bad2 and invalid as above (the range of the
+    /// sequence's calib.txt clips; --scale auto reads the sequence's path, else 1: a sequence made from trainingQ
+    /// needs --scale 4), and from frame to frame, over pixels with ground truth in both frames (selected by both
+    /// masks) and a valid result in both: flicker = mean |d_t − d_t−1| where the truth changed by less than 0.5 px,
+    /// change err = mean |(d_t − d_t−1) − (g_t − g_t−1)| where it changed more (full-resolution px); the last row
+    /// holds the means over the frames. JSON: {"frames": {STEM: {metrics, "flicker", "change_err", ...}}, "mean",
+    /// "flicker", "change_err", "seconds", ...}.
+    ///
     /// Environment: JEM_DATA, if set, is the folder holding paper-results.tsv (used for --paper when --paper-file
     /// is not given; otherwise ../shared/middlebury/paper-results.tsv relative to the current folder).
     #[command(verbatim_doc_comment)]

@@ -65,15 +65,18 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
         range: if args.range_once { RangeRule::FirstFrame } else { RangeRule::PerFrame },
     };
     let quiet = global.quiet;
-    if !quiet {
-        note!(
-            "{} frames in {} ({}), writing to {}",
-            total,
-            args.dir.display(),
-            seq.layout.name(),
-            args.output.display()
-        );
-    }
+    // Said once the output folder is taken, with the first frame, so that a refusal is the only line.
+    let started = std::cell::Cell::new(false);
+    let header = || {
+        if !quiet && !started.replace(true) {
+            note!(
+                "{total} frames in {} ({}), writing to {}",
+                args.dir.display(),
+                seq.layout.name(),
+                args.output.display()
+            );
+        }
+    };
     // Skipped frames are reported as one line per run of them, when the next frame starts or at the end.
     let skipped: std::cell::RefCell<Vec<String>> = Default::default();
     let flush_skipped = || {
@@ -85,8 +88,14 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
         s.clear();
     };
     let on_event = |event: Event<'_>| match event {
-        Event::Skipped { stem, .. } => skipped.borrow_mut().push(stem.to_string()),
-        Event::Started { .. } => flush_skipped(),
+        Event::Skipped { stem, .. } => {
+            header();
+            skipped.borrow_mut().push(stem.to_string());
+        }
+        Event::Started { .. } => {
+            header();
+            flush_skipped();
+        }
         Event::Stage { .. } => {}
         Event::Finished { index, run } if !quiet => {
             let measured = if run.ndisp_measured { " measured" } else { "" };

@@ -300,11 +300,11 @@ fn claim_folder(seq: &Sequence, out: &Path, ext: &str, record: &str) -> Result<(
     };
     if let Some(key) = keys.iter().find(|k| value(&old, k) != value(record, k)) {
         let what = match *key {
-            "config" => format!("another configuration ({CONFIG_FILE})"),
+            "config" => format!("another configuration (see {CONFIG_FILE})"),
             _ => format!("{key} {}", value(&old, key).unwrap_or_default()),
         };
         return Err(Error::Input(format!(
-            "{}: holds the results of another run ({what}); use another folder",
+            "{}: holds the results of another run, with {what}; use another folder",
             path.display()
         )));
     }
