@@ -560,6 +560,11 @@ mod tests {
             assert!(bad.parse::<Recipe>().is_err(), "{bad:?} was accepted");
         }
         assert_eq!("jpeg:40".parse::<Recipe>().unwrap().to_string(), "jpeg:40");
+        let none: Recipe = "none".parse().unwrap();
+        assert_eq!((none.0.len(), none.to_string()), (0, "none".to_string()));
+        let img = ramp(16, 8);
+        assert_eq!(degrade(&img, &none, View::Right, 3).unwrap(), img, "none leaves the view as it is");
+        assert!("none+noise:2".parse::<Recipe>().is_err(), "none is a whole recipe, not a step");
         assert_eq!("misalign:0.5:-0.2".parse::<Recipe>().unwrap().to_string(), "misalign:0.5:-0.2");
         for bad in ["misalign:1", "misalign:1:90", "misalign:200:0", "misalign:x:0"] {
             assert!(bad.parse::<Recipe>().is_err(), "{bad:?} was accepted");
