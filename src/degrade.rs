@@ -18,7 +18,8 @@
 //!   about its centre, bilinear: an imperfectly rectified rig (the ground truth is left as it is, so a rotation
 //!   also moves matches horizontally, which no matcher can undo);
 //! - `jpeg:Q` — JPEG compression of both views at quality Q (1–100; the `image` crate's baseline encoder);
-//! - several degradations separated by `+` apply in order (e.g. `blur:1+noise:4`).
+//! - several degradations separated by `+` apply in order (e.g. `blur:1+noise:4`);
+//! - `none` leaves the images as they are (a clean sequence with `--frames`).
 //!
 //! [`degrade_tree`] makes a degraded copy of a whole MiddEval3-style tree (every scene folder with `im0.png`,
 //! `im1.png` and `calib.txt`): the images degraded, the ground truth, masks and calibration copied unchanged, so
@@ -192,6 +193,9 @@ impl FromStr for Recipe {
     type Err = String;
 
     fn from_str(text: &str) -> std::result::Result<Self, String> {
+        if text == "none" {
+            return Ok(Recipe(Vec::new()));
+        }
         let steps = text.split('+').map(str::parse).collect::<std::result::Result<Vec<_>, _>>()?;
         Ok(Recipe(steps))
     }
@@ -199,6 +203,9 @@ impl FromStr for Recipe {
 
 impl fmt::Display for Recipe {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0.is_empty() {
+            return f.write_str("none");
+        }
         for (k, step) in self.0.iter().enumerate() {
             if k > 0 {
                 f.write_str("+")?;
@@ -439,7 +446,7 @@ pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Resul
 /// Removes the temporary trees `parent/PREFIX<pid>` that an earlier run on this machine left when it was killed
 /// (SIGKILL, a power cut: it could not clean up): those whose process is gone (`/proc/<pid>` missing). Nothing is
 /// removed where `/proc` cannot tell (no `/proc/self`).
-fn sweep_stale(parent: &Path, prefix: &str) {
+pub(crate) fn sweep_stale(parent: &Path, prefix: &str) {
     if !crate::process::proc_available() {
         return;
     }
@@ -528,6 +535,11 @@ mod tests {
             assert!(bad.parse::<Recipe>().is_err(), "{bad:?} was accepted");
         }
         assert_eq!("jpeg:40".parse::<Recipe>().unwrap().to_string(), "jpeg:40");
+        let none: Recipe = "none".parse().unwrap();
+        assert_eq!((none.0.len(), none.to_string()), (0, "none".to_string()));
+        let img = ramp(16, 8);
+        assert_eq!(degrade(&img, &none, View::Right, 3).unwrap(), img, "none leaves the view as it is");
+        assert!("none+noise:2".parse::<Recipe>().is_err(), "none is a whole recipe, not a step");
         assert_eq!("misalign:0.5:-0.2".parse::<Recipe>().unwrap().to_string(), "misalign:0.5:-0.2");
         for bad in ["misalign:1", "misalign:1:90", "misalign:200:0", "misalign:x:0"] {
             assert!(bad.parse::<Recipe>().is_err(), "{bad:?} was accepted");

@@ -66,6 +66,7 @@ mod post;
 mod process;
 mod rng;
 mod scale;
+pub mod sequence;
 mod setup;
 pub mod synth;
 mod table;

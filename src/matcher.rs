@@ -181,6 +181,16 @@ impl Matcher {
         setup::check_before_decode(&header, self.ndisp, &self.params, self.max_memory_bytes).map(|_| ())
     }
 
+    /// The search range this matcher would match `left`/`right` with, and whether it is measured on them (see
+    /// [`NdispSource`]).
+    ///
+    /// # Errors
+    /// As [`Matcher::match_pair`], for the range.
+    pub fn search_range(&self, left: &RgbImage, right: &RgbImage) -> Result<(usize, bool)> {
+        let plan = setup::plan_match(left, right, self.ndisp, &self.params, self.max_memory_bytes)?;
+        Ok((plan.pair.ndisp, plan.ndisp_measured))
+    }
+
     /// Reads a pair of image files (PNG, PPM/PGM or JPEG, 8 or 16 bit) as the matcher would match them: both
     /// headers are checked against the memory limit first (the loading, the range measurement and the run), and
     /// neither image is decoded when the pair cannot fit.

@@ -1011,6 +1011,7 @@ fn global_flags_before_every_subcommand() {
     for (sub, flags) in [
         ("match", &["--threads", "1", "--max-memory", "1G"][..]),
         ("batch", &["--threads", "1", "--max-memory=1G", "-q"]),
+        ("sequence", &["--threads", "1", "--max-memory", "1G"]),
         ("synth", &["--threads", "1", "-v"]),
         ("degrade", &["--threads=1"]),
         ("eval", &["--threads", "1"]),
@@ -1024,8 +1025,8 @@ fn global_flags_before_every_subcommand() {
 }
 
 /// Issue 42, item 6: `--threads` and `--max-memory` are offered only where they mean something: `--threads` on the
-/// commands that share work out (match, batch, synth, degrade, eval), `--max-memory` on those that run the pipeline
-/// (match, batch); `config` and `viz` refuse both, before or after the subcommand, naming the flag. And `degrade
+/// commands that share work out (match, batch, sequence, synth, degrade, eval), `--max-memory` on those that run the
+/// pipeline (match, batch, sequence); `config` and `viz` refuse both, before or after the subcommand, naming the flag. And `degrade
 /// --recipe`'s short help lists every recipe.
 #[test]
 fn resource_flags_only_where_they_mean_something() {
@@ -1033,6 +1034,7 @@ fn resource_flags_only_where_they_mean_something() {
     for (sub, threads, memory) in [
         ("match", true, true),
         ("batch", true, true),
+        ("sequence", true, true),
         ("synth", true, false),
         ("degrade", true, false),
         ("eval", true, false),

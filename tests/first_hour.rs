@@ -102,6 +102,13 @@ fn pixel(path: &Path, x: u32, y: u32) -> ((u32, u32), [u8; 3]) {
     (img.dimensions(), img.get_pixel(x, y).0)
 }
 
+/// Where panel `k` (0 left image, 1 result, 2 error map) of a contact sheet's first row starts, for panels `w`
+/// pixels wide: below the column titles (16 px) and the 8-px gap, right of the label column (15 characters of
+/// 12 px, less the last gap, and 8 px), panels 4 px apart.
+fn sheet_panel(k: u32, w: u32) -> (u32, u32) {
+    (15 * 12 - 2 + 8 + k * (w + 4), 16 + 8)
+}
+
 /// An occluded pixel that is not bad, with error 0 (the module doc of jem::viz).
 fn occluded_exact() -> [u8; 3] {
     [0.5f32 * 255.0, 0.55 * 255.0, 0.7 * 255.0].map(|v| v.round() as u8)
@@ -127,9 +134,9 @@ fn viz_kitti_tree_with_d1() {
     write_map(&d.join("kitti/training/disp_occ_0").join(frame), 8, 2, second(&all));
     write_map(&d.join("kitti/training/disp_noc_0").join(frame), 8, 2, second(&nonocc));
     write_map(&d.join("kitti/results/T/training/disp_0").join(frame), 8, 2, second(&result));
-    let want = |x0: u32, sheet: &Path| {
+    let want = |(x0, y0): (u32, u32), sheet: &Path| {
         let grey = (255.0f32 - 50.0 * 4.0 / 5.0).round() as u8;
-        let colours: Vec<[u8; 3]> = (0..8).map(|x| pixel(sheet, x0 + x, 1).1).collect();
+        let colours: Vec<[u8; 3]> = (0..8).map(|x| pixel(sheet, x0 + x, y0 + 1).1).collect();
         assert_eq!(colours[0], [grey; 3], "4 px off 100: within D1");
         assert_eq!(colours[1], [255; 3]);
         assert_eq!(colours[2], [230, 30, 30], "4 px off 20: a D1 outlier");
@@ -141,14 +148,13 @@ fn viz_kitti_tree_with_d1() {
     assert!(out.status.success(), "{}", stderr(&out));
     let err = stderr(&out);
     assert!(err.contains("1 rows (000000_10); error maps: KITTI D1 (error > 3 px and > 5 % of the true"), "{err}");
-    assert_eq!(pixel(&d.join("sheet.png"), 0, 0).0, (3 * 8 + 2 * 4, 2));
-    want(24, &d.join("sheet.png"));
+    want(sheet_panel(2, 8), &d.join("sheet.png"));
     // One map against disp_noc_0 (its sibling disp_occ_0 is the truth of all pixels).
     let args =
         ["viz", "kitti/results/T/training/disp_0/000000_10.png", "--gt", "kitti/training/disp_noc_0/000000_10.png"];
     let out = run_in(d, &[&args[..], &["-o", "one.png"]].concat());
     assert!(out.status.success() && stderr(&out).contains("red: KITTI D1"), "{}", stderr(&out));
-    want(12, &d.join("one.png"));
+    want((12, 0), &d.join("one.png"));
     // A sheet of a tree without results says where it looked.
     let out = run_in(d, &["viz", "kitti/training", "--alg", "U", "-o", "none.png"]);
     assert_eq!(out.status.code(), Some(2));
@@ -179,7 +185,8 @@ fn viz_eth3d_tree_with_bad1() {
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(stderr(&out).contains("1 rows (S); error maps: ETH3D bad-1 (error > 1 px)"), "{}", stderr(&out));
     let sheet = d.join("sheet.png");
-    let colours: Vec<[u8; 3]> = (0..4).map(|x| pixel(&sheet, 16 + x, 0).1).collect();
+    let (x0, y0) = sheet_panel(2, 4);
+    let colours: Vec<[u8; 3]> = (0..4).map(|x| pixel(&sheet, x0 + x, y0).1).collect();
     assert_eq!(colours, vec![[230, 30, 30], [230; 3], occluded_exact(), [255; 3]]);
     // One map: the rule follows from the ground truth's place in a *_gt tree.
     let args = [

@@ -31,16 +31,18 @@ impl std::str::FromStr for ScaleArg {
 #[derive(Args, Debug, Clone)]
 pub(super) struct EvalArgs {
     /// Folder searched recursively for pairs with ground truth (e.g. MiddEval3/trainingQ or one scene, a KITTI
-    /// training/ tree, an ETH3D two_view_training/ tree).
+    /// training/ tree, an ETH3D two_view_training/ tree); or the output folder of `jem sequence`.
     #[arg(value_name = "DIR")]
     dir: PathBuf,
-    /// Result to score, as `jem batch --alg NAME` wrote it (repeatable).
-    #[arg(long = "alg", required = true, value_name = "NAME")]
+    /// Result to score, as `jem batch --alg NAME` wrote it (repeatable; required except for a sequence).
+    #[arg(long = "alg", value_name = "NAME")]
     algs: Vec<String>,
     /// Where KITTI and ETH3D results are: RESULTS/NAME/SPLIT/ (default: results/ beside the data set, as batch).
     #[arg(long, value_name = "RESULTS")]
     results: Option<PathBuf>,
     /// ETH3D ground truth: the tree with SCENE/disp0GT.pfm and mask0nocc.png (default: DIR's sibling DIR_gt/).
+    /// For a sequence's results: the sequence folder (or its gt/ folder; default: the sequence the results were
+    /// made from, as DIR/sequence.txt records it).
     #[arg(long, value_name = "DIR")]
     gt: Option<PathBuf>,
     /// Read the scenes as this layout (middlebury, eth3d, kitti2012, kitti2015) instead of recognising it.
@@ -77,9 +79,18 @@ fn paper_file(flag: Option<&Path>) -> PathBuf {
     }
 }
 
-/// Scores every --alg over the folder and prints the reports.
+/// Scores every --alg over the folder and prints the reports (or a sequence's results).
 pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCode> {
     use jem::eval::{PaperResults, evaluate_dir, render};
+    if let Some(seq) = sequence_truth(&args.dir, args.gt.as_deref())? {
+        return run_sequence(args, global, &seq);
+    }
+    if args.algs.is_empty() {
+        return Err(Error::Input(format!(
+            "{}: give the results to score with --alg NAME (a folder `jem sequence` wrote needs none)",
+            args.dir.display()
+        )));
+    }
     for a in &args.algs {
         jem::batch::validate_alg_name(a)?;
     }
@@ -127,6 +138,57 @@ pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCod
         note!("{}", scored_line(&reports));
     }
     Ok(if excluded { ExitCode::from(2) } else { ExitCode::SUCCESS })
+}
+
+/// The sequence whose truth scores DIR: `--gt` naming a sequence folder (or its `gt/`), else the sequence DIR's
+/// record names (`jem sequence` wrote DIR); `None` when DIR is no sequence's results.
+fn sequence_truth(dir: &Path, gt: Option<&Path>) -> Result<Option<jem::sequence::Sequence>> {
+    use jem::sequence::Sequence;
+    let candidate = match gt {
+        Some(g) if Sequence::recognise(g).is_some() => Some(g.to_path_buf()),
+        Some(g) if g.file_name().is_some_and(|n| n == "gt") => {
+            g.parent().filter(|p| Sequence::recognise(p).is_some()).map(Path::to_path_buf)
+        }
+        Some(_) => None,
+        None => jem::sequence::recorded_source(dir),
+    };
+    let Some(root) = candidate else { return Ok(None) };
+    Sequence::open(&root).map(Some).map_err(|e| match gt {
+        None => Error::Input(format!(
+            "{}: made from the sequence {}, which does not open ({e}); give its truth with --gt",
+            dir.join(jem::sequence::RUN_FILE).display(),
+            root.display()
+        )),
+        Some(_) => e,
+    })
+}
+
+/// Scores a sequence's results frame by frame ([`jem::eval::sequence`]) and prints the report.
+fn run_sequence(args: &EvalArgs, global: &super::GlobalArgs, seq: &jem::sequence::Sequence) -> Result<ExitCode> {
+    use jem::eval::sequence::{evaluate_sequence, render_sequence};
+    if !args.algs.is_empty() || !args.paper.is_empty() {
+        return Err(Error::Input(format!(
+            "{}: a sequence's results are scored without --alg or --paper",
+            args.dir.display()
+        )));
+    }
+    let scale = args.scale.0.unwrap_or_else(|| jem::eval::scale_from_path(&seq.root).unwrap_or(1));
+    let report = evaluate_sequence(&args.dir, seq, args.mask, scale, None)?;
+    out!("{}", render_sequence(&report, args.format));
+    let missing = report.excluded().count();
+    if !global.quiet {
+        let scored = report.frames.len() - missing;
+        let note =
+            if missing > 0 { format!("; {missing} without a usable result (listed above)") } else { String::new() };
+        let scale = if scale == 1 { String::new() } else { format!(", errors ×{scale}") };
+        note!(
+            "scored {scored} of {} frames of {} ({}{scale}){note}",
+            report.frames.len(),
+            seq.root.display(),
+            args.mask.name()
+        );
+    }
+    Ok(if missing > 0 { ExitCode::from(2) } else { ExitCode::SUCCESS })
 }
 
 /// The last line of an eval: `scored 15 scenes of JEM (middlebury, nonocc, errors ×4)`, and how many had no

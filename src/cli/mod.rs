@@ -7,8 +7,8 @@
 //! `--max-memory` ([`MemoryArg`]) for the commands they mean something to, and `Command`, whose doc
 //! comments are the subcommands' help), [`run`], which hands each command to its own file, and
 //! [`print_error`]. One file per command: `match.rs` (also the default, `jem LEFT RIGHT -o OUT`), `config.rs`
-//! (and the `--config`/`--set`/`--downscale` flags that `match` and `batch` share), `synth.rs`, `batch.rs`,
-//! `eval.rs`, `viz.rs`.
+//! (and the `--config`/`--set`/`--downscale` flags that `match`, `batch` and `sequence` share), `synth.rs`,
+//! `degrade.rs`, `batch.rs`, `sequence.rs`, `eval.rs`, `viz.rs`.
 //!
 //! Everything the commands print goes through [`note!`] (stderr) and [`out!`] (stdout), which ignore a closed or
 //! failing stream: `jem batch … 2>&1 | head -1` must not stop the work (`eprintln!` panics on a
@@ -36,6 +36,7 @@ mod config;
 mod degrade;
 mod eval;
 mod r#match;
+mod sequence;
 mod signals;
 mod synth;
 mod viz;
@@ -50,6 +51,7 @@ use config::ConfigArgs;
 use degrade::DegradeArgs;
 use eval::EvalArgs;
 use r#match::MatchArgs;
+use sequence::SequenceArgs;
 use synth::SynthArgs;
 use viz::VizArgs;
 
@@ -81,7 +83,7 @@ pub struct GlobalArgs {
     verbose: bool,
 }
 
-/// `--threads`, for the commands that run work in parallel (`match`, `batch`, `synth`, `degrade`, `eval`; not
+/// `--threads`, for the commands that run work in parallel (`match`, `batch`, `sequence`, `synth`, `degrade`, `eval`; not
 /// `config` or `viz`, which have nothing to share out).
 #[derive(Args, Debug, Clone, Default)]
 pub struct ThreadsArg {
@@ -90,7 +92,7 @@ pub struct ThreadsArg {
     threads: Option<usize>,
 }
 
-/// `--max-memory`, for the commands that run the pipeline (`match`, `batch`).
+/// `--max-memory`, for the commands that run the pipeline (`match`, `batch`, `sequence`).
 #[derive(Args, Debug, Clone, Default)]
 pub struct MemoryArg {
     /// Refuse runs estimated to need more memory than this, before allocating (e.g. 1500M, 8G; default: 80% of
@@ -166,7 +168,13 @@ enum Command {
     Match(MatchArgs),
     /// Print the effective configuration (defaults ← --config ← --set) as TOML.
     Config(ConfigArgs),
-    /// Render a synthetic scene with exact ground truth in MiddEval3 layout.
+    /// Render a synthetic scene with exact ground truth in MiddEval3 layout (--frames N: a sequence).
+    ///
+    /// `jem synth OUTDIR` writes im0.png, im1.png, calib.txt, disp0GT.pfm and mask0nocc.png. With --frames N it
+    /// writes a stereo sequence as `jem sequence` reads it, exact ground truth per frame: --motion static, pan (the
+    /// camera sideways: near objects move faster than the background), dolly (the camera forward: disparities
+    /// grow), object (one object moves, the camera stands), cut (another scene from frame N/2); --noise S adds
+    /// fresh sensor noise to every frame. truth.txt lists each frame's camera position, scene and object shift.
     Synth(SynthArgs),
     /// Write a degraded copy of a scene tree (noise, low light, exposure mismatch, blur, misalignment, JPEG), seeded.
     ///
@@ -181,7 +189,13 @@ enum Command {
     ///                  rectification; the ground truth is unchanged)
     ///   jpeg:Q         JPEG compression at quality Q (1-100), both views
     ///   A+B            A, then B
+    ///   none           nothing (with --frames: a clean sequence)
     /// OUT is written as a whole or not at all; it must not exist (or be empty) and must be outside SRC.
+    /// With --frames N, SRC is one scene and OUT becomes a stereo sequence (as `jem sequence` reads it): frame k is
+    /// the scene degraded with its own seed (fresh noise each frame), its window moved k × --pan columns right
+    /// (a panning camera; both views and the ground truth cropped alike, so the truth stays exact; matches that
+    /// leave the window are marked occluded in mask/), ground truth in gt/<stem>.pfm, calib.txt with the window's
+    /// width.
     #[command(verbatim_doc_comment)]
     Degrade(DegradeArgs),
     /// Run the pipeline on every stereo pair under DIR... (MiddEval3, KITTI 2012/2015, ETH3D, as distributed).
@@ -202,6 +216,20 @@ enum Command {
     /// failed.
     #[command(verbatim_doc_comment)]
     Batch(BatchArgs),
+    /// Match every frame of a stereo sequence: `jem sequence DIR -o OUTDIR --independent`.
+    ///
+    /// DIR holds left/ and right/ with the frames (PNG, PPM/PGM or JPEG), paired by file stem in sorted order,
+    /// and optionally calib.txt (Middlebury keys), gt/<stem>.pfm and mask/<stem>.png (for `jem eval OUTDIR`); or it
+    /// is a KITTI raw drive folder (image_02/data, image_03/data). Unequal counts or unpaired names are refused.
+    /// Writes OUTDIR/<stem>.pfm (--ext exr|png for the other formats) per frame, times.txt (a line per frame: stem
+    /// and seconds from the decoded pair to its map), sequence.txt (what made the folder) and config.toml.
+    /// --independent matches each frame alone, byte-identical to `jem LEFT RIGHT -o OUT --ndisp N` on that pair
+    /// (N: --ndisp, else calib.txt's ndisp; without either the range is measured on each frame, as `jem match`
+    /// measures it; --range-once measures it on the first frame and holds it).
+    /// A rerun into OUTDIR skips the frames already written (and says so); a folder another run wrote (other
+    /// sequence, format or configuration) is refused. Each frame's map and times.txt are written all or none.
+    #[command(verbatim_doc_comment)]
+    Sequence(SequenceArgs),
     /// Score results against the ground truth: MiddEval3 `evaldisp` style, KITTI devkit D1, ETH3D.
     ///
     /// Every pair under DIR with ground truth is scored, in the layout `jem batch` wrote it (one data set layout
@@ -223,6 +251,16 @@ enum Command {
     /// {"avgerr", "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid", "totbad2"}}, "weighted": {...}, "mean":
     /// {...}}, plus "excluded": {SCENE: reason} when scenes were left out and "paper": {...} with --paper; NaN is
     /// null. KITTI: the keys are "d1", "avgerr", "rms", "bad0.5", "bad1", "bad2", "bad4", "invalid".
+    ///
+    /// A sequence: `jem eval OUTDIR` scores the per-frame maps `jem sequence` wrote against the sequence's
+    /// gt/<stem>.pfm (and mask/<stem>.png where there are masks; without them every GT pixel), --gt naming the
+    /// sequence when OUTDIR does not record it. Per frame avgErr, bad2 and invalid as above (the range of the
+    /// sequence's calib.txt clips; --scale auto reads the sequence's path, else 1: a sequence made from trainingQ
+    /// needs --scale 4), and from frame to frame, over pixels with ground truth in both frames (selected by both
+    /// masks) and a valid result in both: flicker = mean |d_t − d_t−1| where the truth changed by less than 0.5 px,
+    /// change err = mean |(d_t − d_t−1) − (g_t − g_t−1)| where it changed more (full-resolution px); the last row
+    /// holds the means over the frames. JSON: {"frames": {STEM: {metrics, "flicker", "change_err", ...}}, "mean",
+    /// "flicker", "change_err", "seconds", ...}.
     ///
     /// Environment: JEM_DATA, if set, is the folder holding paper-results.tsv (used for --paper when --paper-file
     /// is not given; otherwise ../shared/middlebury/paper-results.tsv relative to the current folder).
@@ -259,6 +297,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Synth(a)) => &a.threads,
         Some(Command::Degrade(a)) => &a.threads,
         Some(Command::Batch(a)) => &a.threads,
+        Some(Command::Sequence(a)) => &a.threads,
         Some(Command::Eval(a)) => &a.threads,
         Some(Command::Config(_) | Command::Viz(_)) => &ThreadsArg::default(),
     };
@@ -277,6 +316,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Synth(args)) => synth::run(&args, &cli.global),
         Some(Command::Degrade(args)) => degrade::run(&args, &cli.global),
         Some(Command::Batch(args)) => batch::run(&args, &cli.global),
+        Some(Command::Sequence(args)) => sequence::run(&args, &cli.global),
         Some(Command::Eval(args)) => eval::run(&args, &cli.global),
         Some(Command::Viz(args)) => viz::run(&args, &cli.global),
     }

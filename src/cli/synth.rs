@@ -26,6 +26,17 @@ pub(super) struct SynthArgs {
     /// Disparity search range written to calib.txt (16..=W/2); the scene's disparities span about 6-92 % of it.
     #[arg(long, default_value_t = 48, value_name = "N")]
     ndisp: usize,
+    /// Render a stereo sequence of N frames instead, laid out as `jem sequence` reads it (left/, right/,
+    /// gt/<stem>.pfm, mask/<stem>.png, calib.txt, truth.txt), into a folder that holds no scene or sequence yet.
+    #[arg(long, value_name = "N", help_heading = "Sequences")]
+    frames: Option<usize>,
+    /// With --frames, what moves: static, pan (the camera sideways, 0.1 baseline per frame), dolly (the camera
+    /// forward), object (one object, 2 px per frame), cut (another scene from frame N/2).
+    #[arg(long, value_name = "MOTION", default_value = "static", requires = "frames", help_heading = "Sequences")]
+    motion: jem::synth::Motion,
+    /// With --frames, Gaussian sensor noise of σ S grey levels, fresh in each frame and view.
+    #[arg(long, value_name = "S", default_value_t = 0.0, requires = "frames", help_heading = "Sequences")]
+    noise: f64,
     #[command(flatten)]
     pub(super) threads: ThreadsArg,
 }
@@ -33,6 +44,24 @@ pub(super) struct SynthArgs {
 /// Renders and writes one scene.
 pub(super) fn run(args: &SynthArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let params = jem::synth::SynthParams { width: args.width, height: args.height, ndisp: args.ndisp, seed: args.seed };
+    if let Some(frames) = args.frames {
+        let seq = jem::synth::SequenceParams { scene: params, frames, motion: args.motion, noise_sigma: args.noise };
+        let stems = jem::synth::write_synth_sequence(&args.outdir, &seq)?;
+        if !global.quiet {
+            let noise = if args.noise > 0.0 { format!(", noise σ {}", args.noise) } else { String::new() };
+            note!(
+                "wrote a sequence of {} frames ({}) to {}: {}×{}, ndisp {}{noise}, seed {}",
+                stems.len(),
+                args.motion.name(),
+                args.outdir.display(),
+                args.width,
+                args.height,
+                args.ndisp,
+                args.seed
+            );
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
     // Before rendering: a folder that holds a scene is refused.
     jem::synth::check_scene_folder(&args.outdir)?;
     let scene = jem::synth::render_scene(&params)?;

@@ -55,7 +55,7 @@ pub fn render(reports: &[AlgReport], papers: &[Option<PaperColumn>], format: For
     }
 }
 
-fn json_str(s: &str) -> String {
+pub(super) fn json_str(s: &str) -> String {
     let mut out = String::with_capacity(s.len() + 2);
     out.push('"');
     for c in s.chars() {
@@ -75,7 +75,7 @@ fn json_str(s: &str) -> String {
     out
 }
 
-fn json_num(v: f64) -> String {
+pub(super) fn json_num(v: f64) -> String {
     if v.is_finite() { format!("{v}") } else { "null".into() }
 }
 
@@ -140,11 +140,11 @@ fn render_json(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String 
     if objects.len() == 1 { format!("{}\n", objects[0]) } else { format!("[\n{}\n]\n", objects.join(",\n")) }
 }
 
-fn csv_field(s: &str) -> String {
+pub(super) fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
 }
 
-fn csv_num(v: Option<f64>) -> String {
+pub(super) fn csv_num(v: Option<f64>) -> String {
     match v {
         Some(v) if v.is_finite() => format!("{v}"),
         Some(_) => "nan".into(),
@@ -191,7 +191,7 @@ fn render_csv(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String {
 }
 
 /// Two decimals, `nan` for NaN, `-` for nothing.
-fn fixed(v: Option<f64>) -> String {
+pub(super) fn fixed(v: Option<f64>) -> String {
     match v {
         Some(v) if v.is_finite() => format!("{v:.2}"),
         Some(_) => "nan".into(),

@@ -53,12 +53,15 @@
 //!   their resolution and weight, scores them in parallel and collects an [`AlgReport`] with its averages.
 //! - `paper.rs`: the paper's numbers ([`PaperResults`], `paper-results.tsv`), printed beside ours.
 //! - `format.rs`: [`render`] prints reports as a text or Markdown table, JSON or CSV.
+//! - `sequence.rs`: a stereo sequence's results ([`sequence::evaluate_sequence`]): each frame as above, and the
+//!   frame-to-frame figures (the change where the truth did not move, the error of the change where it did).
 
 mod format;
 mod kitti_fill;
 mod metrics;
 mod paper;
 mod report;
+pub mod sequence;
 
 pub use format::{Format, render};
 pub use kitti_fill::interpolate_background;

@@ -320,7 +320,7 @@ fn read_seconds(path: &Path) -> Option<f64> {
 }
 
 /// The error and its sources on one line.
-fn error_chain(e: &Error) -> String {
+pub(super) fn error_chain(e: &Error) -> String {
     let mut msg = e.to_string();
     let mut source = std::error::Error::source(e);
     while let Some(s) = source {

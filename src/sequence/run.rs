@@ -1,0 +1,316 @@
+//! Matching a sequence frame by frame into an output folder ([`run`]).
+//!
+//! Each frame is matched alone, the way `jem match` matches a pair: the range from [`Sequence::ndisp_source`]
+//! ([`RangeRule::PerFrame`]: settled on each frame as `jem match` settles it, so every frame's map is byte for byte
+//! `jem match`'s on that pair with `--ndisp` or the sequence's `calib.txt` beside it), matched by a
+//! [`Matcher`].
+//!
+//! # The output folder
+//! - `<stem>.<ext>`: each frame's disparity map (`pfm`, `exr` or `png` as [`crate::io::DisparityFormat`]);
+//! - [`TIMES_FILE`]: one line per frame written, `<stem> <seconds>`, in frame order (the seconds from the decoded
+//!   pair to its disparity map: the range measurement when there is one, and the run; loading and writing are
+//!   left out);
+//! - [`RUN_FILE`]: what made the folder (the sequence, the mode, the output format, a fingerprint of the
+//!   configuration), and [`CONFIG_FILE`], the effective configuration.
+//!
+//! Each frame's map and the times file are written together, all or none ([`crate::io::write_all_or_none`]), so an
+//! interrupted run leaves only whole frames. A rerun into the same folder with the same sequence, mode, format
+//! and configuration skips the frames already there (a map that decodes at the frame's size, with its time) and
+//! runs the rest; a folder written by another run is refused rather than mixed.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use super::{FOLDERS, KITTI_RAW, Sequence, SequenceLayout};
+use crate::error::{Error, Result};
+use crate::io::DisparityFormat;
+use crate::matcher::Matcher;
+use crate::params::Params;
+use crate::setup::NdispSource;
+
+/// The times file of an output folder.
+pub const TIMES_FILE: &str = "times.txt";
+/// The record of what made an output folder.
+pub const RUN_FILE: &str = "sequence.txt";
+/// The effective configuration of the run that made an output folder.
+pub const CONFIG_FILE: &str = "config.toml";
+
+/// How the search range is settled over a sequence.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RangeRule {
+    /// On each frame, as `jem match` does on that pair.
+    PerFrame,
+    /// Once, on the first frame, then held (a range measured on the first frame is used as given for the
+    /// others; a new near object later in the sequence is not looked for).
+    FirstFrame,
+}
+
+/// What [`run`] does.
+#[derive(Clone, Debug)]
+pub struct RunOptions<'a> {
+    /// The pipeline's parameters.
+    pub params: &'a Params,
+    /// `--ndisp`: the range for every frame.
+    pub ndisp: Option<usize>,
+    /// The output format.
+    pub format: DisparityFormat,
+    /// The memory limit of a frame's run ([`Matcher::with_max_memory`]).
+    pub limit_bytes: u64,
+    /// How the range is settled.
+    pub range: RangeRule,
+}
+
+/// One frame matched.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameRun {
+    /// The frame's stem.
+    pub stem: String,
+    /// Its size.
+    pub size: (usize, usize),
+    /// The range it ran with.
+    pub ndisp: usize,
+    /// Whether that range was measured on it.
+    pub ndisp_measured: bool,
+    /// Seconds from the decoded pair to the disparity map (see the module doc).
+    pub seconds: f64,
+    /// The share of its pixels with a disparity (0–1).
+    pub valid: f64,
+}
+
+/// What [`run`] reports as it goes (in frame order, from the calling thread).
+#[derive(Debug)]
+pub enum Event<'a> {
+    /// Frame `index` is in the folder already and is not run again.
+    Skipped {
+        /// Its position in the sequence.
+        index: usize,
+        /// Its stem.
+        stem: &'a str,
+    },
+    /// Frame `index` starts.
+    Started {
+        /// Its position in the sequence.
+        index: usize,
+        /// Its stem.
+        stem: &'a str,
+    },
+    /// A stage of the current frame starts.
+    Stage {
+        /// The frame's position.
+        index: usize,
+        /// The stage.
+        stage: &'a str,
+    },
+    /// Frame `index` is written.
+    Finished {
+        /// Its position in the sequence.
+        index: usize,
+        /// What the run gave.
+        run: &'a FrameRun,
+    },
+}
+
+/// What [`run`] did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RunSummary {
+    /// The frames run, in order.
+    pub ran: Vec<FrameRun>,
+    /// The stems of the frames skipped (written by an earlier run).
+    pub skipped: Vec<String>,
+    /// The range every frame ran with under [`RangeRule::FirstFrame`], and whether it was measured.
+    pub settled: Option<(usize, bool)>,
+}
+
+/// Matches every frame of `seq` into the folder `out` (created if missing), skipping frames an earlier run of
+/// the same kind left there (see the module doc). Frames run one after another; each uses the threads of the
+/// current rayon pool.
+///
+/// # Errors
+/// [`Error::Input`] when `out` is the sequence folder or one of its input folders, or holds another run's
+/// results; any error of loading, planning (memory) or running a frame, naming its files. Frames written before
+/// the error stay, whole, and a rerun continues from them.
+pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(Event<'_>)) -> Result<RunSummary> {
+    check_output_folder(seq, out)?;
+    let ext = extension(opts.format);
+    let source = seq.ndisp_source(opts.ndisp)?;
+    let record = record_text(seq, opts, source);
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    claim_folder(seq, out, ext, &record)?;
+    let config = opts.params.to_toml();
+    crate::io::write_all_or_none(&[
+        (&out.join(RUN_FILE), record.as_bytes()),
+        (&out.join(CONFIG_FILE), config.as_bytes()),
+    ])?;
+
+    let mut times = read_times(&out.join(TIMES_FILE));
+    let mut summary = RunSummary::default();
+    let mut matcher = Matcher::new(opts.params.clone())?.with_max_memory(opts.limit_bytes).with_ndisp(source);
+    for (index, frame) in seq.frames.iter().enumerate() {
+        let result = out.join(format!("{}.{ext}", frame.stem));
+        if opts.range == RangeRule::FirstFrame && index == 0 {
+            let (l, r) = matcher.read_pair(&frame.left, &frame.right)?;
+            let settled = matcher.search_range(&l, &r)?;
+            summary.settled = Some(settled);
+            matcher = matcher.with_ndisp(NdispSource::Given(settled.0));
+        }
+        if times.iter().any(|(s, _)| *s == frame.stem) && is_complete(&result, &frame.left) {
+            on_event(Event::Skipped { index, stem: &frame.stem });
+            summary.skipped.push(frame.stem.clone());
+            continue;
+        }
+        times.retain(|(s, _)| *s != frame.stem);
+        on_event(Event::Started { index, stem: &frame.stem });
+        let (map, run) = match_frame(&mut matcher, &frame.left, &frame.right, &frame.stem, &|stage| {
+            on_event(Event::Stage { index, stage })
+        })?;
+        on_event(Event::Stage { index, stage: "writing" });
+        times.push((frame.stem.clone(), run.seconds));
+        let order = |stem: &str| seq.frames.iter().position(|f| f.stem == stem);
+        times.sort_by_key(|(s, _)| order(s));
+        let bytes = crate::io::encode_disparity(&result, &map)?;
+        let times_text: String = times.iter().map(|(s, t)| format!("{s} {t:.6}\n")).collect();
+        crate::io::write_all_or_none(&[(&result, &bytes), (&out.join(TIMES_FILE), times_text.as_bytes())])?;
+        on_event(Event::Finished { index, run: &run });
+        summary.ran.push(run);
+    }
+    Ok(summary)
+}
+
+/// Matches one pair as `jem match` does: headers and the memory limit before decoding, then the run.
+fn match_frame(
+    matcher: &mut Matcher,
+    left: &Path,
+    right: &Path,
+    stem: &str,
+    on_stage: &dyn Fn(&str),
+) -> Result<(crate::image::DisparityMap, FrameRun)> {
+    on_stage("loading");
+    let (l, r) = matcher.read_pair(left, right)?;
+    let start = Instant::now();
+    let out = matcher.match_pair_with(&l, &r, &|progress| {
+        if let crate::matcher::Progress::Stage(stage) = progress {
+            on_stage(stage);
+        }
+    })?;
+    let seconds = start.elapsed().as_secs_f64();
+    let map = out.disparity;
+    let valid = map.data.iter().filter(|d| d.is_finite()).count() as f64 / map.data.len().max(1) as f64;
+    let run = FrameRun {
+        stem: stem.to_string(),
+        size: map.dims(),
+        ndisp: out.plan.ndisp,
+        ndisp_measured: out.plan.ndisp_measured,
+        seconds,
+        valid,
+    };
+    Ok((map, run))
+}
+
+/// The file extension of a format.
+pub(crate) fn extension(format: DisparityFormat) -> &'static str {
+    match format {
+        DisparityFormat::Pfm => "pfm",
+        DisparityFormat::Exr => "exr",
+        DisparityFormat::Png16 => "png",
+    }
+}
+
+/// The record of a run ([`RUN_FILE`]): `key=value` lines. A rerun must match it to continue the folder.
+fn record_text(seq: &Sequence, opts: &RunOptions<'_>, source: NdispSource) -> String {
+    let root = std::fs::canonicalize(&seq.root).unwrap_or_else(|_| seq.root.clone());
+    let range = match (opts.range, source) {
+        (_, NdispSource::Given(n)) => format!("given {n}"),
+        (RangeRule::PerFrame, NdispSource::Stated(n)) => format!("calib.txt {n}, per frame"),
+        (RangeRule::FirstFrame, NdispSource::Stated(n)) => format!("calib.txt {n}, first frame"),
+        (RangeRule::PerFrame, NdispSource::Unknown) => "measured per frame".into(),
+        (RangeRule::FirstFrame, NdispSource::Unknown) => "measured on the first frame".into(),
+    };
+    let fingerprint = crate::rng::fnv1a(crate::rng::FNV_OFFSET, opts.params.to_toml().as_bytes());
+    format!(
+        "source={}\nmode=independent\nformat={}\nrange={range}\nconfig={fingerprint:016x}\njem={}\n",
+        root.display(),
+        extension(opts.format),
+        env!("CARGO_PKG_VERSION")
+    )
+}
+
+/// Reads the `source=` line of an output folder's [`RUN_FILE`]: the sequence it holds the results of.
+pub fn recorded_source(out: &Path) -> Option<PathBuf> {
+    let text = std::fs::read_to_string(out.join(RUN_FILE)).ok()?;
+    text.lines().find_map(|l| l.strip_prefix("source=")).map(PathBuf::from)
+}
+
+/// Refuses an output folder that is the sequence folder itself or lies in one of its input folders.
+fn check_output_folder(seq: &Sequence, out: &Path) -> Result<()> {
+    let real = |p: &Path| std::fs::canonicalize(p).ok();
+    let Some(out_real) = real(out).or_else(|| {
+        let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        Some(real(parent)?.join(out.file_name()?))
+    }) else {
+        return Ok(());
+    };
+    let Some(root) = real(&seq.root) else { return Ok(()) };
+    let inputs: &[&str] = match seq.layout {
+        SequenceLayout::Folders => &FOLDERS,
+        SequenceLayout::KittiRaw => &KITTI_RAW,
+    };
+    if out_real == root || inputs.iter().any(|f| out_real.starts_with(root.join(f))) {
+        return Err(Error::Input(format!(
+            "{}: the output folder must not be the sequence folder {} or one of its frame folders",
+            out.display(),
+            seq.root.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Takes `out` for this run: a folder without a record is new (unless it holds frame results, which another
+/// program wrote); one with a record continues only when the record is this run's.
+fn claim_folder(seq: &Sequence, out: &Path, ext: &str, record: &str) -> Result<()> {
+    let path = out.join(RUN_FILE);
+    if !path.exists() {
+        let foreign =
+            out.join(TIMES_FILE).exists() || seq.frames.iter().any(|f| out.join(format!("{}.{ext}", f.stem)).exists());
+        if foreign {
+            return Err(Error::Input(format!(
+                "{}: holds frame results without a {RUN_FILE}; refusing to mix them with this run's (use another \
+                 folder)",
+                out.display()
+            )));
+        }
+        return Ok(());
+    }
+    let old = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+    let keys = ["source", "mode", "format", "range", "config"];
+    let value = |text: &str, key: &str| {
+        text.lines().find_map(|l| l.strip_prefix(key).and_then(|r| r.strip_prefix('='))).map(str::to_owned)
+    };
+    if let Some(key) = keys.iter().find(|k| value(&old, k) != value(record, k)) {
+        let what = match *key {
+            "config" => format!("another configuration (see {CONFIG_FILE})"),
+            _ => format!("{key} {}", value(&old, key).unwrap_or_default()),
+        };
+        return Err(Error::Input(format!(
+            "{}: holds the results of another run, with {what}; use another folder",
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
+/// The `(stem, seconds)` lines of a times file (none when it is missing or unreadable).
+fn read_times(path: &Path) -> Vec<(String, f64)> {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    text.lines()
+        .filter_map(|l| {
+            let (stem, seconds) = l.rsplit_once(' ')?;
+            Some((stem.to_string(), seconds.trim().parse().ok()?))
+        })
+        .collect()
+}
+
+/// Whether `result` is a finished frame: a disparity map that decodes, at the size of the frame's left image.
+fn is_complete(result: &Path, left: &Path) -> bool {
+    let Ok(map) = crate::io::read_disparity(result) else { return false };
+    crate::io::png::read_header(left).is_ok_and(|h| (h.width, h.height) == map.dims())
+}
