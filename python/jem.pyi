@@ -101,3 +101,31 @@ def write_pfm(path: _Path, array: npt.NDArray[np.floating[Any]]) -> None:
 
 def read_image(path: _Path) -> _Image:
     """A PNG, PPM/PGM or JPEG as uint8 or uint16, H×W (grey) or H×W×3 (RGB), as ``jem`` reads it."""
+
+class Matcher:
+    """Matches pairs with one configuration; with ``temporal=True`` the pairs are the frames of one stereo
+    sequence, in order, each matched with what the frames before it showed (a still camera's frames averaged and
+    its answers settled; a moving camera's previous answer, moved by its shift, as the prior; scene cuts detected).
+    Arguments as ``match``. OpenCV users: like ``cv2.StereoSGBM_create(...)`` then ``.compute(L, R)``."""
+
+    def __init__(
+        self,
+        ndisp: Optional[int] = None,
+        config: _Config = None,
+        overrides: Optional[Mapping[str, Any]] = None,
+        threads: Optional[int] = None,
+        max_memory: Optional[int] = None,
+        temporal: bool = False,
+        calib_ndisp: Optional[int] = None,
+    ) -> None: ...
+    def match(
+        self, left: _Image, right: _Image, confidence: bool = False, return_info: bool = False
+    ) -> Union[_Map, Tuple[_Map, _Map], Tuple[_Map, dict[str, Any]], Tuple[_Map, _Map, dict[str, Any]]]:
+        """As ``jem.match``; a temporal matcher remembers the pair as the next frame (the info dict's ``frame``:
+        ``"first"``, ``"still"``, ``"moving"`` or ``"cut"``; ``frames_averaged``; ``shift``)."""
+    def reset(self) -> None:
+        """Forgets the frames matched so far: the next pair starts a new sequence."""
+
+def sequence_frames(dir: _Path) -> list[Tuple[str, str, str]]:
+    """The frames of a sequence folder (``left/`` + ``right/`` paired by name, or a KITTI raw drive), in order:
+    ``(stem, left_path, right_path)``."""

@@ -70,12 +70,13 @@ pub mod sequence;
 mod setup;
 pub mod synth;
 mod table;
+mod temporal;
 pub mod threads;
 pub mod viz;
 
 pub use error::{Error, Result};
 pub use image::{DisparityMap, Plane, RgbImage};
-pub use matcher::{Matcher, Output, Progress, RunPlan, Tiles, default_memory_limit};
+pub use matcher::{FrameKind, Matcher, Output, Progress, RunPlan, Tiles, default_memory_limit};
 pub use params::{LrcMode, Model, Params};
 pub use pipeline::{Measured, Timings, VerticalMeasured};
 pub use process::peak_rss_bytes;

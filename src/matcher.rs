@@ -14,6 +14,7 @@ use crate::pipeline::{self, Measured, PipelineOutput, Timings};
 use crate::setup::memory::MemoryBudget;
 use crate::setup::strategy::Strategy;
 use crate::setup::{self, NdispSource, Plan};
+pub use crate::temporal::FrameKind;
 
 /// Matches rectified stereo pairs with one configuration.
 ///
@@ -32,6 +33,8 @@ pub struct Matcher {
     ndisp: NdispSource,
     max_memory_bytes: u64,
     budget: Option<Arc<MemoryBudget>>,
+    /// The frames of a sequence, remembered (`with_temporal`); `None`: each pair alone.
+    temporal: Option<crate::temporal::State>,
 }
 
 /// How a match was set up: its range, whether it went in tiles, the memory it planned for.
@@ -74,6 +77,9 @@ pub struct Output {
     /// Seconds in the pipeline: the run itself, without loading, the range measurement or writing (what
     /// MiddEval3's `time*.txt` holds).
     pub seconds: f64,
+    /// How the frame was matched, for a matcher that remembers frames ([`Matcher::with_temporal`]); `None` for a
+    /// pair matched alone.
+    pub frame: Option<FrameKind>,
 }
 
 /// What a match reports while it runs (see [`Matcher::match_pair_with`]).
@@ -93,7 +99,13 @@ impl Matcher {
     /// [`crate::error::Error::InvalidParam`] if `params` do not validate.
     pub fn new(params: Params) -> Result<Matcher> {
         params.validate()?;
-        Ok(Matcher { params, ndisp: NdispSource::Unknown, max_memory_bytes: default_memory_limit(), budget: None })
+        Ok(Matcher {
+            params,
+            ndisp: NdispSource::Unknown,
+            max_memory_bytes: default_memory_limit(),
+            budget: None,
+            temporal: None,
+        })
     }
 
     /// Where the search range comes from ([`NdispSource`]; default: measured on each pair).
@@ -115,6 +127,23 @@ impl Matcher {
         self.max_memory_bytes = budget.total();
         self.budget = Some(budget);
         self
+    }
+
+    /// Remembers the pairs it matches as the frames of one stereo sequence, in order (see the temporal model in
+    /// the crate's docs, and docs/video.md): a still camera's frames are matched on the running means of the views
+    /// and their answers settle; a moving camera's frame takes the previous answer, moved by the camera's shift, as
+    /// its prior instead of the coarse chain; a scene cut is detected and forgets the past. The search range of
+    /// the first frame is held for the sequence. `false` matches each pair alone (the default).
+    pub fn with_temporal(mut self, on: bool) -> Matcher {
+        self.temporal = on.then(Default::default);
+        self
+    }
+
+    /// Forgets the frames matched so far (a new sequence starts with the next pair).
+    pub fn reset(&mut self) {
+        if let Some(state) = &mut self.temporal {
+            state.reset();
+        }
     }
 
     /// The parameters.
@@ -152,8 +181,16 @@ impl Matcher {
         right: &RgbImage,
         on_progress: &dyn Fn(Progress<'_>),
     ) -> Result<Output> {
-        let plan = setup::plan_match(left, right, self.ndisp, &self.params, self.max_memory_bytes)?;
+        let plan = setup::plan_match(left, right, self.source(), &self.params, self.max_memory_bytes)?;
         self.run(&plan, on_progress)
+    }
+
+    /// The range source of the next pair: a remembered sequence holds its first frame's range.
+    fn source(&self) -> NdispSource {
+        match (self.temporal.as_ref().and_then(|t| t.held_range()), self.ndisp) {
+            (Some(held), NdispSource::Stated(_) | NdispSource::Unknown) => NdispSource::Given(held),
+            _ => self.ndisp,
+        }
     }
 
     /// Checks, before anything is allocated, that a pair of views of these sizes (width, height) can be matched:
@@ -217,7 +254,7 @@ impl Matcher {
         let mut held = budget.as_deref().map(|b| wait_for(b, need, on_progress));
         on_progress(Progress::Stage("loading"));
         let (l, r) = crate::io::png::load_rgb_pair_within(left, right, self.max_memory_bytes)?;
-        let plan = setup::plan_match(&l, &r, self.ndisp, &self.params, self.max_memory_bytes)?;
+        let plan = setup::plan_match(&l, &r, self.source(), &self.params, self.max_memory_bytes)?;
         if let Some(budget) = budget.as_deref() {
             let (w, h) = l.dims();
             let run = plan.strategy.memory_bytes(w, h, plan.pair.ndisp, &self.params).max(header.load_bytes);
@@ -246,13 +283,29 @@ impl Matcher {
         on_progress(Progress::Planned(&run_plan));
         let on_stage = |stage: &str| on_progress(Progress::Stage(stage));
         let start = Instant::now();
-        let out = match plan.strategy {
-            Strategy::Whole => pipeline::run_observed(&self.params, &plan.pair, &on_stage)?,
-            Strategy::Tiled(tiles) => pipeline::tile::run_tiled(&self.params, &plan.pair, &tiles, &on_stage)?,
+        // A remembered sequence runs its frames through the temporal model where the pipeline runs whole and at
+        // full resolution; any other frame runs alone and starts the sequence again.
+        let temporal = self.temporal.as_mut();
+        let (out, frame) = match (plan.strategy, temporal) {
+            (Strategy::Whole, Some(state)) if self.params.downscale == 1 => {
+                let (out, kind) = crate::temporal::match_frame(state, &self.params, &plan.pair, &on_stage)?;
+                (out, Some(kind))
+            }
+            (strategy, temporal) => {
+                let alone = temporal.is_some().then_some(FrameKind::First);
+                if let Some(state) = temporal {
+                    state.reset();
+                }
+                let out = match strategy {
+                    Strategy::Whole => pipeline::run_observed(&self.params, &plan.pair, &on_stage)?,
+                    Strategy::Tiled(tiles) => pipeline::tile::run_tiled(&self.params, &plan.pair, &tiles, &on_stage)?,
+                };
+                (out, alone)
+            }
         };
         let seconds = start.elapsed().as_secs_f64();
-        let PipelineOutput { disparity, confidence, consistent, timings, measured } = out;
-        Ok(Output { disparity, confidence, consistent, timings, measured, plan: run_plan, seconds })
+        let PipelineOutput { disparity, confidence, consistent, timings, measured, .. } = out;
+        Ok(Output { disparity, confidence, consistent, timings, measured, plan: run_plan, seconds, frame })
     }
 }
 

@@ -10,12 +10,15 @@
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
 
-use jem::{Error, Matcher, NdispSource, Params, Plane, RgbImage};
+mod matcher;
+
+use jem::{Error, Params, Plane, RgbImage};
+use matcher::PyMatcher;
 use numpy::ndarray::Array2;
 use numpy::{PyArray2, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyInt, PyList, PyMapping, PyString};
+use pyo3::types::{PyInt, PyList, PyMapping, PyString};
 
 /// A `jem::Error` as the Python exception a caller expects: `MemoryError` for a run that fits the memory limit
 /// neither whole nor in tiles, the matching `OSError` subclass (`FileNotFoundError`, ...) for a file the
@@ -323,52 +326,8 @@ fn match_pair<'py>(
     return_info: bool,
     calib_ndisp: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let (left, right) = (ImageArray::inspect(left, "left")?, ImageArray::inspect(right, "right")?);
-    let params = load_params(config, overrides)?;
-    let given = positive("ndisp", ndisp)?.map(|n| n as usize);
-    let source = NdispSource::resolve(given, positive("calib_ndisp", calib_ndisp)?.map(|n| n as usize));
-    // The command line's bound (jem::threads), checked before any thread starts.
-    let threads = positive("threads", threads)?.map(|n| jem::threads::check_threads("threads", n)).transpose();
-    let threads = threads.map_err(|e| to_py(&e))?;
-    let limit = positive("max_memory", max_memory)?.unwrap_or_else(jem::default_memory_limit);
-    let mut matcher = Matcher::new(params.clone()).map_err(|e| to_py(&e))?.with_ndisp(source).with_max_memory(limit);
-    // From the shapes, before anything is copied: a pair too large for the limit costs no memory.
-    let input_bytes = left.load_bytes().saturating_add(right.load_bytes());
-    let sizes = ((left.width, left.height), (right.width, right.height));
-    matcher.check_size(sizes.0, sizes.1, input_bytes).map_err(|e| to_py(&e))?;
-    let (l, r) = (left.to_rgb()?, right.to_rgb()?);
-    let out = py.detach(|| guarded(threads, || matcher.match_pair(&l, &r)))?;
-    // Values too large for this image (held to a bound, as `jem` warns on stderr): a UserWarning each.
-    let (w, h) = out.disparity.dims();
-    for warning in params.image_warnings(w, h) {
-        let message = std::ffi::CString::new(warning).unwrap_or_default();
-        PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &message, 1)?;
-    }
-    let mut result = vec![to_numpy(py, out.disparity).into_any()];
-    if confidence {
-        result.push(to_numpy(py, out.confidence).into_any());
-    }
-    if return_info {
-        let info = PyDict::new(py);
-        info.set_item("ndisp", out.plan.ndisp)?;
-        info.set_item("ndisp_measured", out.plan.ndisp_measured)?;
-        info.set_item("tiled", out.plan.tiles.is_some())?;
-        info.set_item("noise", out.measured.map(|m| (m.stats.noise[0], m.stats.noise[1])))?;
-        let timings = PyDict::new(py);
-        for (name, d) in &out.timings.stages {
-            let sum = timings.get_item(name)?.map_or(Ok(0.0), |v| v.extract::<f64>())?;
-            timings.set_item(name, sum + d.as_secs_f64())?;
-        }
-        info.set_item("timings", timings)?;
-        info.set_item("seconds", out.seconds)?;
-        info.set_item("memory_planned", out.plan.memory_bytes)?;
-        info.set_item("peak_rss", jem::peak_rss_bytes())?;
-        result.push(info.into_any());
-    }
-    if result.len() == 1 {
-        return Ok(result.remove(0));
-    }
-    Ok(pyo3::types::PyTuple::new(py, result)?.into_any())
+    let mut matcher = PyMatcher::build(ndisp, calib_ndisp, config, overrides, threads, max_memory, false)?;
+    matcher.run(py, left, right, confidence, return_info)
 }
 
 /// Metric depth Z = f·baseline / (disp + doffs), float32 H×W, in the baseline's unit; ``inf`` where the
@@ -469,8 +428,10 @@ fn to_array<'py, T: numpy::Element>(py: Python<'py>, shape: &[usize], data: Vec<
 
 /// Stereo matching by joint energy minimization (Xue & Cai), on numpy arrays.
 ///
-/// ``match`` computes a disparity map (the same bytes as the ``jem`` command line), ``depth`` turns it into metric
-/// depth, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads a PNG/PNM/JPEG.
+/// ``match`` computes a disparity map (the same bytes as the ``jem`` command line), ``Matcher`` matches many pairs
+/// with one configuration and can remember a sequence's frames, ``sequence_frames`` lists a sequence folder's
+/// frames, ``depth`` turns a map into metric depth, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM
+/// files, ``read_image`` loads a PNG/PNM/JPEG.
 #[pymodule]
 #[pyo3(name = "jem")]
 fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -480,7 +441,10 @@ fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_pfm, m)?)?;
     m.add_function(wrap_pyfunction!(write_pfm, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
+    m.add_function(wrap_pyfunction!(matcher::sequence_frames, m)?)?;
+    m.add_class::<PyMatcher>()?;
     // maturin's package __init__ re-exports `*` of the native module: `__all__` makes that include __version__.
-    m.add("__all__", ["__version__", "match", "depth", "read_pfm", "write_pfm", "read_image"])?;
+    let all = ["__version__", "match", "Matcher", "sequence_frames", "depth", "read_pfm", "write_pfm", "read_image"];
+    m.add("__all__", all)?;
     Ok(())
 }

@@ -21,7 +21,9 @@ pub(super) struct SequenceArgs {
     /// Output folder (created if missing): OUTDIR/<frame stem>.EXT per frame, times.txt, sequence.txt, config.toml.
     #[arg(long, short, value_name = "OUTDIR")]
     output: PathBuf,
-    /// Match each frame alone, as `jem LEFT RIGHT -o OUT` matches that pair (byte-identical maps).
+    /// Match each frame alone, as `jem LEFT RIGHT -o OUT` matches that pair (byte-identical maps), instead of with
+    /// the temporal model (a still camera's frames averaged, a moving camera's previous answer as the prior, scene
+    /// cuts detected).
     #[arg(long)]
     independent: bool,
     /// Format of the per-frame maps: pfm (Middlebury), exr (float) or png (16-bit, disparity × 256, 0 = invalid).
@@ -44,11 +46,6 @@ pub(super) struct SequenceArgs {
 
 /// Matches the sequence and prints the closing line.
 pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> {
-    if !args.independent {
-        return Err(Error::Input(
-            "jem sequence: only --independent (each frame matched alone) is available so far".into(),
-        ));
-    }
     if args.ndisp == Some(0) {
         return Err(Error::param("--ndisp", 0, "at least 1"));
     }
@@ -62,7 +59,8 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
         ndisp: args.ndisp,
         format,
         limit_bytes: args.memory.memory_limit(),
-        range: if args.range_once { RangeRule::FirstFrame } else { RangeRule::PerFrame },
+        range: if args.range_once || !args.independent { RangeRule::FirstFrame } else { RangeRule::PerFrame },
+        temporal: !args.independent,
     };
     let quiet = global.quiet;
     // Said once the output folder is taken, with the first frame, so that a refusal is the only line.
@@ -87,7 +85,17 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
         }
         s.clear();
     };
+    let replayed = std::cell::Cell::new(0usize);
     let on_event = |event: Event<'_>| match event {
+        Event::Replayed { index, .. } => {
+            header();
+            if !quiet && replayed.replace(replayed.get() + 1) == 0 {
+                note!(
+                    "rebuilding the temporal model's state: the frames written already are matched again (not rewritten)"
+                );
+            }
+            let _ = index;
+        }
         Event::Skipped { stem, .. } => {
             header();
             skipped.borrow_mut().push(stem.to_string());
@@ -99,7 +107,8 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
         Event::Stage { .. } => {}
         Event::Finished { index, run } if !quiet => {
             let measured = if run.ndisp_measured { " measured" } else { "" };
-            note!("[{}/{total}] {}: ndisp {}{measured}, {:.2} s", index + 1, run.stem, run.ndisp, run.seconds);
+            let kind = run.kind.map_or(String::new(), |k| format!(", {}", describe_kind(k)));
+            note!("[{}/{total}] {}: ndisp {}{measured}{kind}, {:.2} s", index + 1, run.stem, run.ndisp, run.seconds);
         }
         Event::Finished { .. } => {}
     };
@@ -109,6 +118,16 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
         note!("{}", closing_line(&seq, args, &summary));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// How the temporal model matched a frame, in words.
+fn describe_kind(kind: jem::FrameKind) -> String {
+    match kind {
+        jem::FrameKind::First => "first frame".into(),
+        jem::FrameKind::Cut => "scene cut: matched as a first frame".into(),
+        jem::FrameKind::Still { frames } => format!("still camera, the mean of up to {frames} frames"),
+        jem::FrameKind::Moving { dx, dy } => format!("camera moved ({dx:+}, {dy:+}) px, the previous answer as prior"),
+    }
 }
 
 /// `wrote 10 frames to OUT (7 run, 3 already there; 320×240, ndisp 48 from calib.txt, 2.13 s per frame run)`.

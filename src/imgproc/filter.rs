@@ -162,9 +162,60 @@ fn running_extreme(src: &[f32], r: usize, empty: f32, pick: impl Fn(f32, f32) ->
     }
 }
 
+/// The plane reduced `factor` times by the mean of each `factor` × `factor` block (the last row and column of
+/// blocks may be partial), summed in a fixed order.
+///
+/// # Panics
+/// If `factor` is 0.
+pub(crate) fn box_reduce(p: &Plane<f32>, factor: usize) -> Plane<f32> {
+    let (w, h) = p.dims();
+    let (rw, rh) = (w.div_ceil(factor), h.div_ceil(factor));
+    let mut out = Plane::new(rw, rh, 0.0f32);
+    out.data.par_chunks_mut(rw.max(1)).enumerate().for_each(|(by, row)| {
+        let (y0, y1) = (by * factor, ((by + 1) * factor).min(h));
+        for (bx, o) in row.iter_mut().enumerate() {
+            let (x0, x1) = (bx * factor, ((bx + 1) * factor).min(w));
+            let sum: f32 = (y0..y1).map(|y| p.row(y)[x0..x1].iter().sum::<f32>()).sum();
+            *o = sum / ((y1 - y0) * (x1 - x0)) as f32;
+        }
+    });
+    out
+}
+
+/// The mean of each pixel's (2r + 1)² window (borders replicated), summed in a fixed order.
+pub(crate) fn box_mean(p: &Plane<f32>, r: usize) -> Plane<f32> {
+    let (w, h) = p.dims();
+    let mut out = Plane::new(w, h, 0.0f32);
+    let norm = 1.0 / ((2 * r + 1) * (2 * r + 1)) as f32;
+    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        for (x, o) in row.iter_mut().enumerate() {
+            let mut sum = 0.0f32;
+            for k in 0..=2 * r {
+                let src = p.row((y + k).saturating_sub(r).min(h - 1));
+                for j in 0..=2 * r {
+                    sum += src[(x + j).saturating_sub(r).min(w - 1)];
+                }
+            }
+            *o = sum * norm;
+        }
+    });
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn box_means_and_reductions_by_hand() {
+        let p = Plane::from_parts(3, 2, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(box_reduce(&p, 2).data, vec![3.0, 4.5]);
+        assert_eq!(box_reduce(&p, 1).data, p.data);
+        let m = box_mean(&p, 1);
+        // Pixel (0, 0): rows 0, 0, 1 and columns 0, 0, 1 (replicated).
+        assert_eq!(m.data[0], (1.0 + 1.0 + 2.0) * 2.0 / 9.0 + (4.0 + 4.0 + 5.0) / 9.0);
+        assert_eq!(box_mean(&p, 0).data, p.data);
+    }
 
     #[test]
     fn running_extreme_matches_the_direct_window() {

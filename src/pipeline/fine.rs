@@ -62,7 +62,14 @@ pub(crate) fn fine_pass(
     let (left, right) = pass.infer_views(volume, &guide_left, buffers, on_stage, &mut t);
     on_stage("post-processing");
     let (disparity, trusted) = pass.post_process(left.disparity, right.as_ref(), &guide_left, &mut t);
-    Ok(PipelineOutput { disparity, confidence: left.confidence, consistent: trusted, timings: t, measured: None })
+    Ok(PipelineOutput {
+        disparity,
+        confidence: left.confidence,
+        consistent: trusted,
+        timings: t,
+        measured: None,
+        vertical_offset: None,
+    })
 }
 
 /// One fine pass: its parameters, its input, and the prior when it comes with label bands (tiles).

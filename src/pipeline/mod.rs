@@ -20,7 +20,7 @@ pub(crate) mod tile;
 mod window;
 
 use crate::error::{Error, Result};
-use crate::image::StereoPair;
+use crate::image::{Plane, StereoPair};
 use crate::params::Params;
 use crate::{lattice, scale};
 
@@ -81,7 +81,7 @@ fn run_level(
     });
     drop(small);
     let consistent = scale::upsample_mask(&low.consistent, factor, w, h);
-    Ok(PipelineOutput { disparity, confidence, consistent, timings: t, measured: low.measured })
+    Ok(PipelineOutput { disparity, confidence, consistent, timings: t, measured: low.measured, vertical_offset: None })
 }
 
 /// The pipeline at the pair's own resolution, appending its stage times to `t`: prepare, coarse prior, fine pass.
@@ -110,6 +110,77 @@ fn run_pipeline(
     };
     let mut out = fine_pass(params, &fine, &mut Default::default(), on_stage, t)?;
     out.measured = measured;
+    out.vertical_offset = input.vertical_offset();
+    Ok(out)
+}
+
+/// What a frame of a sequence takes from the frame before it in place of the coarse chain ([`run_with_prior`]).
+pub(crate) struct FramePrior {
+    /// The previous frame's answer, moved by the camera's motion (`inf` where it says nothing).
+    pub answer: PipelineOutput,
+    /// Pixels where the frames disagree (something moved): no prior there.
+    pub released: Option<Plane<bool>>,
+    /// The vertical offset removed from the previous frame's right view, reused instead of measured again.
+    pub vertical_offset: Option<crate::condition::vertical::VerticalOffset>,
+    /// λ of the prior relative to the coarse prior's rule.
+    pub weight_scale: f32,
+    /// Mean-field iterations of the frame (`None`: the configured ones).
+    pub iterations: Option<usize>,
+}
+
+/// The pipeline at the pair's own resolution with the previous frame's answer as the prior ([`FramePrior`]): the
+/// coarse chain, and the vertical-offset measurement when the previous offset is given, are not run. The prior's
+/// weight follows the coarse prior's rule (λ by the measured noise, its floor where the cost is flat, its factor by
+/// the previous confidence and left-right check), scaled, and is released where the frames disagree.
+///
+/// # Errors
+/// As [`run`].
+pub(crate) fn run_with_prior(
+    params: &Params,
+    pair: &StereoPair,
+    from: FramePrior,
+    on_stage: &dyn Fn(&str),
+) -> Result<PipelineOutput> {
+    params.validate()?;
+    check_features_fit(params, pair)?;
+    let mut t = Timings::default();
+    let mut input = Prepared::of(params, pair, None, &mut t);
+    let c = &params.condition;
+    match from.vertical_offset {
+        Some(v) => input.apply_vertical_offset(c, v, &mut t),
+        None => {
+            let grey_left = input.pairs(pair).1.left.to_grey();
+            input.align_vertically(c, &grey_left, &from.answer, &mut t);
+        }
+    }
+    let weight = input.prior_weight * from.weight_scale;
+    let mut prior = prior::Prior::from_coarse(from.answer, weight, input.prior_flat, c.prior.untrusted);
+    if let Some(released) = &from.released {
+        prior.confidence.data.iter_mut().zip(&released.data).filter(|(_, r)| **r).for_each(|(f, _)| *f = 0.0);
+    }
+    let measured = input.measured();
+    let (guide, cost_pair) = input.pairs(pair);
+    let fine = FineInput {
+        guide,
+        cost_pair,
+        cost_params: &input.cost_params,
+        grad_norm_mean: input.grad_norm_mean,
+        prior: Some(&prior),
+        left_from: 0,
+    };
+    let fine_params;
+    let params = match from.iterations {
+        Some(n) => {
+            let mut p = params.clone();
+            p.meanfield.iterations = n;
+            fine_params = p;
+            &fine_params
+        }
+        None => params,
+    };
+    let mut out = fine_pass(params, &fine, &mut Default::default(), on_stage, t)?;
+    out.measured = measured;
+    out.vertical_offset = input.vertical_offset();
     Ok(out)
 }
 

@@ -53,6 +53,8 @@ pub struct PipelineOutput {
     /// What the adaptive front end measured on the (full-resolution) pair and set from it; `None` when
     /// `[condition]` is off.
     pub measured: Option<Measured>,
+    /// The right view's vertical offset that was removed, if one was (a sequence's next frame reuses it).
+    pub(crate) vertical_offset: Option<crate::condition::vertical::VerticalOffset>,
 }
 
 /// What the adaptive front end (`crate::condition`) measured on a pair and the values it derived (`jem -v`

@@ -3,7 +3,8 @@
 
 use std::borrow::Cow;
 
-use crate::condition::{self, vertical};
+use crate::condition;
+use crate::condition::vertical::{self, VerticalOffset};
 use crate::cost;
 use crate::image::{Plane, StereoPair};
 use crate::params::{self, Params};
@@ -26,6 +27,8 @@ pub(crate) struct Prepared<'a> {
     pub prior_flat: f32,
     /// The right view's residual vertical offset, once [`Prepared::align_vertically`] has measured it.
     vertical: Option<VerticalMeasured>,
+    /// The vertical offset removed from the right views ([`Prepared::apply_vertical_offset`]).
+    offset: Option<VerticalOffset>,
 }
 
 impl<'a> Prepared<'a> {
@@ -57,7 +60,7 @@ impl<'a> Prepared<'a> {
                 grad_norm_mean = Some(cost::mean_local_contrast(&grey, cost_params.grad_norm_radius));
             }
         }
-        Prepared { conditioned, cost_params, grad_norm_mean, prior_weight, prior_flat, vertical: None }
+        Prepared { conditioned, cost_params, grad_norm_mean, prior_weight, prior_flat, vertical: None, offset: None }
     }
 
     /// Measures the right view's residual vertical offset against a coarse answer at this size
@@ -76,7 +79,16 @@ impl<'a> Prepared<'a> {
         let offset = t.time("vertical", || {
             vertical::estimate(grey_left, &cond.cost_pair().right.to_grey(), &coarse.disparity, &coarse.consistent)
         });
-        let Some(v) = offset else { return };
+        if let Some(v) = offset {
+            self.apply_vertical_offset(c, v, t);
+        }
+    }
+
+    /// Moves the right views of the guidance and the cost pair onto the left view's rows by the vertical offset
+    /// `v` (measured on this pair, or on the previous frame of a sequence), where it reaches
+    /// `condition.vertical.min_px` (stage `vertical`). Nothing when conditioning or `vertical.enabled` is off.
+    pub(crate) fn apply_vertical_offset(&mut self, c: &params::ConditionParams, v: VerticalOffset, t: &mut Timings) {
+        let Some(cond) = self.conditioned.as_mut().filter(|_| c.vertical.enabled) else { return };
         let corrected = v.max_abs() >= c.vertical.min_px;
         self.vertical = Some(VerticalMeasured { range: v.range(), corrected });
         if corrected {
@@ -93,7 +105,13 @@ impl<'a> Prepared<'a> {
                     }
                 }
             });
+            self.offset = Some(v);
         }
+    }
+
+    /// The vertical offset removed from the right views, if one was.
+    pub(crate) fn vertical_offset(&self) -> Option<VerticalOffset> {
+        self.offset
     }
 
     /// What was measured and derived, for [`PipelineOutput::measured`] (`None` when conditioning is off).

@@ -90,6 +90,7 @@ pub fn run_tiled(
         consistent: Plane::new(w, h, false),
         timings: Timings::default(),
         measured: input.measured(),
+        vertical_offset: None,
     };
     let margin = f + 2;
     let step = plan.core_px.max(MIN_CORE_PX);

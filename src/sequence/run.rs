@@ -58,6 +58,9 @@ pub struct RunOptions<'a> {
     pub limit_bytes: u64,
     /// How the range is settled.
     pub range: RangeRule,
+    /// Match the frames with the temporal model ([`Matcher::with_temporal`]): the range is then settled on the
+    /// first frame whatever `range` says. `false`: each frame alone, as `jem match` matches it.
+    pub temporal: bool,
 }
 
 /// One frame matched.
@@ -75,6 +78,8 @@ pub struct FrameRun {
     pub seconds: f64,
     /// The share of its pixels with a disparity (0–1).
     pub valid: f64,
+    /// How the temporal model matched it (`None` without the model).
+    pub kind: Option<crate::temporal::FrameKind>,
 }
 
 /// What [`run`] reports as it goes (in frame order, from the calling thread).
@@ -82,6 +87,14 @@ pub struct FrameRun {
 pub enum Event<'a> {
     /// Frame `index` is in the folder already and is not run again.
     Skipped {
+        /// Its position in the sequence.
+        index: usize,
+        /// Its stem.
+        stem: &'a str,
+    },
+    /// Frame `index` is in the folder already and is matched again without writing, to rebuild the temporal
+    /// model's state for the frames after it.
+    Replayed {
         /// Its position in the sequence.
         index: usize,
         /// Its stem.
@@ -117,6 +130,8 @@ pub struct RunSummary {
     pub ran: Vec<FrameRun>,
     /// The stems of the frames skipped (written by an earlier run).
     pub skipped: Vec<String>,
+    /// The stems of the frames matched again, not written, to rebuild the temporal model's state.
+    pub replayed: Vec<String>,
     /// The range every frame ran with under [`RangeRule::FirstFrame`], and whether it was measured.
     pub settled: Option<(usize, bool)>,
 }
@@ -144,7 +159,10 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
 
     let mut times = read_times(&out.join(TIMES_FILE));
     let mut summary = RunSummary::default();
-    let mut matcher = Matcher::new(opts.params.clone())?.with_max_memory(opts.limit_bytes).with_ndisp(source);
+    let mut matcher = Matcher::new(opts.params.clone())?
+        .with_max_memory(opts.limit_bytes)
+        .with_ndisp(source)
+        .with_temporal(opts.temporal);
     for (index, frame) in seq.frames.iter().enumerate() {
         let result = out.join(format!("{}.{ext}", frame.stem));
         if opts.range == RangeRule::FirstFrame && index == 0 {
@@ -153,9 +171,22 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
             summary.settled = Some(settled);
             matcher = matcher.with_ndisp(NdispSource::Given(settled.0));
         }
-        if times.iter().any(|(s, _)| *s == frame.stem) && is_complete(&result, &frame.left) {
-            on_event(Event::Skipped { index, stem: &frame.stem });
-            summary.skipped.push(frame.stem.clone());
+        let done = |i: usize| {
+            let f = &seq.frames[i];
+            times.iter().any(|(s, _)| *s == f.stem) && is_complete(&out.join(format!("{}.{ext}", f.stem)), &f.left)
+        };
+        if done(index) {
+            // The temporal model's state after a frame is not in the folder: a written frame before one still to
+            // run is matched again to rebuild it (not written again); once every frame is written, none is.
+            let later_missing = opts.temporal && (index + 1..seq.frames.len()).any(|i| !done(i));
+            if later_missing {
+                on_event(Event::Replayed { index, stem: &frame.stem });
+                match_frame(&mut matcher, &frame.left, &frame.right, &frame.stem, &|_| {})?;
+                summary.replayed.push(frame.stem.clone());
+            } else {
+                on_event(Event::Skipped { index, stem: &frame.stem });
+                summary.skipped.push(frame.stem.clone());
+            }
             continue;
         }
         times.retain(|(s, _)| *s != frame.stem);
@@ -202,6 +233,7 @@ fn match_frame(
         ndisp_measured: out.plan.ndisp_measured,
         seconds,
         valid,
+        kind: out.frame,
     };
     Ok((map, run))
 }
@@ -227,8 +259,9 @@ fn record_text(seq: &Sequence, opts: &RunOptions<'_>, source: NdispSource) -> St
     };
     let fingerprint = crate::rng::fnv1a(crate::rng::FNV_OFFSET, opts.params.to_toml().as_bytes());
     format!(
-        "source={}\nmode=independent\nformat={}\nrange={range}\nconfig={fingerprint:016x}\njem={}\n",
+        "source={}\nmode={}\nformat={}\nrange={range}\nconfig={fingerprint:016x}\njem={}\n",
         root.display(),
+        if opts.temporal { "temporal" } else { "independent" },
         extension(opts.format),
         env!("CARGO_PKG_VERSION")
     )

@@ -307,6 +307,7 @@ fn options(params: &crate::Params) -> RunOptions<'_> {
         format: crate::io::DisparityFormat::Pfm,
         limit_bytes: u64::MAX,
         range: RangeRule::PerFrame,
+        temporal: false,
     }
 }
 
@@ -355,6 +356,28 @@ fn a_rerun_skips_the_frames_written_and_runs_the_rest() {
     assert_eq!(std::fs::read(out.join("000001.pfm")).unwrap(), before, "the same map again");
     let times = std::fs::read_to_string(out.join(TIMES_FILE)).unwrap();
     assert_eq!(times.lines().map(|l| &l[..6]).collect::<Vec<_>>(), ["000000", "000001", "000002"]);
+}
+
+#[test]
+fn a_temporal_rerun_replays_the_frames_before_the_missing_one_and_writes_the_same_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let (seq, params) = small_sequence(dir.path());
+    let out = dir.path().join("out");
+    let opts = RunOptions { temporal: true, range: RangeRule::FirstFrame, ..options(&params) };
+    let first = run(&seq, &out, &opts, &|_| {}).unwrap();
+    assert!(first.ran.iter().all(|r| r.kind.is_some()), "every frame says how it was matched");
+    let last = std::fs::read(out.join("000002.pfm")).unwrap();
+    let kept = std::fs::read(out.join("000000.pfm")).unwrap();
+    std::fs::remove_file(out.join("000002.pfm")).unwrap();
+    let again = run(&seq, &out, &opts, &|_| {}).unwrap();
+    assert_eq!(again.replayed, ["000000", "000001"], "the state is rebuilt from the frames before");
+    assert!(again.skipped.is_empty());
+    assert_eq!(again.ran.iter().map(|r| r.stem.as_str()).collect::<Vec<_>>(), ["000002"]);
+    assert_eq!(std::fs::read(out.join("000002.pfm")).unwrap(), last, "the same map as the run without a stop");
+    assert_eq!(std::fs::read(out.join("000000.pfm")).unwrap(), kept, "a replayed frame is not written again");
+    // Everything written: nothing to rebuild, every frame skipped.
+    let done = run(&seq, &out, &opts, &|_| {}).unwrap();
+    assert_eq!((done.skipped.len(), done.replayed.len(), done.ran.len()), (3, 0, 0));
 }
 
 #[test]

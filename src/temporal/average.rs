@@ -1,0 +1,183 @@
+//! Running means over the frames of a still camera: of the views, so that the matcher sees the scene with the
+//! noise of one frame divided by √n, and of the answers, so that what the matcher says about a static pixel
+//! settles instead of flickering. Each pixel keeps its own count and starts again where the scene changed.
+
+use crate::image::{DisparityMap, Plane, RgbImage};
+use crate::imgproc::filter::box_mean;
+
+/// The most frames a running mean holds: beyond √16 = 4 times less noise, the mean follows slow changes (light,
+/// exposure) too slowly for the little it still gains.
+pub(crate) const MAX_FRAMES: u16 = 16;
+
+/// A change larger than this many standard deviations of the noise is the scene's, not the noise's.
+const CHANGE_SIGMAS: f32 = 4.0;
+
+/// The grey's noise σ for per-channel noise σ (√(0.299² + 0.587² + 0.114²)).
+const GREY_PER_CHANNEL: f32 = 0.668;
+
+/// The least per-channel noise σ the change test assumes (quantisation and the clean camera's own noise).
+const MIN_SIGMA: f32 = 0.5;
+
+/// The running mean of both views, each pixel with its count of frames.
+#[derive(Clone, Debug)]
+pub(crate) struct ViewMeans {
+    pub(crate) left: RgbImage,
+    pub(crate) right: RgbImage,
+    counts: [Plane<u16>; 2],
+}
+
+impl ViewMeans {
+    /// The means of one frame.
+    pub(crate) fn start(left: &RgbImage, right: &RgbImage) -> ViewMeans {
+        let (w, h) = left.dims();
+        ViewMeans { left: left.clone(), right: right.clone(), counts: [Plane::new(w, h, 1), Plane::new(w, h, 1)] }
+    }
+
+    /// Folds a new frame into the means and returns where the left view started again. A pixel starts again
+    /// where the 3 × 3 mean of its grey difference from the mean exceeds [`CHANGE_SIGMAS`] standard deviations of
+    /// that mean under noise of per-channel σ `noise_sigma` (something moved or changed there); elsewhere the
+    /// mean takes the frame with weight 1/n, n its count (at most [`MAX_FRAMES`]).
+    pub(crate) fn fold(&mut self, left: &RgbImage, right: &RgbImage, noise_sigma: f32) -> Plane<bool> {
+        let restarted = fold_view(&mut self.left, &mut self.counts[0], left, noise_sigma);
+        fold_view(&mut self.right, &mut self.counts[1], right, noise_sigma);
+        restarted
+    }
+
+    /// The frames the left view's mean holds at each pixel.
+    pub(crate) fn left_counts(&self) -> &Plane<u16> {
+        &self.counts[0]
+    }
+}
+
+/// [`ViewMeans::fold`] for one view.
+fn fold_view(mean: &mut RgbImage, count: &mut Plane<u16>, frame: &RgbImage, noise_sigma: f32) -> Plane<bool> {
+    let (w, h) = frame.dims();
+    let (grey_frame, grey_mean) = (frame.to_grey(), mean.to_grey());
+    let diff = Plane::from_parts(w, h, grey_frame.data.iter().zip(&grey_mean.data).map(|(f, m)| f - m).collect());
+    let local = box_mean(&diff, 1);
+    let sigma_grey = GREY_PER_CHANNEL * noise_sigma.max(MIN_SIGMA);
+    let mut restarted = Plane::new(w, h, false);
+    for i in 0..w * h {
+        let n = f32::from(count.data[i]);
+        // The difference of a frame and an n-frame mean has σ·√(1 + 1/n); a 3 × 3 mean of it a third of that.
+        let limit = CHANGE_SIGMAS * sigma_grey * (1.0 + 1.0 / n).sqrt() / 3.0;
+        if local.data[i].abs() > limit {
+            count.data[i] = 1;
+            restarted.data[i] = true;
+            for c in 0..3 {
+                mean.channels[c][i] = frame.channels[c][i];
+            }
+        } else {
+            count.data[i] = (count.data[i] + 1).min(MAX_FRAMES);
+            let k = 1.0 / f32::from(count.data[i]);
+            for c in 0..3 {
+                mean.channels[c][i] += (frame.channels[c][i] - mean.channels[c][i]) * k;
+            }
+        }
+    }
+    restarted
+}
+
+/// The running mean of a still camera's answers, each weighted by the frames in the view means it was matched on
+/// (an answer from n frames' mean has about 1/n of the noise variance of one frame's: inverse-variance weights),
+/// and robust to a frame's gross errors: a new answer moves the mean by at most `step` × its share of the weight
+/// (a Huber-type running estimate). A static pixel's value settles; a frame whose answer jumps where the views did
+/// not change moves it little.
+#[derive(Clone, Debug)]
+pub(crate) struct AnswerMean {
+    pub(crate) mean: DisparityMap,
+    weight: Plane<f32>,
+}
+
+impl AnswerMean {
+    /// The mean of one answer.
+    pub(crate) fn start(answer: &DisparityMap) -> AnswerMean {
+        let (w, h) = answer.dims();
+        AnswerMean { mean: answer.clone(), weight: Plane::new(w, h, 1.0) }
+    }
+
+    /// Folds a new answer in, matched on view means of `frames` frames at each pixel: where the views started
+    /// again or the mean has no value, the mean is the answer; elsewhere it moves towards it by the difference
+    /// clamped to ±`step`, times the answer's share of the weight (the weights held are at most those of
+    /// [`MAX_FRAMES`] frames). An invalid answer leaves the mean as it is.
+    pub(crate) fn fold(&mut self, answer: &DisparityMap, frames: &Plane<u16>, step: f32) {
+        let cap = f32::from(MAX_FRAMES) * f32::from(MAX_FRAMES);
+        for i in 0..answer.data.len() {
+            let d = answer.data[i];
+            let m = &mut self.mean.data[i];
+            let n = f32::from(frames.data[i]);
+            if !d.is_finite() {
+                continue;
+            }
+            if frames.data[i] == 1 || !m.is_finite() {
+                *m = d;
+                self.weight.data[i] = 1.0;
+                continue;
+            }
+            let held = self.weight.data[i].min(cap);
+            self.weight.data[i] = held + n;
+            *m += (d - *m).clamp(-step, step) * n / (held + n);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grey_image(values: &[f32], w: usize) -> RgbImage {
+        let v = values.to_vec();
+        RgbImage::from_channels(w, values.len() / w, [v.clone(), v.clone(), v]).unwrap()
+    }
+
+    #[test]
+    fn the_mean_of_a_still_scene_averages_and_restarts_where_it_changes() {
+        let a = grey_image(&[100.0; 16], 4);
+        let mut means = ViewMeans::start(&a, &a);
+        let mut b = grey_image(&[102.0; 16], 4);
+        let restarted = means.fold(&b, &b, 2.0);
+        assert!(restarted.data.iter().all(|r| !r), "a change within the noise");
+        assert_eq!(means.left.channel(0)[5], 101.0);
+        // A bright object enters the right half: those pixels (and their 3 × 3 neighbours) start again.
+        for y in 0..4 {
+            for x in 2..4 {
+                for c in 0..3 {
+                    b.channel_mut(c)[y * 4 + x] = 200.0;
+                }
+            }
+        }
+        let restarted = means.fold(&b, &b, 2.0);
+        assert!(restarted.data[3] && restarted.data[2] && !restarted.data[0]);
+        assert_eq!(means.left.channel(1)[3], 200.0);
+        assert_eq!(means.left_counts().data[3], 1);
+        assert_eq!(means.left_counts().data[0], 3);
+    }
+
+    #[test]
+    fn identical_frames_leave_the_mean_exactly_as_it_was() {
+        let a = grey_image(&[10.0, 37.5, 200.25, 99.0], 2);
+        let mut means = ViewMeans::start(&a, &a);
+        for _ in 0..20 {
+            means.fold(&a, &a, 0.0);
+        }
+        assert_eq!(means.left, a);
+        assert_eq!(means.left_counts().data[0], MAX_FRAMES);
+    }
+
+    #[test]
+    fn an_answer_mean_weighs_later_answers_more_and_moves_little_for_a_gross_error() {
+        let frames = |n: u16| Plane::new(2, 1, n);
+        let mut m = AnswerMean::start(&Plane::from_parts(2, 1, vec![10.0, f32::INFINITY]));
+        // The second answer, from a two-frame mean, weighs twice the first.
+        m.fold(&Plane::from_parts(2, 1, vec![11.0, 5.0]), &frames(2), 1.0);
+        assert!((m.mean.data[0] - (10.0 + 2.0 / 3.0)).abs() < 1e-6, "{}", m.mean.data[0]);
+        assert_eq!(m.mean.data[1], 5.0);
+        // A gross error moves it by at most the step times its share: 3 of 6.
+        m.fold(&Plane::from_parts(2, 1, vec![40.0, f32::INFINITY]), &frames(3), 1.0);
+        assert!((m.mean.data[0] - (10.0 + 2.0 / 3.0 + 0.5)).abs() < 1e-5, "{}", m.mean.data[0]);
+        assert_eq!(m.mean.data[1], 5.0, "an invalid answer leaves the mean");
+        // Where the views started again (one frame in their mean), the new answer.
+        m.fold(&Plane::from_parts(2, 1, vec![40.0, 6.0]), &Plane::from_parts(2, 1, vec![1, 4]), 1.0);
+        assert_eq!(m.mean.data[0], 40.0);
+    }
+}

@@ -1,0 +1,185 @@
+//! The temporal model (our addition, not the paper's): a [`crate::Matcher`] that remembers the frames of a stereo
+//! sequence uses what it saw before for the frame it matches now.
+//!
+//! Each frame is first compared with the previous one, on their left views in grey ([`motion`]): the global
+//! integer shift that best aligns them, and what that shift leaves unexplained beyond the two frames' noise,
+//! relative to the image's contrast. Then it is one of:
+//!
+//! - **a cut** (the first frame, a new size, or more than half the contrast unexplained: another scene). Every
+//!   memory is dropped and the frame is matched as a first frame, exactly as without the model.
+//! - **still** (no shift). The views are folded into their running means ([`average::ViewMeans`]: a pixel starts
+//!   again where the frame differs from the mean by more than its noise allows — something moved there) and the
+//!   pipeline matches the means: n frames of a still camera hold the scene with 1/√n of one frame's noise. The
+//!   answers are folded into a robust running mean too ([`average::AnswerMean`]), which starts again where the
+//!   views did: a static pixel's answer settles instead of flickering with each frame's noise.
+//! - **moving** (a shift). The previous answer, moved by the shift, is the prior of the frame in place of the
+//!   coarse chain, which is not run: with the coarse prior's weight rule (λ by the measured noise, at least the
+//!   cost's flatness, times the previous confidence, lowered where its left-right check failed), released where
+//!   the shifted frames disagree (disocclusions, moving objects, the parallax a shift cannot follow). The vertical
+//!   offset removed from the previous frame's right view is reused instead of measured again, and the frame runs
+//!   fewer mean-field iterations: the prior has placed each pixel. The running means start again.
+//!
+//! Frames run this way only when the pipeline runs whole and at full resolution (no tiles, `downscale` 1);
+//! otherwise each frame is matched alone. The search range is held from the first frame (a measured range is
+//! measured once). Measurements: docs/tuning-log.md, "Stereo video".
+
+mod average;
+pub(crate) mod motion;
+
+use crate::error::Result;
+use crate::image::{Plane, StereoPair};
+use crate::params::Params;
+use crate::pipeline::{self, FramePrior, PipelineOutput};
+use average::{AnswerMean, ViewMeans};
+use motion::Shift;
+
+/// Beyond this share of the image's contrast left unexplained by the shift, the frame shows another scene.
+const CUT_UNEXPLAINED: f64 = 0.5;
+
+/// Frames with no shift are of a still camera only where the noise explains their difference: beyond this share of
+/// the image's contrast something in the scene or the camera's view changed (a zoom, a forward motion, light).
+const STILL_UNEXPLAINED: f64 = 0.05;
+
+/// The prior is released where the shifted frames' 5 × 5 mean grey difference exceeds this many times what two
+/// frames' noise gives (plus half a grey level of quantisation).
+const RELEASE_NOISE_MULTIPLE: f32 = 2.0;
+
+/// A still camera's answer moves by at most this many pixels (at the matched resolution) per frame of its count:
+/// a static pixel's answer changes by less between frames unless the frame's answer is a gross error.
+const ANSWER_STEP_PX: f32 = 1.0;
+
+/// How a frame was matched.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameKind {
+    /// As a first frame: the first of a sequence, or after a scene cut or a change of size.
+    First,
+    /// After a scene cut: the previous frames were forgotten and it ran as a first frame.
+    Cut,
+    /// A still camera: on the running means of the views, its answer folded into theirs.
+    Still {
+        /// The frames the views' means hold at most (the pixel that has held still longest).
+        frames: u16,
+    },
+    /// A moving camera: with the previous answer, moved by the shift, as its prior.
+    Moving {
+        /// The shift, in pixels: this frame's (x, y) shows what the previous one showed at (x + dx, y + dy).
+        dx: i32,
+        /// See `dx`.
+        dy: i32,
+    },
+}
+
+/// What the model keeps from one frame to the next.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct State {
+    /// The previous frame: its left view in grey, the answer given for it, its range.
+    previous: Option<Previous>,
+    /// The running means of a still camera's views and answers.
+    still: Option<(ViewMeans, AnswerMean)>,
+}
+
+#[derive(Clone, Debug)]
+struct Previous {
+    grey: Plane<f32>,
+    answer: PipelineOutput,
+    ndisp: usize,
+}
+
+impl State {
+    /// Forgets every frame.
+    pub(crate) fn reset(&mut self) {
+        *self = State::default();
+    }
+
+    /// The range the sequence holds (the first frame's), if a frame has been matched.
+    pub(crate) fn held_range(&self) -> Option<usize> {
+        self.previous.as_ref().map(|p| p.ndisp)
+    }
+}
+
+/// Matches `pair` as the next frame of the sequence `state` remembers (see the module doc), and remembers it.
+///
+/// # Errors
+/// As [`crate::pipeline::run`].
+pub(crate) fn match_frame(
+    state: &mut State,
+    params: &Params,
+    pair: &StereoPair,
+    on_stage: &dyn Fn(&str),
+) -> Result<(PipelineOutput, FrameKind)> {
+    let grey = pair.left.to_grey();
+    let noise = crate::condition::channel_noise(&pair.left);
+    let previous = state.previous.take().filter(|p| p.grey.dims() == grey.dims() && p.ndisp == pair.ndisp);
+    let seen = previous.is_some();
+    let shift = previous.as_ref().map(|p| motion::global_shift(&p.grey, &grey));
+    let unexplained = shift.map_or(0.0, |s| motion::unexplained(s, &grey, noise));
+    let cut = unexplained > CUT_UNEXPLAINED;
+    let (out, kind) = match (previous, shift) {
+        (Some(_), Some(s)) if !cut && (s.dx, s.dy) == (0, 0) && unexplained < STILL_UNEXPLAINED => {
+            still_frame(state, params, pair, noise, on_stage).map(|(out, frames)| (out, FrameKind::Still { frames }))?
+        }
+        (Some(prev), Some(s)) if !cut => {
+            state.still = None;
+            let out = moving_frame(params, pair, &prev, &grey, s, noise, on_stage)?;
+            (out, FrameKind::Moving { dx: s.dx as i32, dy: s.dy as i32 })
+        }
+        _ => {
+            state.still = None;
+            let out = pipeline::run_observed(params, pair, on_stage)?;
+            state.still = Some((ViewMeans::start(&pair.left, &pair.right), AnswerMean::start(&out.disparity)));
+            (out, if seen { FrameKind::Cut } else { FrameKind::First })
+        }
+    };
+    state.previous = Some(Previous { grey, answer: out.clone(), ndisp: pair.ndisp });
+    Ok((out, kind))
+}
+
+/// A still camera's frame: the pipeline on the views' running means, the answer folded into the answers'.
+fn still_frame(
+    state: &mut State,
+    params: &Params,
+    pair: &StereoPair,
+    noise: f32,
+    on_stage: &dyn Fn(&str),
+) -> Result<(PipelineOutput, u16)> {
+    let (views, answers, out) = match state.still.take() {
+        Some((mut views, mut answers)) => {
+            views.fold(&pair.left, &pair.right, noise);
+            let means = StereoPair::borrowed(&views.left, &views.right, pair.ndisp)?;
+            let mut out = pipeline::run_observed(params, &means, on_stage)?;
+            answers.fold(&out.disparity, views.left_counts(), ANSWER_STEP_PX);
+            out.disparity = answers.mean.clone();
+            (views, answers, out)
+        }
+        // The camera has just stopped: this frame starts the means.
+        None => {
+            let out = pipeline::run_observed(params, pair, on_stage)?;
+            (ViewMeans::start(&pair.left, &pair.right), AnswerMean::start(&out.disparity), out)
+        }
+    };
+    let frames = views.left_counts().data.iter().copied().max().unwrap_or(1);
+    state.still = Some((views, answers));
+    Ok((out, frames))
+}
+
+/// A moving camera's frame: the previous answer, moved by `shift`, as the prior (see the module doc).
+fn moving_frame(
+    params: &Params,
+    pair: &StereoPair,
+    prev: &Previous,
+    grey: &Plane<f32>,
+    shift: Shift,
+    noise: f32,
+    on_stage: &dyn Fn(&str),
+) -> Result<PipelineOutput> {
+    let limit = RELEASE_NOISE_MULTIPLE * (motion::GREY_DIFFERENCE_PER_SIGMA as f32 * noise + 0.5);
+    let released = motion::disagreement(&prev.grey, grey, shift, limit);
+    let from = FramePrior {
+        answer: motion::shift_answer(&prev.answer, shift),
+        released: Some(released),
+        vertical_offset: prev.answer.vertical_offset,
+        weight_scale: 1.0,
+        iterations: Some(params.meanfield.iterations.saturating_sub(1).max(1)),
+    };
+    pipeline::run_with_prior(params, pair, from, on_stage)
+}

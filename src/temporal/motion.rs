@@ -1,0 +1,219 @@
+//! How the camera moved between two frames, seen in their left views: a global shift, what it leaves unexplained
+//! (the cut test), and where the frames disagree locally (something moved there).
+
+use rayon::prelude::*;
+
+use crate::image::Plane;
+use crate::imgproc::filter::{box_mean, box_reduce};
+use crate::pipeline::PipelineOutput;
+
+/// The shift search covers ±this many pixels of the search image (the grey image reduced until it is at most
+/// [`SEARCH_WIDTH`] wide), and is refined within ±`factor` pixels at full size.
+const SEARCH_RADIUS: i64 = 16;
+/// The widest image the coarse shift search runs on.
+const SEARCH_WIDTH: usize = 512;
+
+/// The global shift between two frames: the current frame's pixel (x, y) shows what the previous frame showed
+/// at (x + dx, y + dy), and the mean absolute grey difference left after that shift.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Shift {
+    pub(crate) dx: i64,
+    pub(crate) dy: i64,
+    pub(crate) residual: f64,
+}
+
+/// The mean |a(x + dx, y + dy) − b(x, y)| over the pixels of every `step`-th row and column where both exist;
+/// `None` when they overlap on less than half the image. Each row is summed on its own and the rows in order,
+/// so the value does not depend on the thread count.
+fn shifted_difference(a: &Plane<f32>, b: &Plane<f32>, dx: i64, dy: i64, step: usize) -> Option<f64> {
+    let (w, h) = (a.width as i64, a.height as i64);
+    let (x0, x1) = ((-dx).max(0), (w - dx).min(w));
+    let (y0, y1) = ((-dy).max(0), (h - dy).min(h));
+    if x1 <= x0 || y1 <= y0 || (x1 - x0) * (y1 - y0) * 2 < w * h {
+        return None;
+    }
+    let rows: Vec<(f64, usize)> = (y0..y1)
+        .step_by(step)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|y| {
+            let (ra, rb) = (a.row((y + dy) as usize), b.row(y as usize));
+            let xs = (x0..x1).step_by(step);
+            xs.fold((0.0, 0), |(s, n), x| (s + f64::from((ra[(x + dx) as usize] - rb[x as usize]).abs()), n + 1))
+        })
+        .collect();
+    let (sum, n) = rows.iter().fold((0.0, 0), |(s, n), &(rs, rn)| (s + rs, n + rn));
+    Some(sum / n.max(1) as f64)
+}
+
+/// The candidate with the least difference; ties go to the smaller shift, then the first in the list.
+fn best(candidates: Vec<(i64, i64)>, diff: impl Fn(i64, i64) -> Option<f64> + Sync) -> Option<Shift> {
+    let scored: Vec<Option<Shift>> =
+        candidates.into_par_iter().map(|(dx, dy)| diff(dx, dy).map(|residual| Shift { dx, dy, residual })).collect();
+    scored.into_iter().flatten().fold(None, |b: Option<Shift>, c| match b {
+        Some(b) if (b.residual, b.dx.abs() + b.dy.abs()) <= (c.residual, c.dx.abs() + c.dy.abs()) => Some(b),
+        _ => Some(c),
+    })
+}
+
+/// The global integer shift between the previous and the current left view (grey): searched over ±16 pixels of
+/// the views reduced to at most 512 pixels wide, then within ±(reduction) pixels at full size around it.
+pub(crate) fn global_shift(prev: &Plane<f32>, cur: &Plane<f32>) -> Shift {
+    let factor = prev.width.div_ceil(SEARCH_WIDTH).next_power_of_two();
+    let (small_prev, small_cur) = (box_reduce(prev, factor), box_reduce(cur, factor));
+    let r = SEARCH_RADIUS;
+    let coarse: Vec<(i64, i64)> = (-r..=r).flat_map(|dy| (-r..=r).map(move |dx| (dx, dy))).collect();
+    let step = if factor > 1 { 1 } else { 2 };
+    let at = best(coarse, |dx, dy| shifted_difference(&small_prev, &small_cur, dx, dy, step));
+    let (cx, cy) = at.map_or((0, 0), |s| (s.dx * factor as i64, s.dy * factor as i64));
+    let f = factor as i64;
+    let fine: Vec<(i64, i64)> = (-f..=f).flat_map(|dy| (-f..=f).map(move |dx| (cx + dx, cy + dy))).collect();
+    best(fine, |dx, dy| shifted_difference(prev, cur, dx, dy, 1)).unwrap_or(Shift {
+        dx: 0,
+        dy: 0,
+        residual: shifted_difference(prev, cur, 0, 0, 1).unwrap_or(f64::INFINITY),
+    })
+}
+
+/// The share of the image's own contrast that the shift leaves unexplained beyond what noise gives: (residual −
+/// 0.754·σn) / σ(grey). Two frames of one scene read about 0 (the frames' noise accounts for the residual: the
+/// grey of independent per-channel noise σn differs between two frames by 0.754·σn on average), a new scene
+/// about 1 or more.
+pub(crate) fn unexplained(shift: Shift, cur: &Plane<f32>, noise_sigma: f32) -> f64 {
+    let n = cur.data.len().max(1) as f64;
+    let mean = cur.data.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+    let var = cur.data.iter().map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>() / n;
+    (shift.residual - GREY_DIFFERENCE_PER_SIGMA * f64::from(noise_sigma)) / var.sqrt().max(1e-6)
+}
+
+/// The mean |difference| of the grey of two frames with independent per-channel noise of σ 1: the grey's σ is
+/// √(0.299² + 0.587² + 0.114²) = 0.668, the difference's √2 times that, and its mean absolute value √(2/π) times
+/// its σ.
+pub(crate) const GREY_DIFFERENCE_PER_SIGMA: f64 = 0.754;
+
+/// The previous frame's answer moved by `shift`: pixel (x, y) takes what (x + dx, y + dy) held; where that is
+/// outside the frame there is no answer (`inf`, confidence 0, not consistent).
+pub(crate) fn shift_answer(answer: &PipelineOutput, shift: Shift) -> PipelineOutput {
+    let moved = |p: &Plane<f32>, fill: f32| shift_plane(p, shift, fill);
+    let (w, h) = answer.disparity.dims();
+    let consistent = Plane::from_parts(w, h, {
+        let as_f32 = Plane::from_parts(w, h, answer.consistent.data.iter().map(|&c| f32::from(u8::from(c))).collect());
+        moved(&as_f32, 0.0).data.iter().map(|&v| v > 0.5).collect()
+    });
+    PipelineOutput {
+        disparity: moved(&answer.disparity, f32::INFINITY),
+        confidence: moved(&answer.confidence, 0.0),
+        consistent,
+        timings: Default::default(),
+        measured: None,
+        vertical_offset: answer.vertical_offset,
+    }
+}
+
+/// `p` moved by `shift` (see [`shift_answer`]), `fill` where the source is outside.
+pub(crate) fn shift_plane(p: &Plane<f32>, shift: Shift, fill: f32) -> Plane<f32> {
+    let (w, h) = p.dims();
+    let mut out = Plane::new(w, h, fill);
+    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        let sy = y as i64 + shift.dy;
+        if sy < 0 || sy >= h as i64 {
+            return;
+        }
+        let src = p.row(sy as usize);
+        for (x, o) in row.iter_mut().enumerate() {
+            let sx = x as i64 + shift.dx;
+            if sx >= 0 && sx < w as i64 {
+                *o = src[sx as usize];
+            }
+        }
+    });
+    out
+}
+
+/// Where the frames disagree after the shift: the 5 × 5 mean absolute grey difference exceeds `limit` (and where
+/// the previous frame does not reach).
+pub(crate) fn disagreement(prev: &Plane<f32>, cur: &Plane<f32>, shift: Shift, limit: f32) -> Plane<bool> {
+    let moved = shift_plane(prev, shift, f32::INFINITY);
+    let diff = Plane::from_parts(
+        cur.width,
+        cur.height,
+        moved.data.iter().zip(&cur.data).map(|(p, c)| if p.is_finite() { (p - c).abs() } else { 1e6 }).collect(),
+    );
+    let local = box_mean(&diff, 2);
+    Plane::from_parts(cur.width, cur.height, local.data.iter().map(|&d| d > limit).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::internals::SplitMix64;
+
+    /// A textured grey image: smooth waves and fine noise, seeded.
+    fn texture(w: usize, h: usize, seed: u64) -> Plane<f32> {
+        let mut rng = SplitMix64::new(seed);
+        let data = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                128.0 + 40.0 * (x * 0.21).sin() * (y * 0.17).cos() + 20.0 * (rng.next_f64() as f32 - 0.5)
+            })
+            .collect();
+        Plane::from_parts(w, h, data)
+    }
+
+    #[test]
+    fn a_window_moved_across_an_image_is_found_exactly() {
+        let big = texture(300, 200, 3);
+        let crop = |x0: usize, y0: usize| {
+            let data = (0..160).flat_map(|y| big.row(y0 + y)[x0..x0 + 240].to_vec()).collect();
+            Plane::from_parts(240, 160, data)
+        };
+        let (prev, cur) = (crop(20, 10), crop(27, 8));
+        let s = global_shift(&prev, &cur);
+        // The current frame's (x, y) is the big image's (x + 27, y + 8), the previous frame's (x + 7, y − 2).
+        assert_eq!((s.dx, s.dy), (7, -2));
+        assert!(s.residual < 1e-6, "{}", s.residual);
+        assert!(unexplained(s, &cur, 0.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn another_scene_is_unexplained_and_the_same_one_is_not() {
+        let (a, b) = (texture(200, 120, 1), texture(200, 120, 2));
+        let same = global_shift(&a, &a);
+        assert_eq!((same.dx, same.dy, same.residual), (0, 0, 0.0));
+        let other = global_shift(&a, &b);
+        assert!(unexplained(other, &b, 0.0) > 0.2, "{}", unexplained(other, &b, 0.0));
+    }
+
+    #[test]
+    fn an_answer_moves_with_the_shift_and_is_unknown_where_it_leaves_the_frame() {
+        let d = Plane::from_parts(3, 1, vec![1.0, 2.0, 3.0]);
+        let answer = PipelineOutput {
+            confidence: Plane::new(3, 1, 0.5),
+            consistent: Plane::new(3, 1, true),
+            disparity: d,
+            timings: Default::default(),
+            measured: None,
+            vertical_offset: None,
+        };
+        let moved = shift_answer(&answer, Shift { dx: 1, dy: 0, residual: 0.0 });
+        assert_eq!(moved.disparity.data[..2], [2.0, 3.0]);
+        assert!(moved.disparity.data[2].is_infinite());
+        assert_eq!((moved.confidence.data[2], moved.consistent.data[2]), (0.0, false));
+        assert!(moved.consistent.data[0]);
+    }
+
+    #[test]
+    fn frames_disagree_only_where_something_changed() {
+        let prev = texture(60, 40, 5);
+        let mut cur = prev.clone();
+        for y in 10..20 {
+            for x in 30..40 {
+                cur.data[y * 60 + x] += 80.0;
+            }
+        }
+        let d = disagreement(&prev, &cur, Shift { dx: 0, dy: 0, residual: 0.0 }, 10.0);
+        let at = |x: usize, y: usize| d.data[y * 60 + x];
+        assert!((10..20).all(|y| (30..40).all(|x| at(x, y))), "the changed block");
+        assert!(!at(27, 15) && !at(42, 15) && !at(35, 7) && !at(35, 22) && !at(5, 35), "3 px away and beyond");
+    }
+}

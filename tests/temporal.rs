@@ -1,0 +1,119 @@
+//! The temporal model through the public API: a `Matcher` that remembers frames, on synthetic sequences with exact
+//! ground truth (`jem::synth` renders them in memory).
+
+use jem::synth::{MASK_VISIBLE, Motion, SequenceParams, SynthParams, render_frame};
+use jem::{FrameKind, Matcher, NdispSource, Output, Params};
+
+/// Frames of a synthetic sequence: the pairs and their ground truth with its mask.
+fn frames(motion: Motion, noise: f64, n: usize) -> Vec<jem::synth::SynthScene> {
+    let scene = SynthParams { width: 200, height: 140, ndisp: 32, seed: 5 };
+    let params = SequenceParams { scene, frames: n, motion, noise_sigma: noise };
+    (0..n).map(|k| render_frame(&params, k).unwrap().0).collect()
+}
+
+/// Matches every frame with one matcher (remembering frames or not).
+fn run(scenes: &[jem::synth::SynthScene], temporal: bool) -> Vec<Output> {
+    let matcher = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(32));
+    let mut matcher = matcher.with_temporal(temporal);
+    scenes.iter().map(|s| matcher.match_pair(&s.left, &s.right).unwrap()).collect()
+}
+
+/// Mean absolute error over the visible pixels.
+fn error(out: &Output, s: &jem::synth::SynthScene) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for ((d, g), m) in out.disparity.data().iter().zip(s.gt.data()).zip(s.mask.data()) {
+        if *m == MASK_VISIBLE && d.is_finite() {
+            sum += f64::from((d - g).abs());
+            n += 1;
+        }
+    }
+    sum / n as f64
+}
+
+/// Mean |d_t − d_{t−1}| over the pixels visible in both frames (a still scene: the truth did not move).
+fn flicker(a: &Output, b: &Output, s: &jem::synth::SynthScene) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for ((x, y), m) in a.disparity.data().iter().zip(b.disparity.data()).zip(s.mask.data()) {
+        if *m == MASK_VISIBLE {
+            sum += f64::from((x - y).abs());
+            n += 1;
+        }
+    }
+    sum / n as f64
+}
+
+#[test]
+fn a_still_noisy_camera_settles_and_gains_accuracy() {
+    let scenes = frames(Motion::Static, 8.0, 7);
+    let (alone, remembered) = (run(&scenes, false), run(&scenes, true));
+    let kinds: Vec<Option<FrameKind>> = remembered.iter().map(|o| o.frame).collect();
+    assert_eq!(kinds[0], Some(FrameKind::First));
+    assert!(kinds[1..].iter().all(|k| matches!(k, Some(FrameKind::Still { .. }))), "{kinds:?}");
+    assert_eq!(kinds[6], Some(FrameKind::Still { frames: 7 }));
+    assert!(alone.iter().all(|o| o.frame.is_none()));
+    // The first frame is matched exactly as alone.
+    assert_eq!(remembered[0].disparity, alone[0].disparity);
+    let late = |outs: &[Output]| (3..7).map(|k| error(&outs[k], &scenes[k])).sum::<f64>() / 4.0;
+    let changes = |outs: &[Output]| (4..7).map(|k| flicker(&outs[k], &outs[k - 1], &scenes[k])).sum::<f64>() / 3.0;
+    let (err_alone, err_kept) = (late(&alone), late(&remembered));
+    let (flicker_alone, flicker_kept) = (changes(&alone), changes(&remembered));
+    eprintln!(
+        "frames 4–7: error {err_alone:.3} alone, {err_kept:.3} remembered; flicker {flicker_alone:.3}, {flicker_kept:.3}"
+    );
+    assert!(err_kept < 0.9 * err_alone, "error {err_kept:.3} against {err_alone:.3}");
+    assert!(flicker_kept < 0.5 * flicker_alone, "flicker {flicker_kept:.3} against {flicker_alone:.3}");
+}
+
+#[test]
+fn a_clean_still_camera_gives_the_same_answer_every_frame() {
+    let scenes = frames(Motion::Static, 0.0, 4);
+    let (alone, remembered) = (run(&scenes, false), run(&scenes, true));
+    for (a, r) in alone.iter().zip(&remembered) {
+        assert_eq!(a.disparity, r.disparity);
+    }
+}
+
+#[test]
+fn a_scene_cut_forgets_the_past_and_the_frame_after_it_is_matched_alone() {
+    let scenes = frames(Motion::Cut, 0.0, 6);
+    let (alone, remembered) = (run(&scenes, false), run(&scenes, true));
+    let cut = remembered.iter().position(|o| o.frame == Some(FrameKind::Cut)).expect("a cut is found");
+    assert!(remembered.iter().filter(|o| o.frame == Some(FrameKind::Cut)).count() == 1);
+    assert_eq!(remembered[cut].disparity, alone[cut].disparity, "the frame after the cut");
+}
+
+#[test]
+fn a_panning_camera_takes_the_previous_answer_and_stays_as_accurate() {
+    let scenes = frames(Motion::Pan, 0.0, 5);
+    let (alone, remembered) = (run(&scenes, false), run(&scenes, true));
+    assert!(remembered[1..].iter().any(|o| matches!(o.frame, Some(FrameKind::Moving { .. }))), "a shift is found");
+    let mean = |outs: &[Output]| (1..5).map(|k| error(&outs[k], &scenes[k])).sum::<f64>() / 4.0;
+    let (a, r) = (mean(&alone), mean(&remembered));
+    assert!(r < 1.1 * a + 0.02, "panning: {r:.3} remembered against {a:.3} alone");
+}
+
+#[test]
+fn a_remembered_sequence_is_the_same_whatever_the_thread_count() {
+    let scenes = frames(Motion::Object, 4.0, 4);
+    let with = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| run(&scenes, true))
+    };
+    let (one, two) = (with(1), with(2));
+    for (a, b) in one.iter().zip(&two) {
+        assert_eq!(a.disparity, b.disparity);
+        assert_eq!(a.frame, b.frame);
+    }
+}
+
+#[test]
+fn reset_starts_a_new_sequence() {
+    let scenes = frames(Motion::Static, 6.0, 3);
+    let mut matcher = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(32)).with_temporal(true);
+    let first = matcher.match_pair(&scenes[0].left, &scenes[0].right).unwrap();
+    let second = matcher.match_pair(&scenes[1].left, &scenes[1].right).unwrap();
+    assert!(matches!(second.frame, Some(FrameKind::Still { frames: 2 })));
+    matcher.reset();
+    let again = matcher.match_pair(&scenes[0].left, &scenes[0].right).unwrap();
+    assert_eq!((again.frame, &again.disparity), (Some(FrameKind::First), &first.disparity));
+}
