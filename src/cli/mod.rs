@@ -211,8 +211,9 @@ enum Command {
     /// Ground-truth pixels that are inf are skipped; the mask selects mask0nocc.png == 255 (nonocc) or > 0 (all).
     /// Invalid (inf/NaN) result pixels count in `invalid` and `totbad2` but not in avgErr/rms; valid ones are
     /// clipped to [0, ndisp]. Errors and the bad thresholds 0.5/1/2/4 are in full-resolution pixels (err = s·|d − gt|,
-    /// s = 4 for trainingQ, 2 for *H, 1 for *F). All percentages are of the masked GT-valid pixels (bad counts only
-    /// valid pixels; totbad2 = bad2 + invalid). "weighted" is the MiddEval3 average (PianoL, Playroom, Playtable,
+    /// s = 4 for trainingQ, 2 for *H, 1 for *F; in a folder named otherwise, from the scenes' names and image sizes,
+    /// said on stderr). All percentages are of the masked GT-valid pixels (bad counts only valid pixels;
+    /// totbad2 = bad2 + invalid). "weighted" is the MiddEval3 average (PianoL, Playroom, Playtable,
     /// Shelves, Vintage weigh 0.5, other scenes 1), "mean" the plain one. Scenes whose result is missing or
     /// unreadable are listed, left out of both averages, and make the exit code 2.
     /// KITTI and ETH3D: native pixels, no clipping, every scene weighs 1. KITTI as its devkit: invalid result
@@ -236,7 +237,8 @@ enum Command {
     /// With --gt the picture is the colour map and the error map side by side (disparity | error), under the
     /// benchmark's own rule, recognised from where GT is (--layout says otherwise):
     ///   MiddEval3  bad-2: error > 2 full-resolution px (errors × --scale, else from the path: trainingQ = 4, *H = 2,
-    ///              *F = 1; a path that tells nothing needs --scale)
+    ///              *F = 1, else from the scene's name and size, or from GT's size when only one resolution
+    ///              has a MiddEval3 scene of that size; when nothing tells, --scale is needed)
     ///   KITTI      D1: error > 3 px and > 5 % of the true disparity (GT a 16-bit .png in disp_noc*/ or disp_occ*/;
     ///              the sibling map marks occlusions)
     ///   ETH3D      bad-1: error > 1 px (GT in a scene folder of a *_gt/ tree)

@@ -31,8 +31,8 @@ pub(crate) mod font;
 mod sheet;
 
 pub use sheet::{
-    Occlusion, RowPictures, RowScore, Sheet, SheetOptions, SheetRow, TruthFiles, contact_sheet, gt_rule, load_truth,
-    render_row, resolved_scale, sheet_rows,
+    Occlusion, RowPictures, RowScore, Sheet, SheetOptions, SheetRow, TruthFiles, TruthRule, contact_sheet, gt_rule,
+    load_truth, render_row, sheet_rows,
 };
 
 use std::path::Path;
