@@ -1,7 +1,7 @@
 """Stereo matching by joint energy minimization (Xue & Cai), on numpy arrays.
 
 ``match`` computes a disparity map (the same bytes as the ``jem`` command line), ``depth`` turns it into metric
-depth, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads a PNG/PNM/JPEG.
+depth, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads an image file (PNG, PNM, JPEG, BMP, TIFF, WebP).
 """
 
 import os
@@ -100,4 +100,4 @@ def write_pfm(path: _Path, array: npt.NDArray[np.floating[Any]]) -> None:
     bottom-up), atomically; an existing path that is not a regular file (a device, a FIFO) raises ValueError."""
 
 def read_image(path: _Path) -> _Image:
-    """A PNG, PPM/PGM or JPEG as uint8 or uint16, H×W (grey) or H×W×3 (RGB), as ``jem`` reads it."""
+    """A PNG, PPM/PGM, JPEG, BMP, TIFF or WebP as uint8 or uint16, H×W (grey) or H×W×3 (RGB), as ``jem`` reads it."""

@@ -439,18 +439,12 @@ fn write_pfm(py: Python<'_>, path: PathBuf, array: &Bound<'_, PyAny>) -> PyResul
     py.detach(|| jem::io::pfm::write_pfm(&path, &map)).map_err(|e| to_py(&e))
 }
 
-/// A PNG, PPM/PGM or JPEG file as a numpy array, as ``jem`` reads it: uint8 or uint16 (the file's bit depth),
+/// A PNG, PPM/PGM, JPEG, BMP, TIFF or WebP file as a numpy array, as ``jem`` reads it: uint8 or uint16 (the file's bit depth),
 /// H×W for grey, H×W×3 (RGB) for colour; alpha is dropped. Raises ValueError for an undecodable file, OSError
 /// if it cannot be read.
 #[pyfunction]
 fn read_image(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyAny>> {
-    let img = py
-        .detach(|| {
-            let reader = image::ImageReader::open(&path).and_then(|r| r.with_guessed_format());
-            let reader = reader.map_err(|e| Error::io(&path, e))?;
-            reader.decode().map_err(|source| Error::Image { path: path.clone(), source })
-        })
-        .map_err(|e| to_py(&e))?;
+    let img = py.detach(|| jem::io::decode_image(&path)).map_err(|e| to_py(&e))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let grey = !img.color().has_color();
     let sixteen = img.color().bytes_per_pixel() / img.color().channel_count() > 1;
@@ -470,7 +464,7 @@ fn to_array<'py, T: numpy::Element>(py: Python<'py>, shape: &[usize], data: Vec<
 /// Stereo matching by joint energy minimization (Xue & Cai), on numpy arrays.
 ///
 /// ``match`` computes a disparity map (the same bytes as the ``jem`` command line), ``depth`` turns it into metric
-/// depth, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads a PNG/PNM/JPEG.
+/// depth, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads an image file (PNG, PNM, JPEG, BMP, TIFF, WebP).
 #[pymodule]
 #[pyo3(name = "jem")]
 fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -16,15 +16,24 @@ use std::path::{Path, PathBuf};
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, RgbImage};
 
-pub use png::{ImageHeader, PNG16_MAX_DISPARITY};
+pub use png::{IMAGE_FORMATS, ImageHeader, PNG16_MAX_DISPARITY};
 
-/// An image file (PNG, PPM/PGM or JPEG; 8 or 16 bit; grey, RGB or RGBA) as an [`RgbImage`]: samples on the 8-bit
+/// An image file (any of [`IMAGE_FORMATS`]; 8 or 16 bit; grey, RGB or RGBA) as an [`RgbImage`]: samples on the 8-bit
 /// scale (16-bit values divided by 257), grey as three equal channels, alpha dropped.
 ///
 /// # Errors
 /// [`Error::Io`] naming the file when it cannot be read, [`Error::Image`] when it cannot be decoded.
 pub fn read_image(path: &Path) -> Result<RgbImage> {
     png::load_rgb(path)
+}
+
+/// An image file decoded as it is, its bit depth and channels kept (what [`read_image`] converts), for a caller
+/// that wants the file's own samples.
+///
+/// # Errors
+/// As [`read_image`].
+pub fn decode_image(path: &Path) -> Result<image::DynamicImage> {
+    png::decode(path)
 }
 
 /// Both views of a pair ([`read_image`]), decoded in parallel.
