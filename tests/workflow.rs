@@ -364,6 +364,8 @@ fn batch_runs_good_scenes_and_reports_each_bad_one() {
     assert_eq!(lines.len(), 4, "{err}");
     assert!(lines[0].starts_with("[1/4] BadImage: FAILED: ") && lines[0].contains("im1.png"), "{err}");
     assert!(lines[1].starts_with("[2/4] Good: 64x24, ndisp 16, "), "{err}");
+    // The time left, once a scene has finished, from its pipeline time and the two scenes left.
+    assert!(!lines[0].contains("ETA") && lines[1].ends_with(" s, ETA 0 s"), "{err}");
     assert!(lines[2].starts_with("[3/4] BadCalib: FAILED: ") && lines[2].contains("ndisp"), "{err}");
     assert!(lines[3].starts_with("[4/4] Sizes: FAILED: ") && lines[3].contains("60x24"), "{err}");
     // The summary table and the failures.
