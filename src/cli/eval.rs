@@ -12,7 +12,7 @@ use super::ThreadsArg;
 
 /// `auto`, 1, 2 or 4.
 #[derive(Clone, Copy, Debug)]
-struct ScaleArg(Option<u32>);
+pub(super) struct ScaleArg(pub(super) Option<u32>);
 
 impl std::str::FromStr for ScaleArg {
     type Err = String;
@@ -68,7 +68,7 @@ pub(super) struct EvalArgs {
 }
 
 /// Where the paper's TSV is: --paper-file, else $JEM_DATA/paper-results.tsv, else ../shared/middlebury/.
-fn paper_file(flag: Option<&Path>) -> PathBuf {
+pub(super) fn paper_file(flag: Option<&Path>) -> PathBuf {
     if let Some(p) = flag {
         return p.to_path_buf();
     }

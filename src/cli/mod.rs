@@ -8,7 +8,7 @@
 //! comments are the subcommands' help), [`run`], which hands each command to its own file, and
 //! [`print_error`]. One file per command: `match.rs` (also the default, `jem LEFT RIGHT -o OUT`), `config.rs`
 //! (and the `--config`/`--set`/`--downscale` flags that `match` and `batch` share), `synth.rs`, `batch.rs`,
-//! `eval.rs`, `viz.rs`.
+//! `eval.rs`, `viz.rs`, `report.rs`.
 //!
 //! Everything the commands print goes through [`note!`] (stderr) and [`out!`] (stdout), which ignore a closed or
 //! failing stream: `jem batch … 2>&1 | head -1` must not stop the work (`eprintln!` panics on a
@@ -36,6 +36,7 @@ mod config;
 mod degrade;
 mod eval;
 mod r#match;
+mod report;
 mod signals;
 mod synth;
 mod viz;
@@ -50,6 +51,7 @@ use config::ConfigArgs;
 use degrade::DegradeArgs;
 use eval::EvalArgs;
 use r#match::MatchArgs;
+use report::ReportArgs;
 use synth::SynthArgs;
 use viz::VizArgs;
 
@@ -81,8 +83,8 @@ pub struct GlobalArgs {
     verbose: bool,
 }
 
-/// `--threads`, for the commands that run work in parallel (`match`, `batch`, `synth`, `degrade`, `eval`; not
-/// `config` or `viz`, which have nothing to share out).
+/// `--threads`, for the commands that run work in parallel (`match`, `batch`, `synth`, `degrade`, `eval`,
+/// `report`; not `config` or `viz`, which have nothing to share out).
 #[derive(Args, Debug, Clone, Default)]
 pub struct ThreadsArg {
     /// Worker threads (default: one per core). The output does not depend on it.
@@ -250,6 +252,19 @@ enum Command {
     /// *_gt/ sibling or --gt DIR).
     #[command(verbatim_doc_comment)]
     Viz(VizArgs),
+    /// Write an HTML page of a data set's results: `jem report DIR --alg A[,B...] -o report.html`.
+    ///
+    /// One page that opens from the disk in any browser (nothing is loaded from a network), its pictures in the
+    /// folder <stem>_files/ beside it. Per scene or frame a row: the left image and, for each --alg, its disparity
+    /// in colour and its error map under the benchmark's rule (as jem viz draws them; click for the full size),
+    /// and its scores as jem eval computes them: MiddEval3 avgErr, bad-2 (invalid pixels counted as bad), invalid,
+    /// the run time, and the paper's avgErr beside an --alg given a --paper column; KITTI D1 and avgErr; ETH3D
+    /// bad-1 and avgErr. The last row is the weighted (MiddEval3) or plain mean. Click a score's header to sort
+    /// the rows. A colour bar and the error map's key head the page; the command, each algorithm's configuration
+    /// (where the run recorded it) and the machine are at its foot.
+    /// The page and its pictures are written all or none; an output that is one of the inputs is refused.
+    #[command(verbatim_doc_comment)]
+    Report(ReportArgs),
 }
 
 /// Runs the parsed command line.
@@ -262,6 +277,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Degrade(a)) => &a.threads,
         Some(Command::Batch(a)) => &a.threads,
         Some(Command::Eval(a)) => &a.threads,
+        Some(Command::Report(a)) => &a.threads,
         Some(Command::Config(_) | Command::Viz(_)) => &ThreadsArg::default(),
     };
     if let Some(n) = threads.threads {
@@ -281,6 +297,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Batch(args)) => batch::run(&args, &cli.global),
         Some(Command::Eval(args)) => eval::run(&args, &cli.global),
         Some(Command::Viz(args)) => viz::run(&args, &cli.global),
+        Some(Command::Report(args)) => report::run(&args, &cli.global),
     }
 }
 

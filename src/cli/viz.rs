@@ -65,9 +65,10 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     if args.input.is_dir() {
         return sheet(args, global);
     }
+    // Before any file is read (colour_range checks them again with the map).
     for (flag, v) in [("--vmin", args.vmin), ("--vmax", args.vmax)] {
-        if v.is_some_and(|v| !v.is_finite()) {
-            return Err(Error::param(flag, v.unwrap(), "a finite number"));
+        if let Some(v) = v.filter(|v| !v.is_finite()) {
+            return Err(Error::param(flag, v, "a finite number"));
         }
     }
     let dir = args.input.parent().unwrap_or(Path::new("."));
@@ -92,12 +93,7 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         }
     };
     let calib = viz::calib_range(&dir.join("calib.txt"));
-    let data = viz::finite_range(&disp);
-    let vmin = args.vmin.or(calib.map(|c| c.0)).or(data.map(|d| d.0)).unwrap_or(0.0);
-    let vmax = args.vmax.or(calib.map(|c| c.1)).or(data.map(|d| d.1)).unwrap_or(1.0);
-    if (args.vmin.is_some() || args.vmax.is_some()) && vmin >= vmax {
-        return Err(Error::param("--vmin / --vmax", format!("{vmin} / {vmax}"), "a range with --vmin below --vmax"));
-    }
+    let (vmin, vmax) = viz::colour_range(&disp, (args.vmin, args.vmax), calib, ("--vmin", "--vmax"))?;
     let colour = viz::colorize(&disp, vmin, vmax);
     let (picture, error) = match &truth {
         None => (colour, String::new()),
