@@ -119,6 +119,47 @@ fn report_is_written_all_or_none_and_refuses_bad_requests_in_one_line() {
     assert_eq!(files_in(&files), ["002-S2-left.png"], "nothing else written, no temporary file left");
 }
 
+/// A KITTI 2015 tree of two frames with results of two algorithms where `jem batch` puts them: the rows are the
+/// frames, each with both algorithms' pictures and D1 and avgErr (the scores of KITTI, after its devkit's fill).
+#[test]
+fn report_of_a_kitti_tree_shows_d1_per_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    let tree = tmp.path().join("kitti").join("training");
+    for sub in ["image_2", "image_3", "disp_noc_0", "disp_occ_0"] {
+        std::fs::create_dir_all(tree.join(sub)).unwrap();
+    }
+    for k in 0..2 {
+        let params = jem::synth::SynthParams { width: 64, height: 48, ndisp: 16, seed: k + 1 };
+        let scene = jem::synth::render_scene(&params).unwrap();
+        let frame = format!("{k:06}_10.png");
+        for (view, img) in [("image_2", &scene.left), ("image_3", &scene.right)] {
+            let rgb: Vec<u8> = (0..img.width() * img.height())
+                .flat_map(|i| [0, 1, 2].map(|c| img.channel(c)[i].round() as u8))
+                .collect();
+            jem::io::write_png_rgb8(&tree.join(view).join(&frame), 64, 48, &rgb).unwrap();
+        }
+        for truth in ["disp_noc_0", "disp_occ_0"] {
+            jem::io::write_disparity(&tree.join(truth).join(&frame), &scene.gt).unwrap();
+        }
+        for (alg, off) in [("A", 0.5f32), ("B", 4.0 + k as f32)] {
+            let results = tmp.path().join("kitti").join("results").join(alg).join("training");
+            std::fs::create_dir_all(results.join("disp_0")).unwrap();
+            let data = scene.gt.data().iter().map(|g| g + off).collect();
+            let result = jem::Plane::from_vec(64, 48, data).unwrap();
+            jem::io::write_disparity(&results.join("disp_0").join(&frame), &result).unwrap();
+        }
+    }
+    let out = report(tmp.path(), &["kitti/training", "--alg", "A,B", "-o", "k.html"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let page = std::fs::read_to_string(tmp.path().join("k.html")).unwrap();
+    assert!(page.contains("KITTI 2015 · 2 rows") && page.contains(">D1</th>"), "the header and D1 columns");
+    assert!(page.contains("data-v=\"000000_10\"") && page.contains("data-v=\"000001_10\""), "one row per frame");
+    assert_eq!(links(&page).len(), 2 * 5 * 2, "each frame: its left image and two pictures per algorithm");
+    // A's error (0.5 px) is never an outlier, B's (4 and 5 px, above 5 % of disparities below 16) always is.
+    assert!(page.contains("<td class=\"num best\" data-v=\"0\">0.0</td>"), "A's D1 of 0 % is the row's best");
+    assert!(page.contains("data-v=\"100\">100.0</td>"), "B's D1 of 100 %");
+}
+
 /// The harness page: loads the report in a frame, checks that every picture has loaded, clicks A's avgErr header
 /// twice, and writes what it found into its own DOM, which `--dump-dom` prints.
 const HARNESS: &str = r#"<!DOCTYPE html>

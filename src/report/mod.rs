@@ -277,7 +277,7 @@ pub fn write_report(dir: &Path, out: &Path, opts: &ReportOptions) -> Result<Repo
             papers: if opts.papers.is_empty() { vec![None; opts.algs.len()] } else { opts.papers.clone() },
             evals: evals.clone(),
             rows,
-            configs: opts.algs.iter().map(|a| recorded_config(dir, a)).collect(),
+            configs: vec![CONFIG_NOT_RECORDED.to_string(); opts.algs.len()],
             command: opts.command.clone(),
             machine: machine(),
         };
@@ -466,12 +466,10 @@ fn draw_rows(
     Ok((count, not_drawn))
 }
 
-/// The configuration `alg`'s results were made with, where a run recorded it; else a sentence saying it was not
-/// recorded.
-fn recorded_config(dir: &Path, alg: &str) -> String {
-    let _ = (dir, alg);
-    "not recorded (jem batch does not store the configuration a result was made with)".into()
-}
+/// What the foot says of an algorithm's configuration: no run records it beside its results (`jem batch` writes
+/// the benchmark's submission files only, the disparity maps and run times), so the page says so rather than guess.
+const CONFIG_NOT_RECORDED: &str =
+    "not recorded (jem batch keeps only the benchmark's submission files: disparity maps and run times)";
 
 /// The machine the report was made on: its CPU, its cores and jem's version.
 fn machine() -> String {
