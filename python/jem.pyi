@@ -1,7 +1,9 @@
 """Stereo matching by joint energy minimization (Xue & Cai), on numpy arrays.
 
 ``match`` computes a disparity map (the same bytes as the ``jem`` command line), ``depth`` turns it into metric
-depth, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads a PNG/PNM/JPEG.
+depth and ``cloud`` into the points ``--cloud`` writes, ``colorize`` draws it as ``jem viz`` does,
+``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads an image file (PNG, PNM,
+JPEG, BMP, TIFF, WebP).
 """
 
 import os
@@ -75,7 +77,8 @@ def match(
     """The left view's disparity map of a rectified pair: float32 H×W, ``inf`` where invalid, exactly the map
     ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings.
 
-    ``left``, ``right``: H×W (grey) or H×W×3 (RGB order; OpenCV loads BGR), uint8 or uint16 (either byte order),
+    ``left``, ``right``: H×W (grey), H×W×3 (RGB order; OpenCV loads BGR) or H×W×4 (RGBA, alpha dropped), uint8 or
+    uint16 (either byte order),
     any strides; checked against ``max_memory`` from their shapes before they are copied.
     ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair, as ``jem`` does without calib.txt.
     ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one. ``config``: a TOML path or a mapping in
@@ -92,6 +95,19 @@ def match(
 def depth(disp: npt.NDArray[np.floating[Any]], f: float, baseline: float, doffs: float = 0.0) -> _Map:
     """Metric depth Z = f·baseline / (disp + doffs), float32, ``inf`` where there is none."""
 
+def cloud(
+    disp: npt.NDArray[np.floating[Any]], left: _Image, f: float, baseline: float, cx: float, cy: float,
+    doffs: float = 0.0,
+) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
+    """The point cloud ``--cloud`` writes: (points float32 N×3, colours uint8 N×3), one row per pixel with a depth,
+    in row order; X = (x − cx)·Z/f, Y = (y − cy)·Z/f, Z = f·baseline / (d + doffs), in the baseline's unit."""
+
+def colorize(
+    disp: npt.NDArray[np.floating[Any]], vmin: Optional[float] = None, vmax: Optional[float] = None
+) -> npt.NDArray[np.uint8]:
+    """The disparity map in colour as ``jem viz`` draws it: uint8 H×W×3, invalid pixels black; the range defaults to
+    the map's finite range."""
+
 def read_pfm(path: _Path) -> _Map:
     """A PFM file as float32 H×W, top row first, ``inf`` kept."""
 
@@ -100,7 +116,7 @@ def write_pfm(path: _Path, array: npt.NDArray[np.floating[Any]]) -> None:
     bottom-up), atomically; an existing path that is not a regular file (a device, a FIFO) raises ValueError."""
 
 def read_image(path: _Path) -> _Image:
-    """A PNG, PPM/PGM or JPEG as uint8 or uint16, H×W (grey) or H×W×3 (RGB), as ``jem`` reads it."""
+    """A PNG, PPM/PGM, JPEG, BMP, TIFF or WebP as uint8 or uint16, H×W (grey) or H×W×3 (RGB), as ``jem`` reads it."""
 
 class Matcher:
     """Matches pairs with one configuration; with ``temporal=True`` the pairs are the frames of one stereo

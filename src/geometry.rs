@@ -118,31 +118,60 @@ pub fn depth_map(disparity: &DisparityMap, camera: &Camera) -> Plane<f32> {
     Plane::from_parts(disparity.width, disparity.height, data)
 }
 
-/// A binary little-endian PLY of the pixels with a depth: `x y z` (float) and `red green blue` (uchar, from
-/// `image`), in row-major pixel order.
+/// The points of the pixels with a depth ([`Camera::point`]), in row-major pixel order, and their colours: what
+/// [`encode_ply`] writes (and `jem --cloud`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PointCloud {
+    /// (X, Y, Z) in the left camera's frame, in the baseline's unit.
+    pub points: Vec<[f32; 3]>,
+    /// Each point's colour: its pixel in the image, rounded to 8 bits.
+    pub colours: Vec<[u8; 3]>,
+}
+
+impl PointCloud {
+    /// The cloud as a binary little-endian PLY: `x y z` (float) and `red green blue` (uchar).
+    pub fn to_ply(&self) -> Vec<u8> {
+        let header = format!(
+            "ply\nformat binary_little_endian 1.0\ncomment jem: left camera frame, baseline units\nelement vertex {}\n\
+             property float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n\
+             property uchar blue\nend_header\n",
+            self.points.len()
+        );
+        let mut out = Vec::with_capacity(header.len() + self.points.len() * 15);
+        out.extend_from_slice(header.as_bytes());
+        for (p, c) in self.points.iter().zip(&self.colours) {
+            for v in p {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+            out.extend_from_slice(c);
+        }
+        out
+    }
+}
+
+/// The point cloud of the pixels with a depth, coloured from `image`.
+///
+/// # Panics
+/// If `image` and `disparity` differ in size.
+pub fn point_cloud(disparity: &DisparityMap, image: &RgbImage, camera: &Camera) -> PointCloud {
+    assert_eq!(disparity.dims(), image.dims(), "image and disparity map differ in size");
+    let w = disparity.width;
+    let mut cloud = PointCloud::default();
+    for (i, &d) in disparity.data.iter().enumerate() {
+        if let Some(p) = camera.point(i % w, i / w, d) {
+            cloud.points.push(p);
+            cloud.colours.push(image.rgb(i).map(|c| c.round().clamp(0.0, 255.0) as u8));
+        }
+    }
+    cloud
+}
+
+/// A binary little-endian PLY of the pixels with a depth ([`point_cloud`], [`PointCloud::to_ply`]).
 ///
 /// # Panics
 /// If `image` and `disparity` differ in size.
 pub fn encode_ply(disparity: &DisparityMap, image: &RgbImage, camera: &Camera) -> Vec<u8> {
-    assert_eq!(disparity.dims(), image.dims(), "image and disparity map differ in size");
-    let w = disparity.width;
-    let points: Vec<(usize, [f32; 3])> =
-        disparity.data.iter().enumerate().filter_map(|(i, &d)| camera.point(i % w, i / w, d).map(|p| (i, p))).collect();
-    let header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment jem: left camera frame, baseline units\nelement vertex {}\n\
-         property float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n\
-         property uchar blue\nend_header\n",
-        points.len()
-    );
-    let mut out = Vec::with_capacity(header.len() + points.len() * 15);
-    out.extend_from_slice(header.as_bytes());
-    for (i, p) in points {
-        for v in p {
-            out.extend_from_slice(&v.to_le_bytes());
-        }
-        out.extend(image.rgb(i).map(|c| c.round().clamp(0.0, 255.0) as u8));
-    }
-    out
+    point_cloud(disparity, image, camera).to_ply()
 }
 
 #[cfg(test)]

@@ -31,8 +31,8 @@
 //! ```
 //!
 //! Around matching: [`eval`] scores results against ground truth (MiddEval3, KITTI, ETH3D), [`batch`] and
-//! [`dataset`] run whole data sets, [`viz`] draws colour maps, [`synth`] renders scenes with exact ground truth,
-//! [`degrade`] makes degraded copies of a data set.
+//! [`dataset`] run whole data sets, [`viz`] draws colour maps, [`report`] writes an HTML page of results,
+//! [`synth`] renders scenes with exact ground truth, [`degrade`] makes degraded copies of a data set.
 //!
 //! ## Inside
 //!
@@ -64,6 +64,7 @@ pub mod params;
 mod pipeline;
 mod post;
 mod process;
+pub mod report;
 mod rng;
 mod scale;
 pub mod sequence;

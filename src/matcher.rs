@@ -228,7 +228,8 @@ impl Matcher {
         Ok((plan.pair.ndisp, plan.ndisp_measured))
     }
 
-    /// Reads a pair of image files (PNG, PPM/PGM or JPEG, 8 or 16 bit) as the matcher would match them: both
+    /// Reads a pair of image files (PNG, PPM/PGM, JPEG, BMP, TIFF or WebP; 8 or 16 bit) as the matcher would
+    /// match them: both
     /// headers are checked against the memory limit first (the loading, the range measurement and the run), and
     /// neither image is decoded when the pair cannot fit.
     ///

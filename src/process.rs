@@ -1,5 +1,5 @@
 //! What this process and machine are, as Linux's `/proc` tells: the host's name, a process's start time and
-//! whether it is still there, this process's peak memory and file-size limit, the machine's memory. Each answer
+//! whether it is still there, this process's peak memory and file-size limit, the machine's memory and CPU. Each answer
 //! is `None` (or empty) where `/proc` cannot tell, and callers treat that as "unknown", never as "no".
 
 use std::path::Path;
@@ -74,6 +74,21 @@ pub(crate) fn physical_memory_bytes() -> Option<u64> {
     Some(kib * 1024)
 }
 
+/// The CPU's model name (the first `model name` of `/proc/cpuinfo`, as `Intel(R) Xeon(R) ...`) and the number of
+/// processors it lists; the file is read only up to 1 MiB.
+pub(crate) fn cpu_model() -> Option<(String, usize)> {
+    use std::io::Read;
+    let mut text = String::new();
+    std::fs::File::open("/proc/cpuinfo").ok()?.take(1 << 20).read_to_string(&mut text).ok()?;
+    let field = |line: &str, key: &str| {
+        let (k, v) = line.split_once(':')?;
+        (k.trim() == key).then(|| v.trim().to_string())
+    };
+    let model = text.lines().find_map(|l| field(l, "model name"))?;
+    let processors = text.lines().filter(|l| field(l, "processor").is_some()).count();
+    Some((model, processors))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -91,5 +106,8 @@ mod tests {
         assert!(ns.starts_with("pid:[") && ns.ends_with(']'), "{ns}");
         // A pid above the kernel's pid_max (at most 2^22) names no process.
         assert_eq!(pid_exists(1 << 23), Some(false));
+        if let Some((model, processors)) = cpu_model() {
+            assert!(!model.is_empty() && processors >= 1, "{model:?} {processors}");
+        }
     }
 }

@@ -847,6 +847,33 @@ fn jpeg_input() {
     }
 }
 
+/// BMP, TIFF and WebP (lossless) views give the bytes the same pixels as PNG give; a format that is not read
+/// (GIF) is one error line listing those that are.
+#[test]
+fn bmp_tiff_and_webp_inputs_match_png_and_other_formats_are_listed() {
+    let dir = tempfile::tempdir().unwrap();
+    for (i, ext) in [(0, "bmp"), (1, "tiff"), (0, "webp"), (1, "webp")] {
+        let src = image::open(example(&format!("im{i}.png"))).unwrap();
+        src.save(dir.path().join(format!("im{i}.{ext}"))).unwrap();
+    }
+    let wta = ["--ndisp", "48", "--set", "model=wta", "-o"];
+    let result = |left: &str, right: &str| {
+        let out = run_in(dir.path(), &[&[left, right][..], &wta, &["d.pfm"]].concat());
+        assert!(out.status.success(), "{left} {right}: {}", stderr(&out));
+        std::fs::read(dir.path().join("d.pfm")).unwrap()
+    };
+    let png = result(&example("im0.png"), &example("im1.png"));
+    assert_eq!(result("im0.bmp", "im1.tiff"), png, "BMP and TIFF");
+    assert_eq!(result("im0.webp", "im1.webp"), png, "WebP");
+    std::fs::remove_file(dir.path().join("d.pfm")).unwrap();
+    std::fs::write(dir.path().join("a.gif"), b"GIF89a\x01\x00\x01\x00\x00\x00\x00;").unwrap();
+    assert_clean_failure(
+        dir.path(),
+        &["a.gif", "im1.tiff", "-o", "d.pfm"],
+        &["a.gif", "GIF images are not read", "PNG, PPM/PGM/PNM, JPEG, BMP, TIFF, WebP"],
+    );
+}
+
 /// Issue 16: a calib.txt whose ndisp is the image width (ETH3D style) is not trusted: the range is measured on
 /// the pair, the run is as accurate as with the true range, and far fewer labels are searched.
 #[test]

@@ -328,7 +328,7 @@ fn wmedian_fills_holes_from_the_right_side() {
 /// and checks that each post-processing step helps (Motorcycle: 32 % invalid after the check; fill 10.0, fill +
 /// weighted median 6.6, the whole chain 2.8). `cargo test --release --test post_synthetic -- --ignored --nocapture`
 #[test]
-#[ignore = "needs the MiddEval3 data ($JEM_DATA) and a release build; .ci/run runs it (--include-ignored)"]
+#[ignore = "timings on a real scene (a few seconds); run it with `cargo test --release -- --include-ignored`, as .ci/run does"]
 fn motorcycle_timings() {
     use std::time::Instant;
     let scene = std::env::var("JEM_SCENE").unwrap_or_else(|_| "Motorcycle".into());

@@ -79,7 +79,7 @@ fn check(config: &str, achieved: f64, margin: f64) -> Option<f64> {
 
 /// The paper's Table 1: each model within its achieved value + margin, and the paper's ordering JEM < FCM < LCM.
 #[test]
-#[ignore = "slow: every trainingQ scene under each config (about 7 min on 2 cores); .ci/run runs it (--include-ignored)"]
+#[ignore = "slow: every trainingQ scene under each config (about 7 min on 2 cores); run it with `cargo test --release -- --include-ignored`, as .ci/run does"]
 fn table1_configs_trainingq() {
     let Some(jem) = check("jem-lrc.toml", JEM_LRC_ACHIEVED, 0.05) else { return };
     let fcm = check("fcm-lrc.toml", FCM_LRC_ACHIEVED, 0.05).unwrap();
@@ -90,7 +90,7 @@ fn table1_configs_trainingq() {
 /// The paper's full pipeline (Table 3, last column) and the default (it, plus the adaptive front end),
 /// which must stay better.
 #[test]
-#[ignore = "slow: every trainingQ scene under each config (about 7 min on 2 cores); .ci/run runs it (--include-ignored)"]
+#[ignore = "slow: every trainingQ scene under each config (about 7 min on 2 cores); run it with `cargo test --release -- --include-ignored`, as .ci/run does"]
 fn full_pipeline_and_default_trainingq() {
     let Some(paper) = check("jem-all.toml", JEM_ALL_ACHIEVED, 0.05) else { return };
     let default = check("default.toml", DEFAULT_ACHIEVED, 0.05).unwrap();
@@ -99,13 +99,13 @@ fn full_pipeline_and_default_trainingq() {
 
 /// The speed preset between the default and fast.toml (the local term only, 2 iterations, 4 prior levels).
 #[test]
-#[ignore = "slow: every trainingQ scene under each config (about 7 min on 2 cores); .ci/run runs it (--include-ignored)"]
+#[ignore = "slow: every trainingQ scene under each config (about 7 min on 2 cores); run it with `cargo test --release -- --include-ignored`, as .ci/run does"]
 fn balanced_trainingq() {
     check("balanced.toml", BALANCED_ACHIEVED, 0.05);
 }
 
 #[test]
-#[ignore = "slow: every trainingQ scene under each config (about 7 min on 2 cores); .ci/run runs it (--include-ignored)"]
+#[ignore = "slow: every trainingQ scene under each config (about 7 min on 2 cores); run it with `cargo test --release -- --include-ignored`, as .ci/run does"]
 fn jem_sps_trainingq() {
     check("jem-sps.toml", JEM_SPS_ACHIEVED, 0.05);
 }
@@ -132,7 +132,7 @@ const JEM_SPS_ACHIEVED: f64 = 5.123;
 /// measures the views' sharpness and blurs the sharper one for the cost; without that the Census codes of the
 /// left view's fine texture have no counterpart (all 15 scenes: 8.12 -> 6.16, docs/tuning-log.md).
 #[test]
-#[ignore = "slow: three trainingQ scenes, each twice (about 20 s on 2 cores, 55 s under load); .ci/run runs it (--include-ignored)"]
+#[ignore = "slow: three trainingQ scenes, each twice (about 20 s on 2 cores, 55 s under load); run it with `cargo test --release -- --include-ignored`, as .ci/run does"]
 fn one_view_out_of_focus_trainingq() {
     let Some(data) = common::data_dir() else { return };
     let mut off = Params::default();
@@ -152,7 +152,7 @@ fn one_view_out_of_focus_trainingq() {
 /// (docs/tuning-log.md, "JPEG compression noise"). The prior's floor where the cost is flat does part of the same
 /// work, so the gain is modest: these three scenes 2.557 -> 2.445 when written.
 #[test]
-#[ignore = "slow: three trainingQ scenes, each twice (about 20 s on 2 cores, 55 s under load); .ci/run runs it (--include-ignored)"]
+#[ignore = "slow: three trainingQ scenes, each twice (about 20 s on 2 cores, 55 s under load); run it with `cargo test --release -- --include-ignored`, as .ci/run does"]
 fn jpeg_compression_trainingq() {
     let Some(data) = common::data_dir() else { return };
     let mut off = Params::default();

@@ -156,6 +156,55 @@ fn eval_without_a_resolution_in_the_path_asks_for_scale() {
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
+/// A copy of MiddEval3 scenes in a folder named otherwise: the scenes' names and sizes tell the resolution (Teddy
+/// at 450×375 is quarter resolution), so eval and viz need no --scale, say what they inferred on one line, and
+/// -q silences it; a lone ground-truth file is told by its folder's name or its size.
+#[test]
+fn a_copied_middeval3_set_needs_no_scale() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("copy").join("Teddy");
+    let (w, h) = (450, 375);
+    let gt = Plane::new(w, h, 10.0f32);
+    // Error 0.75 px at quarter resolution: 3 full-resolution px, bad-2 everywhere at ×4 (and at ×1 nowhere).
+    let result = Plane::new(w, h, 10.75f32);
+    write_gt_scene(&scene, &gt, &vec![255; w * h], 64, Some(("X", &result)));
+    image::RgbImage::from_pixel(w as u32, h as u32, image::Rgb([9, 9, 9])).save(scene.join("im0.png")).unwrap();
+    let copy = tmp.path().join("copy");
+    let o = run(jem().arg("eval").arg(&copy).args(["--alg", "X", "--format", "json"]));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(v["scale"], 4);
+    assert!((metric(&v["scenes"]["Teddy"], "avgerr") - 3.0).abs() < 1e-6);
+    let err = stderr(&o);
+    let notes: Vec<&str> = err.lines().filter(|l| l.starts_with("note: ")).collect();
+    assert_eq!(notes.len(), 1, "{err}");
+    assert!(notes[0].contains("quarter resolution (errors ×4)") && notes[0].contains("--scale"), "{}", notes[0]);
+    let o = run(jem().arg("eval").arg(&copy).args(["--alg", "X", "-q"]));
+    assert!(o.status.success() && stderr(&o).is_empty(), "{}", stderr(&o));
+    // viz: a contact sheet and a lone map with --gt, without --scale.
+    let sheet = tmp.path().join("sheet.png");
+    let o = run(jem().arg("viz").arg(&copy).args(["--alg", "X", "-o"]).arg(&sheet));
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("note: ") && stderr(&o).contains("errors ×4"), "{}", stderr(&o));
+    let lone = tmp.path().join("gt.pfm");
+    jem::io::pfm::write_pfm(&lone, &gt).unwrap();
+    let out = tmp.path().join("v.png");
+    let o = run(jem().arg("viz").arg(scene.join("disp0X.pfm")).arg("--gt").arg(&lone).arg("-o").arg(&out));
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("450×375 is the size of a MiddEval3 scene at quarter resolution"), "{}", stderr(&o));
+    assert_eq!(png_dims_and_pixel(&out, w as u32 + 4, 0).1, [230, 30, 30], "bad at ×4");
+    // A size no MiddEval3 scene has: --scale is asked for, and then used.
+    jem::io::pfm::write_pfm(&lone, &Plane::new(w, h - 10, 10.0f32)).unwrap();
+    let odd = tmp.path().join("odd.pfm");
+    jem::io::pfm::write_pfm(&odd, &Plane::new(w, h - 10, 10.75f32)).unwrap();
+    let o = run(jem().arg("viz").arg(&odd).arg("--gt").arg(&lone).arg("-o").arg(&out));
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).starts_with("error: ") && stderr(&o).contains("--scale"), "{}", stderr(&o));
+    let o = run(jem().arg("viz").arg(&odd).arg("--gt").arg(&lone).args(["--scale", "1", "-o"]).arg(&out));
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(png_dims_and_pixel(&out, w as u32 + 4, 0).1, [236; 3], "not bad at ×1: grey for 0.75 of 2 px");
+}
+
 /// Three 2×1 scenes with a constant error: PianoL 2 (weight 0.5), Teddy 4, Mystery 1 (unknown: weight 1).
 fn weighted_scenes(root: &Path) {
     let gt = Plane::from_vec(2, 1, vec![1.0, 1.0]).unwrap();
@@ -315,6 +364,8 @@ fn batch_runs_good_scenes_and_reports_each_bad_one() {
     assert_eq!(lines.len(), 4, "{err}");
     assert!(lines[0].starts_with("[1/4] BadImage: FAILED: ") && lines[0].contains("im1.png"), "{err}");
     assert!(lines[1].starts_with("[2/4] Good: 64x24, ndisp 16, "), "{err}");
+    // The time left, once a scene has finished, from its pipeline time and the two scenes left.
+    assert!(!lines[0].contains("ETA") && lines[1].ends_with(" s, ETA 0 s"), "{err}");
     assert!(lines[2].starts_with("[3/4] BadCalib: FAILED: ") && lines[2].contains("ndisp"), "{err}");
     assert!(lines[3].starts_with("[4/4] Sizes: FAILED: ") && lines[3].contains("60x24"), "{err}");
     // The summary table and the failures.

@@ -74,7 +74,8 @@ struct ImageArray<'a, 'py> {
     name: &'static str,
     width: usize,
     height: usize,
-    colour: bool,
+    /// Samples per pixel: 1 (grey), 3 (RGB) or 4 (RGBA, alpha dropped).
+    samples: usize,
     /// 16-bit samples (else 8-bit).
     sixteen: bool,
     /// 16-bit samples in the other byte order (`>u2` on a little-endian machine): converted by numpy first.
@@ -82,19 +83,19 @@ struct ImageArray<'a, 'py> {
 }
 
 impl<'a, 'py> ImageArray<'a, 'py> {
-    /// H×W grey or H×W×3 RGB, uint8 or uint16 in either byte order, any strides.
+    /// H×W grey, H×W×3 RGB or H×W×4 RGBA, uint8 or uint16 in either byte order, any strides.
     fn inspect(array: &'a Bound<'py, PyAny>, name: &'static str) -> PyResult<Self> {
         let untyped = array.cast::<PyUntypedArray>().map_err(|_| {
             let kind = array.get_type().name().map_or("?".to_string(), |n| n.to_string());
             PyValueError::new_err(format!("{name}: expected a numpy array, got {kind}"))
         })?;
         let shape = untyped.shape().to_vec();
-        let (height, width, colour) = match shape[..] {
-            [h, w] => (h, w, false),
-            [h, w, 3] => (h, w, true),
+        let (height, width, samples) = match shape[..] {
+            [h, w] => (h, w, 1),
+            [h, w, c @ (3 | 4)] => (h, w, c),
             _ => {
                 return Err(PyValueError::new_err(format!(
-                    "{name}: shape {shape:?} is neither H×W (grey) nor H×W×3 (RGB)"
+                    "{name}: shape {shape:?} is neither H×W (grey), H×W×3 (RGB) nor H×W×4 (RGBA)"
                 )));
             }
         };
@@ -108,18 +109,19 @@ impl<'a, 'py> ImageArray<'a, 'py> {
                 )));
             }
         };
-        Ok(ImageArray { array, name, width, height, colour, sixteen, swapped })
+        Ok(ImageArray { array, name, width, height, samples, sixteen, swapped })
     }
 
     /// The memory its conversion holds at its peak: the three `f32` planes, and numpy's native-order copy of
     /// swapped samples.
     fn load_bytes(&self) -> u64 {
         let px = self.width as u64 * self.height as u64;
-        let samples = px * if self.colour { 3 } else { 1 };
+        let samples = px * self.samples as u64;
         12 * px + if self.swapped { 2 * samples } else { 0 }
     }
 
-    /// The pixels as planes of `f32` (as [`jem::io::read_image`] gives a decoded image), read in logical order.
+    /// The pixels as planes of `f32` (as [`jem::io::read_image`] gives a decoded image: alpha dropped), read in
+    /// logical order.
     /// Every large buffer is allocated fallibly: a failure is a `MemoryError`, never an abort.
     fn to_rgb(&self) -> PyResult<RgbImage> {
         let n = self.width.checked_mul(self.height).ok_or_else(|| self.too_large())?;
@@ -135,11 +137,12 @@ impl<'a, 'py> ImageArray<'a, 'py> {
                 ))
             })?;
         }
-        let mut put = |k: usize, v: f32| {
-            if self.colour {
-                channels[k % 3].push(v);
-            } else {
-                channels.iter_mut().for_each(|c| c.push(v));
+        let mut put = |k: usize, v: f32| match self.samples {
+            1 => channels.iter_mut().for_each(|c| c.push(v)),
+            n => {
+                if let Some(c) = channels.get_mut(k % n) {
+                    c.push(v);
+                }
             }
         };
         if self.sixteen {
@@ -282,8 +285,8 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 /// The left view's disparity map of a rectified pair: float32 H×W, ``inf`` where invalid, exactly the map
 /// ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings (``read_pfm`` gives the same array).
 ///
-/// ``left``, ``right``: numpy arrays H×W (grey) or H×W×3 (RGB order; OpenCV loads BGR: ``img[..., ::-1]``),
-/// uint8 or uint16 in either byte order (16-bit values are divided by 257, as a 16-bit PNG is), any strides; grey
+/// ``left``, ``right``: numpy arrays H×W (grey), H×W×3 (RGB order; OpenCV loads BGR: ``img[..., ::-1]``) or
+/// H×W×4 (RGBA; alpha is dropped, as ``jem`` drops it from an RGBA file), uint8 or uint16 in either byte order (16-bit values are divided by 257, as a 16-bit PNG is), any strides; grey
 /// and colour may be mixed; they are checked against ``max_memory`` from their shapes before they are copied.
 /// ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair as ``jem`` does without a calib.txt (up
 /// to the width). ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one
@@ -342,14 +345,80 @@ fn depth<'py>(
     baseline: f64,
     doffs: f64,
 ) -> PyResult<Bound<'py, PyArray2<f32>>> {
-    if !(f.is_finite() && f > 0.0 && baseline.is_finite() && baseline > 0.0 && doffs.is_finite()) {
+    let camera = checked_camera(f, baseline, 0.0, 0.0, doffs)?;
+    let map = to_plane(disp, "disp")?;
+    Ok(to_numpy(py, py.detach(|| jem::geometry::depth_map(&map, &camera))))
+}
+
+/// The point cloud of a disparity map, as ``jem LEFT RIGHT --cloud C.ply`` writes it: ``(points, colours)``, the
+/// points float32 N×3 (X, Y, Z in the left camera's frame: x right, y down, z forward, in the baseline's unit;
+/// X = (x − cx)·Z/f, Y = (y − cy)·Z/f, Z = f·baseline / (d + doffs)), the colours uint8 N×3 (RGB, the pixel of
+/// ``left``), one row per pixel with a depth, in row order (the PLY's vertices, in order). ``left``: the image,
+/// as ``match`` takes it (H×W, H×W×3 or H×W×4; uint8 or uint16), the size of ``disp``. ``f``, ``cx``, ``cy``:
+/// ``cam0`` of a calib.txt, in pixels; ``doffs``: its x-difference of the principal points.
+#[pyfunction]
+#[pyo3(signature = (disp, left, f, baseline, cx, cy, doffs=0.0))]
+#[allow(clippy::too_many_arguments)] // the camera's five numbers, as calib.txt gives them
+fn cloud<'py>(
+    py: Python<'py>,
+    disp: &Bound<'py, PyAny>,
+    left: &Bound<'py, PyAny>,
+    f: f64,
+    baseline: f64,
+    cx: f64,
+    cy: f64,
+    doffs: f64,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let camera = checked_camera(f, baseline, cx, cy, doffs)?;
+    let map = to_plane(disp, "disp")?;
+    let image = ImageArray::inspect(left, "left")?;
+    if (image.width, image.height) != map.dims() {
         return Err(PyValueError::new_err(format!(
-            "f {f} and baseline {baseline} must be positive and finite, doffs {doffs} finite"
+            "left is {}×{} but disp is {}×{} (width × height)",
+            image.width,
+            image.height,
+            map.dims().0,
+            map.dims().1
         )));
     }
+    let image = image.to_rgb()?;
+    let cloud = py.detach(|| jem::geometry::point_cloud(&map, &image, &camera));
+    let n = cloud.points.len();
+    let points: Vec<f32> = cloud.points.into_iter().flatten().collect();
+    let colours: Vec<u8> = cloud.colours.into_iter().flatten().collect();
+    Ok((to_array(py, &[n, 3], points)?, to_array(py, &[n, 3], colours)?))
+}
+
+/// A camera from Python's numbers: ``f`` and ``baseline`` positive, all finite, and their product too.
+fn checked_camera(f: f64, baseline: f64, cx: f64, cy: f64, doffs: f64) -> PyResult<jem::geometry::Camera> {
+    let finite = [f, baseline, cx, cy, doffs].iter().all(|v| v.is_finite()) && (f * baseline).is_finite();
+    if !(finite && f > 0.0 && baseline > 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "f {f} and baseline {baseline} must be positive and finite (and their product), cx {cx}, cy {cy} and \
+             doffs {doffs} finite"
+        )));
+    }
+    Ok(jem::geometry::Camera { focal: f, cx, cy, baseline, doffs })
+}
+
+/// A disparity map in colour, as ``jem viz`` draws it: uint8 H×W×3 (RGB), dark indigo (low) through blue,
+/// green, yellow to dark red (high), invalid (``inf``, NaN) pixels black; the same bytes as the PNG ``jem viz
+/// DISP -o OUT.png --vmin A --vmax B`` writes. ``vmin``, ``vmax``: the range the colours span (default: the map's
+/// finite range, as ``jem viz`` without a calib.txt beside DISP). Raises ValueError for a bound that is not
+/// finite or a range that is empty or reversed.
+#[pyfunction]
+#[pyo3(signature = (disp, vmin=None, vmax=None))]
+fn colorize<'py>(
+    py: Python<'py>,
+    disp: &Bound<'py, PyAny>,
+    vmin: Option<f64>,
+    vmax: Option<f64>,
+) -> PyResult<Bound<'py, PyAny>> {
     let map = to_plane(disp, "disp")?;
-    let camera = jem::geometry::Camera { focal: f, cx: 0.0, cy: 0.0, baseline, doffs };
-    Ok(to_numpy(py, py.detach(|| jem::geometry::depth_map(&map, &camera))))
+    let given = (vmin.map(|v| v as f32), vmax.map(|v| v as f32));
+    let (lo, hi) = jem::viz::colour_range(&map, given, None, ("vmin", "vmax")).map_err(|e| to_py(&e))?;
+    let canvas = py.detach(|| jem::viz::colorize(&map, lo, hi));
+    to_array(py, &[canvas.height, canvas.width, 3], canvas.data)
 }
 
 /// A 2-D floating-point array (any strides) as a plane of f32: float32 as it is, float64 rounded, and the other
@@ -398,18 +467,12 @@ fn write_pfm(py: Python<'_>, path: PathBuf, array: &Bound<'_, PyAny>) -> PyResul
     py.detach(|| jem::io::pfm::write_pfm(&path, &map)).map_err(|e| to_py(&e))
 }
 
-/// A PNG, PPM/PGM or JPEG file as a numpy array, as ``jem`` reads it: uint8 or uint16 (the file's bit depth),
+/// A PNG, PPM/PGM, JPEG, BMP, TIFF or WebP file as a numpy array, as ``jem`` reads it: uint8 or uint16 (the file's bit depth),
 /// H×W for grey, H×W×3 (RGB) for colour; alpha is dropped. Raises ValueError for an undecodable file, OSError
 /// if it cannot be read.
 #[pyfunction]
 fn read_image(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyAny>> {
-    let img = py
-        .detach(|| {
-            let reader = image::ImageReader::open(&path).and_then(|r| r.with_guessed_format());
-            let reader = reader.map_err(|e| Error::io(&path, e))?;
-            reader.decode().map_err(|source| Error::Image { path: path.clone(), source })
-        })
-        .map_err(|e| to_py(&e))?;
+    let img = py.detach(|| jem::io::decode_image(&path)).map_err(|e| to_py(&e))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let grey = !img.color().has_color();
     let sixteen = img.color().bytes_per_pixel() / img.color().channel_count() > 1;
@@ -430,21 +493,35 @@ fn to_array<'py, T: numpy::Element>(py: Python<'py>, shape: &[usize], data: Vec<
 ///
 /// ``match`` computes a disparity map (the same bytes as the ``jem`` command line), ``Matcher`` matches many pairs
 /// with one configuration and can remember a sequence's frames, ``sequence_frames`` lists a sequence folder's
-/// frames, ``depth`` turns a map into metric depth, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM
-/// files, ``read_image`` loads a PNG/PNM/JPEG.
+/// frames, ``depth`` turns a map into metric depth and ``cloud`` into the points ``--cloud`` writes,
+/// ``colorize`` draws it as ``jem viz`` does, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM files,
+/// ``read_image`` loads an image file (PNG, PNM, JPEG, BMP, TIFF, WebP).
 #[pymodule]
 #[pyo3(name = "jem")]
 fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(match_pair, m)?)?;
     m.add_function(wrap_pyfunction!(depth, m)?)?;
+    m.add_function(wrap_pyfunction!(cloud, m)?)?;
+    m.add_function(wrap_pyfunction!(colorize, m)?)?;
     m.add_function(wrap_pyfunction!(read_pfm, m)?)?;
     m.add_function(wrap_pyfunction!(write_pfm, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
     m.add_function(wrap_pyfunction!(matcher::sequence_frames, m)?)?;
     m.add_class::<PyMatcher>()?;
     // maturin's package __init__ re-exports `*` of the native module: `__all__` makes that include __version__.
-    let all = ["__version__", "match", "Matcher", "sequence_frames", "depth", "read_pfm", "write_pfm", "read_image"];
+    let all = [
+        "__version__",
+        "match",
+        "Matcher",
+        "sequence_frames",
+        "depth",
+        "cloud",
+        "colorize",
+        "read_pfm",
+        "write_pfm",
+        "read_image",
+    ];
     m.add("__all__", all)?;
     Ok(())
 }

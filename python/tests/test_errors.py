@@ -12,7 +12,7 @@ SMALL = np.zeros((16, 40, 3), np.uint8)
 @pytest.mark.parametrize(
     "left, message",
     [
-        (np.zeros((16, 40, 4), np.uint8), r"shape \[16, 40, 4\] is neither H×W \(grey\) nor H×W×3"),
+        (np.zeros((16, 40, 2), np.uint8), r"shape \[16, 40, 2\] is neither H×W \(grey\), H×W×3 \(RGB\) nor H×W×4"),
         (np.zeros(40, np.uint8), r"shape \[40\] is neither"),
         (np.zeros((16, 40, 3), np.float32), "dtype float32 is not supported"),
         (np.zeros((16, 40), np.int16), "dtype int16 is not supported"),

@@ -15,7 +15,9 @@
 //!
 //! [`Shard`] splits a sorted list into N deterministic parts (item k goes to part `k mod N`), so a job array
 //! (Slurm, GNU parallel) can process a data set with no coordination; `--skip-existing` makes reruns resume.
+//! [`Eta`] estimates the time a batch has left from the pairs finished so far.
 
+mod eta;
 mod summary;
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -32,6 +34,7 @@ use crate::params::Params;
 use crate::pipeline::Timings;
 use crate::setup::NdispSource;
 use crate::setup::memory::MemoryBudget;
+pub use eta::{Eta, format_duration};
 pub use summary::{one_line, summary};
 
 /// Checks an algorithm name: 1–64 ASCII letters, digits, `_` or `-` (it becomes part of file names), and not

@@ -60,15 +60,18 @@ struct BatchDisplay {
     bar: Option<indicatif::ProgressBar>,
     quiet: bool,
     total: usize,
+    /// Scenes run at once, for the time left.
+    jobs: usize,
     done: std::sync::atomic::AtomicUsize,
+    eta: std::sync::Mutex<jem::batch::Eta>,
     active: std::sync::Mutex<std::collections::BTreeMap<usize, (String, String)>>,
 }
 
 impl BatchDisplay {
-    fn new(total: usize, quiet: bool, params: jem::Params) -> Self {
+    fn new(total: usize, jobs: usize, quiet: bool, params: jem::Params) -> Self {
         let bar = (!quiet && std::io::stderr().is_terminal()).then(|| {
             let style = indicatif::ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] [{bar:30}] {pos}/{len} scenes, ETA {eta}  {wide_msg}",
+                "{spinner} [{elapsed_precise}] [{bar:30}] {pos}/{len} scenes{prefix}  {wide_msg}",
             )
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
             .progress_chars("=> ");
@@ -76,7 +79,16 @@ impl BatchDisplay {
             bar.enable_steady_tick(std::time::Duration::from_millis(200));
             bar
         });
-        BatchDisplay { params, bar, quiet, total, done: 0.into(), active: Default::default() }
+        BatchDisplay {
+            params,
+            bar,
+            quiet,
+            total,
+            jobs,
+            done: 0.into(),
+            eta: Default::default(),
+            active: Default::default(),
+        }
     }
 
     fn line(&self, msg: &str) {
@@ -117,13 +129,15 @@ impl BatchDisplay {
                 }
                 let n = self.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
                 let head = format!("[{n}/{}] {}", self.total, one_line(&report.name));
+                let left = self.time_left(&report.status, self.total - n);
                 match &report.status {
                     SceneStatus::Failed(e) => self.line(&format!("{head}: FAILED: {}", one_line(&e.to_string()))),
                     _ if self.quiet || self.bar.is_some() => {}
                     SceneStatus::Skipped => self.line(&format!("{head}: skipped (result exists)")),
-                    SceneStatus::Done(r) => {
-                        self.line(&format!("{head}: {}x{}, ndisp {}, {:.3} s", r.size.0, r.size.1, r.ndisp, r.seconds))
-                    }
+                    SceneStatus::Done(r) => self.line(&format!(
+                        "{head}: {}x{}, ndisp {}, {:.3} s{left}",
+                        r.size.0, r.size.1, r.ndisp, r.seconds
+                    )),
                 }
                 // A value too large for this scene's image (held to its bound); -q silences it.
                 if let SceneStatus::Done(r) = &report.status
@@ -134,10 +148,26 @@ impl BatchDisplay {
                     }
                 }
                 if let Some(bar) = &self.bar {
+                    bar.set_prefix(left);
                     bar.inc(1);
                 }
                 self.refresh();
             }
+        }
+    }
+
+    /// `, ETA 1 min 05 s` after a finished scene (its pipeline time counted), while scenes are left and one has
+    /// finished; else empty.
+    fn time_left(&self, status: &jem::batch::SceneStatus, left: usize) -> String {
+        let Ok(mut eta) = self.eta.lock() else {
+            return String::new();
+        };
+        if let jem::batch::SceneStatus::Done(r) = status {
+            eta.record(r.seconds);
+        }
+        match eta.remaining(left, self.jobs) {
+            Some(d) if left > 0 => format!(", ETA {}", jem::batch::format_duration(d)),
+            _ => String::new(),
         }
     }
 }
@@ -166,7 +196,7 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         skip_existing: args.skip_existing,
         max_memory_bytes: args.memory.memory_limit(),
     };
-    let display = BatchDisplay::new(scenes.len(), global.quiet, params.clone());
+    let display = BatchDisplay::new(scenes.len(), args.jobs, global.quiet, params.clone());
     // Panics inside the pipeline are caught and reported per scene; keep the default hook's message and
     // backtrace note off the terminal unless -v.
     let previous_hook = (!global.verbose).then(|| {

@@ -12,7 +12,7 @@ use super::ThreadsArg;
 
 /// `auto`, 1, 2 or 4.
 #[derive(Clone, Copy, Debug)]
-struct ScaleArg(Option<u32>);
+pub(super) struct ScaleArg(pub(super) Option<u32>);
 
 impl std::str::FromStr for ScaleArg {
     type Err = String;
@@ -51,7 +51,8 @@ pub(super) struct EvalArgs {
     /// Pixels to evaluate: nonocc (mask0nocc.png == 255) or all (mask > 0).
     #[arg(long, value_name = "nonocc|all", default_value = "nonocc")]
     mask: jem::eval::MaskMode,
-    /// Factor to full-resolution pixels; auto reads it from the path (trainingQ/testQ = 4, *H = 2, *F = 1).
+    /// Factor to full-resolution pixels; auto reads it from the path (trainingQ/testQ = 4, *H = 2, *F = 1), else
+    /// from the scenes' names and image sizes (MiddEval3's are known).
     #[arg(long, value_name = "auto|1|2|4", default_value = "auto")]
     scale: ScaleArg,
     /// Output format: table, csv, json or markdown.
@@ -69,7 +70,7 @@ pub(super) struct EvalArgs {
 }
 
 /// Where the paper's TSV is: --paper-file, else $JEM_DATA/paper-results.tsv, else ../shared/middlebury/.
-fn paper_file(flag: Option<&Path>) -> PathBuf {
+pub(super) fn paper_file(flag: Option<&Path>) -> PathBuf {
     if let Some(p) = flag {
         return p.to_path_buf();
     }
@@ -130,6 +131,10 @@ pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCod
         // Results a batch is still writing (its lock is held): scored as they are now.
         for line in reports.iter().flat_map(|r| &r.writers) {
             note!("warning: {line}; scored as it is now, the scores may change when it ends");
+        }
+        // Every --alg scores the same scenes: one line says how their resolution was found.
+        if let Some(line) = reports.iter().find_map(|r| r.scale_inferred.as_ref()) {
+            note!("note: {line}");
         }
     }
     out!("{}", render(&reports, &papers, args.format));

@@ -17,7 +17,7 @@ use super::{GlobalArgs, MemoryArg, ThreadsArg};
 /// Arguments of `jem match` and of the default command (the help text is on [`Cli`](super::Cli)).
 #[derive(Args, Debug, Clone)]
 pub(super) struct MatchArgs {
-    /// Left (reference) image: PNG or PPM/PGM (8 or 16 bit), or JPEG.
+    /// Left (reference) image: PNG, PPM/PGM, JPEG, BMP, TIFF or WebP (8 or 16 bit).
     #[arg(required = true)]
     left: Option<PathBuf>,
     /// Right image, same size as the left.

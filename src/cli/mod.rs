@@ -8,7 +8,7 @@
 //! comments are the subcommands' help), [`run`], which hands each command to its own file, and
 //! [`print_error`]. One file per command: `match.rs` (also the default, `jem LEFT RIGHT -o OUT`), `config.rs`
 //! (and the `--config`/`--set`/`--downscale` flags that `match`, `batch` and `sequence` share), `synth.rs`,
-//! `degrade.rs`, `batch.rs`, `sequence.rs`, `eval.rs`, `viz.rs`.
+//! `degrade.rs`, `batch.rs`, `sequence.rs`, `eval.rs`, `viz.rs`, `report.rs`.
 //!
 //! Everything the commands print goes through [`note!`] (stderr) and [`out!`] (stdout), which ignore a closed or
 //! failing stream: `jem batch … 2>&1 | head -1` must not stop the work (`eprintln!` panics on a
@@ -36,6 +36,7 @@ mod config;
 mod degrade;
 mod eval;
 mod r#match;
+mod report;
 mod sequence;
 mod signals;
 mod synth;
@@ -51,6 +52,7 @@ use config::ConfigArgs;
 use degrade::DegradeArgs;
 use eval::EvalArgs;
 use r#match::MatchArgs;
+use report::ReportArgs;
 use sequence::SequenceArgs;
 use synth::SynthArgs;
 use viz::VizArgs;
@@ -83,8 +85,8 @@ pub struct GlobalArgs {
     verbose: bool,
 }
 
-/// `--threads`, for the commands that run work in parallel (`match`, `batch`, `sequence`, `synth`, `degrade`, `eval`; not
-/// `config` or `viz`, which have nothing to share out).
+/// `--threads`, for the commands that run work in parallel (`match`, `batch`, `sequence`, `synth`, `degrade`,
+/// `eval`, `report`; not `config` or `viz`, which have nothing to share out).
 #[derive(Args, Debug, Clone, Default)]
 pub struct ThreadsArg {
     /// Worker threads (default: one per core). The output does not depend on it.
@@ -239,8 +241,9 @@ enum Command {
     /// Ground-truth pixels that are inf are skipped; the mask selects mask0nocc.png == 255 (nonocc) or > 0 (all).
     /// Invalid (inf/NaN) result pixels count in `invalid` and `totbad2` but not in avgErr/rms; valid ones are
     /// clipped to [0, ndisp]. Errors and the bad thresholds 0.5/1/2/4 are in full-resolution pixels (err = s·|d − gt|,
-    /// s = 4 for trainingQ, 2 for *H, 1 for *F). All percentages are of the masked GT-valid pixels (bad counts only
-    /// valid pixels; totbad2 = bad2 + invalid). "weighted" is the MiddEval3 average (PianoL, Playroom, Playtable,
+    /// s = 4 for trainingQ, 2 for *H, 1 for *F; in a folder named otherwise, from the scenes' names and image sizes,
+    /// said on stderr). All percentages are of the masked GT-valid pixels (bad counts only valid pixels;
+    /// totbad2 = bad2 + invalid). "weighted" is the MiddEval3 average (PianoL, Playroom, Playtable,
     /// Shelves, Vintage weigh 0.5, other scenes 1), "mean" the plain one. Scenes whose result is missing or
     /// unreadable are listed, left out of both averages, and make the exit code 2.
     /// KITTI and ETH3D: native pixels, no clipping, every scene weighs 1. KITTI as its devkit: invalid result
@@ -274,7 +277,8 @@ enum Command {
     /// With --gt the picture is the colour map and the error map side by side (disparity | error), under the
     /// benchmark's own rule, recognised from where GT is (--layout says otherwise):
     ///   MiddEval3  bad-2: error > 2 full-resolution px (errors × --scale, else from the path: trainingQ = 4, *H = 2,
-    ///              *F = 1; a path that tells nothing needs --scale)
+    ///              *F = 1, else from the scene's name and size, or from GT's size when only one resolution
+    ///              has a MiddEval3 scene of that size; when nothing tells, --scale is needed)
     ///   KITTI      D1: error > 3 px and > 5 % of the true disparity (GT a 16-bit .png in disp_noc*/ or disp_occ*/;
     ///              the sibling map marks occlusions)
     ///   ETH3D      bad-1: error > 1 px (GT in a scene folder of a *_gt/ tree)
@@ -286,6 +290,19 @@ enum Command {
     /// *_gt/ sibling or --gt DIR).
     #[command(verbatim_doc_comment)]
     Viz(VizArgs),
+    /// Write an HTML page of a data set's results: `jem report DIR --alg A[,B...] -o report.html`.
+    ///
+    /// One page that opens from the disk in any browser (nothing is loaded from a network), its pictures in the
+    /// folder <stem>_files/ beside it. Per scene or frame a row: the left image and, for each --alg, its disparity
+    /// in colour and its error map under the benchmark's rule (as jem viz draws them; click for the full size),
+    /// and its scores as jem eval computes them: MiddEval3 avgErr, bad-2 (invalid pixels counted as bad), invalid,
+    /// the run time, and the paper's avgErr beside an --alg given a --paper column; KITTI D1 and avgErr; ETH3D
+    /// bad-1 and avgErr. The last row is the weighted (MiddEval3) or plain mean. Click a score's header to sort
+    /// the rows. A colour bar and the error map's key head the page; the command, each algorithm's configuration
+    /// (where the run recorded it) and the machine are at its foot.
+    /// The page and its pictures are written all or none; an output that is one of the inputs is refused.
+    #[command(verbatim_doc_comment)]
+    Report(ReportArgs),
 }
 
 /// Runs the parsed command line.
@@ -299,6 +316,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Batch(a)) => &a.threads,
         Some(Command::Sequence(a)) => &a.threads,
         Some(Command::Eval(a)) => &a.threads,
+        Some(Command::Report(a)) => &a.threads,
         Some(Command::Config(_) | Command::Viz(_)) => &ThreadsArg::default(),
     };
     if let Some(n) = threads.threads {
@@ -319,6 +337,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Sequence(args)) => sequence::run(&args, &cli.global),
         Some(Command::Eval(args)) => eval::run(&args, &cli.global),
         Some(Command::Viz(args)) => viz::run(&args, &cli.global),
+        Some(Command::Report(args)) => report::run(&args, &cli.global),
     }
 }
 

@@ -34,7 +34,8 @@ pub(super) struct VizArgs {
     #[arg(long, value_name = "NAME")]
     alg: Option<String>,
     /// MiddEval3: factor to full-resolution px for the bad-2 rule (default: from the path, trainingQ = 4, *H = 2,
-    /// *F = 1; required when the path does not tell). KITTI and ETH3D are in native pixels.
+    /// *F = 1, else from the scene's name and size; required when nothing tells). KITTI and ETH3D are in native
+    /// pixels.
     #[arg(long, value_name = "1|2|4")]
     scale: Option<u32>,
     /// Read the data as this layout (middlebury, eth3d, kitti2015, kitti2012) instead of recognising it; sets the
@@ -64,9 +65,10 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     if args.input.is_dir() {
         return sheet(args, global);
     }
+    // Before any file is read (colour_range checks them again with the map).
     for (flag, v) in [("--vmin", args.vmin), ("--vmax", args.vmax)] {
-        if v.is_some_and(|v| !v.is_finite()) {
-            return Err(Error::param(flag, v.unwrap(), "a finite number"));
+        if let Some(v) = v.filter(|v| !v.is_finite()) {
+            return Err(Error::param(flag, v, "a finite number"));
         }
     }
     let dir = args.input.parent().unwrap_or(Path::new("."));
@@ -74,8 +76,8 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let mut read = vec![args.input.as_path().to_path_buf(), dir.join("calib.txt")];
     if let Some((gt, rule)) = &truth {
         read.push(gt.to_path_buf());
-        if let Ok((files, _)) = rule {
-            read.extend(files.paths().into_iter().map(Path::to_path_buf));
+        if let Ok(found) = rule {
+            read.extend(found.files.paths().into_iter().map(Path::to_path_buf));
         }
     }
     let read_refs: Vec<&Path> = read.iter().map(PathBuf::as_path).collect();
@@ -91,19 +93,19 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         }
     };
     let calib = viz::calib_range(&dir.join("calib.txt"));
-    let data = viz::finite_range(&disp);
-    let vmin = args.vmin.or(calib.map(|c| c.0)).or(data.map(|d| d.0)).unwrap_or(0.0);
-    let vmax = args.vmax.or(calib.map(|c| c.1)).or(data.map(|d| d.1)).unwrap_or(1.0);
-    if (args.vmin.is_some() || args.vmax.is_some()) && vmin >= vmax {
-        return Err(Error::param("--vmin / --vmax", format!("{vmin} / {vmax}"), "a range with --vmin below --vmax"));
-    }
+    let (vmin, vmax) = viz::colour_range(&disp, (args.vmin, args.vmax), calib, ("--vmin", "--vmax"))?;
     let colour = viz::colorize(&disp, vmin, vmax);
     let (picture, error) = match &truth {
         None => (colour, String::new()),
-        Some((files, rule)) => {
-            let (gt, mask) = viz::load_truth(&disp, files, *rule)?;
+        Some(found) => {
+            let (files, rule) = (&found.files, found.rule);
+            let (gt, mask) = viz::load_truth(&disp, files, rule)?;
+            if let Some(res) = found.resolution.as_ref().filter(|r| r.from_contents() && !global.quiet) {
+                let gt = files.disparity.display();
+                note!("note: {gt}: {}, as {} (--scale sets it)", res.name(), res.reason());
+            }
             let error = format!(" | error map against {}, red: {}", files.disparity.display(), rule.describe());
-            (viz::hstack(&[colour, viz::error_map(&disp, &gt, mask.as_ref(), *rule)], 4), error)
+            (viz::hstack(&[colour, viz::error_map(&disp, &gt, mask.as_ref(), rule)], 4), error)
         }
     };
     picture.write_png(&args.output)?;
@@ -131,6 +133,9 @@ fn sheet(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         gt: args.gt.clone(),
     };
     let rows = viz::sheet_rows(&args.input, alg, &opts)?;
+    if !global.quiet {
+        note_inferred_resolution(&args.input, &rows);
+    }
     // The sheet reads these files of every row: the output must be none of them.
     let read: Vec<&Path> = rows.iter().flat_map(viz::SheetRow::paths).collect();
     jem::io::check_outputs(&read, &[&args.output])?;
@@ -157,4 +162,23 @@ fn sheet(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         );
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// One line saying which resolution the scenes' names and image sizes told, when they did (no `--scale` and no
+/// trainingQ/H/F-like folder).
+pub(super) fn note_inferred_resolution(dir: &Path, rows: &[jem::viz::SheetRow]) {
+    let inferred: Vec<&jem::eval::Resolution> =
+        rows.iter().filter_map(|r| r.resolution.as_ref()).filter(|r| r.from_contents()).collect();
+    let scales: std::collections::BTreeSet<u32> = inferred.iter().map(|r| r.scale).collect();
+    let names: Vec<String> = scales.iter().map(|&s| jem::eval::resolution_name(s)).collect();
+    if !inferred.is_empty() {
+        let n = inferred.len();
+        let of = if n == rows.len() { "its".to_string() } else { format!("{n} of its") };
+        note!(
+            "note: {}: {}, from the names and image sizes of {of} {} MiddEval3 scene(s) (--scale sets it)",
+            dir.display(),
+            names.join(" and "),
+            rows.len()
+        );
+    }
 }

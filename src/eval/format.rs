@@ -348,6 +348,7 @@ mod tests {
             mask: MaskMode::All,
             scale: 2,
             scenes: vec![scene("Teddy", 1.5, true), scene("Pipes", 0.0, false)],
+            scale_inferred: None,
             writers: Vec::new(),
         };
         if let Ok(m) = &mut r.scenes[0].metrics {

@@ -51,6 +51,8 @@
 //!   [`evaluate_scene`] (a MiddEval3 scene folder).
 //! - `report.rs`: one algorithm over a folder of scenes: [`evaluate_dir`] finds the scenes with ground truth,
 //!   their resolution and weight, scores them in parallel and collects an [`AlgReport`] with its averages.
+//! - `resolution.rs`: a MiddEval3 folder's resolution, from its path or from its scenes' names and sizes
+//!   ([`scene_resolution`], [`file_resolution`]).
 //! - `paper.rs`: the paper's numbers ([`PaperResults`], `paper-results.tsv`), printed beside ours.
 //! - `format.rs`: [`render`] prints reports as a text or Markdown table, JSON or CSV.
 //! - `sequence.rs`: a stereo sequence's results ([`sequence::evaluate_sequence`]): each frame as above, and the
@@ -61,6 +63,7 @@ mod kitti_fill;
 mod metrics;
 mod paper;
 mod report;
+mod resolution;
 pub mod sequence;
 
 pub use format::{Format, render};
@@ -70,4 +73,8 @@ pub use metrics::{
     BAD_THRESHOLDS_PX, D1_RELATIVE, D1_THRESHOLD_PX, MaskMode, Metrics, evaluate, evaluate_files, evaluate_scene,
 };
 pub use paper::{PaperColumn, PaperResults};
-pub use report::{AlgReport, SceneResult, Sources, evaluate_dir, find_gt_scenes, scale_from_path, scene_weight};
+pub use report::{AlgReport, SceneResult, Sources, evaluate_dir, find_gt_scenes, scene_weight};
+pub use resolution::{
+    QUARTER_SIZES, Resolution, ScaleSource, file_resolution, resolution_name, scale_from_any_size, scale_from_path,
+    scale_from_scene_size, scene_resolution,
+};

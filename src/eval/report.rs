@@ -1,5 +1,5 @@
 //! One algorithm over a data set: [`evaluate_dir`] finds the pairs with ground truth ([`crate::dataset::discover`]),
-//! their resolution ([`scale_from_path`], MiddEval3) and weight ([`scene_weight`]), scores them in parallel into an
+//! their resolution ([`scene_resolution`](super::scene_resolution), MiddEval3) and weight ([`scene_weight`]), scores them in parallel into an
 //! [`AlgReport`], whose weighted and plain means are the "Averages" of the [`eval`](crate::eval) module doc.
 //! Per-scene failures are recorded, not returned. [`find_gt_scenes`] lists MiddEval3 scene folders with ground
 //! truth.
@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 
 use super::metrics::{MaskMode, Metrics, check_size, evaluate, evaluate_files, evaluate_scene};
+use super::resolution::{resolution_name, scene_resolution};
 use crate::dataset::{Discovery, Layout, Pair, Purpose};
 use crate::error::{Error, Result};
 
@@ -20,21 +21,6 @@ pub fn scene_weight(name: &str) -> f64 {
         "PianoL" | "Playroom" | "Playtable" | "Shelves" | "Vintage" => 0.5,
         _ => 1.0,
     }
-}
-
-/// The resolution scale implied by a path: the innermost component named `training`, `test` or `additional`
-/// followed by `Q` (4), `H` (2) or `F` (1), as in MiddEval3's `trainingQ`. `None` if there is none.
-pub fn scale_from_path(path: &Path) -> Option<u32> {
-    path.components().rev().find_map(|c| {
-        let name = c.as_os_str().to_str()?;
-        let rest = ["training", "test", "additional"].iter().find_map(|p| name.strip_prefix(p))?;
-        match rest {
-            "Q" => Some(4),
-            "H" => Some(2),
-            "F" => Some(1),
-            _ => None,
-        }
-    })
 }
 
 /// One scene's evaluation.
@@ -69,6 +55,9 @@ pub struct AlgReport {
     pub scale: u32,
     /// Every scene with ground truth, sorted by path.
     pub scenes: Vec<SceneResult>,
+    /// How the MiddEval3 resolution was found, when the data told it rather than `--scale` or a folder's name: a
+    /// line to show the user (`None` otherwise).
+    pub scale_inferred: Option<String>,
     /// Runs that were writing these results while they were scored ([`crate::dataset::writers`]): the scores may
     /// change when they end.
     pub writers: Vec<String>,
@@ -145,13 +134,14 @@ pub struct Sources {
 /// scenes (`disp0<alg>.pfm` beside `disp0GT.pfm`), KITTI frames and ETH3D scenes (results and truth where
 /// [`crate::dataset`] puts them). One layout per call.
 ///
-/// `scale = None` infers the factor of MiddEval3 scenes from each scene's path ([`scale_from_path`], after
-/// resolving `.`/symlinks); KITTI and ETH3D are scored in native pixels (1).
+/// `scale = None` infers the factor of MiddEval3 scenes from each scene's path (after resolving `.`/symlinks), else
+/// from its name and image size ([`scene_resolution`](super::scene_resolution); [`AlgReport::scale_inferred`]
+/// then says so); KITTI and ETH3D are scored in native pixels (1).
 ///
 /// # Errors
 /// No scene with ground truth, an unreadable folder, data sets of two layouts, a results folder that holds
-/// another data set's results, or (MiddEval3, with `scale = None`) a path that implies no resolution or scenes at
-/// different resolutions. Per-scene problems are not errors: they are recorded in the report.
+/// another data set's results, or (MiddEval3, with `scale = None`) a scene whose resolution nothing tells, or
+/// scenes at different resolutions. Per-scene problems are not errors: they are recorded in the report.
 pub fn evaluate_dir(
     dir: &Path,
     alg: &str,
@@ -180,10 +170,10 @@ pub fn evaluate_dir(
     crate::dataset::check_results_dirs(&pairs, alg, src.results.as_deref(), false)?;
     let writers = crate::dataset::writers(&pairs, alg, src.results.as_deref());
     let locations: Vec<PathBuf> = pairs.iter().map(Pair::location).collect();
-    let scale = match (scale, layout) {
-        (Some(s), _) => s,
-        (None, Layout::Middlebury) => infer_common_scale(&locations)?,
-        (None, _) => 1,
+    let (scale, scale_inferred) = match (scale, layout) {
+        (Some(s), _) => (s, None),
+        (None, Layout::Middlebury) => infer_common_scale(dir, &locations)?,
+        (None, _) => (1, None),
     };
     let names = scene_names(dir, &pairs, &locations);
     let scenes = pairs
@@ -203,7 +193,7 @@ pub fn evaluate_dir(
             }
         })
         .collect();
-    Ok(AlgReport { alg: alg.to_string(), layout, mask: mask_mode, scale, scenes, writers })
+    Ok(AlgReport { alg: alg.to_string(), layout, mask: mask_mode, scale, scale_inferred, scenes, writers })
 }
 
 /// Checks that the files of the data set a pair's score needs are there: its ground truth, its mask (for
@@ -269,30 +259,42 @@ fn score_pair(pair: &Pair, alg: &str, scale: u32, mask_mode: MaskMode, src: &Sou
     Ok(metrics)
 }
 
-/// The one scale all `dirs` imply.
-fn infer_common_scale(dirs: &[PathBuf]) -> Result<u32> {
+/// The one scale all scene folders `dirs` (under `root`) have ([`scene_resolution`]: their path, else their name
+/// and image size), and a line saying so when it came from the sizes.
+fn infer_common_scale(root: &Path, dirs: &[PathBuf]) -> Result<(u32, Option<String>)> {
     let mut found: Option<(u32, &Path)> = None;
+    let mut from_sizes = 0;
     for d in dirs {
-        let resolved = std::fs::canonicalize(d).unwrap_or_else(|_| d.clone());
-        let Some(s) = scale_from_path(&resolved) else {
+        let Some(res) = scene_resolution(d) else {
             return Err(Error::Input(format!(
-                "cannot tell the resolution of {} from its path (no trainingQ/H/F-like folder); pass --scale 1, 2 \
-                 or 4",
+                "cannot tell the resolution of {}: no trainingQ/H/F-like folder in its path, and its name and \
+                 image size are not a MiddEval3 scene's; pass --scale 1, 2 or 4",
                 d.display()
             )));
         };
+        from_sizes += usize::from(res.from_contents());
         match found {
-            Some((f, other)) if f != s => {
+            Some((f, other)) if f != res.scale => {
                 return Err(Error::Input(format!(
                     "{} and {} are at different resolutions; evaluate one folder at a time or pass --scale",
                     other.display(),
                     d.display()
                 )));
             }
-            _ => found = Some((s, d)),
+            _ => found = Some((res.scale, d)),
         }
     }
-    found.map(|(s, _)| s).ok_or_else(|| Error::Input("no scenes".into()))
+    let (scale, _) = found.ok_or_else(|| Error::Input("no scenes".into()))?;
+    let note = (from_sizes > 0).then(|| {
+        let of = if from_sizes == dirs.len() { "its".to_string() } else { format!("{from_sizes} of its") };
+        format!(
+            "{}: {}, from the names and image sizes of {of} {} MiddEval3 scene(s) (--scale sets it)",
+            root.display(),
+            resolution_name(scale),
+            dirs.len()
+        )
+    });
+    Ok((scale, note))
 }
 
 /// Pair names, or the path of their location relative to `root` where two pairs share a name.
@@ -334,16 +336,6 @@ pub(super) fn error_chain(e: &Error) -> String {
 pub(super) mod tests {
     use super::*;
 
-    #[test]
-    fn scale_from_middeval_paths() {
-        assert_eq!(scale_from_path(Path::new("/d/MiddEval3/trainingQ/Teddy")), Some(4));
-        assert_eq!(scale_from_path(Path::new("MiddEval3/testH/Australia")), Some(2));
-        assert_eq!(scale_from_path(Path::new("x/trainingF")), Some(1));
-        assert_eq!(scale_from_path(Path::new("trainingQ/trainingH/Teddy")), Some(2));
-        assert_eq!(scale_from_path(Path::new("/home/PDF/Teddy")), None);
-        assert_eq!(scale_from_path(Path::new("trainingX/Teddy")), None);
-    }
-
     /// A scene with made-up metrics (avgerr, rms = 2·avgerr, bad2 10, invalid 1) and run time `avgerr` s.
     pub(in crate::eval) fn scene(name: &str, avgerr: f64, ok: bool) -> SceneResult {
         let m = Metrics::from_values([avgerr, 2.0 * avgerr, 0.0, 0.0, 10.0, 0.0, 1.0, 11.0, 5.0], 100);
@@ -370,6 +362,7 @@ pub(super) mod tests {
                 scene("New", 1.0, true),
                 scene("Vintage", 50.0, false),
             ],
+            scale_inferred: None,
             writers: Vec::new(),
         };
         let w = r.weighted().unwrap();

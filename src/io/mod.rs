@@ -16,15 +16,24 @@ use std::path::{Path, PathBuf};
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, RgbImage};
 
-pub use png::{ImageHeader, PNG16_MAX_DISPARITY};
+pub use png::{IMAGE_FORMATS, ImageHeader, PNG16_MAX_DISPARITY};
 
-/// An image file (PNG, PPM/PGM or JPEG; 8 or 16 bit; grey, RGB or RGBA) as an [`RgbImage`]: samples on the 8-bit
+/// An image file (any of [`IMAGE_FORMATS`]; 8 or 16 bit; grey, RGB or RGBA) as an [`RgbImage`]: samples on the 8-bit
 /// scale (16-bit values divided by 257), grey as three equal channels, alpha dropped.
 ///
 /// # Errors
 /// [`Error::Io`] naming the file when it cannot be read, [`Error::Image`] when it cannot be decoded.
 pub fn read_image(path: &Path) -> Result<RgbImage> {
     png::load_rgb(path)
+}
+
+/// An image file decoded as it is, its bit depth and channels kept (what [`read_image`] converts), for a caller
+/// that wants the file's own samples.
+///
+/// # Errors
+/// As [`read_image`].
+pub fn decode_image(path: &Path) -> Result<image::DynamicImage> {
+    png::decode(path)
 }
 
 /// Both views of a pair ([`read_image`]), decoded in parallel.
@@ -128,7 +137,7 @@ pub fn encode_disparity(path: &Path, map: &DisparityMap) -> Result<Vec<u8>> {
 /// are removed. If a rename fails (a destination that is a folder, say, or has become a special file:
 /// [`check_replaceable`]), the files renamed before it are undone: a destination that existed gets its old file
 /// back (kept under a hidden name, a hard link, until all are renamed), one that did not is removed; the error
-/// names the file that failed.
+/// names the file that failed. [`AllOrNone`] does the same for files produced one at a time.
 ///
 /// # Errors
 /// [`Error::Io`] naming the first file that could not be written, [`Error::Input`] for a destination that is not
@@ -137,20 +146,63 @@ pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
     for &(path, bytes) in files {
         check_file_size_limit(path, bytes.len() as u64)?;
     }
-    let mut staged: Vec<(PathBuf, &Path)> = Vec::with_capacity(files.len());
+    let mut set = AllOrNone::new();
     for &(path, bytes) in files {
-        match stage(path, |file| file.write_all(bytes).map_err(|e| Error::io(path, e))) {
-            Ok(tmp) => staged.push((tmp, path)),
-            Err(e) => {
-                let mut held = crate::cleanup::hold();
-                for (tmp, _) in &staged {
-                    let _ = std::fs::remove_file(tmp);
-                    held.forget(tmp);
-                }
-                return Err(e);
-            }
+        set.add(path, bytes)?;
+    }
+    set.commit()
+}
+
+/// Files written as one, as [`write_all_or_none`] writes them, but added one at a time, so that only one of them
+/// is in memory at once: [`AllOrNone::add`] writes a file to its temporary name, [`AllOrNone::commit`] renames
+/// them all into place (or none). Dropped without a commit (an error on the way), it removes its temporary files
+/// and no destination is touched.
+#[derive(Debug, Default)]
+pub struct AllOrNone {
+    /// (temporary file, destination), in the order added.
+    staged: Vec<(PathBuf, PathBuf)>,
+}
+
+impl AllOrNone {
+    /// An empty set.
+    pub fn new() -> Self {
+        AllOrNone::default()
+    }
+
+    /// Writes `bytes` to `path`'s temporary file (flushed to disk); `path` itself is written at the commit.
+    ///
+    /// # Errors
+    /// [`Error::Io`] naming `path`, or [`Error::Input`] for a file above the file-size limit (`ulimit -f`); the
+    /// set should then be dropped.
+    pub fn add(&mut self, path: &Path, bytes: &[u8]) -> Result<()> {
+        check_file_size_limit(path, bytes.len() as u64)?;
+        let tmp = stage(path, |file| file.write_all(bytes).map_err(|e| Error::io(path, e)))?;
+        self.staged.push((tmp, path.to_path_buf()));
+        Ok(())
+    }
+
+    /// Renames every file into place (see [`write_all_or_none`] for what a failed rename undoes).
+    ///
+    /// # Errors
+    /// [`Error::Io`] or [`Error::Input`] naming the file whose rename failed.
+    pub fn commit(mut self) -> Result<()> {
+        let staged = std::mem::take(&mut self.staged);
+        commit_staged(&staged)
+    }
+}
+
+impl Drop for AllOrNone {
+    fn drop(&mut self) {
+        let mut held = crate::cleanup::hold();
+        for (tmp, _) in &self.staged {
+            let _ = std::fs::remove_file(tmp);
+            held.forget(tmp);
         }
     }
+}
+
+/// Renames staged files (temporary name, destination) into place, all or none.
+fn commit_staged(staged: &[(PathBuf, PathBuf)]) -> Result<()> {
     // How to undo each rename: remove the new file (there was none), or put the old one back (kept by a hard link
     // under a hidden name; `None` when it could not be kept, and the new file then stays).
     enum Undo {

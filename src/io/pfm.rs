@@ -59,6 +59,19 @@ pub fn read_pfm(path: &Path) -> Result<Plane<f32>> {
     decode(&bytes).map_err(pfm_error)
 }
 
+/// A PFM file's width and height, from its header (the body is not read).
+///
+/// # Errors
+/// [`Error::Io`] if it cannot be read, [`Error::Pfm`] naming the path if the header is malformed.
+pub(crate) fn read_pfm_size(path: &Path) -> Result<(usize, usize)> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut bytes = Vec::new();
+    file.take(3 * (MAX_LINE as u64 + 2)).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
+    let (width, height, ..) = header(&bytes).map_err(|msg| Error::Pfm { path: path.to_path_buf(), msg })?;
+    Ok((width, height))
+}
+
 /// The longest header line accepted (a width, a space and a height fit in 41 bytes).
 const MAX_LINE: usize = 64;
 

@@ -1,7 +1,9 @@
-//! Raster images: loading PNG/PNM into [`RgbImage`], writing 8-bit colour PNGs and 16-bit disparity PNGs.
+//! Raster images: loading the formats of [`IMAGE_FORMATS`] into [`RgbImage`], writing 8-bit colour PNGs and 16-bit
+//! disparity PNGs.
 //!
-//! Loading accepts 8- and 16-bit grey, grey+alpha, RGB and RGBA PNG, and PPM/PGM; samples are scaled to 0..=255
-//! `f32` (16-bit values divided by 257), alpha is dropped. The format is sniffed from the content, not the name.
+//! Loading accepts 8- and 16-bit grey, grey+alpha, RGB and RGBA (and TIFF's float samples, through 16 bits);
+//! samples are scaled to 0..=255 `f32` (16-bit values divided by 257), alpha is dropped. The format is sniffed
+//! from the content, not the name; another format (GIF, AVIF, ...) is refused with the list of these.
 
 use std::io::Cursor;
 use std::path::Path;
@@ -10,6 +12,26 @@ use image::{DynamicImage, ImageEncoder, ImageReader};
 
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane, RgbImage};
+
+/// The image formats jem reads, as an error message lists them.
+pub const IMAGE_FORMATS: &str = "PNG, PPM/PGM/PNM, JPEG, BMP, TIFF, WebP";
+
+/// Refuses a file whose format was not recognised, or is one the decoder was not built to read, naming the file
+/// and listing the formats that are read (the decoder's own message names neither).
+fn check_format<R>(path: &Path, reader: &ImageReader<R>) -> Result<()>
+where
+    R: std::io::BufRead + std::io::Seek,
+{
+    match reader.format() {
+        Some(f) if f.reading_enabled() => Ok(()),
+        Some(f) => Err(Error::Input(format!(
+            "{}: {} images are not read (supported: {IMAGE_FORMATS})",
+            path.display(),
+            f.extensions_str().first().map_or("these", |e| e).to_ascii_uppercase()
+        ))),
+        None => Err(Error::Input(format!("{}: not an image jem reads (supported: {IMAGE_FORMATS})", path.display()))),
+    }
+}
 
 /// What an image file's header says, read without decoding the image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -31,9 +53,7 @@ pub(crate) fn read_header(path: &Path) -> Result<ImageHeader> {
     let file_bytes = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
     let reader = ImageReader::open(path).map_err(|e| Error::io(path, e))?;
     let reader = reader.with_guessed_format().map_err(|e| Error::io(path, e))?;
-    if reader.format().is_none() {
-        return Err(Error::Input(format!("{}: not a PNG, PNM or JPEG image", path.display())));
-    }
+    check_format(path, &reader)?;
     let decoder = reader.into_decoder().map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     let (w, h) = decoder.dimensions();
     let px = u64::from(w) * u64::from(h);
@@ -90,25 +110,35 @@ pub(crate) fn load_rgb_pair_within(left: &Path, right: &Path, max_bytes: u64) ->
 ///
 /// # Errors
 /// [`Error::Io`] if the file cannot be opened, [`Error::Image`] (naming the file and the decoder's reason) if it
-/// is not a readable PNG/PNM image.
+/// is not a readable image in one of [`IMAGE_FORMATS`].
 pub(crate) fn load_rgb(path: &Path) -> Result<RgbImage> {
     load_rgb_within(path, None)
 }
 
 /// [`load_rgb`], with the decoder's allocation limit `max_bytes` (`None`: the decoder's default).
 fn load_rgb_within(path: &Path, max_bytes: Option<u64>) -> Result<RgbImage> {
+    Ok(to_rgb(&decode_within(path, max_bytes)?))
+}
+
+/// Decodes an image file as it is (bit depth and channels kept).
+///
+/// # Errors
+/// As [`load_rgb`].
+pub(crate) fn decode(path: &Path) -> Result<DynamicImage> {
+    decode_within(path, None)
+}
+
+/// [`decode`], with the decoder's allocation limit `max_bytes` (`None`: the decoder's default).
+fn decode_within(path: &Path, max_bytes: Option<u64>) -> Result<DynamicImage> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let mut reader = ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| Error::io(path, e))?;
-    if reader.format().is_none() {
-        return Err(Error::Input(format!("{}: not a PNG, PNM or JPEG image", path.display())));
-    }
+    check_format(path, &reader)?;
     if let Some(max) = max_bytes {
         let mut limits = image::Limits::default();
         limits.max_alloc = Some(max);
         reader.limits(limits);
     }
-    let img = reader.decode().map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
-    Ok(to_rgb(&img))
+    reader.decode().map_err(|source| Error::Image { path: path.to_path_buf(), source })
 }
 
 /// Converts a decoded image to planar RGB `f32` (0..=255).
@@ -150,12 +180,23 @@ pub(crate) fn to_rgb(img: &DynamicImage) -> RgbImage {
 /// # Panics
 /// If `rgb.len() != width * height * 3`.
 pub(crate) fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<()> {
+    super::write_atomic(path, &encode_rgb8_png(path, width, height, rgb)?)
+}
+
+/// An 8-bit RGB PNG's bytes (interleaved `rgb`, `width * height * 3` bytes); `path` names it in errors.
+///
+/// # Errors
+/// [`Error::Image`] naming the path.
+///
+/// # Panics
+/// If `rgb.len() != width * height * 3`.
+pub(crate) fn encode_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<Vec<u8>> {
     assert_eq!(rgb.len(), width * height * 3);
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new(&mut bytes)
         .write_image(rgb, width as u32, height as u32, image::ExtendedColorType::Rgb8)
         .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
-    super::write_atomic(path, &bytes)
+    Ok(bytes)
 }
 
 /// The largest disparity a 16-bit PNG holds: 65535 / 256.
@@ -248,6 +289,43 @@ mod tests {
         let grey = dir.path().join("g.pgm");
         image::GrayImage::from_pixel(2, 2, image::Luma([9])).save(&grey).unwrap();
         assert_eq!(load_rgb(&grey).unwrap().rgb(3), [9.0; 3]);
+    }
+
+    #[test]
+    fn bmp_tiff_and_lossless_webp_read_as_the_png() {
+        let dir = tempfile::tempdir().unwrap();
+        let rgb8 = image::RgbImage::from_fn(5, 3, |x, y| image::Rgb([(x * 50) as u8, (y * 90) as u8, 200]));
+        let png = dir.path().join("a.png");
+        rgb8.save(&png).unwrap();
+        let want = load_rgb(&png).unwrap();
+        let tiff8 = dir.path().join("b.tif");
+        rgb8.save(&tiff8).unwrap();
+        let tiff16 = dir.path().join("b16.tiff");
+        DynamicImage::ImageRgb8(rgb8.clone()).to_rgb16().save(&tiff16).unwrap();
+        let webp = dir.path().join("c.webp");
+        DynamicImage::ImageRgb8(rgb8.clone()).to_rgba8().save(&webp).unwrap();
+        // Named .img: the content tells the format, not the name.
+        let bmp = dir.path().join("d.img");
+        rgb8.save_with_format(&bmp, image::ImageFormat::Bmp).unwrap();
+        for p in [tiff8, tiff16, webp, bmp] {
+            assert_eq!(load_rgb(&p).unwrap(), want, "{}", p.display());
+            let h = read_header(&p).unwrap();
+            assert_eq!((h.width, h.height), (5, 3), "{}", p.display());
+        }
+    }
+
+    #[test]
+    fn an_unsupported_format_lists_the_supported_ones() {
+        let dir = tempfile::tempdir().unwrap();
+        let gif = dir.path().join("x.gif");
+        std::fs::write(&gif, b"GIF89a\x01\x00\x01\x00\x00\x00\x00;").unwrap();
+        for e in [load_rgb(&gif).unwrap_err(), read_header(&gif).unwrap_err()] {
+            let msg = e.to_string();
+            assert!(msg.contains("x.gif") && msg.contains("GIF") && msg.contains(IMAGE_FORMATS), "{msg}");
+        }
+        let text = dir.path().join("t.png");
+        std::fs::write(&text, b"hello").unwrap();
+        assert!(load_rgb(&text).unwrap_err().to_string().contains("supported: PNG"));
     }
 
     #[test]

@@ -31,8 +31,8 @@ pub(crate) mod font;
 mod sheet;
 
 pub use sheet::{
-    Occlusion, RowPictures, RowScore, Sheet, SheetOptions, SheetRow, TruthFiles, contact_sheet, gt_rule, load_truth,
-    render_row, resolved_scale, sheet_rows,
+    Occlusion, RowPictures, RowScore, Sheet, SheetOptions, SheetRow, TruthFiles, TruthRule, contact_sheet, gt_rule,
+    load_truth, render_row, sheet_rows,
 };
 
 use std::path::Path;
@@ -188,6 +188,37 @@ pub fn finite_range(map: &Plane<f32>) -> Option<(f32, f32)> {
         None => Some((v, v)),
         Some((lo, hi)) => Some((lo.min(v), hi.max(v))),
     })
+}
+
+/// The colour range `jem viz` draws a map over: each end as given, else `calib`'s (a `calib.txt`'s `vmin`/`vmax`:
+/// [`calib_range`]), else the map's finite range ([`finite_range`]), else `0..1`. `names` name the two ends in
+/// messages (`--vmin`, `--vmax`).
+///
+/// # Errors
+/// [`Error::InvalidParam`](crate::Error::InvalidParam) for a given end that is not finite, or ends (one given at
+/// least) that make an empty or reversed range.
+pub fn colour_range(
+    disp: &DisparityMap,
+    given: (Option<f32>, Option<f32>),
+    calib: Option<(f32, f32)>,
+    names: (&str, &str),
+) -> Result<(f32, f32)> {
+    for (name, v) in [(names.0, given.0), (names.1, given.1)] {
+        if let Some(v) = v.filter(|v| !v.is_finite()) {
+            return Err(crate::Error::param(name, v, "a finite number"));
+        }
+    }
+    let data = finite_range(disp);
+    let vmin = given.0.or(calib.map(|c| c.0)).or(data.map(|d| d.0)).unwrap_or(0.0);
+    let vmax = given.1.or(calib.map(|c| c.1)).or(data.map(|d| d.1)).unwrap_or(1.0);
+    if (given.0.is_some() || given.1.is_some()) && vmin >= vmax {
+        return Err(crate::Error::param(
+            &format!("{} / {}", names.0, names.1),
+            format!("{vmin} / {vmax}"),
+            format!("a range with {} below {}", names.0, names.1),
+        ));
+    }
+    Ok((vmin, vmax))
 }
 
 /// Colour-maps a disparity map over `[vmin, vmax]` (an empty or reversed range maps everything to the low end);

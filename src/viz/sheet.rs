@@ -14,13 +14,14 @@ use super::{
 };
 use crate::dataset::{Discovery, Layout, Pair, Purpose};
 use crate::error::{Error, Result};
+use crate::eval::{Resolution, file_resolution, scene_resolution};
 use crate::image::{DisparityMap, Plane};
 
 /// How [`sheet_rows`] finds the rows.
 #[derive(Clone, Debug, Default)]
 pub struct SheetOptions {
-    /// MiddEval3's factor to full-resolution pixels (default: from each scene's path, `trainingQ` = 4; required
-    /// when the path does not tell and a scene has ground truth).
+    /// MiddEval3's factor to full-resolution pixels (default: from each scene's path, `trainingQ` = 4, else from
+    /// its name and image size; required when neither tells and a scene has ground truth).
     pub scale: Option<u32>,
     /// Read the tree as this layout instead of recognising it (as `jem batch --layout`).
     pub layout: Option<Layout>,
@@ -75,6 +76,8 @@ pub struct SheetRow {
     pub calib: Option<PathBuf>,
     /// The benchmark's rule for the error map.
     pub rule: ErrorRule,
+    /// How a MiddEval3 row's resolution was found, when no `--scale` gave it.
+    pub resolution: Option<Resolution>,
 }
 
 impl SheetRow {
@@ -87,22 +90,22 @@ impl SheetRow {
     }
 }
 
-/// The scale implied by a path after resolving it (so `.` inside `trainingQ` works).
-pub fn resolved_scale(path: &Path) -> Option<u32> {
-    let p = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
-    crate::eval::scale_from_path(&p)
-}
-
-/// The MiddEval3 scale of `path`: `scale`, else the one its path implies.
-fn middlebury_scale(path: &Path, scale: Option<u32>) -> Result<u32> {
-    scale.or_else(|| resolved_scale(path)).ok_or_else(|| {
-        Error::Input(format!(
-            "cannot tell the resolution of {} from its path (no trainingQ/H/F-like folder), which the error map's \
-             MiddEval3 rule (bad-2 at full resolution) needs: pass --scale 1, 2 or 4 (or --layout for a KITTI or ETH3D \
-             tree)",
+/// The MiddEval3 resolution of a scene folder or a ground-truth file: `scale` when given, else what
+/// [`scene_resolution`] or [`file_resolution`] finds (its path; its name and size).
+fn middlebury_resolution(path: &Path, scale: Option<u32>) -> Result<(u32, Option<Resolution>)> {
+    if let Some(s) = scale {
+        return Ok((s, None));
+    }
+    let found = if path.is_dir() { scene_resolution(path) } else { file_resolution(path) };
+    let Some(res) = found else {
+        return Err(Error::Input(format!(
+            "cannot tell the resolution of {}: no trainingQ/H/F-like folder in its path, and its name and size are \
+             not a MiddEval3 scene's; the error map's MiddEval3 rule (bad-2 at full resolution) needs it: pass \
+             --scale 1, 2 or 4 (or --layout for a KITTI or ETH3D tree)",
             path.display()
-        ))
-    })
+        )));
+    };
+    Ok((res.scale, Some(res)))
 }
 
 /// The KITTI ground truth of a frame: the map of all pixels with the non-occluded map marking occlusions, or the
@@ -116,14 +119,25 @@ fn kitti_truth(all: PathBuf, nonocc: PathBuf) -> Option<TruthFiles> {
     }
 }
 
+/// A ground truth, its benchmark's error rule, and how its resolution was found ([`gt_rule`]).
+#[derive(Clone, Debug)]
+pub struct TruthRule {
+    /// The files.
+    pub files: TruthFiles,
+    /// The rule of its error map.
+    pub rule: ErrorRule,
+    /// MiddEval3: how its resolution was found, when no `--scale` gave it.
+    pub resolution: Option<Resolution>,
+}
+
 /// The ground truth of one map at `gt` and its benchmark's error rule: KITTI D1 for a `.png` in a `disp_noc*` or
 /// `disp_occ*` folder (its sibling map marks occlusions), ETH3D bad-1 in a scene folder of a `*_gt` tree, else
-/// MiddEval3 bad-2 at the scale `scale` or the path gives (an error when neither does). `layout` overrides the
-/// recognition.
+/// MiddEval3 bad-2 at the scale `scale` gives, else the one [`file_resolution`] finds (the path; the folder's
+/// name and the file's size; its size alone), an error when none does. `layout` overrides the recognition.
 ///
 /// # Errors
 /// A MiddEval3 ground truth whose resolution is unknown.
-pub fn gt_rule(gt: &Path, layout: Option<Layout>, scale: Option<u32>) -> Result<(TruthFiles, ErrorRule)> {
+pub fn gt_rule(gt: &Path, layout: Option<Layout>, scale: Option<u32>) -> Result<TruthRule> {
     let folder = gt.parent().unwrap_or(Path::new("."));
     let folder_name = folder.file_name().and_then(|n| n.to_str()).unwrap_or("");
     let scene_parent = std::fs::canonicalize(folder).ok().and_then(|f| f.parent().map(Path::to_path_buf));
@@ -154,12 +168,17 @@ pub fn gt_rule(gt: &Path, layout: Option<Layout>, scale: Option<u32>) -> Result<
                 }
                 (None, None) => TruthFiles { disparity: given, occlusion: None },
             };
-            (truth, ErrorRule::KittiD1)
+            TruthRule { files: truth, rule: ErrorRule::KittiD1, resolution: None }
         }
-        Layout::Eth3d => (TruthFiles { disparity: gt.to_path_buf(), occlusion: mask }, ErrorRule::Eth3d),
+        Layout::Eth3d => TruthRule {
+            files: TruthFiles { disparity: gt.to_path_buf(), occlusion: mask },
+            rule: ErrorRule::Eth3d,
+            resolution: None,
+        },
         Layout::Middlebury => {
-            let scale = middlebury_scale(gt, scale)?;
-            (TruthFiles { disparity: gt.to_path_buf(), occlusion: mask }, ErrorRule::Middlebury { scale })
+            let (scale, resolution) = middlebury_resolution(gt, scale)?;
+            let files = TruthFiles { disparity: gt.to_path_buf(), occlusion: mask };
+            TruthRule { files, rule: ErrorRule::Middlebury { scale }, resolution }
         }
     })
 }
@@ -268,6 +287,7 @@ fn pair_row(pair: &Pair, result: PathBuf, opts: &SheetOptions) -> SheetRow {
         truth,
         calib,
         rule: ErrorRule::for_layout(pair.layout, 1),
+        resolution: None,
     }
 }
 
@@ -285,11 +305,13 @@ fn middlebury_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<She
         .into_iter()
         .map(|s| {
             let gt = s.join("disp0GT.pfm");
-            let (truth, rule) = if gt.is_file() {
-                let (truth, rule) = gt_rule(&gt, Some(Layout::Middlebury), opts.scale)?;
-                (Some(truth), rule)
+            let (truth, rule, resolution) = if gt.is_file() {
+                let (scale, resolution) = middlebury_resolution(&s, opts.scale)?;
+                let mask = s.join("mask0nocc.png");
+                let occlusion = mask.is_file().then_some(Occlusion::Mask(mask));
+                (Some(TruthFiles { disparity: gt, occlusion }), ErrorRule::Middlebury { scale }, resolution)
             } else {
-                (None, ErrorRule::Middlebury { scale: opts.scale.unwrap_or(1) })
+                (None, ErrorRule::Middlebury { scale: opts.scale.unwrap_or(1) }, None)
             };
             Ok(SheetRow {
                 name: crate::batch::scene_name(&s),
@@ -299,6 +321,7 @@ fn middlebury_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<She
                 truth,
                 calib: Some(s.join("calib.txt")),
                 rule,
+                resolution,
             })
         })
         .collect()
