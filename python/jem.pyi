@@ -1,7 +1,8 @@
 """Stereo matching by joint energy minimization (Xue & Cai), on numpy arrays.
 
 ``match`` computes a disparity map (the same bytes as the ``jem`` command line), ``depth`` turns it into metric
-depth, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads a PNG/PNM/JPEG.
+depth, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads a PNG/PNM/JPEG,
+``rectify``/``rectify_maps`` rectify a raw pair from its stereo calibration as OpenCV does.
 """
 
 import os
@@ -29,6 +30,7 @@ def match(
     confidence: Literal[False] = False,
     return_info: Literal[False] = False,
     calib_ndisp: Optional[int] = None,
+    rectify: Optional[_Path] = None,
 ) -> _Map: ...
 @overload
 def match(
@@ -43,6 +45,7 @@ def match(
     confidence: Literal[True],
     return_info: Literal[False] = False,
     calib_ndisp: Optional[int] = None,
+    rectify: Optional[_Path] = None,
 ) -> Tuple[_Map, _Map]: ...
 @overload
 def match(
@@ -57,6 +60,7 @@ def match(
     *,
     return_info: Literal[True],
     calib_ndisp: Optional[int] = None,
+    rectify: Optional[_Path] = None,
 ) -> Tuple[_Map, dict[str, Any]]: ...
 @overload
 def match(
@@ -71,6 +75,7 @@ def match(
     confidence: Literal[True],
     return_info: Literal[True],
     calib_ndisp: Optional[int] = None,
+    rectify: Optional[_Path] = None,
 ) -> Tuple[_Map, _Map, dict[str, Any]]:
     """The left view's disparity map of a rectified pair: float32 H×W, ``inf`` where invalid, exactly the map
     ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings.
@@ -82,7 +87,8 @@ def match(
     the TOML's shape. ``overrides``: ``{"section.key": value}`` as ``--set``. ``threads``: workers for this call
     (at most 4 per core, at least 16). ``max_memory``: bytes; larger runs go in tiles. With ``confidence=True`` also the confidence map, with
     ``return_info=True`` also a dict (ndisp, ndisp_measured, tiled, noise, timings, seconds, memory_planned,
-    peak_rss). The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
+    peak_rss). ``rectify``: a stereo calibration (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt); the raw
+    views are rectified first, as ``jem match --rectify``, and the map is of the rectified left view. The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
 
     Raises ValueError (shape, dtype, range, config, threads), MemoryError (fits neither whole nor in tiles, or
     cannot be allocated), OSError.
@@ -101,3 +107,13 @@ def write_pfm(path: _Path, array: npt.NDArray[np.floating[Any]]) -> None:
 
 def read_image(path: _Path) -> _Image:
     """A PNG, PPM/PGM or JPEG as uint8 or uint16, H×W (grey) or H×W×3 (RGB), as ``jem`` reads it."""
+
+def rectify_maps(calib: _Path, size: Optional[Tuple[int, int]] = None) -> dict[str, Any]:
+    """The rectification of a stereo calibration (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt) for views
+    of ``size`` (width, height; default: the size the file states), as ``cv2.stereoRectify(alpha=0)`` and
+    ``cv2.initUndistortRectifyMap`` give it: ``map1x``, ``map1y``, ``map2x``, ``map2y`` (float32 H×W, cv2.remap's
+    maps), ``R1``, ``R2``, ``P1``, ``P2``, ``Q`` (nested lists), ``focal``, ``baseline``, ``doffs``, ``size``."""
+
+def rectify(calib: _Path, left: _Image, right: _Image) -> Tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8], str]:
+    """The rectified views (uint8 H×W×3, what ``jem rectify`` writes) and the rectified pair's Middlebury
+    calib.txt text."""

@@ -64,6 +64,7 @@ pub mod params;
 mod pipeline;
 mod post;
 mod process;
+pub mod rectify;
 mod rng;
 mod scale;
 mod setup;

@@ -29,6 +29,11 @@ pub(super) struct MatchArgs {
     /// Disparity search range 0..N−1 (default: `ndisp` from calib.txt beside LEFT).
     #[arg(long, value_name = "N")]
     ndisp: Option<usize>,
+    /// Rectify the raw pair first with this stereo calibration, as `jem rectify` does (OpenCV FileStorage YAML/XML
+    /// or KITTI calib_cam_to_cam.txt): the outputs are then of the rectified left view, the camera for --depth and
+    /// --cloud is the rectified one, and calib.txt beside LEFT is not read.
+    #[arg(long, value_name = "CALIB")]
+    rectify: Option<PathBuf>,
     /// Also write the per-pixel confidence (max-marginal of the left view) to this file (.pfm/.exr).
     #[arg(long, value_name = "FILE")]
     confidence: Option<PathBuf>,
@@ -76,6 +81,10 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     }
     // Both headers are checked against the memory limit before either image is decoded.
     let (l, r) = matcher.read_pair(request.left, request.right)?;
+    let (l, r) = match &request.rectification {
+        Some(rect) => rect.rectify_pair(&l, &r)?,
+        None => (l, r),
+    };
     let load_time = start.elapsed();
     let out = match_with_progress(&mut matcher, (&l, &r), request.stated_ndisp, global.quiet)?;
     write_outputs(args, &request, &out, &l)?;
@@ -108,6 +117,8 @@ struct Request<'a> {
     stated_ndisp: Option<usize>,
     /// For `--depth` and `--cloud`.
     camera: Option<jem::geometry::Camera>,
+    /// With `--rectify`: how the pair is rectified before matching.
+    rectification: Option<jem::rectify::Rectification>,
 }
 
 impl<'a> Request<'a> {
@@ -130,12 +141,20 @@ impl<'a> Request<'a> {
         {
             return Err(Error::Input(format!("{}: a point cloud is written as .ply", c.display())));
         }
-        // calib.txt, read once when something needs it (the range, or the camera).
+        // calib.txt, read once when something needs it (the range, or the camera); with --rectify, the rectified
+        // pair's (it states no range).
         let wants_camera = args.cloud.is_some() || args.depth.is_some();
-        let calib_file = if (args.ndisp.is_none() || wants_camera) && calib.is_file() {
-            Some(calib::Calib::load(&calib)?)
-        } else {
-            None
+        let rectification = match &args.rectify {
+            Some(c) => Some(super::rectify::plan(c, left, right, args.memory.memory_limit())?),
+            None => None,
+        };
+        let calib_file = match &rectification {
+            Some(rect) => Some(
+                calib::Calib::parse(&rect.calib_txt())
+                    .map_err(|msg| Error::Calib { path: args.rectify.clone().unwrap_or_default(), msg })?,
+            ),
+            None if (args.ndisp.is_none() || wants_camera) && calib.is_file() => Some(calib::Calib::load(&calib)?),
+            None => None,
         };
         let camera = if wants_camera {
             let overrides = jem::geometry::CameraOverrides {
@@ -154,16 +173,17 @@ impl<'a> Request<'a> {
             .chain(args.cloud.as_deref())
             .chain(args.depth.as_deref())
             .collect();
-        jem::io::check_outputs(&[left, right, &calib], &outputs)?;
+        let rectify_calib = args.rectify.as_deref().unwrap_or(&calib);
+        jem::io::check_outputs(&[left, right, &calib, rectify_calib], &outputs)?;
         // The range: --ndisp, else calib.txt's (measured instead when it is missing or no real bound: half the
         // width or more).
         let stated_ndisp = match &calib_file {
-            Some(c) if args.ndisp.is_none() => {
+            Some(c) if args.ndisp.is_none() && rectification.is_none() => {
                 Some(c.ndisp().map_err(|msg| Error::Calib { path: calib.clone(), msg })?)
             }
             _ => None,
         };
-        Ok(Request { left, right, stated_ndisp, camera })
+        Ok(Request { left, right, stated_ndisp, camera, rectification })
     }
 }
 

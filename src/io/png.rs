@@ -150,12 +150,23 @@ pub(crate) fn to_rgb(img: &DynamicImage) -> RgbImage {
 /// # Panics
 /// If `rgb.len() != width * height * 3`.
 pub(crate) fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<()> {
+    super::write_atomic(path, &encode_rgb8_png(path, width, height, rgb)?)
+}
+
+/// An 8-bit RGB PNG of interleaved `rgb` (nothing is written; `path` names it in an error).
+///
+/// # Errors
+/// [`Error::Image`] naming the path.
+///
+/// # Panics
+/// If `rgb.len() != width * height * 3`.
+pub(crate) fn encode_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<Vec<u8>> {
     assert_eq!(rgb.len(), width * height * 3);
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new(&mut bytes)
         .write_image(rgb, width as u32, height as u32, image::ExtendedColorType::Rgb8)
         .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
-    super::write_atomic(path, &bytes)
+    Ok(bytes)
 }
 
 /// The largest disparity a 16-bit PNG holds: 65535 / 256.
