@@ -24,14 +24,18 @@ pub(crate) fn undistort_rectify_maps(
         |(i, (row_x, row_y))| {
             let y = i as f64;
             for (j, (mx, my)) in row_x.iter_mut().zip(row_y.iter_mut()).enumerate() {
-                let x = j as f64;
-                let ray = [0, 1, 2].map(|r| ir[r][0] * x + ir[r][1] * y + ir[r][2]);
-                let (u, v) = camera.distort(ray[0] / ray[2], ray[1] / ray[2]);
+                let (u, v) = source_position(camera, &ir, j as f64, y);
                 (*mx, *my) = (u as f32, v as f32);
             }
         },
     );
     Some((Plane::from_parts(width, height, map_x), Plane::from_parts(width, height, map_y)))
+}
+
+/// The original image's position of rectified position (x, y), given the inverse `ir` of projection × rotation.
+pub(crate) fn source_position(camera: &Intrinsics, ir: &Mat3, x: f64, y: f64) -> (f64, f64) {
+    let ray = [0, 1, 2].map(|r| ir[r][0] * x + ir[r][1] * y + ir[r][2]);
+    camera.distort(ray[0] / ray[2], ray[1] / ray[2])
 }
 
 #[cfg(test)]

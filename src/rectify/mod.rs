@@ -490,3 +490,6 @@ fn from_kitti(nodes: &Nodes, path: &Path) -> Result<StereoCalibration> {
         prerectified,
     })
 }
+
+#[cfg(test)]
+mod tests;
