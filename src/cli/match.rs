@@ -164,7 +164,8 @@ impl<'a> Request<'a> {
                 baseline: args.baseline,
                 doffs: args.doffs,
             };
-            Some(jem::geometry::Camera::resolve(calib_file.as_ref(), &overrides)?)
+            let source = args.rectify.as_deref().unwrap_or(&calib);
+            Some(jem::geometry::Camera::resolve(calib_file.as_ref(), source, &overrides, args.cloud.is_some())?)
         } else {
             None
         };

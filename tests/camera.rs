@@ -1,0 +1,124 @@
+//! Your own camera from the command line: `jem rectify` and `jem match --rectify` with a stereo calibration, and
+//! the camera values `--depth` and `--cloud` need, asked for all at once.
+
+mod common;
+
+use std::path::Path;
+
+use common::{files_in, run_in, stderr};
+
+/// An OpenCV FileStorage YAML of a rig of two pinhole cameras (no distortion, no rotation), the right one `b` to
+/// the right, with the principal point at the centre of `w × h` images.
+fn pinhole_rig_yaml(w: usize, h: usize, b: f64) -> String {
+    let (cx, cy) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
+    let k = format!("[ 80., 0., {cx}, 0., 80., {cy}, 0., 0., 1. ]");
+    let m = |name: &str, rows: usize, cols: usize, data: &str| {
+        format!("{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: {data}\n")
+    };
+    format!(
+        "%YAML:1.0\n---\n{}{}{}{}{}{}image_width: {w}\nimage_height: {h}\n",
+        m("K1", 3, 3, &k),
+        m("D1", 1, 5, "[ 0., 0., 0., 0., 0. ]"),
+        m("K2", 3, 3, &k),
+        m("D2", 1, 5, "[ 0., 0., 0., 0., 0. ]"),
+        m("R", 3, 3, "[ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]"),
+        m("T", 3, 1, &format!("[ {}, 0., 0. ]", -b)),
+    )
+}
+
+fn synth_scene(dir: &Path, name: &str) {
+    let out = run_in(dir, &["synth", name, "--width", "64", "--height", "48", "--ndisp", "16"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+#[test]
+fn rectify_writes_the_pair_and_its_calib_txt() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    std::fs::write(dir.path().join("rig.yml"), pinhole_rig_yaml(64, 48, 0.25)).unwrap();
+    let out = run_in(dir.path(), &["rectify", "rig.yml", "S/im0.png", "S/im1.png", "-o", "R"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(files_in(&dir.path().join("R")), ["calib.txt", "im0.png", "im1.png"]);
+    // An ideal rig: the rectified views are the views.
+    for name in ["im0.png", "im1.png"] {
+        let (a, b) = (
+            jem::io::read_image(&dir.path().join("S").join(name)).unwrap(),
+            jem::io::read_image(&dir.path().join("R").join(name)).unwrap(),
+        );
+        assert_eq!(a, b, "{name}");
+    }
+    let calib = std::fs::read_to_string(dir.path().join("R/calib.txt")).unwrap();
+    assert_eq!(
+        calib,
+        "cam0=[80 0 31.5; 0 80 23.5; 0 0 1]\ncam1=[80 0 31.5; 0 80 23.5; 0 0 1]\ndoffs=0\nbaseline=0.25\nwidth=64\nheight=48\n"
+    );
+}
+
+#[test]
+fn match_with_rectify_writes_depth_from_the_rectified_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    std::fs::write(dir.path().join("rig.yml"), pinhole_rig_yaml(64, 48, 0.25)).unwrap();
+    let args =
+        ["S/im0.png", "S/im1.png", "--rectify", "rig.yml", "-o", "d.pfm", "--depth", "z.pfm", "--set", "model=wta"];
+    let out = run_in(dir.path(), &args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let d = jem::io::read_disparity(&dir.path().join("d.pfm")).unwrap();
+    let z = jem::io::read_disparity(&dir.path().join("z.pfm")).unwrap();
+    let (i, &di) = d.data().iter().enumerate().find(|(_, v)| v.is_finite() && **v > 1.0).unwrap();
+    assert!((z.data()[i] - 80.0 * 0.25 / di).abs() < 1e-4, "depth {} for disparity {di}", z.data()[i]);
+}
+
+#[test]
+fn a_bad_calibration_is_one_error_naming_the_file_and_leaves_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let cases: [(&str, String, &str); 4] = [
+        ("empty.yml", "%YAML:1.0\n---\n".into(), "missing K1/M1/cameraMatrix1, D1/distCoeffs1, K2/M2/cameraMatrix2"),
+        ("other.yml", pinhole_rig_yaml(640, 480, 0.25), "the calibration is for 640x480 images, these are 64x48"),
+        ("swapped.yml", pinhole_rig_yaml(64, 48, -0.25), "other way round"),
+        ("notes.txt", "hello\n".into(), "neither an OpenCV FileStorage"),
+    ];
+    for (name, text, needle) in cases {
+        std::fs::write(dir.path().join(name), text).unwrap();
+        let before = files_in(dir.path());
+        for args in [
+            vec!["rectify", name, "S/im0.png", "S/im1.png", "-o", "R"],
+            vec!["S/im0.png", "S/im1.png", "--rectify", name, "-o", "d.pfm"],
+        ] {
+            let out = run_in(dir.path(), &args);
+            let err = stderr(&out);
+            assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+            assert!(err.starts_with(&format!("error: {name}: ")) && err.contains(needle), "{args:?}: {err}");
+            assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+            assert_eq!(files_in(dir.path()), before, "{args:?} left files");
+        }
+    }
+}
+
+#[test]
+fn depth_asks_for_everything_missing_at_once_and_names_where_it_looked() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    std::fs::remove_file(dir.path().join("S/calib.txt")).unwrap();
+    let base = ["S/im0.png", "S/im1.png", "-o", "d.pfm", "--ndisp", "16", "--set", "model=wta"];
+    let out = run_in(dir.path(), &[&base[..], &["--depth", "z.pfm"]].concat());
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(
+        err.trim_end(),
+        "error: depth needs the focal length (cam0), baseline (give --focal, --baseline): no S/calib.txt was found"
+    );
+    // Depth needs the focal length and the baseline only.
+    let out = run_in(dir.path(), &[&base[..], &["--depth", "z.pfm", "--focal", "100", "--baseline", "0.1"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    // A calib.txt without them is named as the file read.
+    std::fs::write(dir.path().join("S/calib.txt"), "ndisp=16\n").unwrap();
+    let out = run_in(dir.path(), &[&base[..], &["--cloud", "c.ply"]].concat());
+    let err = stderr(&out);
+    assert!(
+        err.starts_with("error: S/calib.txt: a point cloud needs the focal length (cam0), baseline, principal point x")
+            && err.contains("(give --focal, --baseline, --cx, --cy) (read from this file)"),
+        "{err}"
+    );
+}
