@@ -31,6 +31,7 @@ def match(
     return_info: Literal[False] = False,
     calib_ndisp: Optional[int] = None,
     rectify: Optional[_Path] = None,
+    min_confidence: Optional[float] = None,
 ) -> _Map: ...
 @overload
 def match(
@@ -46,6 +47,7 @@ def match(
     return_info: Literal[False] = False,
     calib_ndisp: Optional[int] = None,
     rectify: Optional[_Path] = None,
+    min_confidence: Optional[float] = None,
 ) -> Tuple[_Map, _Map]: ...
 @overload
 def match(
@@ -61,6 +63,7 @@ def match(
     return_info: Literal[True],
     calib_ndisp: Optional[int] = None,
     rectify: Optional[_Path] = None,
+    min_confidence: Optional[float] = None,
 ) -> Tuple[_Map, dict[str, Any]]: ...
 @overload
 def match(
@@ -76,6 +79,7 @@ def match(
     return_info: Literal[True],
     calib_ndisp: Optional[int] = None,
     rectify: Optional[_Path] = None,
+    min_confidence: Optional[float] = None,
 ) -> Tuple[_Map, _Map, dict[str, Any]]:
     """The left view's disparity map of a rectified pair: float32 H×W, ``inf`` where invalid, exactly the map
     ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings.
@@ -88,15 +92,19 @@ def match(
     (at most 4 per core, at least 16). ``max_memory``: bytes; larger runs go in tiles. With ``confidence=True`` also the confidence map, with
     ``return_info=True`` also a dict (ndisp, ndisp_measured, tiled, noise, timings, seconds, memory_planned,
     peak_rss). ``rectify``: a stereo calibration (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt); the raw
-    views are rectified first, as ``jem match --rectify``, and the map is of the rectified left view. The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
+    views are rectified first, as ``jem match --rectify``, and the map is of the rectified left view.
+    ``min_confidence``: pixels whose confidence is below it are ``inf``. The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
 
     Raises ValueError (shape, dtype, range, config, threads), MemoryError (fits neither whole nor in tiles, or
     cannot be allocated), OSError.
     Warns (UserWarning) for a value the image cannot use, held to a bound (post.sps.segments).
     """
 
-def depth(disp: npt.NDArray[np.floating[Any]], f: float, baseline: float, doffs: float = 0.0) -> _Map:
-    """Metric depth Z = f·baseline / (disp + doffs), float32, ``inf`` where there is none."""
+def depth(
+    disp: npt.NDArray[np.floating[Any]], f: float, baseline: float, doffs: float = 0.0, max_depth: Optional[float] = None
+) -> _Map:
+    """Metric depth Z = f·baseline / (disp + doffs), float32, ``inf`` where there is none or beyond ``max_depth``
+    (default f·baseline, the depth of a one-pixel disparity)."""
 
 def read_pfm(path: _Path) -> _Map:
     """A PFM file as float32 H×W, top row first, ``inf`` kept."""

@@ -26,6 +26,9 @@ pub struct Camera {
     pub baseline: f64,
     /// x-difference of the principal points, in pixels (0 for rectified pairs that share it).
     pub doffs: f64,
+    /// Points farther than this have no depth (`inf` in the depth map, no point in the cloud); `f64::INFINITY`
+    /// keeps every one. [`Camera::resolve`] defaults it to [`Camera::one_pixel_depth`].
+    pub max_depth: f64,
 }
 
 /// Values given on the command line, each overriding `calib.txt`.
@@ -41,6 +44,8 @@ pub struct CameraOverrides {
     pub baseline: Option<f64>,
     /// Principal point offset.
     pub doffs: Option<f64>,
+    /// The farthest depth kept.
+    pub max_depth: Option<f64>,
 }
 
 /// The 3 × 3 matrix of a `cam0=[f 0 cx; 0 f cy; 0 0 1]` value, row-major.
@@ -97,6 +102,11 @@ impl Camera {
         if !doffs.is_finite() {
             invalid.push(format!("doffs {doffs} (expected a finite number)"));
         }
+        if let Some(z) = overrides.max_depth
+            && z.is_nan() | (z <= 0.0)
+        {
+            invalid.push(format!("maximum depth {z} (expected > 0)"));
+        }
         for (name, v) in [("focal length", focal), ("baseline", baseline)] {
             if v.is_finite() && v <= 0.0 && !missing.iter().any(|(w, _)| w.starts_with(name)) {
                 invalid.push(format!("{name} {v} (expected > 0)"));
@@ -119,7 +129,8 @@ impl Camera {
                 None => Error::Input(format!("{msg}: no {} was found", calib_path.display())),
             });
         }
-        let camera = Camera { focal, cx, cy, baseline, doffs };
+        let max_depth = overrides.max_depth.unwrap_or(focal * baseline);
+        let camera = Camera { focal, cx, cy, baseline, doffs, max_depth };
         if !(camera.focal * camera.baseline).is_finite() {
             return Err(Error::Input(format!(
                 "focal length {:?} times baseline {:?} overflows: no depth f·B / d could be written; check \
@@ -132,10 +143,17 @@ impl Camera {
         Ok(camera)
     }
 
-    /// Depth of disparity `d`, or `None` (invalid, or at or beyond infinity).
+    /// The depth of a disparity of one pixel, f·B: the default farthest depth. Beyond it a disparity error of
+    /// half a pixel (what matching leaves) more than doubles the depth, and the sky, whose disparity is about 0,
+    /// would be put thousands of kilometres away.
+    pub fn one_pixel_depth(&self) -> f64 {
+        self.focal * self.baseline
+    }
+
+    /// Depth of disparity `d`, or `None` (invalid, at or beyond infinity, or beyond [`Camera::max_depth`]).
     pub fn depth(&self, d: f32) -> Option<f64> {
         let denom = f64::from(d) + self.doffs;
-        (d.is_finite() && denom > 0.0).then(|| self.focal * self.baseline / denom)
+        (d.is_finite() && denom > 0.0).then(|| self.focal * self.baseline / denom).filter(|&z| z <= self.max_depth)
     }
 
     /// The point (X, Y, Z) of pixel (`x`, `y`) with disparity `d` as written (`f32`), or `None` when it has no depth
@@ -192,7 +210,7 @@ mod tests {
     use super::*;
 
     fn camera() -> Camera {
-        Camera { focal: 500.0, cx: 2.0, cy: 1.0, baseline: 100.0, doffs: 5.0 }
+        Camera { focal: 500.0, cx: 2.0, cy: 1.0, baseline: 100.0, doffs: 5.0, max_depth: f64::INFINITY }
     }
 
     #[test]
@@ -207,7 +225,7 @@ mod tests {
         let no_baseline = Calib::parse("cam0=[1 0 0; 0 1 0; 0 0 1]\n").unwrap();
         let e = Camera::resolve(Some(&no_baseline), path, &CameraOverrides::default(), false).unwrap_err().to_string();
         assert_eq!(e, "scene/calib.txt: depth needs the baseline (give --baseline) (read from this file)");
-        let bad = CameraOverrides { focal: Some(-1.0), cx: Some(0.0), cy: Some(0.0), baseline: Some(1.0), doffs: None };
+        let bad = CameraOverrides { focal: Some(-1.0), baseline: Some(1.0), ..Default::default() };
         assert!(Camera::resolve(None, path, &bad, true).is_err());
     }
 
@@ -215,11 +233,16 @@ mod tests {
     /// stay finite give no non-finite point, and `inf` depth exactly where there is no point.
     #[test]
     fn overflowing_geometry_writes_no_infinite_point() {
-        let huge =
-            CameraOverrides { focal: Some(1e300), cx: Some(0.0), cy: Some(0.0), baseline: Some(1e300), doffs: None };
+        let huge = CameraOverrides {
+            focal: Some(1e300),
+            cx: Some(0.0),
+            cy: Some(0.0),
+            baseline: Some(1e300),
+            ..Default::default()
+        };
         let e = Camera::resolve(None, Path::new("calib.txt"), &huge, true).unwrap_err().to_string();
         assert!(e.contains("overflows") && e.contains("baseline"), "{e}");
-        let c = Camera { focal: 1e30, cx: 1.0, cy: 0.5, baseline: 1e30, doffs: 0.0 };
+        let c = Camera { focal: 1e30, cx: 1.0, cy: 0.5, baseline: 1e30, doffs: 0.0, max_depth: f64::INFINITY };
         let disp = Plane::from_parts(3, 2, vec![1.0, 2.0, 3.0, 1e32, 2e32, f32::INFINITY]);
         let depth = depth_map(&disp, &c);
         let ply = encode_ply(&disp, &RgbImage::new(3, 2), &c);
@@ -258,6 +281,27 @@ mod tests {
         let both_bad = CameraOverrides { focal: Some(0.0), baseline: Some(-2.0), ..Default::default() };
         let e = Camera::resolve(None, path, &both_bad, false).unwrap_err().to_string();
         assert!(e.contains("focal length 0 (expected > 0), baseline -2 (expected > 0)"), "{e}");
+    }
+
+    /// By default a point is kept up to the depth of a one-pixel disparity (the sky, at about 0, is left out);
+    /// `max_depth` sets the range.
+    #[test]
+    fn depth_stops_at_one_pixel_of_disparity_unless_told_otherwise() {
+        let given = CameraOverrides { focal: Some(500.0), baseline: Some(0.2), ..Default::default() };
+        let c = Camera::resolve(None, Path::new("calib.txt"), &given, false).unwrap();
+        assert_eq!(c.max_depth, 100.0);
+        let disp = Plane::from_parts(4, 1, vec![0.001, 0.5, 1.0, 10.0]);
+        assert_eq!(depth_map(&disp, &c).data, vec![f32::INFINITY, f32::INFINITY, 100.0, 10.0]);
+        let near = CameraOverrides { max_depth: Some(20.0), ..given };
+        let c = Camera::resolve(None, Path::new("calib.txt"), &near, false).unwrap();
+        assert_eq!(depth_map(&disp, &c).data, vec![f32::INFINITY, f32::INFINITY, f32::INFINITY, 10.0]);
+        let bad = CameraOverrides { max_depth: Some(-1.0), ..given };
+        assert!(
+            Camera::resolve(None, Path::new("calib.txt"), &bad, false)
+                .unwrap_err()
+                .to_string()
+                .contains("maximum depth")
+        );
     }
 
     /// Depth and points follow Z = f·B / (d + doffs), X = (x − cx)·Z / f, Y = (y − cy)·Z / f; invalid pixels and

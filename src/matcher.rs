@@ -76,6 +76,18 @@ pub struct Output {
     pub seconds: f64,
 }
 
+impl Output {
+    /// The disparity map with every pixel whose confidence is below `min_confidence` made invalid (`inf`): the
+    /// reliable pixels only (`jem --min-confidence`).
+    pub fn reliable_disparity(&self, min_confidence: f32) -> DisparityMap {
+        let mut out = self.disparity.clone();
+        out.data.iter_mut().zip(&self.confidence.data).filter(|&(_, &c)| c < min_confidence).for_each(|(d, _)| {
+            *d = f32::INFINITY;
+        });
+        out
+    }
+}
+
 /// What a match reports while it runs (see [`Matcher::match_pair_with`]).
 #[derive(Clone, Copy, Debug)]
 pub enum Progress<'a> {
@@ -278,6 +290,18 @@ mod tests {
         assert_eq!(out.disparity.data, direct.disparity.data);
         assert_eq!((out.plan.ndisp, out.plan.ndisp_measured, out.plan.tiles), (scene.ndisp, false, None));
         assert!(out.plan.memory_bytes > 0 && out.seconds > 0.0);
+    }
+
+    #[test]
+    fn reliable_disparity_drops_the_pixels_below_the_confidence() {
+        let scene = render_scene(&SynthParams { width: 64, height: 48, ndisp: 16, seed: 2 }).unwrap();
+        let mut matcher = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(16));
+        let out = matcher.match_pair(&scene.left, &scene.right).unwrap();
+        let kept = out.reliable_disparity(0.95);
+        for ((&d, &k), &c) in out.disparity.data.iter().zip(&kept.data).zip(&out.confidence.data) {
+            assert!(if c < 0.95 { k.is_infinite() } else { k.to_bits() == d.to_bits() });
+        }
+        assert_eq!(out.reliable_disparity(0.0).data, out.disparity.data);
     }
 
     #[test]

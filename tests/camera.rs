@@ -122,3 +122,49 @@ fn depth_asks_for_everything_missing_at_once_and_names_where_it_looked() {
         "{err}"
     );
 }
+
+#[test]
+fn min_confidence_writes_only_the_reliable_pixels() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let base = ["S/im0.png", "S/im1.png", "--confidence", "k.pfm"];
+    let all = run_in(dir.path(), &[&base[..], &["-o", "all.pfm"]].concat());
+    assert!(all.status.success(), "{}", stderr(&all));
+    let some = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "some.pfm", "--min-confidence", "0.9"]);
+    assert!(some.status.success(), "{}", stderr(&some));
+    let read = |n: &str| jem::io::read_disparity(&dir.path().join(n)).unwrap();
+    let (all, some, confidence) = (read("all.pfm"), read("some.pfm"), read("k.pfm"));
+    let mut dropped = 0;
+    for ((&a, &s), &c) in all.data().iter().zip(some.data()).zip(confidence.data()) {
+        if c < 0.9 {
+            assert!(s.is_infinite());
+            dropped += 1;
+        } else {
+            assert_eq!(a.to_bits(), s.to_bits());
+        }
+    }
+    assert!(dropped > 0 && dropped < all.data().len(), "{dropped} pixels dropped");
+    for bad in ["1.5", "-0.1", "nan"] {
+        let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "x.pfm", "--min-confidence", bad]);
+        assert_eq!(out.status.code(), Some(2), "{bad}");
+        assert!(stderr(&out).contains("--min-confidence"), "{}", stderr(&out));
+    }
+    let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "x.pfm", "--max-depth", "10"]);
+    assert!(stderr(&out).contains("--max-depth limits --depth and --cloud"), "{}", stderr(&out));
+}
+
+#[test]
+fn viz_draws_a_depth_map_with_its_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "d.pfm", "--depth", "z.pfm", "--set", "model=wta"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = run_in(dir.path(), &["viz", "z.pfm", "--depth", "-o", "z.png"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("depth coloured by 1/Z"), "{}", stderr(&out));
+    let picture = jem::io::read_image(&dir.path().join("z.png")).unwrap();
+    // The picture and, under it, the scale bar.
+    assert!(picture.width() == 64 && picture.height() > 48 + 20, "{:?}", picture.dims());
+    let out = run_in(dir.path(), &["viz", "z.pfm", "--depth", "--vmin", "5", "--vmax", "2", "-o", "y.png"]);
+    assert_eq!(out.status.code(), Some(2));
+}

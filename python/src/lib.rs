@@ -293,6 +293,7 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 ///
 /// ``rectify``: a stereo calibration file (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt): the raw views
 /// are rectified first, as ``jem match --rectify`` does, and the map is of the rectified left view.
+/// ``min_confidence``: pixels whose confidence is below it are ``inf`` (as ``jem --min-confidence``).
 ///
 /// Returns the map; with ``confidence=True`` also the per-pixel confidence (max-marginal of the left view,
 /// float32 H×W), and with ``return_info=True`` also a dict: ``ndisp``, ``ndisp_measured``, ``tiled``, ``noise``
@@ -310,7 +311,7 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 #[pyo3(
     name = "match",
     signature = (left, right, ndisp=None, config=None, overrides=None, threads=None, max_memory=None,
-                 confidence=false, return_info=false, calib_ndisp=None, rectify=None)
+                 confidence=false, return_info=false, calib_ndisp=None, rectify=None, min_confidence=None)
 )]
 #[allow(clippy::too_many_arguments)] // the Python signature the issue asks for
 fn match_pair<'py>(
@@ -326,7 +327,13 @@ fn match_pair<'py>(
     return_info: bool,
     calib_ndisp: Option<i64>,
     rectify: Option<PathBuf>,
+    min_confidence: Option<f32>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(c) = min_confidence
+        && !(0.0..=1.0).contains(&c)
+    {
+        return Err(to_py(&Error::param("min_confidence", c, "a confidence from 0 to 1")));
+    }
     let (left, right) = (ImageArray::inspect(left, "left")?, ImageArray::inspect(right, "right")?);
     let rectification = match &rectify {
         Some(path) => {
@@ -363,7 +370,11 @@ fn match_pair<'py>(
         let message = std::ffi::CString::new(warning).unwrap_or_default();
         PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &message, 1)?;
     }
-    let mut result = vec![to_numpy(py, out.disparity).into_any()];
+    let disparity = match min_confidence {
+        Some(c) => out.reliable_disparity(c),
+        None => out.disparity.clone(),
+    };
+    let mut result = vec![to_numpy(py, disparity).into_any()];
     if confidence {
         result.push(to_numpy(py, out.confidence).into_any());
     }
@@ -392,15 +403,17 @@ fn match_pair<'py>(
 
 /// Metric depth Z = f·baseline / (disp + doffs), float32 H×W, in the baseline's unit; ``inf`` where the
 /// disparity is invalid or d + doffs ≤ 0 (as ``jem --depth``). ``f``: focal length in pixels; ``doffs``: the
-/// x-difference of the principal points (Middlebury calib.txt).
+/// x-difference of the principal points (Middlebury calib.txt). ``max_depth``: depths beyond it are ``inf`` too
+/// (default f·baseline, the depth of a one-pixel disparity, as ``jem --depth``; ``float("inf")`` keeps all).
 #[pyfunction]
-#[pyo3(signature = (disp, f, baseline, doffs=0.0))]
+#[pyo3(signature = (disp, f, baseline, doffs=0.0, max_depth=None))]
 fn depth<'py>(
     py: Python<'py>,
     disp: &Bound<'py, PyAny>,
     f: f64,
     baseline: f64,
     doffs: f64,
+    max_depth: Option<f64>,
 ) -> PyResult<Bound<'py, PyArray2<f32>>> {
     if !(f.is_finite() && f > 0.0 && baseline.is_finite() && baseline > 0.0 && doffs.is_finite()) {
         return Err(PyValueError::new_err(format!(
@@ -408,7 +421,11 @@ fn depth<'py>(
         )));
     }
     let map = to_plane(disp, "disp")?;
-    let camera = jem::geometry::Camera { focal: f, cx: 0.0, cy: 0.0, baseline, doffs };
+    let max_depth = max_depth.unwrap_or(f * baseline);
+    if max_depth.is_nan() || max_depth <= 0.0 {
+        return Err(PyValueError::new_err(format!("max_depth {max_depth} must be positive")));
+    }
+    let camera = jem::geometry::Camera { focal: f, cx: 0.0, cy: 0.0, baseline, doffs, max_depth };
     Ok(to_numpy(py, py.detach(|| jem::geometry::depth_map(&map, &camera))))
 }
 

@@ -59,6 +59,14 @@ pub(super) struct MatchArgs {
     /// Principal point offset between the views, pixels (default: `doffs` of calib.txt, else 0).
     #[arg(long, value_name = "PX")]
     doffs: Option<f64>,
+    /// Leave out of --depth and --cloud every point farther than Z, in the baseline's unit (default: f·B, the
+    /// depth of a one-pixel disparity: beyond it half a pixel of error more than doubles the depth).
+    #[arg(long, value_name = "Z", allow_negative_numbers = true)]
+    max_depth: Option<f64>,
+    /// Write invalid (inf; 0 in a 16-bit PNG) where the confidence is below C (0..1): only the reliable pixels in
+    /// the disparity map, the depth map and the cloud.
+    #[arg(long, value_name = "C", allow_negative_numbers = true)]
+    min_confidence: Option<f32>,
     #[command(flatten)]
     config: ConfigArgs,
     #[command(flatten)]
@@ -87,7 +95,10 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     };
     let load_time = start.elapsed();
     let out = match_with_progress(&mut matcher, (&l, &r), request.stated_ndisp, global.quiet)?;
-    write_outputs(args, &request, &out, &l)?;
+    // With --min-confidence, the map written holds the reliable pixels only.
+    let reliable = args.min_confidence.map(|c| out.reliable_disparity(c));
+    let disparity = reliable.as_ref().unwrap_or(&out.disparity);
+    write_outputs(args, &request, &out, disparity, &l)?;
     if global.verbose && !global.quiet {
         note!("{:<14} {:>9.1} ms", "load", load_time.as_secs_f64() * 1e3);
         for (name, d) in &out.timings.stages {
@@ -103,7 +114,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     }
     if !global.quiet {
         let seconds = start.elapsed().as_secs_f64();
-        note!("{}", wrote_line(args, &out, seconds, request.camera.as_ref()));
+        note!("{}", wrote_line(args, &out, disparity, seconds, request.camera.as_ref()));
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -127,6 +138,14 @@ impl<'a> Request<'a> {
             return Err(Error::Input("usage: jem LEFT RIGHT -o OUT (see --help)".into()));
         };
         jem::io::DisparityFormat::from_path(output)?;
+        if let Some(c) = args.min_confidence
+            && !(0.0..=1.0).contains(&c)
+        {
+            return Err(Error::param("--min-confidence", c, "a confidence from 0 to 1"));
+        }
+        if args.max_depth.is_some() && args.depth.is_none() && args.cloud.is_none() {
+            return Err(Error::Input("--max-depth limits --depth and --cloud; give one of them".into()));
+        }
         if let Some(c) = &args.confidence {
             jem::io::DisparityFormat::from_path(c)?;
         }
@@ -163,6 +182,7 @@ impl<'a> Request<'a> {
                 cy: args.cy,
                 baseline: args.baseline,
                 doffs: args.doffs,
+                max_depth: args.max_depth,
             };
             let source = args.rectify.as_deref().unwrap_or(&calib);
             Some(jem::geometry::Camera::resolve(calib_file.as_ref(), source, &overrides, args.cloud.is_some())?)
@@ -226,19 +246,25 @@ fn match_with_progress(
 
 /// Writes the disparity map and what else was asked for, all or none: every file is encoded first, then they are
 /// written as one.
-fn write_outputs(args: &MatchArgs, request: &Request<'_>, out: &jem::Output, left: &jem::RgbImage) -> Result<()> {
+fn write_outputs(
+    args: &MatchArgs,
+    request: &Request<'_>,
+    out: &jem::Output,
+    disparity: &jem::DisparityMap,
+    left: &jem::RgbImage,
+) -> Result<()> {
     let output = args.output.as_deref().unwrap_or(Path::new("?"));
-    let mut files = vec![(output, jem::io::encode_disparity(output, &out.disparity)?)];
+    let mut files = vec![(output, jem::io::encode_disparity(output, disparity)?)];
     if let Some(c) = &args.confidence {
         files.push((c.as_path(), jem::io::encode_disparity(c, &out.confidence)?));
     }
     if let Some(camera) = &request.camera {
         if let Some(d) = &args.depth {
-            let depth = jem::geometry::depth_map(&out.disparity, camera);
+            let depth = jem::geometry::depth_map(disparity, camera);
             files.push((d.as_path(), jem::io::encode_disparity(d, &depth)?));
         }
         if let Some(c) = &args.cloud {
-            files.push((c.as_path(), jem::geometry::encode_ply(&out.disparity, left, camera)));
+            files.push((c.as_path(), jem::geometry::encode_ply(disparity, left, camera)));
         }
     }
     let refs: Vec<(&Path, &[u8])> = files.iter().map(|(p, b)| (*p, b.as_slice())).collect();
@@ -246,8 +272,14 @@ fn write_outputs(args: &MatchArgs, request: &Request<'_>, out: &jem::Output, lef
 }
 
 /// The last line of a match: `wrote d.pfm (741×497, 96 % valid, ndisp 70, 2.8 s)`, then the other files written.
-fn wrote_line(args: &MatchArgs, out: &jem::Output, seconds: f64, camera: Option<&jem::geometry::Camera>) -> String {
-    let (disparity, ndisp, measured) = (&out.disparity, out.plan.ndisp, out.plan.ndisp_measured);
+fn wrote_line(
+    args: &MatchArgs,
+    out: &jem::Output,
+    disparity: &jem::DisparityMap,
+    seconds: f64,
+    camera: Option<&jem::geometry::Camera>,
+) -> String {
+    let (ndisp, measured) = (out.plan.ndisp, out.plan.ndisp_measured);
     let (w, h) = disparity.dims();
     let valid = disparity.data().iter().filter(|d| d.is_finite()).count();
     let percent = 100.0 * valid as f64 / disparity.data().len().max(1) as f64;
@@ -257,8 +289,8 @@ fn wrote_line(args: &MatchArgs, out: &jem::Output, seconds: f64, camera: Option<
     if let Some(c) = &args.confidence {
         line.push_str(&format!(", confidence {}", c.display()));
     }
-    if let Some(d) = &args.depth {
-        line.push_str(&format!(", depth {}", d.display()));
+    if let (Some(d), Some(camera)) = (&args.depth, camera) {
+        line.push_str(&format!(", depth {} (up to {})", d.display(), camera.max_depth as f32));
     }
     if let (Some(c), Some(camera)) = (&args.cloud, camera) {
         let points = disparity.data().iter().enumerate().filter(|&(i, &d)| camera.point(i % w, i / w, d).is_some());

@@ -240,10 +240,12 @@ impl Rectification {
         ]
     }
 
-    /// The rectified left camera, for depth and point clouds ([`crate::geometry`]).
+    /// The rectified left camera, for depth and point clouds ([`crate::geometry`]), keeping depths up to that of
+    /// a one-pixel disparity.
     pub fn camera(&self) -> crate::geometry::Camera {
         let [(cx, cy), _] = self.principal_points();
-        crate::geometry::Camera { focal: self.focal_px(), cx, cy, baseline: self.baseline(), doffs: self.doffs() }
+        let (focal, baseline) = (self.focal_px(), self.baseline());
+        crate::geometry::Camera { focal, cx, cy, baseline, doffs: self.doffs(), max_depth: focal * baseline }
     }
 
     /// The maps (x, y) of one view: for each rectified pixel, the position in the original image its colour

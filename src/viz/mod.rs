@@ -25,10 +25,15 @@
 //!   most `panel_width` pixels wide; `sheet.rs` finds the rows where the [`dataset`](crate::dataset) layout puts
 //!   the files.
 //!
+//! - **Depth maps** ([`colorize_depth`], `depth.rs`): coloured by inverse depth over a robust range
+//!   ([`depth_range`]), with a labelled scale bar under the picture.
+//!
 //! Images are [`Canvas`]es: interleaved 8-bit RGB, row-major, `data[(y·w + x)·3 + c]`. Everything is O(pixels).
 
+mod depth;
 mod sheet;
 
+pub use depth::{colorize_depth, depth_range};
 pub use sheet::{
     Occlusion, Sheet, SheetOptions, SheetRow, TruthFiles, contact_sheet, draw_row, gt_rule, load_truth, resolved_scale,
     sheet_rows,
