@@ -50,6 +50,7 @@ mod condition;
 mod cost;
 pub mod dataset;
 pub mod degrade;
+mod diagnose;
 mod error;
 pub mod eval;
 mod fastmath;
@@ -73,6 +74,7 @@ mod table;
 pub mod threads;
 pub mod viz;
 
+pub use diagnose::PairCheck;
 pub use error::{Error, Result};
 pub use image::{DisparityMap, Plane, RgbImage};
 pub use matcher::{Matcher, Output, Progress, RunPlan, Tiles, default_memory_limit};

@@ -233,6 +233,16 @@ impl Matcher {
         out
     }
 
+    /// Checks a matched pair for what would make any disparity map of it wrong ([`crate::PairCheck`]: swapped
+    /// views, a vertical offset beyond the alignment, a range over half the width, no texture, an exposure or focus
+    /// difference beyond the front end); `out` is the match's output (its measured range and noise).
+    pub fn check_pair(&self, left: &RgbImage, right: &RgbImage, out: &Output) -> crate::PairCheck {
+        let width = left.width().max(1) as f32;
+        let range_share = out.plan.ndisp_measured.then(|| out.plan.ndisp as f32 / width);
+        let noise = out.measured.map(|m| (m.stats.sigma(), m.stats.gain[0]));
+        crate::diagnose::check_pair(left, right, &self.params.cost, noise, range_share, self.max_memory_bytes)
+    }
+
     /// Runs a planned pair.
     fn run(&mut self, plan: &Plan<'_>, on_progress: &dyn Fn(Progress<'_>)) -> Result<Output> {
         let (w, h) = plan.pair.left.dims();

@@ -168,3 +168,43 @@ fn viz_draws_a_depth_map_with_its_scale() {
     let out = run_in(dir.path(), &["viz", "z.pfm", "--depth", "--vmin", "5", "--vmax", "2", "-o", "y.png"]);
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn swapped_views_warn_and_strict_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let args = ["S/im1.png", "S/im0.png", "-o", "d.pfm", "--ndisp", "16", "--set", "model=wta"];
+    let out = run_in(dir.path(), &args);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("warning: the views look swapped")), "{err}");
+    assert!(dir.path().join("d.pfm").is_file());
+    let before = files_in(dir.path());
+    let out = run_in(dir.path(), &["S/im1.png", "S/im0.png", "-o", "e.pfm", "--ndisp", "16", "--strict"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    let prefix = "error: the pair looks wrong (--strict: nothing written): the views look swapped";
+    assert!(err.lines().any(|l| l.starts_with(prefix)), "{err}");
+    assert_eq!(files_in(dir.path()), before);
+    // The pair the right way round: no warning, and --strict writes it.
+    let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "f.pfm", "--strict", "-v"]);
+    let err = stderr(&out);
+    // (A 64 × 48 image holds fewer slanted-plane segments than configured: that warning is about the settings.)
+    assert!(out.status.success() && err.lines().all(|l| !l.starts_with("warning: the ")), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("checked: negative-disparity share")), "{err}");
+}
+
+/// No false alarm: the checks of every trainingQ pair give no warning; swapping each pair's views is caught every
+/// time.
+#[test]
+fn no_trainingq_pair_is_said_to_be_wrong_and_every_swapped_one_is() {
+    let Some(data) = common::data_dir() else { return };
+    let params = jem::params::CostParams::default();
+    for scene in common::training_scenes(&data) {
+        let (l, r) = jem::io::read_image_pair(&scene.join("im0.png"), &scene.join("im1.png")).unwrap();
+        let check = jem::internals::diagnose::check_pair(&l, &r, &params, None, None, u64::MAX);
+        assert!(check.warnings().is_empty(), "{}: {check}: {:?}", scene.display(), check.warnings());
+        let swapped = jem::internals::diagnose::check_pair(&r, &l, &params, None, None, u64::MAX);
+        assert!(swapped.negative_share.is_some_and(|s| s > 0.5), "{}: {swapped}", scene.display());
+    }
+}

@@ -298,7 +298,10 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 /// Returns the map; with ``confidence=True`` also the per-pixel confidence (max-marginal of the left view,
 /// float32 H×W), and with ``return_info=True`` also a dict: ``ndisp``, ``ndisp_measured``, ``tiled``, ``noise``
 /// (σ of each view, or None with ``condition.enabled = false``), ``timings`` (seconds per stage), ``seconds``
-/// (the run, as jem batch counts it), ``memory_planned`` and ``peak_rss`` (bytes; the whole process's peak).
+/// (the run, as jem batch counts it), ``memory_planned`` and ``peak_rss`` (bytes; the whole process's peak),
+/// ``checks`` (the numbers of the pair's checks: ``negative_share``, ``vertical_px``, ``vertical_limit_px``,
+/// ``range_share``, ``textured_share``, ``clipped``, ``sharpness_ratio``, ``focus_beyond``) and ``warnings`` (the
+/// lines ``jem`` prints for a pair that looks wrong, each also a UserWarning).
 ///
 /// The GIL is released while matching, so pairs can run in Python threads. Ctrl-C (KeyboardInterrupt) is
 /// honoured only when the call returns.
@@ -355,18 +358,23 @@ fn match_pair<'py>(
     let sizes = ((left.width, left.height), (right.width, right.height));
     matcher.check_size(sizes.0, sizes.1, input_bytes).map_err(|e| to_py(&e))?;
     let (l, r) = (left.to_rgb()?, right.to_rgb()?);
-    let out = py.detach(|| {
-        guarded(threads, || match &rectification {
-            Some(rect) => {
-                let (l, r) = rect.rectify_pair(&l, &r)?;
-                matcher.match_pair(&l, &r)
-            }
-            None => matcher.match_pair(&l, &r),
+    let (out, check) = py.detach(|| {
+        guarded(threads, || {
+            let rectified = rectification.as_ref().map(|rect| rect.rectify_pair(&l, &r)).transpose()?;
+            let (l, r) = rectified.as_ref().map_or((&l, &r), |(a, b)| (a, b));
+            let out = matcher.match_pair(l, r)?;
+            let check = matcher.check_pair(l, r, &out);
+            Ok((out, check))
         })
     })?;
     // Values too large for this image (held to a bound, as `jem` warns on stderr): a UserWarning each.
     let (w, h) = out.disparity.dims();
     for warning in params.image_warnings(w, h) {
+        let message = std::ffi::CString::new(warning).unwrap_or_default();
+        PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &message, 1)?;
+    }
+    // A pair that looks wrong (swapped, unrectified, ...): a UserWarning each, as `jem` prints them.
+    for warning in check.warnings() {
         let message = std::ffi::CString::new(warning).unwrap_or_default();
         PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &message, 1)?;
     }
@@ -393,6 +401,17 @@ fn match_pair<'py>(
         info.set_item("seconds", out.seconds)?;
         info.set_item("memory_planned", out.plan.memory_bytes)?;
         info.set_item("peak_rss", jem::peak_rss_bytes())?;
+        let checks = PyDict::new(py);
+        checks.set_item("negative_share", check.negative_share)?;
+        checks.set_item("vertical_px", check.vertical_px)?;
+        checks.set_item("vertical_limit_px", check.vertical_limit_px)?;
+        checks.set_item("range_share", check.range_share)?;
+        checks.set_item("textured_share", check.textured_share)?;
+        checks.set_item("clipped", (check.clipped[0], check.clipped[1]))?;
+        checks.set_item("sharpness_ratio", check.sharpness_ratio)?;
+        checks.set_item("focus_beyond", check.focus_beyond)?;
+        info.set_item("checks", checks)?;
+        info.set_item("warnings", check.warnings())?;
         result.push(info.into_any());
     }
     if result.len() == 1 {

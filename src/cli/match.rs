@@ -67,6 +67,10 @@ pub(super) struct MatchArgs {
     /// the disparity map, the depth map and the cloud.
     #[arg(long, value_name = "C", allow_negative_numbers = true)]
     min_confidence: Option<f32>,
+    /// Write nothing and fail (exit 2) when the pair looks wrong (views swapped, rows far apart, no texture, ...:
+    /// the warnings jem otherwise prints beside a written result).
+    #[arg(long)]
+    strict: bool,
     #[command(flatten)]
     config: ConfigArgs,
     #[command(flatten)]
@@ -95,10 +99,18 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     };
     let load_time = start.elapsed();
     let out = match_with_progress(&mut matcher, (&l, &r), request.stated_ndisp, global.quiet)?;
+    let check = matcher.check_pair(&l, &r, &out);
+    let warnings = check.warnings();
+    if args.strict && !warnings.is_empty() {
+        return Err(Error::Input(format!("the pair looks wrong (--strict: nothing written): {}", warnings.join("; "))));
+    }
     // With --min-confidence, the map written holds the reliable pixels only.
     let reliable = args.min_confidence.map(|c| out.reliable_disparity(c));
     let disparity = reliable.as_ref().unwrap_or(&out.disparity);
     write_outputs(args, &request, &out, disparity, &l)?;
+    for warning in warnings.iter().filter(|_| !global.quiet) {
+        note!("warning: {warning}");
+    }
     if global.verbose && !global.quiet {
         note!("{:<14} {:>9.1} ms", "load", load_time.as_secs_f64() * 1e3);
         for (name, d) in &out.timings.stages {
@@ -108,6 +120,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         if let Some(m) = &out.measured {
             note!("{m}");
         }
+        note!("{check}");
         if let Some(peak) = jem::peak_rss_bytes() {
             note!("memory: peak {} (planned {})", human(peak), human(out.plan.memory_bytes));
         }
