@@ -1,9 +1,11 @@
 """Stereo matching by joint energy minimization (Xue & Cai), on numpy arrays.
 
-``match`` computes a disparity map (the same bytes as the ``jem`` command line), ``depth`` turns it into metric
-depth and ``cloud`` into the points ``--cloud`` writes, ``colorize`` draws it as ``jem viz`` does,
-``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads an image file (PNG, PNM,
-JPEG, BMP, TIFF, WebP).
+``match`` computes a disparity map (the same bytes as the ``jem`` command line), ``Matcher`` matches many pairs
+with one configuration and can remember a sequence's frames (``sequence_frames`` lists a sequence folder's),
+``depth`` turns a map into metric depth and ``cloud`` into the points ``--cloud`` writes, ``colorize`` draws it
+as ``jem viz`` does, ``read_pfm``/``write_pfm`` read and write Middlebury's PFM files, ``read_image`` loads an
+image file (PNG, PNM, JPEG, BMP, TIFF, WebP), ``rectify``/``rectify_maps`` rectify a raw pair from its stereo
+calibration as OpenCV does.
 """
 
 import os
@@ -31,6 +33,8 @@ def match(
     confidence: Literal[False] = False,
     return_info: Literal[False] = False,
     calib_ndisp: Optional[int] = None,
+    rectify: Optional[_Path] = None,
+    min_confidence: Optional[float] = None,
 ) -> _Map: ...
 @overload
 def match(
@@ -45,6 +49,8 @@ def match(
     confidence: Literal[True],
     return_info: Literal[False] = False,
     calib_ndisp: Optional[int] = None,
+    rectify: Optional[_Path] = None,
+    min_confidence: Optional[float] = None,
 ) -> Tuple[_Map, _Map]: ...
 @overload
 def match(
@@ -59,6 +65,8 @@ def match(
     *,
     return_info: Literal[True],
     calib_ndisp: Optional[int] = None,
+    rectify: Optional[_Path] = None,
+    min_confidence: Optional[float] = None,
 ) -> Tuple[_Map, dict[str, Any]]: ...
 @overload
 def match(
@@ -73,6 +81,8 @@ def match(
     confidence: Literal[True],
     return_info: Literal[True],
     calib_ndisp: Optional[int] = None,
+    rectify: Optional[_Path] = None,
+    min_confidence: Optional[float] = None,
 ) -> Tuple[_Map, _Map, dict[str, Any]]:
     """The left view's disparity map of a rectified pair: float32 H×W, ``inf`` where invalid, exactly the map
     ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings.
@@ -85,19 +95,24 @@ def match(
     the TOML's shape. ``overrides``: ``{"section.key": value}`` as ``--set``. ``threads``: workers for this call
     (at most 4 per core, at least 16). ``max_memory``: bytes; larger runs go in tiles. With ``confidence=True`` also the confidence map, with
     ``return_info=True`` also a dict (ndisp, ndisp_measured, tiled, noise, timings, seconds, memory_planned,
-    peak_rss). The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
+    peak_rss). ``rectify``: a stereo calibration (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt); the raw
+    views are rectified first, as ``jem match --rectify``, and the map is of the rectified left view.
+    ``min_confidence``: pixels whose confidence is below it are ``inf``. The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
 
     Raises ValueError (shape, dtype, range, config, threads), MemoryError (fits neither whole nor in tiles, or
     cannot be allocated), OSError.
     Warns (UserWarning) for a value the image cannot use, held to a bound (post.sps.segments).
     """
 
-def depth(disp: npt.NDArray[np.floating[Any]], f: float, baseline: float, doffs: float = 0.0) -> _Map:
-    """Metric depth Z = f·baseline / (disp + doffs), float32, ``inf`` where there is none."""
+def depth(
+    disp: npt.NDArray[np.floating[Any]], f: float, baseline: float, doffs: float = 0.0, max_depth: Optional[float] = None
+) -> _Map:
+    """Metric depth Z = f·baseline / (disp + doffs), float32, ``inf`` where there is none or beyond ``max_depth``
+    (default f·baseline, the depth of a one-pixel disparity)."""
 
 def cloud(
     disp: npt.NDArray[np.floating[Any]], left: _Image, f: float, baseline: float, cx: float, cy: float,
-    doffs: float = 0.0,
+    doffs: float = 0.0, max_depth: Optional[float] = None,
 ) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
     """The point cloud ``--cloud`` writes: (points float32 N×3, colours uint8 N×3), one row per pixel with a depth,
     in row order; X = (x − cx)·Z/f, Y = (y − cy)·Z/f, Z = f·baseline / (d + doffs), in the baseline's unit."""
@@ -133,6 +148,8 @@ class Matcher:
         max_memory: Optional[int] = None,
         temporal: bool = False,
         calib_ndisp: Optional[int] = None,
+        rectify: Optional[_Path] = None,
+        min_confidence: Optional[float] = None,
     ) -> None: ...
     def match(
         self, left: _Image, right: _Image, confidence: bool = False, return_info: bool = False
@@ -145,3 +162,13 @@ class Matcher:
 def sequence_frames(dir: _Path) -> list[Tuple[str, str, str]]:
     """The frames of a sequence folder (``left/`` + ``right/`` paired by name, or a KITTI raw drive), in order:
     ``(stem, left_path, right_path)``."""
+
+def rectify_maps(calib: _Path, size: Optional[Tuple[int, int]] = None) -> dict[str, Any]:
+    """The rectification of a stereo calibration (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt) for views
+    of ``size`` (width, height; default: the size the file states), as ``cv2.stereoRectify(alpha=0)`` and
+    ``cv2.initUndistortRectifyMap`` give it: ``map1x``, ``map1y``, ``map2x``, ``map2y`` (float32 H×W, cv2.remap's
+    maps), ``R1``, ``R2``, ``P1``, ``P2``, ``Q`` (nested lists), ``focal``, ``baseline``, ``doffs``, ``size``."""
+
+def rectify(calib: _Path, left: _Image, right: _Image) -> Tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8], str]:
+    """The rectified views (uint8 H×W×3, what ``jem rectify`` writes) and the rectified pair's Middlebury
+    calib.txt text."""

@@ -7,6 +7,8 @@
 //! (millimetres for Middlebury). A pixel without a valid disparity, or with d + doffs ≤ 0 (at or beyond
 //! infinity), has no depth: `inf` in the depth map, no point in the cloud.
 
+use std::path::Path;
+
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane, RgbImage};
 use crate::io::calib::Calib;
@@ -24,6 +26,9 @@ pub struct Camera {
     pub baseline: f64,
     /// x-difference of the principal points, in pixels (0 for rectified pairs that share it).
     pub doffs: f64,
+    /// Points farther than this have no depth (`inf` in the depth map, no point in the cloud); `f64::INFINITY`
+    /// keeps every one. [`Camera::resolve`] defaults it to [`Camera::one_pixel_depth`].
+    pub max_depth: f64,
 }
 
 /// Values given on the command line, each overriding `calib.txt`.
@@ -39,6 +44,8 @@ pub struct CameraOverrides {
     pub baseline: Option<f64>,
     /// Principal point offset.
     pub doffs: Option<f64>,
+    /// The farthest depth kept.
+    pub max_depth: Option<f64>,
 }
 
 /// The 3 × 3 matrix of a `cam0=[f 0 cx; 0 f cy; 0 0 1]` value, row-major.
@@ -54,46 +61,99 @@ fn matrix(text: &str) -> Option<[f64; 9]> {
 }
 
 impl Camera {
-    /// The camera from `calib` (`cam0`, `baseline`, `doffs`; either may be absent) and `overrides`.
+    /// The camera from `calib` (`cam0`, `baseline`, `doffs`, read from `calib_path`; `None` when there is no such
+    /// file) and `overrides`, which win. Depth needs the focal length and the baseline only; a point cloud also
+    /// needs the principal point (`with_principal_point`; without it cx and cy are 0 and only the depth is
+    /// meaningful). `doffs` defaults to 0.
     ///
     /// # Errors
-    /// [`Error::Input`] naming what is missing or invalid (focal length and baseline must be positive and
-    /// finite) and the flag that gives it.
-    pub fn resolve(calib: Option<&Calib>, overrides: &CameraOverrides) -> Result<Camera> {
+    /// One error naming every value missing or invalid at once, the file read (or that none was found at
+    /// `calib_path`) and the flags that give them: [`Error::Calib`] when the file exists, [`Error::Input`] when not.
+    pub fn resolve(
+        calib: Option<&Calib>,
+        calib_path: &Path,
+        overrides: &CameraOverrides,
+        with_principal_point: bool,
+    ) -> Result<Camera> {
         let cam0 = calib.and_then(|c| c.get("cam0")).and_then(matrix);
         let key = |k: &str| calib.and_then(|c| c.get(k)).and_then(|v| v.trim().parse::<f64>().ok());
-        let pick = |given: Option<f64>, from_calib: Option<f64>, what: &str, flag: &str| {
-            given.or(from_calib).filter(|v| v.is_finite()).ok_or_else(|| {
-                Error::Input(format!("the {what} is needed for depth: no usable value in calib.txt; give {flag}"))
-            })
+        let mut missing: Vec<(&str, &str)> = Vec::new();
+        let mut invalid: Vec<String> = Vec::new();
+        let mut pick = |given: Option<f64>, from_calib: Option<f64>, what: &'static str, flag: &'static str| {
+            let v = given.or(from_calib);
+            match v {
+                None => missing.push((what, flag)),
+                Some(v) if !v.is_finite() => invalid.push(format!("{what} {v} (expected a finite number)")),
+                Some(_) => {}
+            }
+            v.unwrap_or(0.0)
         };
-        let camera = Camera {
-            focal: pick(overrides.focal, cam0.map(|m| m[0]), "focal length (cam0)", "--focal")?,
-            cx: pick(overrides.cx, cam0.map(|m| m[2]), "principal point x (cam0)", "--cx")?,
-            cy: pick(overrides.cy, cam0.map(|m| m[5]), "principal point y (cam0)", "--cy")?,
-            baseline: pick(overrides.baseline, key("baseline"), "baseline", "--baseline")?,
-            doffs: overrides.doffs.or(key("doffs")).unwrap_or(0.0),
+        let focal = pick(overrides.focal, cam0.map(|m| m[0]), "focal length (cam0)", "--focal");
+        let baseline = pick(overrides.baseline, key("baseline"), "baseline", "--baseline");
+        let (cx, cy) = if with_principal_point {
+            (
+                pick(overrides.cx, cam0.map(|m| m[2]), "principal point x (cam0)", "--cx"),
+                pick(overrides.cy, cam0.map(|m| m[5]), "principal point y (cam0)", "--cy"),
+            )
+        } else {
+            (0.0, 0.0)
         };
-        if !(camera.focal > 0.0 && camera.baseline > 0.0 && camera.doffs.is_finite()) {
-            return Err(Error::Input(format!(
-                "focal length {} and baseline {} must be positive (doffs {} finite)",
-                camera.focal, camera.baseline, camera.doffs
-            )));
+        let doffs = overrides.doffs.or(key("doffs")).unwrap_or(0.0);
+        if !doffs.is_finite() {
+            invalid.push(format!("doffs {doffs} (expected a finite number)"));
         }
+        if let Some(z) = overrides.max_depth
+            && z.is_nan() | (z <= 0.0)
+        {
+            invalid.push(format!("maximum depth {z} (expected > 0)"));
+        }
+        for (name, v) in [("focal length", focal), ("baseline", baseline)] {
+            if v.is_finite() && v <= 0.0 && !missing.iter().any(|(w, _)| w.starts_with(name)) {
+                invalid.push(format!("{name} {v} (expected > 0)"));
+            }
+        }
+        let purpose = if with_principal_point { "a point cloud" } else { "depth" };
+        if !missing.is_empty() || !invalid.is_empty() {
+            let mut parts = Vec::new();
+            if !missing.is_empty() {
+                let what: Vec<&str> = missing.iter().map(|(w, _)| *w).collect();
+                let flags: Vec<&str> = missing.iter().map(|(_, f)| *f).collect();
+                parts.push(format!("{purpose} needs the {} (give {})", what.join(", "), flags.join(", ")));
+            }
+            if !invalid.is_empty() {
+                parts.push(format!("invalid {}", invalid.join(", ")));
+            }
+            let msg = parts.join("; ");
+            return Err(match calib {
+                Some(_) => Error::Calib { path: calib_path.to_path_buf(), msg: format!("{msg} (read from this file)") },
+                None => Error::Input(format!("{msg}: no {} was found", calib_path.display())),
+            });
+        }
+        let max_depth = overrides.max_depth.unwrap_or(focal * baseline);
+        let camera = Camera { focal, cx, cy, baseline, doffs, max_depth };
         if !(camera.focal * camera.baseline).is_finite() {
             return Err(Error::Input(format!(
                 "focal length {:?} times baseline {:?} overflows: no depth f·B / d could be written; check \
-                 calib.txt's cam0 and baseline (or --focal, --baseline)",
-                camera.focal, camera.baseline
+                 {}'s cam0 and baseline (or --focal, --baseline)",
+                camera.focal,
+                camera.baseline,
+                calib_path.display()
             )));
         }
         Ok(camera)
     }
 
-    /// Depth of disparity `d`, or `None` (invalid, or at or beyond infinity).
+    /// The depth of a disparity of one pixel, f·B: the default farthest depth. Beyond it a disparity error of
+    /// half a pixel (what matching leaves) more than doubles the depth, and the sky, whose disparity is about 0,
+    /// would be put thousands of kilometres away.
+    pub fn one_pixel_depth(&self) -> f64 {
+        self.focal * self.baseline
+    }
+
+    /// Depth of disparity `d`, or `None` (invalid, at or beyond infinity, or beyond [`Camera::max_depth`]).
     pub fn depth(&self, d: f32) -> Option<f64> {
         let denom = f64::from(d) + self.doffs;
-        (d.is_finite() && denom > 0.0).then(|| self.focal * self.baseline / denom)
+        (d.is_finite() && denom > 0.0).then(|| self.focal * self.baseline / denom).filter(|&z| z <= self.max_depth)
     }
 
     /// The point (X, Y, Z) of pixel (`x`, `y`) with disparity `d` as written (`f32`), or `None` when it has no depth
@@ -179,35 +239,39 @@ mod tests {
     use super::*;
 
     fn camera() -> Camera {
-        Camera { focal: 500.0, cx: 2.0, cy: 1.0, baseline: 100.0, doffs: 5.0 }
+        Camera { focal: 500.0, cx: 2.0, cy: 1.0, baseline: 100.0, doffs: 5.0, max_depth: f64::INFINITY }
     }
 
     #[test]
     fn camera_from_calib_and_overrides() {
         let calib =
             Calib::parse("cam0=[1746.24 0 14.88; 0 1746.24 65.5; 0 0 1]\nbaseline=178.089\ndoffs=2.5\n").unwrap();
-        let c = Camera::resolve(Some(&calib), &CameraOverrides::default()).unwrap();
+        let path = Path::new("scene/calib.txt");
+        let c = Camera::resolve(Some(&calib), path, &CameraOverrides::default(), true).unwrap();
         assert_eq!((c.focal, c.cx, c.cy, c.baseline, c.doffs), (1746.24, 14.88, 65.5, 178.089, 2.5));
         let o = CameraOverrides { baseline: Some(50.0), ..Default::default() };
-        assert_eq!(Camera::resolve(Some(&calib), &o).unwrap().baseline, 50.0);
-        let e = Camera::resolve(None, &CameraOverrides::default()).unwrap_err().to_string();
-        assert!(e.contains("--focal"), "{e}");
+        assert_eq!(Camera::resolve(Some(&calib), path, &o, true).unwrap().baseline, 50.0);
         let no_baseline = Calib::parse("cam0=[1 0 0; 0 1 0; 0 0 1]\n").unwrap();
-        let e = Camera::resolve(Some(&no_baseline), &CameraOverrides::default()).unwrap_err().to_string();
-        assert!(e.contains("--baseline"), "{e}");
-        let bad = CameraOverrides { focal: Some(-1.0), cx: Some(0.0), cy: Some(0.0), baseline: Some(1.0), doffs: None };
-        assert!(Camera::resolve(None, &bad).is_err());
+        let e = Camera::resolve(Some(&no_baseline), path, &CameraOverrides::default(), false).unwrap_err().to_string();
+        assert_eq!(e, "scene/calib.txt: depth needs the baseline (give --baseline) (read from this file)");
+        let bad = CameraOverrides { focal: Some(-1.0), baseline: Some(1.0), ..Default::default() };
+        assert!(Camera::resolve(None, path, &bad, true).is_err());
     }
 
     /// Issue 41, item 7: a focal length times baseline that overflows is refused; absurd values whose products
     /// stay finite give no non-finite point, and `inf` depth exactly where there is no point.
     #[test]
     fn overflowing_geometry_writes_no_infinite_point() {
-        let huge =
-            CameraOverrides { focal: Some(1e300), cx: Some(0.0), cy: Some(0.0), baseline: Some(1e300), doffs: None };
-        let e = Camera::resolve(None, &huge).unwrap_err().to_string();
+        let huge = CameraOverrides {
+            focal: Some(1e300),
+            cx: Some(0.0),
+            cy: Some(0.0),
+            baseline: Some(1e300),
+            ..Default::default()
+        };
+        let e = Camera::resolve(None, Path::new("calib.txt"), &huge, true).unwrap_err().to_string();
         assert!(e.contains("overflows") && e.contains("baseline"), "{e}");
-        let c = Camera { focal: 1e30, cx: 1.0, cy: 0.5, baseline: 1e30, doffs: 0.0 };
+        let c = Camera { focal: 1e30, cx: 1.0, cy: 0.5, baseline: 1e30, doffs: 0.0, max_depth: f64::INFINITY };
         let disp = Plane::from_parts(3, 2, vec![1.0, 2.0, 3.0, 1e32, 2e32, f32::INFINITY]);
         let depth = depth_map(&disp, &c);
         let ply = encode_ply(&disp, &RgbImage::new(3, 2), &c);
@@ -221,6 +285,52 @@ mod tests {
         assert!(floats.iter().all(|v| v.is_finite()), "{floats:?}");
         let with_depth = depth.data.iter().filter(|z| z.is_finite()).count();
         assert_eq!((body.len() / 15, with_depth), (2, 2), "{:?}", depth.data);
+    }
+
+    /// Everything missing is named in one message, with the flags that give it and where calib.txt was looked
+    /// for; depth does not ask for the principal point.
+    #[test]
+    fn every_missing_value_is_named_at_once_and_depth_needs_no_principal_point() {
+        let path = Path::new("pair/calib.txt");
+        let none = CameraOverrides::default();
+        let e = Camera::resolve(None, path, &none, true).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "a point cloud needs the focal length (cam0), baseline, principal point x (cam0), principal point y \
+             (cam0) (give --focal, --baseline, --cx, --cy): no pair/calib.txt was found"
+        );
+        let e = Camera::resolve(None, path, &none, false).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "depth needs the focal length (cam0), baseline (give --focal, --baseline): no pair/calib.txt was found"
+        );
+        let given = CameraOverrides { focal: Some(500.0), baseline: Some(0.1), ..Default::default() };
+        let c = Camera::resolve(None, path, &given, false).unwrap();
+        assert_eq!((c.focal, c.baseline, c.doffs), (500.0, 0.1, 0.0));
+        let both_bad = CameraOverrides { focal: Some(0.0), baseline: Some(-2.0), ..Default::default() };
+        let e = Camera::resolve(None, path, &both_bad, false).unwrap_err().to_string();
+        assert!(e.contains("focal length 0 (expected > 0), baseline -2 (expected > 0)"), "{e}");
+    }
+
+    /// By default a point is kept up to the depth of a one-pixel disparity (the sky, at about 0, is left out);
+    /// `max_depth` sets the range.
+    #[test]
+    fn depth_stops_at_one_pixel_of_disparity_unless_told_otherwise() {
+        let given = CameraOverrides { focal: Some(500.0), baseline: Some(0.2), ..Default::default() };
+        let c = Camera::resolve(None, Path::new("calib.txt"), &given, false).unwrap();
+        assert_eq!(c.max_depth, 100.0);
+        let disp = Plane::from_parts(4, 1, vec![0.001, 0.5, 1.0, 10.0]);
+        assert_eq!(depth_map(&disp, &c).data, vec![f32::INFINITY, f32::INFINITY, 100.0, 10.0]);
+        let near = CameraOverrides { max_depth: Some(20.0), ..given };
+        let c = Camera::resolve(None, Path::new("calib.txt"), &near, false).unwrap();
+        assert_eq!(depth_map(&disp, &c).data, vec![f32::INFINITY, f32::INFINITY, f32::INFINITY, 10.0]);
+        let bad = CameraOverrides { max_depth: Some(-1.0), ..given };
+        assert!(
+            Camera::resolve(None, Path::new("calib.txt"), &bad, false)
+                .unwrap_err()
+                .to_string()
+                .contains("maximum depth")
+        );
     }
 
     /// Depth and points follow Z = f·B / (d + doffs), X = (x − cx)·Z / f, Y = (y − cy)·Z / f; invalid pixels and

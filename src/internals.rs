@@ -31,3 +31,8 @@ pub mod post {
 pub mod vertical {
     pub use crate::condition::vertical::{VerticalOffset, resample_right};
 }
+
+/// The checks of a pair that no map could make right.
+pub mod diagnose {
+    pub use crate::diagnose::check_pair;
+}

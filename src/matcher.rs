@@ -82,6 +82,18 @@ pub struct Output {
     pub frame: Option<FrameKind>,
 }
 
+impl Output {
+    /// The disparity map with every pixel whose confidence is below `min_confidence` made invalid (`inf`): the
+    /// reliable pixels only (`jem --min-confidence`).
+    pub fn reliable_disparity(&self, min_confidence: f32) -> DisparityMap {
+        let mut out = self.disparity.clone();
+        out.data.iter_mut().zip(&self.confidence.data).filter(|&(_, &c)| c < min_confidence).for_each(|(d, _)| {
+            *d = f32::INFINITY;
+        });
+        out
+    }
+}
+
 /// What a match reports while it runs (see [`Matcher::match_pair_with`]).
 #[derive(Clone, Copy, Debug)]
 pub enum Progress<'a> {
@@ -269,6 +281,16 @@ impl Matcher {
         out
     }
 
+    /// Checks a matched pair for what would make any disparity map of it wrong ([`crate::PairCheck`]: swapped
+    /// views, a vertical offset beyond the alignment, a range over half the width, no texture, an exposure or focus
+    /// difference beyond the front end); `out` is the match's output (its measured range and noise).
+    pub fn check_pair(&self, left: &RgbImage, right: &RgbImage, out: &Output) -> crate::PairCheck {
+        let width = left.width().max(1) as f32;
+        let range_share = out.plan.ndisp_measured.then(|| out.plan.ndisp as f32 / width);
+        let noise = out.measured.map(|m| (m.stats.sigma(), m.stats.gain[0]));
+        crate::diagnose::check_pair(left, right, &self.params.cost, noise, range_share, self.max_memory_bytes)
+    }
+
     /// Runs a planned pair.
     fn run(&mut self, plan: &Plan<'_>, on_progress: &dyn Fn(Progress<'_>)) -> Result<Output> {
         let (w, h) = plan.pair.left.dims();
@@ -342,6 +364,18 @@ mod tests {
         assert_eq!(out.disparity.data, direct.disparity.data);
         assert_eq!((out.plan.ndisp, out.plan.ndisp_measured, out.plan.tiles), (scene.ndisp, false, None));
         assert!(out.plan.memory_bytes > 0 && out.seconds > 0.0);
+    }
+
+    #[test]
+    fn reliable_disparity_drops_the_pixels_below_the_confidence() {
+        let scene = render_scene(&SynthParams { width: 64, height: 48, ndisp: 16, seed: 2 }).unwrap();
+        let mut matcher = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(16));
+        let out = matcher.match_pair(&scene.left, &scene.right).unwrap();
+        let kept = out.reliable_disparity(0.95);
+        for ((&d, &k), &c) in out.disparity.data.iter().zip(&kept.data).zip(&out.confidence.data) {
+            assert!(if c < 0.95 { k.is_infinite() } else { k.to_bits() == d.to_bits() });
+        }
+        assert_eq!(out.reliable_disparity(0.0).data, out.disparity.data);
     }
 
     #[test]

@@ -776,7 +776,7 @@ fn file_size_limit_is_an_error_not_a_leftover() {
 }
 
 /// Issue 18, item 3: `--depth` and `--cloud` on a synthetic scene whose calib.txt gives f = width, B = 100,
-/// doffs = 0: the depth map is f·B/d of the written disparity map, the PLY holds one point per valid pixel at
+/// doffs = 0: the depth map is f·B/d of the written disparity map (where d ≥ 1 px, the default range), the PLY holds one point per valid pixel at
 /// (x − cx)·Z/f, (y − cy)·Z/f, Z with the left image's colour; a missing baseline is an error naming --baseline.
 #[test]
 fn depth_and_point_cloud() {
@@ -789,8 +789,9 @@ fn depth_and_point_cloud() {
     let depth = pfm::read_pfm(&dir.path().join("z.pfm")).unwrap();
     let (f, b, cx, cy) = (96.0f64, 100.0f64, 47.5f64, 31.5f64);
     let mut valid = Vec::new();
+    // Depth is kept up to f·B, the depth of a one-pixel disparity.
     for (i, (&d, &z)) in disp.data().iter().zip(depth.data()).enumerate() {
-        if d.is_finite() && d > 0.0 {
+        if d.is_finite() && d >= 1.0 {
             assert!((f64::from(z) - f * b / f64::from(d)).abs() < 1e-3 * f64::from(z), "pixel {i}: d {d}, z {z}");
             valid.push((i, f64::from(z)));
         } else {

@@ -117,7 +117,7 @@ fn sequences_that_do_not_pair_fail_with_one_line_naming_the_folder() {
         &["seq", "left/ holds 3 frames but right/ holds 2"],
     );
     assert!(!dir.path().join("out").exists());
-    fails(dir.path(), &["sequence", "seq", "-o", "out"], &["--independent"]);
+    fails(dir.path(), &["sequence", "seq", "-o", "out"], &["seq", "left/ holds 3 frames but right/ holds 2"]);
     fails(dir.path(), &["sequence", "nowhere", "-o", "out", "--independent"], &["nowhere", "not a stereo sequence"]);
 }
 

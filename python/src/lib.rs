@@ -13,12 +13,12 @@ use std::path::PathBuf;
 mod matcher;
 
 use jem::{Error, Params, Plane, RgbImage};
-use matcher::PyMatcher;
+use matcher::{MatchOptions, PyMatcher};
 use numpy::ndarray::Array2;
 use numpy::{PyArray2, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyInt, PyList, PyMapping, PyString};
+use pyo3::types::{PyDict, PyInt, PyList, PyMapping, PyString};
 
 /// A `jem::Error` as the Python exception a caller expects: `MemoryError` for a run that fits the memory limit
 /// neither whole nor in tiles, the matching `OSError` subclass (`FileNotFoundError`, ...) for a file the
@@ -297,10 +297,17 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 /// count. ``max_memory``: bytes (default 80 % of RAM, and of the address space left under ``ulimit -v``); a pair
 /// too large for it runs in tiles, as ``--max-memory`` does.
 ///
+/// ``rectify``: a stereo calibration file (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt): the raw views
+/// are rectified first, as ``jem match --rectify`` does, and the map is of the rectified left view.
+/// ``min_confidence``: pixels whose confidence is below it are ``inf`` (as ``jem --min-confidence``).
+///
 /// Returns the map; with ``confidence=True`` also the per-pixel confidence (max-marginal of the left view,
 /// float32 H×W), and with ``return_info=True`` also a dict: ``ndisp``, ``ndisp_measured``, ``tiled``, ``noise``
 /// (σ of each view, or None with ``condition.enabled = false``), ``timings`` (seconds per stage), ``seconds``
-/// (the run, as jem batch counts it), ``memory_planned`` and ``peak_rss`` (bytes; the whole process's peak).
+/// (the run, as jem batch counts it), ``memory_planned`` and ``peak_rss`` (bytes; the whole process's peak),
+/// ``checks`` (the numbers of the pair's checks: ``negative_share``, ``vertical_px``, ``vertical_limit_px``,
+/// ``range_share``, ``textured_share``, ``clipped``, ``sharpness_ratio``, ``focus_beyond``) and ``warnings`` (the
+/// lines ``jem`` prints for a pair that looks wrong, each also a UserWarning).
 ///
 /// The GIL is released while matching, so pairs can run in Python threads. Ctrl-C (KeyboardInterrupt) is
 /// honoured only when the call returns.
@@ -313,7 +320,7 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 #[pyo3(
     name = "match",
     signature = (left, right, ndisp=None, config=None, overrides=None, threads=None, max_memory=None,
-                 confidence=false, return_info=false, calib_ndisp=None)
+                 confidence=false, return_info=false, calib_ndisp=None, rectify=None, min_confidence=None)
 )]
 #[allow(clippy::too_many_arguments)] // the Python signature the issue asks for
 fn match_pair<'py>(
@@ -328,24 +335,29 @@ fn match_pair<'py>(
     confidence: bool,
     return_info: bool,
     calib_ndisp: Option<i64>,
+    rectify: Option<PathBuf>,
+    min_confidence: Option<f32>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let mut matcher = PyMatcher::build(ndisp, calib_ndisp, config, overrides, threads, max_memory, false)?;
+    let options = MatchOptions::new(false, rectify, min_confidence)?;
+    let mut matcher = PyMatcher::build(ndisp, calib_ndisp, config, overrides, threads, max_memory, options)?;
     matcher.run(py, left, right, confidence, return_info)
 }
 
 /// Metric depth Z = f·baseline / (disp + doffs), float32 H×W, in the baseline's unit; ``inf`` where the
 /// disparity is invalid or d + doffs ≤ 0 (as ``jem --depth``). ``f``: focal length in pixels; ``doffs``: the
-/// x-difference of the principal points (Middlebury calib.txt).
+/// x-difference of the principal points (Middlebury calib.txt). ``max_depth``: depths beyond it are ``inf`` too
+/// (default f·baseline, the depth of a one-pixel disparity, as ``jem --depth``; ``float("inf")`` keeps all).
 #[pyfunction]
-#[pyo3(signature = (disp, f, baseline, doffs=0.0))]
+#[pyo3(signature = (disp, f, baseline, doffs=0.0, max_depth=None))]
 fn depth<'py>(
     py: Python<'py>,
     disp: &Bound<'py, PyAny>,
     f: f64,
     baseline: f64,
     doffs: f64,
+    max_depth: Option<f64>,
 ) -> PyResult<Bound<'py, PyArray2<f32>>> {
-    let camera = checked_camera(f, baseline, 0.0, 0.0, doffs)?;
+    let camera = checked_camera(f, baseline, 0.0, 0.0, doffs, max_depth)?;
     let map = to_plane(disp, "disp")?;
     Ok(to_numpy(py, py.detach(|| jem::geometry::depth_map(&map, &camera))))
 }
@@ -355,9 +367,10 @@ fn depth<'py>(
 /// X = (x − cx)·Z/f, Y = (y − cy)·Z/f, Z = f·baseline / (d + doffs)), the colours uint8 N×3 (RGB, the pixel of
 /// ``left``), one row per pixel with a depth, in row order (the PLY's vertices, in order). ``left``: the image,
 /// as ``match`` takes it (H×W, H×W×3 or H×W×4; uint8 or uint16), the size of ``disp``. ``f``, ``cx``, ``cy``:
-/// ``cam0`` of a calib.txt, in pixels; ``doffs``: its x-difference of the principal points.
+/// ``cam0`` of a calib.txt, in pixels; ``doffs``: its x-difference of the principal points; ``max_depth``: no
+/// point beyond it (default f·baseline, as ``--cloud``; ``float("inf")`` keeps all).
 #[pyfunction]
-#[pyo3(signature = (disp, left, f, baseline, cx, cy, doffs=0.0))]
+#[pyo3(signature = (disp, left, f, baseline, cx, cy, doffs=0.0, max_depth=None))]
 #[allow(clippy::too_many_arguments)] // the camera's five numbers, as calib.txt gives them
 fn cloud<'py>(
     py: Python<'py>,
@@ -368,8 +381,9 @@ fn cloud<'py>(
     cx: f64,
     cy: f64,
     doffs: f64,
+    max_depth: Option<f64>,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-    let camera = checked_camera(f, baseline, cx, cy, doffs)?;
+    let camera = checked_camera(f, baseline, cx, cy, doffs, max_depth)?;
     let map = to_plane(disp, "disp")?;
     let image = ImageArray::inspect(left, "left")?;
     if (image.width, image.height) != map.dims() {
@@ -389,8 +403,16 @@ fn cloud<'py>(
     Ok((to_array(py, &[n, 3], points)?, to_array(py, &[n, 3], colours)?))
 }
 
-/// A camera from Python's numbers: ``f`` and ``baseline`` positive, all finite, and their product too.
-fn checked_camera(f: f64, baseline: f64, cx: f64, cy: f64, doffs: f64) -> PyResult<jem::geometry::Camera> {
+/// A camera from Python's numbers: ``f`` and ``baseline`` positive, all finite, and their product too;
+/// ``max_depth`` positive (infinite keeps every depth), by default f·baseline (a one-pixel disparity's depth).
+fn checked_camera(
+    f: f64,
+    baseline: f64,
+    cx: f64,
+    cy: f64,
+    doffs: f64,
+    max_depth: Option<f64>,
+) -> PyResult<jem::geometry::Camera> {
     let finite = [f, baseline, cx, cy, doffs].iter().all(|v| v.is_finite()) && (f * baseline).is_finite();
     if !(finite && f > 0.0 && baseline > 0.0) {
         return Err(PyValueError::new_err(format!(
@@ -398,7 +420,11 @@ fn checked_camera(f: f64, baseline: f64, cx: f64, cy: f64, doffs: f64) -> PyResu
              doffs {doffs} finite"
         )));
     }
-    Ok(jem::geometry::Camera { focal: f, cx, cy, baseline, doffs })
+    let max_depth = max_depth.unwrap_or(f * baseline);
+    if max_depth.is_nan() || max_depth <= 0.0 {
+        return Err(PyValueError::new_err(format!("max_depth {max_depth} must be positive")));
+    }
+    Ok(jem::geometry::Camera { focal: f, cx, cy, baseline, doffs, max_depth })
 }
 
 /// A disparity map in colour, as ``jem viz`` draws it: uint8 H×W×3 (RGB), dark indigo (low) through blue,
@@ -444,6 +470,72 @@ fn to_plane(array: &Bound<'_, PyAny>, name: &str) -> PyResult<Plane<f32>> {
         return Plane::from_vec(w, h, view.as_array().iter().map(|&v| v as f32).collect()).map_err(|e| to_py(&e));
     }
     Err(bad())
+}
+
+/// The rectification a stereo calibration file gives views of ``size`` (width, height; default: the size the
+/// file states), as OpenCV's ``stereoRectify(alpha=0)`` and ``initUndistortRectifyMap`` give it: a dict with
+/// ``map1x``, ``map1y`` (left) and ``map2x``, ``map2y`` (right), float32 H×W (for each rectified pixel, where in the
+/// original image it comes from: ``cv2.remap``'s maps), ``R1``, ``R2`` (3×3), ``P1``, ``P2`` (3×4), ``Q`` (4×4),
+/// ``focal``, ``baseline`` (the calibration's unit), ``doffs`` and ``size``. ``calib``: OpenCV FileStorage YAML/XML
+/// or KITTI calib_cam_to_cam.txt. Raises ValueError for a malformed or unusable calibration, OSError if it cannot be
+/// read.
+#[pyfunction]
+#[pyo3(signature = (calib, size=None))]
+fn rectify_maps<'py>(py: Python<'py>, calib: PathBuf, size: Option<(usize, usize)>) -> PyResult<Bound<'py, PyDict>> {
+    let calibration = jem::rectify::StereoCalibration::load(&calib).map_err(|e| to_py(&e))?;
+    let size = size.or(calibration.image_size).ok_or_else(|| {
+        PyValueError::new_err(format!("{}: states no image size; give size=(width, height)", calib.display()))
+    })?;
+    if size.0 == 0 || size.1 == 0 || size.0.saturating_mul(size.1) > 1 << 30 {
+        return Err(PyValueError::new_err(format!("size {size:?}: expected 1..2^30 pixels")));
+    }
+    let rect = calibration.rectification(size).map_err(|e| to_py(&e))?;
+    let ((m1x, m1y), (m2x, m2y)) =
+        py.detach(|| (rect.maps(jem::rectify::View::Left), rect.maps(jem::rectify::View::Right)));
+    let out = PyDict::new(py);
+    for (name, plane) in [("map1x", m1x), ("map1y", m1y), ("map2x", m2x), ("map2y", m2y)] {
+        out.set_item(name, to_numpy(py, plane))?;
+    }
+    let t = rect.transforms();
+    let rows = |m: &[[f64; 3]; 3]| m.iter().map(|r| r.to_vec()).collect::<Vec<_>>();
+    let rows4 = |m: &[[f64; 4]]| m.iter().map(|r| r.to_vec()).collect::<Vec<_>>();
+    out.set_item("R1", rows(&t.r1))?;
+    out.set_item("R2", rows(&t.r2))?;
+    out.set_item("P1", rows4(&t.p1))?;
+    out.set_item("P2", rows4(&t.p2))?;
+    out.set_item("Q", rows4(&rect.q()))?;
+    out.set_item("focal", rect.focal_px())?;
+    out.set_item("baseline", rect.baseline())?;
+    out.set_item("doffs", rect.doffs())?;
+    out.set_item("size", size)?;
+    Ok(out)
+}
+
+/// Rectifies a raw pair with its stereo calibration (as ``jem rectify``): the rectified views as uint8 H×W×3
+/// arrays (the images ``jem rectify`` writes), and the Middlebury calib.txt of the rectified pair as text.
+/// ``left``, ``right`` as for ``match``. Raises ValueError for a bad array or calibration, OSError if the file cannot
+/// be read.
+#[pyfunction]
+fn rectify<'py>(
+    py: Python<'py>,
+    calib: PathBuf,
+    left: &Bound<'py, PyAny>,
+    right: &Bound<'py, PyAny>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, String)> {
+    let (left, right) = (ImageArray::inspect(left, "left")?, ImageArray::inspect(right, "right")?);
+    if (left.width, left.height) != (right.width, right.height) {
+        let e = Error::SizeMismatch { left: (left.width, left.height), right: (right.width, right.height) };
+        return Err(to_py(&e));
+    }
+    let calibration = jem::rectify::StereoCalibration::load(&calib).map_err(|e| to_py(&e))?;
+    let rect = calibration.rectification((left.width, left.height)).map_err(|e| to_py(&e))?;
+    let (l, r) = (left.to_rgb()?, right.to_rgb()?);
+    let (l, r) = py.detach(|| guarded(None, || rect.rectify_pair(&l, &r)))?;
+    let bytes = |img: &RgbImage| -> Vec<u8> {
+        (0..img.len()).flat_map(|i| img.rgb(i).map(|v| v.round().clamp(0.0, 255.0) as u8)).collect()
+    };
+    let (w, h) = l.dims();
+    Ok((to_array(py, &[h, w, 3], bytes(&l))?, to_array(py, &[h, w, 3], bytes(&r))?, rect.calib_txt()))
 }
 
 /// A PFM file as float32 H×W, top row first (PFM stores rows bottom-up; this undoes it), ``inf`` kept. A 3-channel
@@ -507,6 +599,8 @@ fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_pfm, m)?)?;
     m.add_function(wrap_pyfunction!(write_pfm, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
+    m.add_function(wrap_pyfunction!(rectify_maps, m)?)?;
+    m.add_function(wrap_pyfunction!(rectify, m)?)?;
     m.add_function(wrap_pyfunction!(matcher::sequence_frames, m)?)?;
     m.add_class::<PyMatcher>()?;
     // maturin's package __init__ re-exports `*` of the native module: `__all__` makes that include __version__.
@@ -521,6 +615,8 @@ fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
         "read_pfm",
         "write_pfm",
         "read_image",
+        "rectify_maps",
+        "rectify",
     ];
     m.add("__all__", all)?;
     Ok(())

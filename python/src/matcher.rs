@@ -4,7 +4,8 @@
 
 use std::path::PathBuf;
 
-use jem::{FrameKind, NdispSource, Output, Params};
+use jem::rectify::{Rectification, StereoCalibration};
+use jem::{Error, FrameKind, NdispSource, Output, PairCheck, Params};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -24,6 +25,41 @@ pub(crate) struct PyMatcher {
     matcher: jem::Matcher,
     params: Params,
     threads: Option<usize>,
+    options: MatchOptions,
+}
+
+/// What a matcher does besides the match: remember the frames, rectify the raw views first, keep the reliable
+/// pixels only.
+pub(crate) struct MatchOptions {
+    temporal: bool,
+    /// The stereo calibration, and its rectification for the last size seen.
+    calibration: Option<(StereoCalibration, Option<Rectification>)>,
+    min_confidence: Option<f32>,
+}
+
+impl MatchOptions {
+    /// From the ``temporal``, ``rectify`` and ``min_confidence`` arguments, checked.
+    pub(crate) fn new(temporal: bool, rectify: Option<PathBuf>, min_confidence: Option<f32>) -> PyResult<MatchOptions> {
+        if let Some(c) = min_confidence
+            && !(0.0..=1.0).contains(&c)
+        {
+            return Err(to_py(&Error::param("min_confidence", c, "a confidence from 0 to 1")));
+        }
+        let calibration = match rectify {
+            Some(path) => Some((StereoCalibration::load(&path).map_err(|e| to_py(&e))?, None)),
+            None => None,
+        };
+        Ok(MatchOptions { temporal, calibration, min_confidence })
+    }
+
+    /// The rectification for views of `size`, computed once per size.
+    fn rectification(&mut self, size: (usize, usize)) -> PyResult<Option<&Rectification>> {
+        let Some((calibration, held)) = &mut self.calibration else { return Ok(None) };
+        if held.as_ref().is_none_or(|r| r.size() != size) {
+            *held = Some(calibration.rectification(size).map_err(|e| to_py(&e))?);
+        }
+        Ok(held.as_ref())
+    }
 }
 
 impl PyMatcher {
@@ -35,7 +71,7 @@ impl PyMatcher {
         overrides: Option<&Bound<'_, PyAny>>,
         threads: Option<i64>,
         max_memory: Option<i64>,
-        temporal: bool,
+        options: MatchOptions,
     ) -> PyResult<PyMatcher> {
         let params = load_params(config, overrides)?;
         let given = positive("ndisp", ndisp)?.map(|n| n as usize);
@@ -45,8 +81,8 @@ impl PyMatcher {
         let threads = threads.map_err(|e| to_py(&e))?;
         let limit = positive("max_memory", max_memory)?.unwrap_or_else(jem::default_memory_limit);
         let matcher = jem::Matcher::new(params.clone()).map_err(|e| to_py(&e))?;
-        let matcher = matcher.with_ndisp(source).with_max_memory(limit).with_temporal(temporal);
-        Ok(PyMatcher { matcher, params, threads })
+        let matcher = matcher.with_ndisp(source).with_max_memory(limit).with_temporal(options.temporal);
+        Ok(PyMatcher { matcher, params, threads, options })
     }
 
     /// Matches one pair of arrays and builds what `match` returns.
@@ -63,10 +99,20 @@ impl PyMatcher {
         let input_bytes = left.load_bytes().saturating_add(right.load_bytes());
         let sizes = ((left.width, left.height), (right.width, right.height));
         self.matcher.check_size(sizes.0, sizes.1, input_bytes).map_err(|e| to_py(&e))?;
+        let rectification = self.options.rectification((left.width, left.height))?;
         let (l, r) = (left.to_rgb()?, right.to_rgb()?);
         let (matcher, threads) = (&mut self.matcher, self.threads);
-        let out = py.detach(|| guarded(threads, || matcher.match_pair(&l, &r)))?;
-        results(py, out, &self.params, confidence, return_info)
+        let (out, check) = py.detach(|| {
+            guarded(threads, || {
+                let rectified = rectification.map(|rect| rect.rectify_pair(&l, &r)).transpose()?;
+                let (l, r) = rectified.as_ref().map_or((&l, &r), |(a, b)| (a, b));
+                let out = matcher.match_pair(l, r)?;
+                let check = matcher.check_pair(l, r, &out);
+                Ok((out, check))
+            })
+        })?;
+        let shown = Shown { confidence, return_info, min_confidence: self.options.min_confidence };
+        results(py, out, &check, &self.params, shown)
     }
 }
 
@@ -74,7 +120,8 @@ impl PyMatcher {
 impl PyMatcher {
     #[new]
     #[pyo3(signature = (ndisp=None, config=None, overrides=None, threads=None, max_memory=None, temporal=false,
-                        calib_ndisp=None))]
+                        calib_ndisp=None, rectify=None, min_confidence=None))]
+    #[allow(clippy::too_many_arguments)] // the Python signature, as jem.match's
     fn new(
         ndisp: Option<i64>,
         config: Option<&Bound<'_, PyAny>>,
@@ -83,8 +130,11 @@ impl PyMatcher {
         max_memory: Option<i64>,
         temporal: bool,
         calib_ndisp: Option<i64>,
+        rectify: Option<PathBuf>,
+        min_confidence: Option<f32>,
     ) -> PyResult<PyMatcher> {
-        PyMatcher::build(ndisp, calib_ndisp, config, overrides, threads, max_memory, temporal)
+        let options = MatchOptions::new(temporal, rectify, min_confidence)?;
+        PyMatcher::build(ndisp, calib_ndisp, config, overrides, threads, max_memory, options)
     }
 
     /// The left view's disparity map of the pair (and with the flags, its confidence and an info dict), as
@@ -107,23 +157,35 @@ impl PyMatcher {
     }
 }
 
-/// What `match` returns for `out`: the map, then the confidence and the info dict when asked for. Values too
-/// large for this image (held to a bound, as `jem` warns on stderr) give a UserWarning each.
+/// What a call asked to see.
+struct Shown {
+    confidence: bool,
+    return_info: bool,
+    min_confidence: Option<f32>,
+}
+
+/// What `match` returns for `out`: the map (the reliable pixels only with ``min_confidence``), then the confidence
+/// and the info dict when asked for. Values too large for this image (held to a bound, as `jem` warns on stderr)
+/// and a pair that looks wrong (swapped, unrectified, ...; the lines `jem` prints) give a UserWarning each.
 fn results<'py>(
     py: Python<'py>,
     out: Output,
+    check: &PairCheck,
     params: &Params,
-    confidence: bool,
-    return_info: bool,
+    shown: Shown,
 ) -> PyResult<Bound<'py, PyAny>> {
     let (w, h) = out.disparity.dims();
-    for warning in params.image_warnings(w, h) {
+    for warning in params.image_warnings(w, h).into_iter().chain(check.warnings()) {
         let message = std::ffi::CString::new(warning).unwrap_or_default();
         PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &message, 1)?;
     }
-    let info = if return_info { Some(info(py, &out)?) } else { None };
-    let mut result = vec![to_numpy(py, out.disparity).into_any()];
-    if confidence {
+    let info = if shown.return_info { Some(info(py, &out, check)?) } else { None };
+    let disparity = match shown.min_confidence {
+        Some(c) => out.reliable_disparity(c),
+        None => out.disparity,
+    };
+    let mut result = vec![to_numpy(py, disparity).into_any()];
+    if shown.confidence {
         result.push(to_numpy(py, out.confidence).into_any());
     }
     result.extend(info);
@@ -134,7 +196,7 @@ fn results<'py>(
 }
 
 /// The info dict of a match (see `jem.match`).
-fn info<'py>(py: Python<'py>, out: &Output) -> PyResult<Bound<'py, PyAny>> {
+fn info<'py>(py: Python<'py>, out: &Output, check: &PairCheck) -> PyResult<Bound<'py, PyAny>> {
     let info = PyDict::new(py);
     info.set_item("ndisp", out.plan.ndisp)?;
     info.set_item("ndisp_measured", out.plan.ndisp_measured)?;
@@ -158,6 +220,17 @@ fn info<'py>(py: Python<'py>, out: &Output) -> PyResult<Bound<'py, PyAny>> {
     info.set_item("frame", frame.map(|f| f.0))?;
     info.set_item("frames_averaged", frame.and_then(|f| f.1))?;
     info.set_item("shift", frame.and_then(|f| f.2))?;
+    let checks = PyDict::new(py);
+    checks.set_item("negative_share", check.negative_share)?;
+    checks.set_item("vertical_px", check.vertical_px)?;
+    checks.set_item("vertical_limit_px", check.vertical_limit_px)?;
+    checks.set_item("range_share", check.range_share)?;
+    checks.set_item("textured_share", check.textured_share)?;
+    checks.set_item("clipped", (check.clipped[0], check.clipped[1]))?;
+    checks.set_item("sharpness_ratio", check.sharpness_ratio)?;
+    checks.set_item("focus_beyond", check.focus_beyond)?;
+    info.set_item("checks", checks)?;
+    info.set_item("warnings", check.warnings())?;
     Ok(info.into_any())
 }
 

@@ -85,3 +85,12 @@ def test_the_gil_is_released_while_matching(synth_pair):
         counter.join()
     # At 1 ms a tick, the call's seconds would allow ~1000/s; ask for a tenth of that.
     assert during >= 100 * info["seconds"], (during, info["seconds"])
+
+
+def test_depth_stops_at_one_pixel_of_disparity_unless_told():
+    disp = np.array([[0.001, 0.5, 1.0, 10.0]], np.float32)
+    # f·B = 100: the depth of a one-pixel disparity is the default range, as jem --depth.
+    np.testing.assert_array_equal(jem.depth(disp, 500.0, 0.2), np.array([[np.inf, np.inf, 100.0, 10.0]], np.float32))
+    np.testing.assert_array_equal(jem.depth(disp, 500.0, 0.2, max_depth=float("inf"))[0, 1], np.float32(200.0))
+    with pytest.raises(ValueError, match="max_depth"):
+        jem.depth(disp, 500.0, 0.2, max_depth=-1.0)

@@ -130,3 +130,12 @@ def test_a_segment_count_the_image_cannot_hold_warns(synth_pair):
 def test_version_is_the_core_crate_version():
     text = (REPO / "Cargo.toml").read_text()
     assert f'version = "{jem.__version__}"' in text.split("[dependencies]")[0]
+
+
+def test_min_confidence_matches_the_cli(tmp_path, cli, synth_pair):
+    cli(SYNTH / "im0.png", SYNTH / "im1.png", "-o", tmp_path / "cli.pfm", "--min-confidence", "0.8")
+    disp = jem.match(*synth_pair, calib_ndisp=calib_ndisp(SYNTH / "calib.txt"), min_confidence=0.8)
+    assert pfm_bytes(tmp_path, disp) == (tmp_path / "cli.pfm").read_bytes()
+    assert 0 < np.isinf(disp).sum() < disp.size
+    with pytest.raises(ValueError, match="min_confidence"):
+        jem.match(*synth_pair, ndisp=48, min_confidence=2.0)

@@ -29,6 +29,11 @@ pub(super) struct MatchArgs {
     /// Disparity search range 0..N−1 (default: `ndisp` from calib.txt beside LEFT).
     #[arg(long, value_name = "N")]
     ndisp: Option<usize>,
+    /// Rectify the raw pair first with this stereo calibration, as `jem rectify` does (OpenCV FileStorage YAML/XML
+    /// or KITTI calib_cam_to_cam.txt): the outputs are then of the rectified left view, the camera for --depth and
+    /// --cloud is the rectified one, and calib.txt beside LEFT is not read.
+    #[arg(long, value_name = "CALIB")]
+    rectify: Option<PathBuf>,
     /// Also write the per-pixel confidence (max-marginal of the left view) to this file (.pfm/.exr).
     #[arg(long, value_name = "FILE")]
     confidence: Option<PathBuf>,
@@ -54,6 +59,18 @@ pub(super) struct MatchArgs {
     /// Principal point offset between the views, pixels (default: `doffs` of calib.txt, else 0).
     #[arg(long, value_name = "PX")]
     doffs: Option<f64>,
+    /// Leave out of --depth and --cloud every point farther than Z, in the baseline's unit (default: f·B, the
+    /// depth of a one-pixel disparity: beyond it half a pixel of error more than doubles the depth).
+    #[arg(long, value_name = "Z", allow_negative_numbers = true)]
+    max_depth: Option<f64>,
+    /// Write invalid (inf; 0 in a 16-bit PNG) where the confidence is below C (0..1): only the reliable pixels in
+    /// the disparity map, the depth map and the cloud.
+    #[arg(long, value_name = "C", allow_negative_numbers = true)]
+    min_confidence: Option<f32>,
+    /// Write nothing and fail (exit 2) when the pair looks wrong (views swapped, rows far apart, no texture, ...:
+    /// the warnings jem otherwise prints beside a written result).
+    #[arg(long)]
+    strict: bool,
     #[command(flatten)]
     config: ConfigArgs,
     #[command(flatten)]
@@ -76,9 +93,24 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     }
     // Both headers are checked against the memory limit before either image is decoded.
     let (l, r) = matcher.read_pair(request.left, request.right)?;
+    let (l, r) = match &request.rectification {
+        Some(rect) => rect.rectify_pair(&l, &r)?,
+        None => (l, r),
+    };
     let load_time = start.elapsed();
     let out = match_with_progress(&mut matcher, (&l, &r), request.stated_ndisp, global.quiet)?;
-    write_outputs(args, &request, &out, &l)?;
+    let check = matcher.check_pair(&l, &r, &out);
+    let warnings = check.warnings();
+    if args.strict && !warnings.is_empty() {
+        return Err(Error::Input(format!("the pair looks wrong (--strict: nothing written): {}", warnings.join("; "))));
+    }
+    // With --min-confidence, the map written holds the reliable pixels only.
+    let reliable = args.min_confidence.map(|c| out.reliable_disparity(c));
+    let disparity = reliable.as_ref().unwrap_or(&out.disparity);
+    write_outputs(args, &request, &out, disparity, &l)?;
+    for warning in warnings.iter().filter(|_| !global.quiet) {
+        note!("warning: {warning}");
+    }
     if global.verbose && !global.quiet {
         note!("{:<14} {:>9.1} ms", "load", load_time.as_secs_f64() * 1e3);
         for (name, d) in &out.timings.stages {
@@ -88,13 +120,14 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         if let Some(m) = &out.measured {
             note!("{m}");
         }
+        note!("{check}");
         if let Some(peak) = jem::peak_rss_bytes() {
             note!("memory: peak {} (planned {})", human(peak), human(out.plan.memory_bytes));
         }
     }
     if !global.quiet {
         let seconds = start.elapsed().as_secs_f64();
-        note!("{}", wrote_line(args, &out, seconds, request.camera.as_ref()));
+        note!("{}", wrote_line(args, &out, disparity, seconds, request.camera.as_ref()));
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -108,6 +141,8 @@ struct Request<'a> {
     stated_ndisp: Option<usize>,
     /// For `--depth` and `--cloud`.
     camera: Option<jem::geometry::Camera>,
+    /// With `--rectify`: how the pair is rectified before matching.
+    rectification: Option<jem::rectify::Rectification>,
 }
 
 impl<'a> Request<'a> {
@@ -116,6 +151,14 @@ impl<'a> Request<'a> {
             return Err(Error::Input("usage: jem LEFT RIGHT -o OUT (see --help)".into()));
         };
         jem::io::DisparityFormat::from_path(output)?;
+        if let Some(c) = args.min_confidence
+            && !(0.0..=1.0).contains(&c)
+        {
+            return Err(Error::param("--min-confidence", c, "a confidence from 0 to 1"));
+        }
+        if args.max_depth.is_some() && args.depth.is_none() && args.cloud.is_none() {
+            return Err(Error::Input("--max-depth limits --depth and --cloud; give one of them".into()));
+        }
         if let Some(c) = &args.confidence {
             jem::io::DisparityFormat::from_path(c)?;
         }
@@ -130,12 +173,20 @@ impl<'a> Request<'a> {
         {
             return Err(Error::Input(format!("{}: a point cloud is written as .ply", c.display())));
         }
-        // calib.txt, read once when something needs it (the range, or the camera).
+        // calib.txt, read once when something needs it (the range, or the camera); with --rectify, the rectified
+        // pair's (it states no range).
         let wants_camera = args.cloud.is_some() || args.depth.is_some();
-        let calib_file = if (args.ndisp.is_none() || wants_camera) && calib.is_file() {
-            Some(calib::Calib::load(&calib)?)
-        } else {
-            None
+        let rectification = match &args.rectify {
+            Some(c) => Some(super::rectify::plan(c, left, right, args.memory.memory_limit())?),
+            None => None,
+        };
+        let calib_file = match &rectification {
+            Some(rect) => Some(
+                calib::Calib::parse(&rect.calib_txt())
+                    .map_err(|msg| Error::Calib { path: args.rectify.clone().unwrap_or_default(), msg })?,
+            ),
+            None if (args.ndisp.is_none() || wants_camera) && calib.is_file() => Some(calib::Calib::load(&calib)?),
+            None => None,
         };
         let camera = if wants_camera {
             let overrides = jem::geometry::CameraOverrides {
@@ -144,8 +195,10 @@ impl<'a> Request<'a> {
                 cy: args.cy,
                 baseline: args.baseline,
                 doffs: args.doffs,
+                max_depth: args.max_depth,
             };
-            Some(jem::geometry::Camera::resolve(calib_file.as_ref(), &overrides)?)
+            let source = args.rectify.as_deref().unwrap_or(&calib);
+            Some(jem::geometry::Camera::resolve(calib_file.as_ref(), source, &overrides, args.cloud.is_some())?)
         } else {
             None
         };
@@ -154,16 +207,17 @@ impl<'a> Request<'a> {
             .chain(args.cloud.as_deref())
             .chain(args.depth.as_deref())
             .collect();
-        jem::io::check_outputs(&[left, right, &calib], &outputs)?;
+        let rectify_calib = args.rectify.as_deref().unwrap_or(&calib);
+        jem::io::check_outputs(&[left, right, &calib, rectify_calib], &outputs)?;
         // The range: --ndisp, else calib.txt's (measured instead when it is missing or no real bound: half the
         // width or more).
         let stated_ndisp = match &calib_file {
-            Some(c) if args.ndisp.is_none() => {
+            Some(c) if args.ndisp.is_none() && rectification.is_none() => {
                 Some(c.ndisp().map_err(|msg| Error::Calib { path: calib.clone(), msg })?)
             }
             _ => None,
         };
-        Ok(Request { left, right, stated_ndisp, camera })
+        Ok(Request { left, right, stated_ndisp, camera, rectification })
     }
 }
 
@@ -205,19 +259,25 @@ fn match_with_progress(
 
 /// Writes the disparity map and what else was asked for, all or none: every file is encoded first, then they are
 /// written as one.
-fn write_outputs(args: &MatchArgs, request: &Request<'_>, out: &jem::Output, left: &jem::RgbImage) -> Result<()> {
+fn write_outputs(
+    args: &MatchArgs,
+    request: &Request<'_>,
+    out: &jem::Output,
+    disparity: &jem::DisparityMap,
+    left: &jem::RgbImage,
+) -> Result<()> {
     let output = args.output.as_deref().unwrap_or(Path::new("?"));
-    let mut files = vec![(output, jem::io::encode_disparity(output, &out.disparity)?)];
+    let mut files = vec![(output, jem::io::encode_disparity(output, disparity)?)];
     if let Some(c) = &args.confidence {
         files.push((c.as_path(), jem::io::encode_disparity(c, &out.confidence)?));
     }
     if let Some(camera) = &request.camera {
         if let Some(d) = &args.depth {
-            let depth = jem::geometry::depth_map(&out.disparity, camera);
+            let depth = jem::geometry::depth_map(disparity, camera);
             files.push((d.as_path(), jem::io::encode_disparity(d, &depth)?));
         }
         if let Some(c) = &args.cloud {
-            files.push((c.as_path(), jem::geometry::encode_ply(&out.disparity, left, camera)));
+            files.push((c.as_path(), jem::geometry::encode_ply(disparity, left, camera)));
         }
     }
     let refs: Vec<(&Path, &[u8])> = files.iter().map(|(p, b)| (*p, b.as_slice())).collect();
@@ -225,8 +285,14 @@ fn write_outputs(args: &MatchArgs, request: &Request<'_>, out: &jem::Output, lef
 }
 
 /// The last line of a match: `wrote d.pfm (741×497, 96 % valid, ndisp 70, 2.8 s)`, then the other files written.
-fn wrote_line(args: &MatchArgs, out: &jem::Output, seconds: f64, camera: Option<&jem::geometry::Camera>) -> String {
-    let (disparity, ndisp, measured) = (&out.disparity, out.plan.ndisp, out.plan.ndisp_measured);
+fn wrote_line(
+    args: &MatchArgs,
+    out: &jem::Output,
+    disparity: &jem::DisparityMap,
+    seconds: f64,
+    camera: Option<&jem::geometry::Camera>,
+) -> String {
+    let (ndisp, measured) = (out.plan.ndisp, out.plan.ndisp_measured);
     let (w, h) = disparity.dims();
     let valid = disparity.data().iter().filter(|d| d.is_finite()).count();
     let percent = 100.0 * valid as f64 / disparity.data().len().max(1) as f64;
@@ -236,8 +302,8 @@ fn wrote_line(args: &MatchArgs, out: &jem::Output, seconds: f64, camera: Option<
     if let Some(c) = &args.confidence {
         line.push_str(&format!(", confidence {}", c.display()));
     }
-    if let Some(d) = &args.depth {
-        line.push_str(&format!(", depth {}", d.display()));
+    if let (Some(d), Some(camera)) = (&args.depth, camera) {
+        line.push_str(&format!(", depth {} (up to {})", d.display(), camera.max_depth as f32));
     }
     if let (Some(c), Some(camera)) = (&args.cloud, camera) {
         let points = disparity.data().iter().enumerate().filter(|&(i, &d)| camera.point(i % w, i / w, d).is_some());

@@ -36,6 +36,7 @@ mod config;
 mod degrade;
 mod eval;
 mod r#match;
+mod rectify;
 mod report;
 mod sequence;
 mod signals;
@@ -52,6 +53,7 @@ use config::ConfigArgs;
 use degrade::DegradeArgs;
 use eval::EvalArgs;
 use r#match::MatchArgs;
+use rectify::RectifyArgs;
 use report::ReportArgs;
 use sequence::SequenceArgs;
 use synth::SynthArgs;
@@ -168,6 +170,18 @@ fn parse_size(text: &str) -> std::result::Result<u64, String> {
 enum Command {
     /// Match one pair (the same as `jem LEFT RIGHT -o OUT`).
     Match(MatchArgs),
+    /// Rectify a raw pair with its stereo calibration, as OpenCV's stereoRectify (alpha 0) and remap do.
+    ///
+    /// `jem rectify CALIB LEFT RIGHT -o DIR` writes DIR/im0.png, DIR/im1.png (the rectified views, 8-bit) and
+    /// DIR/calib.txt (Middlebury keys cam0, cam1, doffs, baseline, width, height; the baseline in the calibration's
+    /// unit), ready for `jem DIR/im0.png DIR/im1.png -o disp.pfm --depth depth.pfm`. `jem match --rectify CALIB`
+    /// does the same before matching.
+    /// CALIB: OpenCV FileStorage YAML or XML as cv2.FileStorage writes it (K1 or M1, D1 with 4, 5 or 8
+    /// coefficients, K2/M2, D2, R, T; image_width/image_height or a size node; R1, R2, P1, P2 are used when
+    /// present), or KITTI's calib_cam_to_cam.txt (cameras 02 and 03; images of KITTI's rectified size S_rect_02 are
+    /// taken as already rectified).
+    #[command(verbatim_doc_comment)]
+    Rectify(RectifyArgs),
     /// Print the effective configuration (defaults ← --config ← --set) as TOML.
     Config(ConfigArgs),
     /// Render a synthetic scene with exact ground truth in MiddEval3 layout (--frames N: a sequence).
@@ -317,6 +331,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Sequence(a)) => &a.threads,
         Some(Command::Eval(a)) => &a.threads,
         Some(Command::Report(a)) => &a.threads,
+        Some(Command::Rectify(a)) => &a.threads,
         Some(Command::Config(_) | Command::Viz(_)) => &ThreadsArg::default(),
     };
     if let Some(n) = threads.threads {
@@ -338,6 +353,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Eval(args)) => eval::run(&args, &cli.global),
         Some(Command::Viz(args)) => viz::run(&args, &cli.global),
         Some(Command::Report(args)) => report::run(&args, &cli.global),
+        Some(Command::Rectify(args)) => rectify::run(&args, &cli.global),
     }
 }
 

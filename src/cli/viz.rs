@@ -45,6 +45,10 @@ pub(super) struct VizArgs {
     /// Where KITTI and ETH3D results are: RESULTS/NAME/SPLIT/ (default: results/ beside the data set, as batch).
     #[arg(long, value_name = "RESULTS")]
     results: Option<PathBuf>,
+    /// DISP is a depth map (jem --depth): coloured by inverse depth (near dark red, far indigo) with a labelled
+    /// scale bar under it, over --vmin..--vmax in the depth's unit, else the 2nd to 98th percentile of its depths.
+    #[arg(long)]
+    depth: bool,
     /// Largest panel width of a contact sheet, in pixels.
     #[arg(long, value_name = "PX", default_value_t = 320)]
     panel_width: usize,
@@ -83,6 +87,27 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let read_refs: Vec<&Path> = read.iter().map(PathBuf::as_path).collect();
     jem::io::check_outputs(&read_refs, &[&args.output])?;
     let disp = jem::io::read_disparity(&args.input)?;
+    if args.depth {
+        if args.gt.is_some() {
+            return Err(Error::Input("--gt scores disparity maps; a depth map (--depth) is drawn alone".into()));
+        }
+        let auto = viz::depth_range(&disp);
+        let near = args.vmin.or(auto.map(|r| r.0)).unwrap_or(1.0);
+        let far = args.vmax.or(auto.map(|r| r.1)).unwrap_or(near);
+        if (args.vmin.is_some() || args.vmax.is_some()) && !(near > 0.0 && near < far) {
+            return Err(Error::param("--vmin / --vmax", format!("{near} / {far}"), "depths with 0 < --vmin < --vmax"));
+        }
+        let picture = viz::colorize_depth(&disp, near, far);
+        picture.write_png(&args.output)?;
+        if !global.quiet {
+            let (w, h) = (picture.width, picture.height);
+            note!(
+                "wrote {} ({w}×{h}): depth coloured by 1/Z from {near} (dark red) to {far} (indigo), scale bar below",
+                args.output.display()
+            );
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
     let truth = match truth {
         None => None,
         Some((_, Ok(t))) => Some(t),

@@ -76,6 +76,17 @@ pub fn write_png_rgb8(path: &Path, width: usize, height: usize, rgb: &[u8]) -> R
     png::write_rgb8_png(path, width, height, rgb)
 }
 
+/// An image as an 8-bit RGB PNG file's bytes (samples rounded and held to 0..=255); nothing is written, `path`
+/// names the file in an error. With [`write_all_or_none`], several files are written as one.
+///
+/// # Errors
+/// [`Error::Image`] naming the path.
+pub fn encode_png(path: &Path, image: &RgbImage) -> Result<Vec<u8>> {
+    let (w, h) = image.dims();
+    let rgb: Vec<u8> = (0..w * h).flat_map(|i| image.rgb(i).map(|v| v.round().clamp(0.0, 255.0) as u8)).collect();
+    png::encode_rgb8_png(path, w, h, &rgb)
+}
+
 /// A decoded image (from the `image` crate) as an [`RgbImage`], exactly as [`read_image`] converts a file's
 /// pixels.
 pub fn image_from_dynamic(img: &image::DynamicImage) -> RgbImage {

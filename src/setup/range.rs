@@ -89,39 +89,8 @@ pub(crate) fn find_ndisp(
     let factor = measure_factor(w, h, max_ndisp, limit_bytes).ok_or_else(|| too_large(w, h, max_ndisp, limit_bytes))?;
     let (l, r) = (downsample_rgb(left, factor), downsample_rgb(right, factor));
     let labels = max_ndisp.div_ceil(factor).clamp(2, l.width.max(2));
-    let vol = cost::build_cost_volume(&l, &r, labels, p);
-    let dl = cost::winner_take_all(&vol);
-    let dr = cost::winner_take_all(&cost::derive_right_volume(&vol, cost::truncation_cost(p)));
-    // Distinct: the best cost clearly below the best one away from it (a flat or repetitive region matches
-    // anywhere, and such chance matches would stretch the range).
-    let distinct = |i: usize, d: usize| {
-        let c = vol.pixel(i);
-        let second = c.iter().enumerate().filter(|(k, _)| k.abs_diff(d) > 1).map(|(_, v)| *v).fold(f32::MAX, f32::min);
-        c[d] < DISTINCT_RATIO * second
-    };
-    let (lw, lh) = l.dims();
-    let coherent = |x: usize, y: usize, d: f32| {
-        let rows = y.saturating_sub(1)..=(y + 1).min(lh - 1);
-        let cols = x.saturating_sub(1)..=(x + 1).min(lw - 1);
-        let agree = rows
-            .flat_map(|yy| cols.clone().map(move |xx| (xx, yy)))
-            .filter(|&(xx, yy)| (xx, yy) != (x, y) && (dl.data[yy * lw + xx] - d).abs() <= 1.0)
-            .count();
-        agree >= MIN_COHERENT_NEIGHBOURS
-    };
-    let consistent: Vec<f32> = dl
-        .data
-        .iter()
-        .enumerate()
-        .filter_map(|(i, &d)| {
-            let (x, y) = (i % lw, i / lw);
-            let xr = x.checked_sub(d.round() as usize)?;
-            let ok = (dr.data[y * lw + xr] - d).abs() <= 1.0 && distinct(i, d.round() as usize) && coherent(x, y, d);
-            ok.then_some(d)
-        })
-        .collect();
-    drop(vol);
-    let dl_len = dl.data.len();
+    let consistent = reliable_matches(&l, &r, labels, p);
+    let dl_len = l.len();
     if consistent.len() * 100 < dl_len {
         return Ok(max_ndisp);
     }
@@ -138,6 +107,41 @@ pub(crate) fn find_ndisp(
     // Two coarse labels and 8 px of margin, in full-resolution pixels.
     let n = ((f64::from(top) + 2.0) * factor as f64).ceil() as usize + 8;
     Ok(n.clamp(min_ndisp(max_ndisp), max_ndisp))
+}
+
+/// The disparities (in `left`'s pixels, 0..`labels`) of the matches of a pair that are left-right consistent,
+/// distinct and spatially coherent (see the module doc): the ones a measurement can rest on.
+pub(crate) fn reliable_matches(left: &RgbImage, right: &RgbImage, labels: usize, p: &CostParams) -> Vec<f32> {
+    let vol = cost::build_cost_volume(left, right, labels, p);
+    let dl = cost::winner_take_all(&vol);
+    let dr = cost::winner_take_all(&cost::derive_right_volume(&vol, cost::truncation_cost(p)));
+    // Distinct: the best cost clearly below the best one away from it (a flat or repetitive region matches
+    // anywhere, and such chance matches would stretch the range).
+    let distinct = |i: usize, d: usize| {
+        let c = vol.pixel(i);
+        let second = c.iter().enumerate().filter(|(k, _)| k.abs_diff(d) > 1).map(|(_, v)| *v).fold(f32::MAX, f32::min);
+        c[d] < DISTINCT_RATIO * second
+    };
+    let (lw, lh) = left.dims();
+    let coherent = |x: usize, y: usize, d: f32| {
+        let rows = y.saturating_sub(1)..=(y + 1).min(lh - 1);
+        let cols = x.saturating_sub(1)..=(x + 1).min(lw - 1);
+        let agree = rows
+            .flat_map(|yy| cols.clone().map(move |xx| (xx, yy)))
+            .filter(|&(xx, yy)| (xx, yy) != (x, y) && (dl.data[yy * lw + xx] - d).abs() <= 1.0)
+            .count();
+        agree >= MIN_COHERENT_NEIGHBOURS
+    };
+    dl.data
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &d)| {
+            let (x, y) = (i % lw, i / lw);
+            let xr = x.checked_sub(d.round() as usize)?;
+            let ok = (dr.data[y * lw + xr] - d).abs() <= 1.0 && distinct(i, d.round() as usize) && coherent(x, y, d);
+            ok.then_some(d)
+        })
+        .collect()
 }
 
 /// The error of a range measurement that fits `limit_bytes` at no resolution.

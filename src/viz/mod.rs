@@ -25,11 +25,16 @@
 //!   most `panel_width` pixels wide; `sheet.rs` finds the rows where the [`dataset`](crate::dataset) layout puts
 //!   the files.
 //!
+//! - **Depth maps** ([`colorize_depth`], `depth.rs`): coloured by inverse depth over a robust range
+//!   ([`depth_range`]), with a labelled scale bar under the picture.
+//!
 //! Images are [`Canvas`]es: interleaved 8-bit RGB, row-major, `data[(y·w + x)·3 + c]`. Everything is O(pixels).
 
+mod depth;
 pub(crate) mod font;
 mod sheet;
 
+pub use depth::{colorize_depth, depth_range};
 pub use sheet::{
     Occlusion, RowPictures, RowScore, Sheet, SheetOptions, SheetRow, TruthFiles, TruthRule, contact_sheet, gt_rule,
     load_truth, render_row, sheet_rows,

@@ -1,0 +1,97 @@
+//! `jem rectify CALIB LEFT RIGHT -o DIR`: rectify a raw pair with its stereo calibration (OpenCV FileStorage
+//! YAML/XML, KITTI calib_cam_to_cam.txt), writing `DIR/im0.png`, `DIR/im1.png` and the Middlebury `DIR/calib.txt`
+//! of the rectified pair, all or none.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::Args;
+use jem::rectify::{Rectification, StereoCalibration, View};
+use jem::{Error, Result};
+
+use super::{GlobalArgs, MemoryArg, ThreadsArg};
+
+/// Arguments of `jem rectify` (the help text is on [`Command::Rectify`](super::Command::Rectify)).
+#[derive(Args, Debug, Clone)]
+pub(super) struct RectifyArgs {
+    /// The stereo calibration: OpenCV FileStorage (.yml/.yaml/.xml) or KITTI's calib_cam_to_cam.txt.
+    #[arg(value_name = "CALIB")]
+    calib: PathBuf,
+    /// The left camera's image.
+    left: PathBuf,
+    /// The right camera's image, the same size.
+    right: PathBuf,
+    /// Output folder (created if missing): im0.png, im1.png, calib.txt.
+    #[arg(long, short, value_name = "DIR")]
+    output: PathBuf,
+    /// Also write the maps (for each rectified pixel, where in the original image it comes from) as
+    /// DIR/map0x.pfm, map0y.pfm (left) and map1x.pfm, map1y.pfm (right).
+    #[arg(long)]
+    maps: bool,
+    #[command(flatten)]
+    pub(super) threads: ThreadsArg,
+    #[command(flatten)]
+    memory: MemoryArg,
+}
+
+/// Reads a calibration and the pair's headers, and makes the rectification for the pair's size, before any image
+/// is decoded; refuses a pair whose rectification would need more than `max_memory` bytes.
+pub(super) fn plan(calib: &Path, left: &Path, right: &Path, max_memory: u64) -> Result<Rectification> {
+    let calibration = StereoCalibration::load(calib)?;
+    let header = jem::io::read_pair_header(left, right)?;
+    let rectification = calibration.rectification((header.width, header.height))?;
+    let need = header
+        .load_bytes
+        .saturating_add(jem::rectify::RECTIFY_BYTES_PER_PX.saturating_mul((header.width * header.height) as u64));
+    if need > max_memory {
+        return Err(Error::OutOfMemory {
+            needed: need,
+            limit: max_memory,
+            hint: "raise --max-memory or rectify smaller images".into(),
+        });
+    }
+    Ok(rectification)
+}
+
+/// Rectifies one pair.
+pub(super) fn run(args: &RectifyArgs, global: &GlobalArgs) -> Result<ExitCode> {
+    let names = ["im0.png", "im1.png", "calib.txt"];
+    let mut outputs: Vec<PathBuf> = names.iter().map(|n| args.output.join(n)).collect();
+    if args.maps {
+        outputs.extend(["map0x.pfm", "map0y.pfm", "map1x.pfm", "map1y.pfm"].map(|n| args.output.join(n)));
+    }
+    if args.output.exists() && !args.output.is_dir() {
+        return Err(Error::Input(format!("{}: exists and is not a folder", args.output.display())));
+    }
+    let rectification = plan(&args.calib, &args.left, &args.right, args.memory.memory_limit())?;
+    let output_refs: Vec<&Path> = outputs.iter().map(PathBuf::as_path).collect();
+    jem::io::check_outputs(&[&args.calib, &args.left, &args.right], &output_refs)?;
+    let (left, right) = jem::io::read_image_pair(&args.left, &args.right)?;
+    let (left, right) = rectification.rectify_pair(&left, &right)?;
+    let mut files = vec![
+        jem::io::encode_png(&outputs[0], &left)?,
+        jem::io::encode_png(&outputs[1], &right)?,
+        rectification.calib_txt().into_bytes(),
+    ];
+    if args.maps {
+        for view in [View::Left, View::Right] {
+            let (x, y) = rectification.maps(view);
+            files.push(jem::io::pfm::encode_pfm(&x));
+            files.push(jem::io::pfm::encode_pfm(&y));
+        }
+    }
+    std::fs::create_dir_all(&args.output).map_err(|e| Error::io(&args.output, e))?;
+    let pairs: Vec<(&Path, &[u8])> = output_refs.iter().copied().zip(files.iter().map(Vec::as_slice)).collect();
+    jem::io::write_all_or_none(&pairs)?;
+    if !global.quiet {
+        let (w, h) = rectification.size();
+        note!(
+            "wrote {} ({w}×{h}; focal length {:.2} px, baseline {:.6}, doffs {:.2})",
+            outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "),
+            rectification.focal_px(),
+            rectification.baseline(),
+            rectification.doffs()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

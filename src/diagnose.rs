@@ -1,0 +1,350 @@
+//! Checks of a pair that no disparity map could make right: views given the wrong way round, rows further apart
+//! than the alignment corrects, a range of more than half the width, almost no texture, one view far darker,
+//! brighter or blurrier than the front end allows for. Each is a number ([`PairCheck`]) and, past its bound, a
+//! one-line warning ([`PairCheck::warnings`]); the map is still made.
+//!
+//! - **Swapped views**: the reliable matches (left-right consistent, distinct, coherent: the range measurement's,
+//!   `crate::setup::range`) at 1/4 resolution, searched at positive disparities on the pair and on the pair
+//!   mirrored left to right (whose positive disparities are the pair's negative ones). Most of them at negative
+//!   disparity: the views look swapped.
+//! - **Vertical offset**: the views' row profiles (each row's mean grey level, less its local mean over
+//!   [`PROFILE_DETREND`] rows) are correlated over vertical shifts; a horizontal disparity moves content along a
+//!   row and leaves the profile nearly as it is, a vertical offset shifts it. Beyond what the alignment
+//!   corrects ([`VerticalParams::MAX_OFFSET_PX`]) and clearly better correlated than no shift, it is a warning.
+//! - **Texture**: the share of pixels whose gradient stands above the noise.
+//! - **Exposure**: the share of pixels clipped to black or white in one view and not the other (detail lost
+//!   there cannot be matched; a gain or an offset the front end stretches away).
+//! - **Focus**: the views' sharpness ratio beyond the largest blur the front end gives the sharper view.
+
+use crate::image::{Plane, RgbImage};
+use crate::imgproc::filter::{central_differences, gaussian_blur_plane};
+use crate::params::{CostParams, VerticalParams};
+use crate::scale::downsample_rgb;
+
+/// Rows over which the row profile's slow trend (lighting, vignetting) is taken out.
+const PROFILE_DETREND: usize = 15;
+
+/// A vertical offset is reported only when its profile correlation beats no shift's by at least this much: on a
+/// pair without horizontal structure both are noise.
+const PROFILE_MARGIN: f64 = 0.2;
+
+/// A pixel is textured when its gradient magnitude exceeds this many times the noise σ (and 2 grey levels).
+const TEXTURE_SIGMAS: f32 = 3.0;
+
+/// The reduction the texture is measured at (as the range measurement and the swap check see the pair).
+const TEXTURE_FACTOR: usize = 4;
+
+/// Fewer textured pixels than this share: almost no texture (matching then rests on propagation alone).
+const MIN_TEXTURED_SHARE: f32 = 0.05;
+
+/// A difference in the clipped share of the views beyond this (a fraction of the pixels) is reported.
+const MAX_CLIPPED_DIFFERENCE: f32 = 0.10;
+
+/// The largest blur (σ, px) the front end gives the sharper view (`condition::sharpness`).
+const MAX_MATCHING_BLUR: f32 = 3.0;
+
+/// What was checked on a pair (see the module doc); `None` where it could not be measured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PairCheck {
+    /// The share of the reliable matches at negative disparity (0..1; over ½: swapped).
+    pub negative_share: Option<f32>,
+    /// The right view's vertical offset measured from the row profiles (px; + = the right view's content lower).
+    pub vertical_px: Option<f32>,
+    /// The largest offset the alignment corrects (px).
+    pub vertical_limit_px: f32,
+    /// The measured range as a share of the width, when it was measured.
+    pub range_share: Option<f32>,
+    /// The share of the left view's pixels with texture above the noise.
+    pub textured_share: f32,
+    /// The share of each view's pixels clipped to black or white.
+    pub clipped: [f32; 2],
+    /// The sharper view's sharpness over the blurrier one's, and whether the largest blur the front end applies
+    /// still leaves the sharper one sharper than the other by more than the front end tolerates.
+    pub sharpness_ratio: f32,
+    /// Whether the focus difference is beyond what the front end matches.
+    pub focus_beyond: bool,
+}
+
+impl PairCheck {
+    /// One line per problem found (no line for a pair that looks right).
+    pub fn warnings(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if let Some(share) = self.negative_share
+            && share > 0.5
+        {
+            out.push(format!(
+                "the views look swapped: {:.0} % of the reliable matches are at negative disparity (give the left \
+                 view first)",
+                100.0 * share
+            ));
+        }
+        if let Some(v) = self.vertical_px
+            && v.abs() > self.vertical_limit_px
+        {
+            out.push(format!(
+                "the right view is {:.1} px {} than the left, more than the {} px the alignment corrects: the pair is \
+                 not rectified (rectify it with --rectify CALIB)",
+                v.abs(),
+                if v > 0.0 { "lower" } else { "higher" },
+                self.vertical_limit_px
+            ));
+        }
+        if let Some(r) = self.range_share
+            && r > 0.5
+        {
+            out.push(format!(
+                "the measured disparity range is {:.0} % of the width: objects that close, or views that do not \
+                 overlap (a pair this wide apart is rarely matched right)",
+                100.0 * r
+            ));
+        }
+        if self.textured_share < MIN_TEXTURED_SHARE {
+            out.push(format!(
+                "almost no texture: {:.1} % of the pixels stand above the noise; the disparities are guesses \
+                 propagated from the few that do",
+                100.0 * self.textured_share
+            ));
+        }
+        let [cl, cr] = self.clipped;
+        if (cl - cr).abs() > MAX_CLIPPED_DIFFERENCE {
+            out.push(format!(
+                "the views are exposed differently: {:.0} % of the left view's pixels and {:.0} % of the right's are \
+                 clipped to black or white; detail lost in one view cannot be matched",
+                100.0 * cl,
+                100.0 * cr
+            ));
+        }
+        if self.focus_beyond {
+            out.push(format!(
+                "one view is {:.1} times sharper than the other, more than a blur of {MAX_MATCHING_BLUR} px \
+                 evens out (focus or motion blur)",
+                self.sharpness_ratio
+            ));
+        }
+        out
+    }
+}
+
+impl std::fmt::Display for PairCheck {
+    /// One line of the numbers (what `jem -v` prints).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let opt =
+            |v: Option<f32>, scale: f32, unit: &str| v.map_or("-".to_string(), |v| format!("{:.2}{unit}", v * scale));
+        write!(
+            f,
+            "checked: negative-disparity share {}, vertical offset {} (alignment up to {} px), range {} of the width, \
+             textured {:.1} %, clipped {:.1} / {:.1} %, sharpness ratio {:.2}",
+            opt(self.negative_share, 100.0, " %"),
+            opt(self.vertical_px, 1.0, " px"),
+            self.vertical_limit_px,
+            opt(self.range_share, 100.0, " %"),
+            100.0 * self.textured_share,
+            100.0 * self.clipped[0],
+            100.0 * self.clipped[1],
+            self.sharpness_ratio
+        )
+    }
+}
+
+/// Checks a pair (see the module doc). `noise` is the noise σ the front end measured and the left view's contrast
+/// gain it was measured after (σ is in stretched grey levels); `range_share`
+/// the measured range over the width, when it was measured. The swap check runs at a resolution whose cost volume
+/// fits `limit_bytes` (none when none does).
+pub fn check_pair(
+    left: &RgbImage,
+    right: &RgbImage,
+    p: &CostParams,
+    noise: Option<(f32, f32)>,
+    range_share: Option<f32>,
+    limit_bytes: u64,
+) -> PairCheck {
+    let (w, h) = left.dims();
+    let negative_share = crate::setup::range::measure_factor(w, h, w, limit_bytes).and_then(|factor| {
+        let (l, r) = (downsample_rgb(left, factor), downsample_rgb(right, factor));
+        // Half the width: the largest range a pair is matched over with any sense.
+        let labels = (l.width / 2).max(2);
+        let (direct, mirrored) = rayon::join(
+            || crate::setup::range::reliable_matches(&l, &r, labels, p),
+            || crate::setup::range::reliable_matches(&l.mirrored(), &r.mirrored(), labels, p),
+        );
+        // Disparity 0 (the far distance) matches the same either way round.
+        let count = |m: &[f32]| m.iter().filter(|&&d| d >= 1.0).count();
+        let (pos, neg) = (count(&direct), count(&mirrored));
+        (100 * (pos + neg) >= l.len()).then(|| neg as f32 / (pos + neg) as f32)
+    });
+    let (gl, gr) = (left.to_grey(), right.to_grey());
+    let (sigma, gain) = noise.unwrap_or((0.0, 1.0));
+    let (sharpness_ratio, focus_beyond) = sharpness_ratio(&gl, &gr);
+    PairCheck {
+        negative_share,
+        vertical_px: vertical_offset(&gl, &gr),
+        vertical_limit_px: VerticalParams::MAX_OFFSET_PX,
+        range_share,
+        textured_share: textured_share(left, sigma, gain),
+        clipped: [clipped_share(left), clipped_share(right)],
+        sharpness_ratio,
+        focus_beyond,
+    }
+}
+
+/// Each row's mean grey level less its mean over the [`PROFILE_DETREND`] rows around it.
+fn row_profile(grey: &Plane<f32>) -> Vec<f64> {
+    let (w, h) = grey.dims();
+    let means: Vec<f64> = (0..h).map(|y| grey.row(y).iter().map(|&v| f64::from(v)).sum::<f64>() / w as f64).collect();
+    let half = PROFILE_DETREND / 2;
+    (0..h)
+        .map(|y| {
+            let (a, b) = (y.saturating_sub(half), (y + half + 1).min(h));
+            means[y] - means[a..b].iter().sum::<f64>() / (b - a) as f64
+        })
+        .collect()
+}
+
+/// The vertical shift (px, sub-pixel) of the right view's row profile against the left's, within ±⅛ of the height;
+/// `None` when its correlation does not beat no shift's by [`PROFILE_MARGIN`] or the image is too small.
+fn vertical_offset(left: &Plane<f32>, right: &Plane<f32>) -> Option<f32> {
+    let h = left.height();
+    let reach = (h / 8) as i64;
+    if reach < 2 {
+        return None;
+    }
+    let (pl, pr) = (row_profile(left), row_profile(right));
+    let ncc = |dy: i64| -> f64 {
+        let pairs = (0..h as i64).filter_map(|y| {
+            let yr = y + dy;
+            (yr >= 0 && yr < h as i64).then(|| (pl[y as usize], pr[yr as usize]))
+        });
+        let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+        for (a, b) in pairs {
+            sab += a * b;
+            saa += a * a;
+            sbb += b * b;
+        }
+        if saa > 0.0 && sbb > 0.0 { sab / (saa * sbb).sqrt() } else { f64::NEG_INFINITY }
+    };
+    let scores: Vec<(i64, f64)> = (-reach..=reach).map(|dy| (dy, ncc(dy))).collect();
+    let &(best, score) = scores.iter().max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.abs().cmp(&a.0.abs())))?;
+    if !(score - ncc(0) >= PROFILE_MARGIN || best == 0) || !score.is_finite() {
+        return None;
+    }
+    // A parabola through the peak and its neighbours.
+    let at = |dy: i64| scores.iter().find(|s| s.0 == dy).map(|s| s.1);
+    let sub = match (at(best - 1), at(best + 1)) {
+        (Some(a), Some(c)) if (a - 2.0 * score + c) < 0.0 => 0.5 * (a - c) / (a - 2.0 * score + c),
+        _ => 0.0,
+    };
+    Some((best as f64 + sub) as f32)
+}
+
+/// The share of the view's pixels with texture above the noise, at [`TEXTURE_FACTOR`] × reduced resolution (where
+/// the averaging has taken the noise down by that factor, as the matching's windows do): the gradient magnitude
+/// over [`TEXTURE_SIGMAS`] × the reduced noise σ and 2 grey levels, both in the grey levels of the view stretched
+/// by `gain` (as the front end matches it: a dark view is not textureless).
+fn textured_share(view: &RgbImage, sigma: f32, gain: f32) -> f32 {
+    let grey = downsample_rgb(view, TEXTURE_FACTOR).to_grey();
+    let (gx, gy) = central_differences(&grey);
+    let threshold = (TEXTURE_SIGMAS * sigma / TEXTURE_FACTOR as f32).max(2.0) / gain.max(1.0);
+    let n = gx.data().iter().zip(gy.data()).filter(|&(&a, &b)| a.hypot(b) > threshold).count();
+    n as f32 / grey.data().len().max(1) as f32
+}
+
+/// The share of pixels whose channels are all at most 1 or all at least 254.
+fn clipped_share(img: &RgbImage) -> f32 {
+    let n = (0..img.len()).filter(|&i| {
+        let c = img.rgb(i);
+        c.iter().all(|&v| v <= 1.0) || c.iter().all(|&v| v >= 254.0)
+    });
+    n.count() as f32 / img.len().max(1) as f32
+}
+
+/// The sharper view's sharpness over the other's, and whether the largest blur the front end gives the sharper
+/// view still leaves it more than the front end's tolerance (`condition.sharpness_ratio`, 1.25) sharper.
+fn sharpness_ratio(left: &Plane<f32>, right: &Plane<f32>) -> (f32, bool) {
+    let (sl, sr) = (crate::condition::sharpness(left), crate::condition::sharpness(right));
+    let (sharp, blurry, sharper) = if sl >= sr { (sl, sr, left) } else { (sr, sl, right) };
+    if blurry.is_nan() || blurry <= 0.0 {
+        return (1.0, false);
+    }
+    let ratio = sharp / blurry;
+    // Cheap first: a blur of 3 px lowers the sharpness far more than 2 times, so below that nothing is beyond.
+    if ratio < 2.0 {
+        return (ratio, false);
+    }
+    let (w, h) = sharper.dims();
+    let blurred = Plane::from_parts(w, h, gaussian_blur_plane(sharper.data(), w, h, MAX_MATCHING_BLUR));
+    (ratio, crate::condition::sharpness(&blurred) > 1.25 * blurry)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{SynthParams, render_scene};
+
+    fn scene() -> (RgbImage, RgbImage) {
+        let s = render_scene(&SynthParams { width: 240, height: 180, ndisp: 32, seed: 5 }).unwrap();
+        (s.left, s.right)
+    }
+
+    fn check(l: &RgbImage, r: &RgbImage) -> PairCheck {
+        check_pair(l, r, &CostParams::default(), None, None, u64::MAX)
+    }
+
+    /// The image with every channel mapped through `f`.
+    fn mapped(img: &RgbImage, f: impl Fn(usize, usize, &[f32]) -> f32) -> RgbImage {
+        let (w, h) = img.dims();
+        let channels = [0, 1, 2].map(|c| (0..w * h).map(|i| f(i % w, i / w, img.channel(c))).collect());
+        RgbImage::from_channels(w, h, channels).unwrap()
+    }
+
+    #[test]
+    fn a_good_pair_gives_no_warning() {
+        let (l, r) = scene();
+        let c = check(&l, &r);
+        assert!(c.warnings().is_empty(), "{c}: {:?}", c.warnings());
+        assert!(c.negative_share.unwrap() < 0.5 && c.vertical_px.unwrap().abs() < 0.5, "{c}");
+    }
+
+    #[test]
+    fn swapped_views_are_said_to_be() {
+        let (l, r) = scene();
+        let c = check(&r, &l);
+        assert!(c.warnings().iter().any(|w| w.starts_with("the views look swapped")), "{c}");
+    }
+
+    #[test]
+    fn a_right_view_lower_than_the_alignment_corrects_is_reported_with_its_offset() {
+        let (l, r) = scene();
+        let w = r.width();
+        let lower = mapped(&r, |x, y, ch| if y >= 7 { ch[(y - 7) * w + x] } else { ch[x] });
+        let c = check(&l, &lower);
+        assert!((c.vertical_px.unwrap() - 7.0).abs() < 0.5, "{c}");
+        let warnings = c.warnings();
+        assert!(
+            warnings.iter().any(|w| w.contains(" px lower than the left") && w.contains("--rectify")),
+            "{warnings:?}"
+        );
+    }
+
+    #[test]
+    fn a_flat_pair_has_almost_no_texture() {
+        let flat = mapped(&scene().0, |x, y, _| 120.0 + ((x * 7 + y * 13) % 3) as f32 * 0.3);
+        let c = check(&flat, &flat);
+        assert!(c.warnings().iter().any(|w| w.starts_with("almost no texture")), "{c}");
+    }
+
+    #[test]
+    fn a_clipped_view_and_a_blurred_view_are_reported() {
+        let (l, r) = scene();
+        let bright = mapped(&r, |x, y, ch| (ch[y * r.width() + x] * 3.0).min(255.0));
+        assert!(check(&l, &bright).warnings().iter().any(|w| w.contains("exposed differently")));
+        let (w, h) = r.dims();
+        let blurred =
+            RgbImage::from_channels(w, h, [0, 1, 2].map(|c| gaussian_blur_plane(r.channel(c), w, h, 6.0))).unwrap();
+        let c = check(&l, &blurred);
+        assert!(c.focus_beyond && c.warnings().iter().any(|w| w.contains("sharper than the other")), "{c}");
+        // A blur the front end evens out is no warning.
+        let slight =
+            RgbImage::from_channels(w, h, [0, 1, 2].map(|c| gaussian_blur_plane(r.channel(c), w, h, 1.0))).unwrap();
+        assert!(!check(&l, &slight).focus_beyond);
+    }
+}

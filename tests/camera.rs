@@ -1,0 +1,210 @@
+//! Your own camera from the command line: `jem rectify` and `jem match --rectify` with a stereo calibration, and
+//! the camera values `--depth` and `--cloud` need, asked for all at once.
+
+mod common;
+
+use std::path::Path;
+
+use common::{files_in, run_in, stderr};
+
+/// An OpenCV FileStorage YAML of a rig of two pinhole cameras (no distortion, no rotation), the right one `b` to
+/// the right, with the principal point at the centre of `w × h` images.
+fn pinhole_rig_yaml(w: usize, h: usize, b: f64) -> String {
+    let (cx, cy) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
+    let k = format!("[ 80., 0., {cx}, 0., 80., {cy}, 0., 0., 1. ]");
+    let m = |name: &str, rows: usize, cols: usize, data: &str| {
+        format!("{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: {data}\n")
+    };
+    format!(
+        "%YAML:1.0\n---\n{}{}{}{}{}{}image_width: {w}\nimage_height: {h}\n",
+        m("K1", 3, 3, &k),
+        m("D1", 1, 5, "[ 0., 0., 0., 0., 0. ]"),
+        m("K2", 3, 3, &k),
+        m("D2", 1, 5, "[ 0., 0., 0., 0., 0. ]"),
+        m("R", 3, 3, "[ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]"),
+        m("T", 3, 1, &format!("[ {}, 0., 0. ]", -b)),
+    )
+}
+
+fn synth_scene(dir: &Path, name: &str) {
+    let out = run_in(dir, &["synth", name, "--width", "64", "--height", "48", "--ndisp", "16"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+#[test]
+fn rectify_writes_the_pair_and_its_calib_txt() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    std::fs::write(dir.path().join("rig.yml"), pinhole_rig_yaml(64, 48, 0.25)).unwrap();
+    let out = run_in(dir.path(), &["rectify", "rig.yml", "S/im0.png", "S/im1.png", "-o", "R"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(files_in(&dir.path().join("R")), ["calib.txt", "im0.png", "im1.png"]);
+    // An ideal rig: the rectified views are the views.
+    for name in ["im0.png", "im1.png"] {
+        let (a, b) = (
+            jem::io::read_image(&dir.path().join("S").join(name)).unwrap(),
+            jem::io::read_image(&dir.path().join("R").join(name)).unwrap(),
+        );
+        assert_eq!(a, b, "{name}");
+    }
+    let calib = std::fs::read_to_string(dir.path().join("R/calib.txt")).unwrap();
+    assert_eq!(
+        calib,
+        "cam0=[80 0 31.5; 0 80 23.5; 0 0 1]\ncam1=[80 0 31.5; 0 80 23.5; 0 0 1]\ndoffs=0\nbaseline=0.25\nwidth=64\nheight=48\n"
+    );
+}
+
+#[test]
+fn match_with_rectify_writes_depth_from_the_rectified_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    std::fs::write(dir.path().join("rig.yml"), pinhole_rig_yaml(64, 48, 0.25)).unwrap();
+    let args =
+        ["S/im0.png", "S/im1.png", "--rectify", "rig.yml", "-o", "d.pfm", "--depth", "z.pfm", "--set", "model=wta"];
+    let out = run_in(dir.path(), &args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let d = jem::io::read_disparity(&dir.path().join("d.pfm")).unwrap();
+    let z = jem::io::read_disparity(&dir.path().join("z.pfm")).unwrap();
+    let (i, &di) = d.data().iter().enumerate().find(|(_, v)| v.is_finite() && **v > 1.0).unwrap();
+    assert!((z.data()[i] - 80.0 * 0.25 / di).abs() < 1e-4, "depth {} for disparity {di}", z.data()[i]);
+}
+
+#[test]
+fn a_bad_calibration_is_one_error_naming_the_file_and_leaves_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let cases: [(&str, String, &str); 4] = [
+        ("empty.yml", "%YAML:1.0\n---\n".into(), "missing K1/M1/cameraMatrix1, D1/distCoeffs1, K2/M2/cameraMatrix2"),
+        ("other.yml", pinhole_rig_yaml(640, 480, 0.25), "the calibration is for 640x480 images, these are 64x48"),
+        ("swapped.yml", pinhole_rig_yaml(64, 48, -0.25), "other way round"),
+        ("notes.txt", "hello\n".into(), "neither an OpenCV FileStorage"),
+    ];
+    for (name, text, needle) in cases {
+        std::fs::write(dir.path().join(name), text).unwrap();
+        let before = files_in(dir.path());
+        for args in [
+            vec!["rectify", name, "S/im0.png", "S/im1.png", "-o", "R"],
+            vec!["S/im0.png", "S/im1.png", "--rectify", name, "-o", "d.pfm"],
+        ] {
+            let out = run_in(dir.path(), &args);
+            let err = stderr(&out);
+            assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+            assert!(err.starts_with(&format!("error: {name}: ")) && err.contains(needle), "{args:?}: {err}");
+            assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+            assert_eq!(files_in(dir.path()), before, "{args:?} left files");
+        }
+    }
+}
+
+#[test]
+fn depth_asks_for_everything_missing_at_once_and_names_where_it_looked() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    std::fs::remove_file(dir.path().join("S/calib.txt")).unwrap();
+    let base = ["S/im0.png", "S/im1.png", "-o", "d.pfm", "--ndisp", "16", "--set", "model=wta"];
+    let out = run_in(dir.path(), &[&base[..], &["--depth", "z.pfm"]].concat());
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(
+        err.trim_end(),
+        "error: depth needs the focal length (cam0), baseline (give --focal, --baseline): no S/calib.txt was found"
+    );
+    // Depth needs the focal length and the baseline only.
+    let out = run_in(dir.path(), &[&base[..], &["--depth", "z.pfm", "--focal", "100", "--baseline", "0.1"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    // A calib.txt without them is named as the file read.
+    std::fs::write(dir.path().join("S/calib.txt"), "ndisp=16\n").unwrap();
+    let out = run_in(dir.path(), &[&base[..], &["--cloud", "c.ply"]].concat());
+    let err = stderr(&out);
+    assert!(
+        err.starts_with("error: S/calib.txt: a point cloud needs the focal length (cam0), baseline, principal point x")
+            && err.contains("(give --focal, --baseline, --cx, --cy) (read from this file)"),
+        "{err}"
+    );
+}
+
+#[test]
+fn min_confidence_writes_only_the_reliable_pixels() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let base = ["S/im0.png", "S/im1.png", "--confidence", "k.pfm"];
+    let all = run_in(dir.path(), &[&base[..], &["-o", "all.pfm"]].concat());
+    assert!(all.status.success(), "{}", stderr(&all));
+    let some = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "some.pfm", "--min-confidence", "0.9"]);
+    assert!(some.status.success(), "{}", stderr(&some));
+    let read = |n: &str| jem::io::read_disparity(&dir.path().join(n)).unwrap();
+    let (all, some, confidence) = (read("all.pfm"), read("some.pfm"), read("k.pfm"));
+    let mut dropped = 0;
+    for ((&a, &s), &c) in all.data().iter().zip(some.data()).zip(confidence.data()) {
+        if c < 0.9 {
+            assert!(s.is_infinite());
+            dropped += 1;
+        } else {
+            assert_eq!(a.to_bits(), s.to_bits());
+        }
+    }
+    assert!(dropped > 0 && dropped < all.data().len(), "{dropped} pixels dropped");
+    for bad in ["1.5", "-0.1", "nan"] {
+        let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "x.pfm", "--min-confidence", bad]);
+        assert_eq!(out.status.code(), Some(2), "{bad}");
+        assert!(stderr(&out).contains("--min-confidence"), "{}", stderr(&out));
+    }
+    let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "x.pfm", "--max-depth", "10"]);
+    assert!(stderr(&out).contains("--max-depth limits --depth and --cloud"), "{}", stderr(&out));
+}
+
+#[test]
+fn viz_draws_a_depth_map_with_its_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "d.pfm", "--depth", "z.pfm", "--set", "model=wta"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = run_in(dir.path(), &["viz", "z.pfm", "--depth", "-o", "z.png"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("depth coloured by 1/Z"), "{}", stderr(&out));
+    let picture = jem::io::read_image(&dir.path().join("z.png")).unwrap();
+    // The picture and, under it, the scale bar.
+    assert!(picture.width() == 64 && picture.height() > 48 + 20, "{:?}", picture.dims());
+    let out = run_in(dir.path(), &["viz", "z.pfm", "--depth", "--vmin", "5", "--vmax", "2", "-o", "y.png"]);
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn swapped_views_warn_and_strict_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let args = ["S/im1.png", "S/im0.png", "-o", "d.pfm", "--ndisp", "16", "--set", "model=wta"];
+    let out = run_in(dir.path(), &args);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("warning: the views look swapped")), "{err}");
+    assert!(dir.path().join("d.pfm").is_file());
+    let before = files_in(dir.path());
+    let out = run_in(dir.path(), &["S/im1.png", "S/im0.png", "-o", "e.pfm", "--ndisp", "16", "--strict"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    let prefix = "error: the pair looks wrong (--strict: nothing written): the views look swapped";
+    assert!(err.lines().any(|l| l.starts_with(prefix)), "{err}");
+    assert_eq!(files_in(dir.path()), before);
+    // The pair the right way round: no warning, and --strict writes it.
+    let out = run_in(dir.path(), &["S/im0.png", "S/im1.png", "-o", "f.pfm", "--strict", "-v"]);
+    let err = stderr(&out);
+    // (A 64 × 48 image holds fewer slanted-plane segments than configured: that warning is about the settings.)
+    assert!(out.status.success() && err.lines().all(|l| !l.starts_with("warning: the ")), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("checked: negative-disparity share")), "{err}");
+}
+
+/// No false alarm: the checks of every trainingQ pair give no warning; swapping each pair's views is caught every
+/// time.
+#[test]
+fn no_trainingq_pair_is_said_to_be_wrong_and_every_swapped_one_is() {
+    let Some(data) = common::data_dir() else { return };
+    let params = jem::params::CostParams::default();
+    for scene in common::training_scenes(&data) {
+        let (l, r) = jem::io::read_image_pair(&scene.join("im0.png"), &scene.join("im1.png")).unwrap();
+        let check = jem::internals::diagnose::check_pair(&l, &r, &params, None, None, u64::MAX);
+        assert!(check.warnings().is_empty(), "{}: {check}: {:?}", scene.display(), check.warnings());
+        let swapped = jem::internals::diagnose::check_pair(&r, &l, &params, None, None, u64::MAX);
+        assert!(swapped.negative_share.is_some_and(|s| s > 0.5), "{}: {swapped}", scene.display());
+    }
+}
