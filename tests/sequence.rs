@@ -101,6 +101,24 @@ fn eval_scores_a_sequence_from_its_results_folder() {
 }
 
 #[test]
+fn a_temporal_sequence_says_how_each_frame_was_matched_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    small_pan(dir.path());
+    let err = ok(dir.path(), &["sequence", "seq", "-o", "out"]);
+    assert!(err.contains("[1/3] 000000: ndisp 24, first frame"), "{err}");
+    assert!(err.contains("[2/3] 000001: ndisp 24, camera moved"), "{err}");
+    let last = std::fs::read(dir.path().join("out/000002.pfm")).unwrap();
+    std::fs::remove_file(dir.path().join("out/000002.pfm")).unwrap();
+    let err = ok(dir.path(), &["sequence", "seq", "-o", "out"]);
+    assert!(err.contains("matched again"), "the rerun says it rebuilt the state: {err}");
+    let closing = err.trim_end().lines().last().unwrap();
+    assert!(closing.starts_with("wrote 3 frames to out (1 run, 2 already there (2 matched again"), "{closing}");
+    assert_eq!(std::fs::read(dir.path().join("out/000002.pfm")).unwrap(), last, "the same map as without the stop");
+    // An independent run into the same folder is another run's results.
+    fails(dir.path(), &["sequence", "seq", "-o", "out", "--independent"], &["out"]);
+}
+
+#[test]
 fn sequences_that_do_not_pair_fail_with_one_line_naming_the_folder() {
     let dir = tempfile::tempdir().unwrap();
     small_pan(dir.path());

@@ -109,6 +109,10 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
             let measured = if run.ndisp_measured { " measured" } else { "" };
             let kind = run.kind.map_or(String::new(), |k| format!(", {}", describe_kind(k)));
             note!("[{}/{total}] {}: ndisp {}{measured}{kind}, {:.2} s", index + 1, run.stem, run.ndisp, run.seconds);
+            if global.verbose {
+                let stages: Vec<String> = run.stages.iter().map(|(n, s)| format!("{n} {:.0}", s * 1e3)).collect();
+                note!("  stages (ms): {}", stages.join(", "));
+            }
         }
         Event::Finished { .. } => {}
     };
@@ -132,11 +136,18 @@ fn describe_kind(kind: jem::FrameKind) -> String {
 
 /// `wrote 10 frames to OUT (7 run, 3 already there; 320×240, ndisp 48 from calib.txt, 2.13 s per frame run)`.
 fn closing_line(seq: &Sequence, args: &SequenceArgs, summary: &jem::sequence::RunSummary) -> String {
-    let (ran, skipped) = (summary.ran.len(), summary.skipped.len());
+    let (ran, skipped, replayed) = (summary.ran.len(), summary.skipped.len(), summary.replayed.len());
     if ran == 0 {
         return format!("nothing to do: all {skipped} frames are in {} already", args.output.display());
     }
-    let counts = if skipped > 0 { format!("{ran} run, {skipped} already there; ") } else { String::new() };
+    let counts = match (skipped, replayed) {
+        (0, 0) => String::new(),
+        (_, 0) => format!("{ran} run, {skipped} already there; "),
+        _ => format!(
+            "{ran} run, {} already there ({replayed} matched again for the temporal state); ",
+            skipped + replayed
+        ),
+    };
     let size = summary.ran.first().map_or(String::new(), |r| format!("{}×{}, ", r.size.0, r.size.1));
     let (lo, hi) = summary.ran.iter().fold((usize::MAX, 0), |(lo, hi), r| (lo.min(r.ndisp), hi.max(r.ndisp)));
     let measured = summary.ran.iter().any(|r| r.ndisp_measured);
@@ -151,7 +162,7 @@ fn closing_line(seq: &Sequence, args: &SequenceArgs, summary: &jem::sequence::Ru
     let mean = summary.ran.iter().map(|r| r.seconds).sum::<f64>() / ran as f64;
     format!(
         "wrote {} frames to {} ({counts}{size}{range}, {mean:.2} s per frame run; times in {})",
-        ran + skipped,
+        ran + skipped + replayed,
         args.output.display(),
         jem::sequence::TIMES_FILE
     )

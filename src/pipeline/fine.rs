@@ -7,7 +7,7 @@ use std::borrow::Cow;
 
 use crate::error::Result;
 use crate::image::{CostVolume, DisparityMap, Plane, RgbImage, StereoPair};
-use crate::params::{self, LrcMode, Model, Params};
+use crate::params::{self, LrcMode, MeanFieldParams, Model, Params};
 use crate::{cost, meanfield, post};
 
 use super::output::{PipelineOutput, Timings};
@@ -38,6 +38,9 @@ pub(crate) struct FineInput<'a> {
     /// [`super::tile`]): the left view's inference and post-processing skip them, and the output maps start after
     /// them (0 outside tiles).
     pub left_from: usize,
+    /// Mean-field iterations of the right view when not the configured ones (a frame of a sequence, whose right
+    /// view only serves the left-right check).
+    pub right_iterations: Option<usize>,
 }
 
 /// The pipeline from the cost volume on, for `input` ([`FineInput`]): cost volume (stage `cost volume`), inference
@@ -96,7 +99,7 @@ impl Pass<'_> {
     /// own best label is taken before the prior is added; both are done row by row as the volume is written,
     /// unless the prior needs the cost's flatness (a median over the whole volume) first.
     fn left_volume(&self, buffers: &mut meanfield::Buffers, t: &mut Timings) -> LeftVolume {
-        let FineInput { guide: pair, cost_pair, cost_params, grad_norm_mean, prior, left_from } = self.input;
+        let FineInput { guide: pair, cost_pair, cost_params, grad_norm_mean, prior, left_from, .. } = self.input;
         let c = &self.params.condition;
         let (w, h) = pair.left.dims();
         let storage = buffers.take(w * h * pair.ndisp);
@@ -185,6 +188,17 @@ impl Pass<'_> {
                 .zip(best)
                 .map(|(prior, best)| t.time("bands", || prior.label_bands(&best, ndisp, true, params)));
             on_stage("inference (right)");
+            let right_params;
+            let params = match self.input.right_iterations {
+                Some(n) => {
+                    right_params = Params {
+                        meanfield: MeanFieldParams { iterations: n, ..params.meanfield.clone() },
+                        ..params.clone()
+                    };
+                    &right_params
+                }
+                None => params,
+            };
             let right = estimate_view(params, &self.input.guide.right, &cost_right, right_bands, t, buffers);
             buffers.recycle(cost_right.data);
             right

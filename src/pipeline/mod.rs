@@ -107,6 +107,7 @@ fn run_pipeline(
         grad_norm_mean: input.grad_norm_mean,
         prior: prior.as_ref(),
         left_from: 0,
+        right_iterations: None,
     };
     let mut out = fine_pass(params, &fine, &mut Default::default(), on_stage, t)?;
     out.measured = measured;
@@ -124,8 +125,10 @@ pub(crate) struct FramePrior {
     pub vertical_offset: Option<crate::condition::vertical::VerticalOffset>,
     /// λ of the prior relative to the coarse prior's rule.
     pub weight_scale: f32,
-    /// Mean-field iterations of the frame (`None`: the configured ones).
+    /// Mean-field iterations of the frame's left view (`None`: the configured ones).
     pub iterations: Option<usize>,
+    /// Mean-field iterations of its right view, which serves the left-right check only (`None`: as the left's).
+    pub right_iterations: Option<usize>,
 }
 
 /// The pipeline at the pair's own resolution with the previous frame's answer as the prior ([`FramePrior`]): the
@@ -167,6 +170,7 @@ pub(crate) fn run_with_prior(
         grad_norm_mean: input.grad_norm_mean,
         prior: Some(&prior),
         left_from: 0,
+        right_iterations: from.right_iterations.or(from.iterations),
     };
     let fine_params;
     let params = match from.iterations {

@@ -80,6 +80,8 @@ pub struct FrameRun {
     pub valid: f64,
     /// How the temporal model matched it (`None` without the model).
     pub kind: Option<crate::temporal::FrameKind>,
+    /// The pipeline's stages and their seconds, in order (a stage run more than once, summed).
+    pub stages: Vec<(&'static str, f64)>,
 }
 
 /// What [`run`] reports as it goes (in frame order, from the calling thread).
@@ -234,8 +236,21 @@ fn match_frame(
         seconds,
         valid,
         kind: out.frame,
+        stages: stage_seconds(&out.timings),
     };
     Ok((map, run))
+}
+
+/// `timings` as (stage, seconds), each stage once, in the order first run.
+fn stage_seconds(timings: &crate::pipeline::Timings) -> Vec<(&'static str, f64)> {
+    let mut out: Vec<(&'static str, f64)> = Vec::new();
+    for (name, d) in &timings.stages {
+        match out.iter_mut().find(|(n, _)| n == name) {
+            Some((_, s)) => *s += d.as_secs_f64(),
+            None => out.push((name, d.as_secs_f64())),
+        }
+    }
+    out
 }
 
 /// The file extension of a format.

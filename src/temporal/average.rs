@@ -79,10 +79,8 @@ fn fold_view(mean: &mut RgbImage, count: &mut Plane<u16>, frame: &RgbImage, nois
 }
 
 /// The running mean of a still camera's answers, each weighted by the frames in the view means it was matched on
-/// (an answer from n frames' mean has about 1/n of the noise variance of one frame's: inverse-variance weights),
-/// and robust to a frame's gross errors: a new answer moves the mean by at most `step` × its share of the weight
-/// (a Huber-type running estimate). A static pixel's value settles; a frame whose answer jumps where the views did
-/// not change moves it little.
+/// (an answer from n frames' mean has about 1/n of the noise variance of one frame's: inverse-variance weights). A
+/// static pixel's value settles, and later answers, from less noisy means, count more.
 #[derive(Clone, Debug)]
 pub(crate) struct AnswerMean {
     pub(crate) mean: DisparityMap,
@@ -97,10 +95,10 @@ impl AnswerMean {
     }
 
     /// Folds a new answer in, matched on view means of `frames` frames at each pixel: where the views started
-    /// again or the mean has no value, the mean is the answer; elsewhere it moves towards it by the difference
-    /// clamped to ±`step`, times the answer's share of the weight (the weights held are at most those of
-    /// [`MAX_FRAMES`] frames). An invalid answer leaves the mean as it is.
-    pub(crate) fn fold(&mut self, answer: &DisparityMap, frames: &Plane<u16>, step: f32) {
+    /// again or the mean has no value, the mean is the answer; elsewhere the weighted mean of the answers (the
+    /// weight held is at most that of [`MAX_FRAMES`] frames of [`MAX_FRAMES`] each, so the mean still follows a
+    /// slow change). An invalid answer leaves the mean as it is.
+    pub(crate) fn fold(&mut self, answer: &DisparityMap, frames: &Plane<u16>) {
         let cap = f32::from(MAX_FRAMES) * f32::from(MAX_FRAMES);
         for i in 0..answer.data.len() {
             let d = answer.data[i];
@@ -116,7 +114,7 @@ impl AnswerMean {
             }
             let held = self.weight.data[i].min(cap);
             self.weight.data[i] = held + n;
-            *m += (d - *m).clamp(-step, step) * n / (held + n);
+            *m += (d - *m) * n / (held + n);
         }
     }
 }
@@ -165,19 +163,19 @@ mod tests {
     }
 
     #[test]
-    fn an_answer_mean_weighs_later_answers_more_and_moves_little_for_a_gross_error() {
+    fn an_answer_mean_weighs_later_answers_more() {
         let frames = |n: u16| Plane::new(2, 1, n);
         let mut m = AnswerMean::start(&Plane::from_parts(2, 1, vec![10.0, f32::INFINITY]));
         // The second answer, from a two-frame mean, weighs twice the first.
-        m.fold(&Plane::from_parts(2, 1, vec![11.0, 5.0]), &frames(2), 1.0);
+        m.fold(&Plane::from_parts(2, 1, vec![11.0, 5.0]), &frames(2));
         assert!((m.mean.data[0] - (10.0 + 2.0 / 3.0)).abs() < 1e-6, "{}", m.mean.data[0]);
         assert_eq!(m.mean.data[1], 5.0);
-        // A gross error moves it by at most the step times its share: 3 of 6.
-        m.fold(&Plane::from_parts(2, 1, vec![40.0, f32::INFINITY]), &frames(3), 1.0);
-        assert!((m.mean.data[0] - (10.0 + 2.0 / 3.0 + 0.5)).abs() < 1e-5, "{}", m.mean.data[0]);
+        // The third, from three frames, weighs 3 of 6.
+        m.fold(&Plane::from_parts(2, 1, vec![16.0, f32::INFINITY]), &frames(3));
+        assert!((m.mean.data[0] - (10.0 + 22.0 + 48.0) / 6.0).abs() < 1e-5, "{}", m.mean.data[0]);
         assert_eq!(m.mean.data[1], 5.0, "an invalid answer leaves the mean");
         // Where the views started again (one frame in their mean), the new answer.
-        m.fold(&Plane::from_parts(2, 1, vec![40.0, 6.0]), &Plane::from_parts(2, 1, vec![1, 4]), 1.0);
+        m.fold(&Plane::from_parts(2, 1, vec![40.0, 6.0]), &Plane::from_parts(2, 1, vec![1, 4]));
         assert_eq!(m.mean.data[0], 40.0);
     }
 }

@@ -10,14 +10,16 @@
 //! - **still** (no shift). The views are folded into their running means ([`average::ViewMeans`]: a pixel starts
 //!   again where the frame differs from the mean by more than its noise allows — something moved there) and the
 //!   pipeline matches the means: n frames of a still camera hold the scene with 1/√n of one frame's noise. The
-//!   answers are folded into a robust running mean too ([`average::AnswerMean`]), which starts again where the
-//!   views did: a static pixel's answer settles instead of flickering with each frame's noise.
+//!   answers are folded into a running mean too, weighted by the frames each was matched on
+//!   ([`average::AnswerMean`]), which starts again where the views did: a static pixel's answer settles instead
+//!   of flickering with each frame's noise.
 //! - **moving** (a shift). The previous answer, moved by the shift, is the prior of the frame in place of the
 //!   coarse chain, which is not run: with the coarse prior's weight rule (λ by the measured noise, at least the
 //!   cost's flatness, times the previous confidence, lowered where its left-right check failed), released where
 //!   the shifted frames disagree (disocclusions, moving objects, the parallax a shift cannot follow). The vertical
 //!   offset removed from the previous frame's right view is reused instead of measured again, and the frame runs
-//!   fewer mean-field iterations: the prior has placed each pixel. The running means start again.
+//!   one mean-field iteration fewer (the prior has placed each pixel), its right view, which serves the left-right
+//!   check only, one. The running means start again.
 //!
 //! Frames run this way only when the pipeline runs whole and at full resolution (no tiles, `downscale` 1);
 //! otherwise each frame is matched alone. The search range is held from the first frame (a measured range is
@@ -44,9 +46,10 @@ const STILL_UNEXPLAINED: f64 = 0.05;
 /// frames' noise gives (plus half a grey level of quantisation).
 const RELEASE_NOISE_MULTIPLE: f32 = 2.0;
 
-/// A still camera's answer moves by at most this many pixels (at the matched resolution) per frame of its count:
-/// a static pixel's answer changes by less between frames unless the frame's answer is a gross error.
-const ANSWER_STEP_PX: f32 = 1.0;
+/// Mean-field iterations of a moving frame's right view: it serves the left-right check only, and one iteration
+/// from its own cost finds the pixels whose left answer it contradicts as well as the configured ones (pans and
+/// moving objects within 0.5 % of the accuracy; the tuning log's "Stereo video: the temporal model").
+const RIGHT_ITERATIONS: usize = 1;
 
 /// How a frame was matched.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -147,7 +150,7 @@ fn still_frame(
             views.fold(&pair.left, &pair.right, noise);
             let means = StereoPair::borrowed(&views.left, &views.right, pair.ndisp)?;
             let mut out = pipeline::run_observed(params, &means, on_stage)?;
-            answers.fold(&out.disparity, views.left_counts(), ANSWER_STEP_PX);
+            answers.fold(&out.disparity, views.left_counts());
             out.disparity = answers.mean.clone();
             (views, answers, out)
         }
@@ -180,6 +183,7 @@ fn moving_frame(
         vertical_offset: prev.answer.vertical_offset,
         weight_scale: 1.0,
         iterations: Some(params.meanfield.iterations.saturating_sub(1).max(1)),
+        right_iterations: Some(RIGHT_ITERATIONS),
     };
     pipeline::run_with_prior(params, pair, from, on_stage)
 }
