@@ -113,6 +113,29 @@ fn ndisp_comes_from_calib_or_flag() {
     assert_clean_failure(dir.path(), &["im0.png", "im1.png", "-o", "e.pfm"], &["calib.txt", "ndisp"]);
 }
 
+/// Issue 50 (the README's own-camera steps): the calib.txt `jem rectify` writes states the geometry and no range,
+/// and `jem` on the rectified pair measures the range instead of refusing the file.
+#[test]
+fn r50_a_rectified_pair_matches_with_the_calib_txt_rectify_wrote() {
+    let dir = tempfile::tempdir().unwrap();
+    let yml = "%YAML:1.0\n---\nK1: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 320., 0., 159.5, 0., \
+               320., 119.5, 0., 0., 1. ]\nD1: !!opencv-matrix\n   rows: 1\n   cols: 4\n   dt: d\n   data: [ 0., 0., 0., 0. ]\n\
+               K2: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 320., 0., 159.5, 0., 320., 119.5, 0., 0., \
+               1. ]\nD2: !!opencv-matrix\n   rows: 1\n   cols: 4\n   dt: d\n   data: [ 0., 0., 0., 0. ]\nR: !!opencv-matrix\n\
+               \x20  rows: 3\n   cols: 3\n   dt: d\n   data: [ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]\nT: !!opencv-matrix\n\
+               \x20  rows: 3\n   cols: 1\n   dt: d\n   data: [ -0.1, 0., 0. ]\n";
+    std::fs::write(dir.path().join("stereo.yml"), yml).unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    let out = run_in(dir.path(), &["rectify", "stereo.yml", &l, &r, "-o", "rect"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let calib = std::fs::read_to_string(dir.path().join("rect/calib.txt")).unwrap();
+    assert!(calib.contains("baseline=") && !calib.contains("ndisp"), "{calib}");
+    let args = ["rect/im0.png", "rect/im1.png", "-o", "d.pfm", "--depth", "z.pfm", "--set", "model=wta"];
+    let out = run_in(dir.path(), &args);
+    assert!(out.status.success() && stderr(&out).contains("measured on the pair"), "{}", stderr(&out));
+    assert!(dir.path().join("z.pfm").is_file());
+}
+
 #[test]
 fn bad_input_fails_cleanly() {
     let dir = tempfile::tempdir().unwrap();

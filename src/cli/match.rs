@@ -209,11 +209,11 @@ impl<'a> Request<'a> {
             .collect();
         let rectify_calib = args.rectify.as_deref().unwrap_or(&calib);
         jem::io::check_outputs(&[left, right, &calib, rectify_calib], &outputs)?;
-        // The range: --ndisp, else calib.txt's (measured instead when it is missing or no real bound: half the
-        // width or more).
+        // The range: --ndisp, else calib.txt's (measured instead when it is missing, the file states none, as
+        // `jem rectify` writes it, or it is no real bound: half the width or more).
         let stated_ndisp = match &calib_file {
             Some(c) if args.ndisp.is_none() && rectification.is_none() => {
-                Some(c.ndisp().map_err(|msg| Error::Calib { path: calib.clone(), msg })?)
+                c.stated_ndisp().map_err(|msg| Error::Calib { path: calib.clone(), msg })?
             }
             _ => None,
         };

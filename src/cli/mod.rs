@@ -232,13 +232,16 @@ enum Command {
     /// failed.
     #[command(verbatim_doc_comment)]
     Batch(BatchArgs),
-    /// Match every frame of a stereo sequence: `jem sequence DIR -o OUTDIR --independent`.
+    /// Match every frame of a stereo sequence: `jem sequence DIR -o OUTDIR [--independent]`.
     ///
     /// DIR holds left/ and right/ with the frames (PNG, PPM/PGM or JPEG), paired by file stem in sorted order,
     /// and optionally calib.txt (Middlebury keys), gt/<stem>.pfm and mask/<stem>.png (for `jem eval OUTDIR`); or it
     /// is a KITTI raw drive folder (image_02/data, image_03/data). Unequal counts or unpaired names are refused.
     /// Writes OUTDIR/<stem>.pfm (--ext exr|png for the other formats) per frame, times.txt (a line per frame: stem
     /// and seconds from the decoded pair to its map), sequence.txt (what made the folder) and config.toml.
+    /// By default each frame is matched with the temporal model: a still camera's frames averaged, a moving
+    /// camera's previous answer (moved by its shift) as the prior, scene cuts detected; the range is the first
+    /// frame's, held for the sequence. A rerun replays the frames before the first missing one to rebuild its state.
     /// --independent matches each frame alone, byte-identical to `jem LEFT RIGHT -o OUT --ndisp N` on that pair
     /// (N: --ndisp, else calib.txt's ndisp; without either the range is measured on each frame, as `jem match`
     /// measures it; --range-once measures it on the first frame and holds it).

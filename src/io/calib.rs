@@ -65,6 +65,18 @@ impl Calib {
         }
     }
 
+    /// `ndisp` if the file states one: `None` without the key (a calib.txt of geometry only, as `jem rectify`
+    /// writes: the range is then measured), a positive integer when present.
+    ///
+    /// # Errors
+    /// A message when the key is present but not a positive integer.
+    pub fn stated_ndisp(&self) -> std::result::Result<Option<usize>, String> {
+        match self.get("ndisp") {
+            None => Ok(None),
+            Some(_) => self.ndisp().map(Some),
+        }
+    }
+
     /// A finite float value of `key`, if present and parseable.
     pub fn float(&self, key: &str) -> Option<f32> {
         self.get(key).and_then(|v| v.parse::<f32>().ok()).filter(|v| v.is_finite())
@@ -114,6 +126,11 @@ mod tests {
         for bad in ["ndisp=0", "ndisp=-3", "ndisp=abc", "ndisp=", "width=3"] {
             assert!(Calib::parse(bad).unwrap().ndisp().is_err(), "{bad}");
         }
+        for bad in ["ndisp=0", "ndisp=-3", "ndisp=abc", "ndisp="] {
+            assert!(Calib::parse(bad).unwrap().stated_ndisp().is_err(), "{bad}");
+        }
+        assert_eq!(Calib::parse("width=3").unwrap().stated_ndisp(), Ok(None));
+        assert_eq!(Calib::parse("ndisp=64").unwrap().stated_ndisp(), Ok(Some(64)));
     }
 
     #[test]

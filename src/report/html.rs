@@ -279,20 +279,22 @@ fn score_cells(h: &mut String, m: &Model, a: usize, cell: &AlgCell, best: &[Opti
 /// fewer than two, or when two share it: nothing stands out).
 fn best_values(m: &Model, row: &Row) -> Vec<Option<f64>> {
     let cols = if m.rule.is_some() { columns(m.layout) } else { Vec::new() };
-    // Shown to the digits displayed: a tie there (all 0.0 invalid, say) marks nothing.
-    let lowest = |values: Vec<f64>, digits: usize| {
-        let shown: Vec<String> = values.iter().filter(|v| v.is_finite()).map(|v| format!("{v:.digits$}")).collect();
-        let min = values.iter().copied().filter(|v| v.is_finite()).fold(f64::INFINITY, f64::min);
-        let ties = shown.iter().filter(|s| **s == format!("{min:.digits$}")).count();
-        (shown.len() >= 2 && ties == 1).then_some(min)
-    };
     let metrics = |c: &AlgCell| c.metrics.as_ref().and_then(|r| r.as_ref().ok()).copied();
     let mut best: Vec<Option<f64>> = cols
         .iter()
-        .map(|c| lowest(row.cells.iter().filter_map(metrics).map(|x| (c.value)(&x)).collect(), c.digits))
+        .map(|c| lowest(&row.cells.iter().filter_map(metrics).map(|x| (c.value)(&x)).collect::<Vec<_>>(), c.digits))
         .collect();
-    best.push(lowest(row.cells.iter().filter_map(|c| c.seconds).collect(), 2));
+    best.push(lowest(&row.cells.iter().filter_map(|c| c.seconds).collect::<Vec<_>>(), 2));
     best
+}
+
+/// The lowest finite value, when there are two or more and no other shows the same to the digits displayed (a tie
+/// there, all 0.0 invalid say, marks nothing).
+fn lowest(values: &[f64], digits: usize) -> Option<f64> {
+    let shown: Vec<String> = values.iter().filter(|v| v.is_finite()).map(|v| format!("{v:.digits$}")).collect();
+    let min = values.iter().copied().filter(|v| v.is_finite()).fold(f64::INFINITY, f64::min);
+    let ties = shown.iter().filter(|s| **s == format!("{min:.digits$}")).count();
+    (shown.len() >= 2 && ties == 1).then_some(min)
 }
 
 /// The summary row: MiddEval3's weighted mean, else the plain mean, of each algorithm's scores and times.
@@ -308,16 +310,26 @@ fn summary_row(h: &mut String, m: &Model) {
         _ => ("mean", "the mean over the scored rows"),
     };
     let _ = write!(h, "<tfoot><tr><th title=\"{}\">{label}</th><td></td>", escape(help));
-    for (a, eval) in m.evals.iter().enumerate() {
+    let avgs: Vec<Option<Metrics>> = m
+        .evals
+        .iter()
+        .map(|e| e.as_ref().and_then(|e| if m.layout == Layout::Middlebury { e.weighted() } else { e.mean() }))
+        .collect();
+    let times: Vec<Option<f64>> =
+        m.evals.iter().map(|e| e.as_ref().and_then(|e| e.mean_seconds()).map(|(s, _)| s)).collect();
+    // The best of each column bold, as in the rows above.
+    let best_times = lowest(&times.iter().flatten().copied().collect::<Vec<_>>(), 2);
+    for (a, avg) in avgs.iter().enumerate() {
         let (cols, paper) = alg_columns(m, a);
         h.push_str("<td></td><td></td>");
-        let avg: Option<Metrics> =
-            eval.as_ref().and_then(|e| if m.layout == Layout::Middlebury { e.weighted() } else { e.mean() });
         for c in &cols {
-            h.push_str(&value_cell(avg.as_ref().map(|x| (c.value)(x)), c.digits, "", None));
+            let v = avg.as_ref().map(|x| (c.value)(x));
+            let all: Vec<f64> = avgs.iter().flatten().map(|x| (c.value)(x)).collect();
+            let class = if v.is_some() && v == lowest(&all, c.digits) { "best" } else { "" };
+            h.push_str(&value_cell(v, c.digits, class, None));
         }
-        let t = eval.as_ref().and_then(|e| e.mean_seconds()).map(|(s, _)| s);
-        h.push_str(&value_cell(t, 2, "", None));
+        let t = times[a];
+        h.push_str(&value_cell(t, 2, if t.is_some() && t == best_times { "best" } else { "" }, None));
         if paper {
             let w = m.papers[a].as_ref().and_then(|p| p.weighted);
             h.push_str(&value_cell(w, 2, "paper", None));
@@ -396,6 +408,14 @@ mod tests {
         assert_eq!(escape("a<b & \"c\" 'd'>"), "a&lt;b &amp; &quot;c&quot; &#39;d&#39;&gt;");
         assert_eq!(url_segment("my report_files"), "my%20report_files");
         assert_eq!(url_segment("é#?.png"), "%C3%A9%23%3F.png");
+    }
+
+    #[test]
+    fn the_lowest_stands_out_only_alone_and_among_two_or_more() {
+        assert_eq!(lowest(&[4.94, 3.58], 2), Some(3.58));
+        assert_eq!(lowest(&[0.0, 0.001], 1), None, "a tie to the digits shown marks nothing");
+        assert_eq!(lowest(&[3.58], 2), None, "one algorithm: nothing to compare");
+        assert_eq!(lowest(&[f64::NAN, 2.0, 5.0], 2), Some(2.0));
     }
 
     #[test]

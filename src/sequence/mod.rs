@@ -172,14 +172,21 @@ impl Sequence {
     }
 
     /// Where the range comes from, as `jem match` takes it: `given` (`--ndisp`), else the `ndisp` of the root's
-    /// `calib.txt` ([`NdispSource::Stated`]), else [`NdispSource::Unknown`].
+    /// `calib.txt` ([`NdispSource::Stated`]), else [`NdispSource::Unknown`] (also for a `calib.txt` that states no
+    /// `ndisp`: geometry only).
     ///
     /// # Errors
-    /// [`Error::Calib`] for a `calib.txt` without a valid `ndisp` (when `given` is `None`).
+    /// [`Error::Calib`] for a `calib.txt` whose `ndisp` is not a positive integer (when `given` is `None`).
     pub fn ndisp_source(&self, given: Option<usize>) -> Result<NdispSource> {
         match (given, &self.calib) {
             (Some(n), _) => Ok(NdispSource::Given(n)),
-            (None, Some(c)) => Ok(NdispSource::Stated(crate::io::calib::read_ndisp(c)?)),
+            (None, Some(c)) => {
+                let calib = crate::io::calib::Calib::load(c)?;
+                match calib.stated_ndisp().map_err(|msg| Error::Calib { path: c.clone(), msg })? {
+                    Some(n) => Ok(NdispSource::Stated(n)),
+                    None => Ok(NdispSource::Unknown),
+                }
+            }
             (None, None) => Ok(NdispSource::Unknown),
         }
     }

@@ -136,7 +136,10 @@ fn the_range_is_given_else_stated_by_calib_else_unknown() {
     let seq = Sequence::open(dir.path()).unwrap();
     assert_eq!(seq.ndisp_source(None).unwrap(), NdispSource::Stated(5));
     assert_eq!(seq.ndisp_source(Some(9)).unwrap(), NdispSource::Given(9));
+    // A calib.txt of geometry only (as `jem rectify` writes one): the range is measured.
     std::fs::write(dir.path().join("calib.txt"), "width=8\n").unwrap();
+    assert_eq!(Sequence::open(dir.path()).unwrap().ndisp_source(None).unwrap(), NdispSource::Unknown);
+    std::fs::write(dir.path().join("calib.txt"), "width=8\nndisp=zero\n").unwrap();
     let e = Sequence::open(dir.path()).unwrap().ndisp_source(None).unwrap_err().to_string();
     assert!(e.contains("calib.txt") && e.contains("ndisp"), "{e}");
 }

@@ -35,8 +35,9 @@ pub(crate) fn needs_search(stated: Option<usize>, width: usize) -> bool {
 
 /// The largest range [`find_ndisp`] considers for a `width`-pixel-wide pair whose stated range is `stated`: the
 /// stated range, or the whole width when none is stated (no range is no bound, as ETH3D's ndisp = width is not:
-/// README, "ndisp"), never more than the largest range a pair of that width takes (width − 1: a disparity of
-/// width − 2 at most, as [`crate::image::StereoPair::new`] requires), nor below 1. `jem` and `jem batch` both ask this.
+/// docs/cli.md, "The search range"), never more than the largest range a pair of that width takes (width − 1: a
+/// disparity of width − 2 at most, as [`crate::image::StereoPair::new`] requires), nor below 1. `jem` and
+/// `jem batch` both ask this.
 pub(crate) fn search_limit(stated: Option<usize>, width: usize) -> usize {
     stated.unwrap_or(width).min(width.saturating_sub(1)).max(1)
 }
