@@ -116,7 +116,7 @@ fn ndisp_comes_from_calib_or_flag() {
 /// Issue 50 (the README's own-camera steps): the calib.txt `jem rectify` writes states the geometry and no range,
 /// and `jem` on the rectified pair measures the range instead of refusing the file.
 #[test]
-fn r50_a_rectified_pair_matches_with_the_calib_txt_rectify_wrote() {
+fn a_rectified_pair_matches_with_the_calib_txt_rectify_wrote() {
     let dir = tempfile::tempdir().unwrap();
     let yml = "%YAML:1.0\n---\nK1: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 320., 0., 159.5, 0., \
                320., 119.5, 0., 0., 1. ]\nD1: !!opencv-matrix\n   rows: 1\n   cols: 4\n   dt: d\n   data: [ 0., 0., 0., 0. ]\n\
