@@ -105,6 +105,9 @@ pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCod
     for a in &args.algs {
         jem::batch::validate_alg_name(a)?;
     }
+    if args.regions && args.format == jem::eval::Format::Csv {
+        return Err(Error::Input("--regions prints a table, markdown or json, not csv".into()));
+    }
     let papers = if args.paper.is_empty() {
         Vec::new()
     } else {
@@ -148,9 +151,6 @@ pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCod
         }
     }
     let regions = if args.regions {
-        if args.format == jem::eval::Format::Csv {
-            return Err(Error::Input("--regions prints a table, markdown or json, not csv".into()));
-        }
         reports.iter().map(jem::eval::split_report).collect::<Result<Vec<_>>>()?
     } else {
         Vec::new()

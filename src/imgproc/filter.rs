@@ -225,6 +225,16 @@ mod tests {
     use super::*;
 
     #[test]
+    fn sobel_magnitude_by_hand() {
+        // A vertical step 0 | 10 between columns 1 and 2: gx = 40 on both sides of it, gy = 0; flat elsewhere.
+        let p = Plane::from_parts(4, 3, [0.0, 0.0, 10.0, 10.0].repeat(3));
+        assert_eq!(sobel_magnitude(&p).data, [0.0, 40.0, 40.0, 0.0].repeat(3));
+        // The transpose gives the same magnitude.
+        let t = Plane::from_parts(3, 4, [[0.0; 3], [0.0; 3], [10.0; 3], [10.0; 3]].concat());
+        assert_eq!(sobel_magnitude(&t).data, [[0.0; 3], [40.0; 3], [40.0; 3], [0.0; 3]].concat());
+    }
+
+    #[test]
     fn box_means_and_reductions_by_hand() {
         let p = Plane::from_parts(3, 2, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
         assert_eq!(box_reduce(&p, 2).data, vec![3.0, 4.5]);
