@@ -7,7 +7,8 @@
 //! writes, all or none, the disparity map and the run time (the seconds spent in the pipeline for that pair —
 //! image loading and file writing are not counted) where the layout's submission form puts them
 //! ([`crate::dataset::Pair::result_files`]: MiddEval3 `disp0<ALG>.pfm` and `time<ALG>.txt` in the scene folder;
-//! KITTI and ETH3D in a results folder beside the data set).
+//! KITTI and ETH3D in a results folder beside the data set), and with [`BatchOptions::lr_mask`] where the left-right
+//! check rejected each pixel ([`crate::dataset::Pair::lr_mask_file`], [`crate::io::encode_lr_mask`]).
 //!
 //! [`run_batch`] runs a list of pairs, `jobs` at a time (each pipeline is itself multi-threaded on the global
 //! rayon pool). A failing pair — unreadable image, malformed calib, unequal sizes, or even a panic inside the
@@ -164,6 +165,8 @@ pub struct BatchOptions {
     pub jobs: usize,
     /// Skip pairs whose result exists and is complete.
     pub skip_existing: bool,
+    /// Also write where the left-right check rejected each pixel ([`crate::dataset::Pair::lr_mask_file`]).
+    pub lr_mask: bool,
     /// Memory limit of the whole batch (see `crate::check_memory`): concurrent scenes share it, a scene
     /// waits while the ones running hold too much of it, and one that needs more than all of it fails.
     pub max_memory_bytes: u64,
@@ -191,7 +194,12 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
     let files = pair.result_files(&opts.alg, opts.results.as_deref());
     let inputs: Vec<&Path> =
         [Some(pair.left.as_path()), Some(pair.right.as_path()), pair.calib.as_deref()].into_iter().flatten().collect();
-    crate::io::check_outputs(&inputs, &[&files.disparity, &files.time])?;
+    let lr_mask = opts.lr_mask.then(|| pair.lr_mask_file(&opts.alg, opts.results.as_deref()));
+    let outputs: Vec<&Path> = [Some(files.disparity.as_path()), Some(files.time.as_path()), lr_mask.as_deref()]
+        .into_iter()
+        .flatten()
+        .collect();
+    crate::io::check_outputs(&inputs, &outputs)?;
     let stated = match &pair.calib {
         Some(c) => Some(calib::read_ndisp(c)?),
         None => pair.default_ndisp(),
@@ -204,13 +212,22 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
     })?;
     on_stage("writing");
     let disparity = crate::io::encode_disparity(&files.disparity, &out.disparity)?;
-    for dir in [files.disparity.parent(), files.time.parent()].into_iter().flatten() {
+    let mask = match &lr_mask {
+        Some(path) => Some((path.as_path(), crate::io::encode_lr_mask(path, &out.consistent)?)),
+        None => None,
+    };
+    let mut written: Vec<(&Path, &[u8])> = vec![(&files.disparity, &disparity)];
+    let time = pair.time_text(out.seconds);
+    written.push((&files.time, time.as_bytes()));
+    if let Some((path, bytes)) = &mask {
+        written.push((path, bytes));
+    }
+    for dir in written.iter().filter_map(|(p, _)| p.parent()) {
         if !dir.as_os_str().is_empty() {
             std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         }
     }
-    let time = pair.time_text(out.seconds);
-    crate::io::write_all_or_none(&[(&files.disparity, &disparity), (&files.time, time.as_bytes())])?;
+    crate::io::write_all_or_none(&written)?;
     let size = out.disparity.dims();
     Ok(SceneRun { size, ndisp: out.plan.ndisp, seconds: out.seconds, timings: out.timings, measured: out.measured })
 }

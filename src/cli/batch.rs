@@ -47,6 +47,12 @@ pub(super) struct BatchArgs {
     /// Skip pairs whose result is already there and complete (to resume an interrupted run).
     #[arg(long)]
     skip_existing: bool,
+    /// Also write where the left-right check rejected each pixel, before fill, weighted median and planes changed
+    /// its value (8-bit grey PNG, 255 = rejected, 0 = passed; the disparity map is the same without it): MiddEval3
+    /// lrmask0NAME.png beside disp0NAME.pfm (what `jem eval --regions` reads), KITTI RESULTS/NAME/SPLIT/lrmask_0/,
+    /// ETH3D RESULTS/NAME/SPLIT/lrmask/.
+    #[arg(long)]
+    lr_mask: bool,
     #[command(flatten)]
     pub(super) threads: ThreadsArg,
     #[command(flatten)]
@@ -194,6 +200,7 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         ndisp: args.ndisp,
         jobs: args.jobs,
         skip_existing: args.skip_existing,
+        lr_mask: args.lr_mask,
         max_memory_bytes: args.memory.memory_limit(),
     };
     let display = BatchDisplay::new(scenes.len(), args.jobs, global.quiet, params.clone());

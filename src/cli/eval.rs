@@ -55,6 +55,16 @@ pub(super) struct EvalArgs {
     /// from the scenes' names and image sizes (MiddEval3's are known).
     #[arg(long, value_name = "auto|1|2|4", default_value = "auto")]
     scale: ScaleArg,
+    /// Also show where the error is (MiddEval3 trees, nonocc): each scene's avgErr split by region — rejected by
+    /// the left-right check (from lrmask0NAME.png, which `jem batch --lr-mask` writes; "-" without it, and its
+    /// pixels fall into the others), within 3 px of a ground-truth depth edge (a jump over 1 px between
+    /// 4-neighbours, at the evaluated resolution), the least-textured 15 % (5×5 mean Sobel magnitude of the left
+    /// grey), within 3 px of an occluded pixel (mask 128), the rest; each pixel in the first that holds — and by
+    /// error size (≤1, 1–2, 2–4, 4–8, >8 full-resolution px), per scene and weighted. A region's value is its error
+    /// sum divided by the number of all scored pixels (valid results, as avgErr), so the regions add up to avgErr;
+    /// likewise the gross (> 8 px) table. Text, markdown or json (a "regions" member per --alg).
+    #[arg(long)]
+    regions: bool,
     /// Output format: table, csv, json or markdown.
     #[arg(long, value_name = "FORMAT", default_value = "table")]
     format: jem::eval::Format,
@@ -82,7 +92,7 @@ pub(super) fn paper_file(flag: Option<&Path>) -> PathBuf {
 
 /// Scores every --alg over the folder and prints the reports (or a sequence's results).
 pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCode> {
-    use jem::eval::{PaperResults, evaluate_dir, render};
+    use jem::eval::{PaperResults, evaluate_dir};
     if let Some(seq) = sequence_truth(&args.dir, args.gt.as_deref())? {
         return run_sequence(args, global, &seq);
     }
@@ -94,6 +104,9 @@ pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCod
     }
     for a in &args.algs {
         jem::batch::validate_alg_name(a)?;
+    }
+    if args.regions && args.format == jem::eval::Format::Csv {
+        return Err(Error::Input("--regions prints a table, markdown or json, not csv".into()));
     }
     let papers = if args.paper.is_empty() {
         Vec::new()
@@ -137,7 +150,12 @@ pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCod
             note!("note: {line}");
         }
     }
-    out!("{}", render(&reports, &papers, args.format));
+    let regions = if args.regions {
+        reports.iter().map(jem::eval::split_report).collect::<Result<Vec<_>>>()?
+    } else {
+        Vec::new()
+    };
+    out!("{}", jem::eval::render_with_regions(&reports, &papers, &regions, args.format));
     let excluded = reports.iter().any(|r| r.excluded().next().is_some());
     if !global.quiet {
         note!("{}", scored_line(&reports));

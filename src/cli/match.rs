@@ -37,6 +37,12 @@ pub(super) struct MatchArgs {
     /// Also write the per-pixel confidence (max-marginal of the left view) to this file (.pfm/.exr).
     #[arg(long, value_name = "FILE")]
     confidence: Option<PathBuf>,
+    /// Also write where the left-right check rejected the left view's pixel, before fill, weighted median and
+    /// planes changed its value: an 8-bit grey PNG, 255 = rejected, 0 = passed (all 0 with `post.lrc.mode =
+    /// "off"`). `jem eval --regions` reads it as lrmask0NAME.png beside disp0NAME.pfm. The disparity map is the
+    /// same with or without it.
+    #[arg(long, value_name = "FILE.png")]
+    lr_mask: Option<PathBuf>,
     /// Also write a point cloud: binary PLY, x y z (float, left camera frame, baseline units) and the left
     /// image's colour, valid pixels only. Needs cam0 and baseline (calib.txt beside LEFT, or the flags below).
     #[arg(long, value_name = "OUT.ply")]
@@ -162,6 +168,10 @@ impl<'a> Request<'a> {
         if let Some(c) = &args.confidence {
             jem::io::DisparityFormat::from_path(c)?;
         }
+        if let Some(m) = args.lr_mask.as_ref().filter(|m| !m.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")))
+        {
+            return Err(Error::Input(format!("{}: the left-right mask is written as .png", m.display())));
+        }
         let calib = left.parent().unwrap_or(Path::new(".")).join("calib.txt");
         if let Some(d) = &args.depth
             && jem::io::DisparityFormat::from_path(d)? == jem::io::DisparityFormat::Png16
@@ -204,6 +214,7 @@ impl<'a> Request<'a> {
         };
         let outputs: Vec<&Path> = std::iter::once(output.as_path())
             .chain(args.confidence.as_deref())
+            .chain(args.lr_mask.as_deref())
             .chain(args.cloud.as_deref())
             .chain(args.depth.as_deref())
             .collect();
@@ -271,6 +282,9 @@ fn write_outputs(
     if let Some(c) = &args.confidence {
         files.push((c.as_path(), jem::io::encode_disparity(c, &out.confidence)?));
     }
+    if let Some(m) = &args.lr_mask {
+        files.push((m.as_path(), jem::io::encode_lr_mask(m, &out.consistent)?));
+    }
     if let Some(camera) = &request.camera {
         if let Some(d) = &args.depth {
             let depth = jem::geometry::depth_map(disparity, camera);
@@ -301,6 +315,11 @@ fn wrote_line(
     let mut line = format!("wrote {output} ({w}×{h}, {percent:.0} % valid, ndisp {ndisp}{measured}, {seconds:.1} s)");
     if let Some(c) = &args.confidence {
         line.push_str(&format!(", confidence {}", c.display()));
+    }
+    if let Some(m) = &args.lr_mask {
+        let rejected = out.consistent.data().iter().filter(|ok| !**ok).count();
+        let percent = 100.0 * rejected as f64 / out.consistent.data().len().max(1) as f64;
+        line.push_str(&format!(", left-right mask {} ({percent:.0} % rejected)", m.display()));
     }
     if let (Some(d), Some(camera)) = (&args.depth, camera) {
         line.push_str(&format!(", depth {} (up to {})", d.display(), camera.max_depth as f32));

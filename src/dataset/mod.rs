@@ -184,6 +184,18 @@ impl Pair {
         }
     }
 
+    /// Where `jem batch --lr-mask` writes where the left-right check rejected `alg`'s pixels
+    /// ([`crate::io::encode_lr_mask`]): MiddEval3 `lrmask0<alg>.png` beside `disp0<alg>.pfm` (what `jem eval
+    /// --regions` reads); KITTI `lrmask_0/FRAME.png` beside `disp_0/`, ETH3D `lrmask/SCENE.png` beside
+    /// `low_res_two_view/` (outside the folders a benchmark takes as the submission).
+    pub fn lr_mask_file(&self, alg: &str, results: Option<&Path>) -> PathBuf {
+        match self.results_dir(alg, results) {
+            None => self.root.join(format!("lrmask0{alg}.png")),
+            Some(dir) if self.layout == Layout::Eth3d => dir.join("lrmask").join(format!("{}.png", self.name)),
+            Some(dir) => dir.join("lrmask_0").join(format!("{}.png", self.name)),
+        }
+    }
+
     /// The text of the run-time file for `seconds` (ETH3D: `runtime <s>`, the benchmark's form; else the number).
     pub fn time_text(&self, seconds: f64) -> String {
         match self.layout {

@@ -6,6 +6,7 @@ use std::str::FromStr;
 
 use super::metrics::Metrics;
 use super::paper::PaperColumn;
+use super::regions::RegionReport;
 use super::report::AlgReport;
 use crate::table::Table;
 
@@ -44,14 +45,37 @@ impl FromStr for Format {
 /// # Panics
 /// If `papers` is non-empty and not as long as `reports`.
 pub fn render(reports: &[AlgReport], papers: &[Option<PaperColumn>], format: Format) -> String {
+    render_with_regions(reports, papers, &[], format)
+}
+
+/// [`render`], and with `regions` (one per report, from [`split_report`](super::split_report); `jem eval
+/// --regions`) where the error is: in JSON a `"regions"` member per algorithm (see
+/// [`RegionReport`](super::RegionReport)), in text and Markdown the tables of
+/// [`render_regions`](super::render_regions) after each report's.
+///
+/// # Panics
+/// As [`render`], or if `regions` is non-empty and not as long as `reports`, or with CSV and regions (the CLI
+/// refuses that first).
+pub fn render_with_regions(
+    reports: &[AlgReport],
+    papers: &[Option<PaperColumn>],
+    regions: &[RegionReport],
+    format: Format,
+) -> String {
     assert!(papers.is_empty() || papers.len() == reports.len(), "one paper column per report");
+    assert!(regions.is_empty() || regions.len() == reports.len(), "one region split per report");
+    assert!(regions.is_empty() || format != Format::Csv, "no region split in CSV");
     let paper: Vec<Option<&PaperColumn>> = (0..reports.len()).map(|i| papers.get(i).and_then(Option::as_ref)).collect();
     let paper = paper.as_slice();
     match format {
-        Format::Json => render_json(reports, paper),
+        Format::Json => render_json(reports, paper, regions),
         Format::Csv => render_csv(reports, paper),
-        Format::Table => render_text(reports, paper, false),
-        Format::Markdown => render_text(reports, paper, true),
+        Format::Table | Format::Markdown => {
+            let md = format == Format::Markdown;
+            let mut out = render_text(reports, paper, md);
+            out.push_str(&super::render_regions(regions, md));
+            out
+        }
     }
 }
 
@@ -90,7 +114,7 @@ fn json_metrics(m: Option<&Metrics>, columns: &[&str]) -> String {
     }
 }
 
-fn render_json(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String {
+fn render_json(reports: &[AlgReport], paper: &[Option<&PaperColumn>], regions: &[RegionReport]) -> String {
     let objects: Vec<String> = reports
         .iter()
         .enumerate()
@@ -132,6 +156,9 @@ fn render_json(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String 
                     scenes.join(", "),
                     p.weighted.map_or("null".into(), json_num)
                 );
+            }
+            if let Some(split) = regions.get(i) {
+                let _ = write!(o, ",\n  \"regions\": {}", super::regions_format::regions_json(split));
             }
             o.push_str("\n}");
             o

@@ -55,6 +55,10 @@
 //!   ([`scene_resolution`], [`file_resolution`]).
 //! - `paper.rs`: the paper's numbers ([`PaperResults`], `paper-results.tsv`), printed beside ours.
 //! - `format.rs`: [`render`] prints reports as a text or Markdown table, JSON or CSV.
+//! - `regions.rs`: where the error is (`jem eval --regions`): a MiddEval3 result's avgErr split by region (rejected
+//!   by the left-right check, near depth edges, textureless, near occlusions, the rest) and by error size
+//!   ([`split_report`], [`split_scene`], [`split_by_region`]); `regions_format.rs` prints it ([`render_regions`],
+//!   and a `"regions"` member in the JSON of [`render_with_regions`]).
 //! - `sequence.rs`: a stereo sequence's results ([`sequence::evaluate_sequence`]): each frame as above, and the
 //!   frame-to-frame figures (the change where the truth did not move, the error of the change where it did).
 
@@ -62,17 +66,25 @@ mod format;
 mod kitti_fill;
 mod metrics;
 mod paper;
+mod regions;
+mod regions_format;
 mod report;
 mod resolution;
 pub mod sequence;
 
-pub use format::{Format, render};
+pub use format::{Format, render, render_with_regions};
 pub use kitti_fill::interpolate_background;
 pub(crate) use metrics::check_size;
 pub use metrics::{
     BAD_THRESHOLDS_PX, D1_RELATIVE, D1_THRESHOLD_PX, MaskMode, Metrics, evaluate, evaluate_files, evaluate_scene,
 };
 pub use paper::{PaperColumn, PaperResults};
+pub use regions::{
+    EDGE_JUMP_PX, EDGE_RADIUS_PX, GROSS_PX, NOT_SCORED, OCCLUSION_RADIUS_PX, REGION_KEYS, RegionInputs, RegionReport,
+    RegionSplit, SIZE_BOUNDS_PX, SIZE_KEYS, TEXTURE_RADIUS_PX, TEXTURELESS_SHARE, region_map, split_by_region,
+    split_report, split_scene,
+};
+pub use regions_format::render_regions;
 pub use report::{AlgReport, SceneResult, Sources, evaluate_dir, find_gt_scenes, scene_weight};
 pub use resolution::{
     QUARTER_SIZES, Resolution, ScaleSource, file_resolution, resolution_name, scale_from_any_size, scale_from_path,

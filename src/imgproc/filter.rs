@@ -1,4 +1,4 @@
-//! Neighbourhood filters on planes and images: replicated padding, the horizontal Sobel gradient, central
+//! Neighbourhood filters on planes and images: replicated padding, the Sobel gradient (horizontal, magnitude), central
 //! differences, a local mean of |v|, a separable Gaussian blur, and the minimum or maximum over a square window.
 //! Borders are replicated everywhere.
 
@@ -31,6 +31,24 @@ pub(crate) fn sobel_x(grey: &Plane<f32>) -> Plane<f32> {
         for (x, g) in row.iter_mut().enumerate() {
             let (l, r) = (x.saturating_sub(1), (x + 1).min(w - 1));
             *g = (up[r] - up[l]) + 2.0 * (mid[r] - mid[l]) + (down[r] - down[l]);
+        }
+    });
+    out
+}
+
+/// Sobel gradient magnitude √(gx² + gy²) (`[-1 0 1; -2 0 2; -1 0 1]` and its transpose), borders replicated.
+pub(crate) fn sobel_magnitude(grey: &Plane<f32>) -> Plane<f32> {
+    let (w, h) = grey.dims();
+    let mut out = Plane::new(w, h, 0.0f32);
+    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        let up = grey.row(y.saturating_sub(1));
+        let mid = grey.row(y);
+        let down = grey.row((y + 1).min(h - 1));
+        for (x, g) in row.iter_mut().enumerate() {
+            let (l, r) = (x.saturating_sub(1), (x + 1).min(w - 1));
+            let gx = (up[r] - up[l]) + 2.0 * (mid[r] - mid[l]) + (down[r] - down[l]);
+            let gy = (down[l] - up[l]) + 2.0 * (down[x] - up[x]) + (down[r] - up[r]);
+            *g = gx.hypot(gy);
         }
     });
     out
@@ -205,6 +223,16 @@ pub(crate) fn box_mean(p: &Plane<f32>, r: usize) -> Plane<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sobel_magnitude_by_hand() {
+        // A vertical step 0 | 10 between columns 1 and 2: gx = 40 on both sides of it, gy = 0; flat elsewhere.
+        let p = Plane::from_parts(4, 3, [0.0, 0.0, 10.0, 10.0].repeat(3));
+        assert_eq!(sobel_magnitude(&p).data, [0.0, 40.0, 40.0, 0.0].repeat(3));
+        // The transpose gives the same magnitude.
+        let t = Plane::from_parts(3, 4, [[0.0; 3], [0.0; 3], [10.0; 3], [10.0; 3]].concat());
+        assert_eq!(sobel_magnitude(&t).data, [[0.0; 3], [40.0; 3], [40.0; 3], [0.0; 3]].concat());
+    }
 
     #[test]
     fn box_means_and_reductions_by_hand() {

@@ -87,6 +87,24 @@ pub fn encode_png(path: &Path, image: &RgbImage) -> Result<Vec<u8>> {
     png::encode_rgb8_png(path, w, h, &rgb)
 }
 
+/// The value [`encode_lr_mask`] writes where the left-right check rejected a pixel (0 where it passed).
+pub const LR_REJECTED: u8 = 255;
+
+/// Where the left-right check rejected a pixel, as an 8-bit grey PNG file's bytes: [`LR_REJECTED`] (255) where
+/// `consistent` is false, 0 where it is true (`jem match --lr-mask`, `jem batch --lr-mask`; read back with
+/// [`read_grey8`]). Nothing is written; `path` names the file in an error.
+///
+/// # Errors
+/// [`Error::Input`] if `path` is not a `.png`; [`Error::Image`] naming the path.
+pub fn encode_lr_mask(path: &Path, consistent: &crate::image::Plane<bool>) -> Result<Vec<u8>> {
+    if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+        return Err(Error::Input(format!("{}: the left-right mask is written as .png", path.display())));
+    }
+    let (w, h) = consistent.dims();
+    let grey: Vec<u8> = consistent.data().iter().map(|&ok| if ok { 0 } else { LR_REJECTED }).collect();
+    png::encode_grey8_png(path, w, h, &grey)
+}
+
 /// A decoded image (from the `image` crate) as an [`RgbImage`], exactly as [`read_image`] converts a file's
 /// pixels.
 pub fn image_from_dynamic(img: &image::DynamicImage) -> RgbImage {

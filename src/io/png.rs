@@ -199,6 +199,22 @@ pub(crate) fn encode_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u
     Ok(bytes)
 }
 
+/// An 8-bit grey PNG's bytes (`width * height` samples, row-major); `path` names it in errors.
+///
+/// # Errors
+/// [`Error::Image`] naming the path.
+///
+/// # Panics
+/// If `grey.len() != width * height`.
+pub(crate) fn encode_grey8_png(path: &Path, width: usize, height: usize, grey: &[u8]) -> Result<Vec<u8>> {
+    assert_eq!(grey.len(), width * height);
+    let mut bytes = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut bytes)
+        .write_image(grey, width as u32, height as u32, image::ExtendedColorType::L8)
+        .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
+    Ok(bytes)
+}
+
 /// The largest disparity a 16-bit PNG holds: 65535 / 256.
 pub const PNG16_MAX_DISPARITY: f32 = 65535.0 / 256.0;
 
