@@ -14,7 +14,7 @@
 //! let (left, right) = rectification.rectify_pair(&left, &right)?;
 //! assert_eq!(left.dims(), (64, 48));
 //! assert!((rectification.baseline() - 0.1).abs() < 1e-12);
-//! # Ok::<(), jem::Error>(())
+//! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
 mod camera;
