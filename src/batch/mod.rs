@@ -164,6 +164,8 @@ pub struct BatchOptions {
     pub jobs: usize,
     /// Skip pairs whose result exists and is complete.
     pub skip_existing: bool,
+    /// Also write each pair's confidence map ([`crate::dataset::ResultFiles::confidence`]), which `jem eval` scores.
+    pub confidence: bool,
     /// Memory limit of the whole batch (see `crate::check_memory`): concurrent scenes share it, a scene
     /// waits while the ones running hold too much of it, and one that needs more than all of it fails.
     pub max_memory_bytes: u64,
@@ -191,7 +193,11 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
     let files = pair.result_files(&opts.alg, opts.results.as_deref());
     let inputs: Vec<&Path> =
         [Some(pair.left.as_path()), Some(pair.right.as_path()), pair.calib.as_deref()].into_iter().flatten().collect();
-    crate::io::check_outputs(&inputs, &[&files.disparity, &files.time])?;
+    let mut outputs = vec![files.disparity.as_path(), files.time.as_path()];
+    if opts.confidence {
+        outputs.push(&files.confidence);
+    }
+    crate::io::check_outputs(&inputs, &outputs)?;
     let stated = match &pair.calib {
         Some(c) => Some(calib::read_ndisp(c)?),
         None => pair.default_ndisp(),
@@ -204,13 +210,20 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
     })?;
     on_stage("writing");
     let disparity = crate::io::encode_disparity(&files.disparity, &out.disparity)?;
-    for dir in [files.disparity.parent(), files.time.parent()].into_iter().flatten() {
+    let confidence =
+        opts.confidence.then(|| crate::io::encode_disparity(&files.confidence, &out.confidence)).transpose()?;
+    let dirs = [files.disparity.parent(), files.time.parent(), confidence.as_ref().and(files.confidence.parent())];
+    for dir in dirs.into_iter().flatten() {
         if !dir.as_os_str().is_empty() {
             std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         }
     }
     let time = pair.time_text(out.seconds);
-    crate::io::write_all_or_none(&[(&files.disparity, &disparity), (&files.time, time.as_bytes())])?;
+    let mut written = vec![(files.disparity.as_path(), disparity.as_slice()), (files.time.as_path(), time.as_bytes())];
+    if let Some(c) = &confidence {
+        written.push((files.confidence.as_path(), c.as_slice()));
+    }
+    crate::io::write_all_or_none(&written)?;
     let size = out.disparity.dims();
     Ok(SceneRun { size, ndisp: out.plan.ndisp, seconds: out.seconds, timings: out.timings, measured: out.measured })
 }
@@ -235,9 +248,13 @@ fn process(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: &dyn F
 }
 
 /// Whether the pair's result is there and finished: a file that parses as a disparity map of the pair's image
-/// size (an empty, truncated or foreign file, or a folder of that name, is not a result; the pair runs again).
+/// size (an empty, truncated or foreign file, or a folder of that name, is not a result; the pair runs again), and
+/// with `--confidence` its confidence map beside it.
 fn has_complete_result(pair: &Pair, opts: &BatchOptions) -> bool {
     let files = pair.result_files(&opts.alg, opts.results.as_deref());
+    if opts.confidence && !files.confidence.is_file() {
+        return false;
+    }
     let Ok(result) = crate::io::read_disparity(&files.disparity) else { return false };
     let size = image::image_dimensions(&pair.left).ok();
     size.is_some_and(|(w, h)| (w as usize, h as usize) == result.dims())

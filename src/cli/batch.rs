@@ -47,6 +47,10 @@ pub(super) struct BatchArgs {
     /// Skip pairs whose result is already there and complete (to resume an interrupted run).
     #[arg(long)]
     skip_existing: bool,
+    /// Also write each pair's confidence map (0..1, PFM; ranks the errors, see `jem eval`): MiddEval3
+    /// conf0NAME.pfm beside disp0NAME.pfm, KITTI RESULTS/NAME/SPLIT/conf_0/FRAME.pfm, ETH3D .../confidence/SCENE.pfm.
+    #[arg(long)]
+    confidence: bool,
     #[command(flatten)]
     pub(super) threads: ThreadsArg,
     #[command(flatten)]
@@ -194,6 +198,7 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         ndisp: args.ndisp,
         jobs: args.jobs,
         skip_existing: args.skip_existing,
+        confidence: args.confidence,
         max_memory_bytes: args.memory.memory_limit(),
     };
     let display = BatchDisplay::new(scenes.len(), args.jobs, global.quiet, params.clone());
