@@ -202,33 +202,46 @@ pub(crate) fn box_mean(p: &Plane<f32>, r: usize) -> Plane<f32> {
     out
 }
 
-/// [`box_mean`] in O(r) per pixel rather than O(r²): a running row sum over dx = −r..r (in `f64`, so adding and
-/// dropping values leaves no drift), then the sum of those over dy = −r..r; borders replicated. Every row is summed
-/// by one thread in a fixed order, so the result does not depend on the thread count.
+/// [`box_mean`] in O(1) per pixel rather than O(r²): running sums (in `f64`, so adding and dropping values leaves
+/// no drift) along each row over dx = −r..r, then down each column over dy = −r..r, in bands of
+/// [`BOX_BAND_ROWS`] rows; borders replicated. The bands are fixed and each is summed by one thread in a fixed
+/// order, so the result does not depend on the thread count.
 pub(crate) fn box_mean_separable(p: &Plane<f32>, r: usize) -> Plane<f32> {
     let (w, h) = p.dims();
-    let mut rows = Plane::new(w, h, 0.0f32);
-    rows.data.par_chunks_mut(w.max(1)).zip(p.data.par_chunks(w.max(1))).for_each(|(out, src)| {
-        let at = |x: isize| f64::from(src[x.clamp(0, w as isize - 1) as usize]);
-        let r = r as isize;
-        let mut sum: f64 = (-r..=r).map(at).sum();
+    if w == 0 || h == 0 {
+        return p.clone();
+    }
+    let mut rows = Plane::new(w, h, 0.0f64);
+    rows.data.par_chunks_mut(w).zip(p.data.par_chunks(w)).for_each(|(out, src)| {
+        let at = |x: usize| f64::from(src[x.saturating_sub(r).min(w - 1)]);
+        // Window of x is padded columns x ..= x + 2r, column c of the padding being src[c − r] clamped.
+        let mut sum: f64 = (0..=2 * r).map(at).sum();
         for (x, o) in out.iter_mut().enumerate() {
-            *o = sum as f32;
-            let x = x as isize;
-            sum += at(x + r + 1) - at(x - r);
+            *o = sum;
+            sum += at(x + 2 * r + 1) - at(x);
         }
     });
-    let norm = 1.0 / ((2 * r + 1) * (2 * r + 1)) as f32;
+    let norm = 1.0 / ((2 * r + 1) * (2 * r + 1)) as f64;
+    let row = |y: usize| rows.row(y.saturating_sub(r).min(h - 1));
     let mut out = Plane::new(w, h, 0.0f32);
-    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, o)| {
+    out.data.par_chunks_mut(w * BOX_BAND_ROWS).enumerate().for_each(|(band, dst)| {
+        let y0 = band * BOX_BAND_ROWS;
+        let mut acc = vec![0.0f64; w];
         for k in 0..=2 * r {
-            let src = rows.row((y + k).saturating_sub(r).min(h - 1));
-            o.iter_mut().zip(src).for_each(|(a, &v)| *a += v);
+            acc.iter_mut().zip(row(y0 + k)).for_each(|(a, &v)| *a += v);
         }
-        o.iter_mut().for_each(|a| *a *= norm);
+        for (dy, o) in dst.chunks_exact_mut(w).enumerate() {
+            o.iter_mut().zip(&acc).for_each(|(o, &a)| *o = (a * norm) as f32);
+            let y = y0 + dy;
+            let (add, drop) = (row(y + 2 * r + 1), row(y));
+            acc.iter_mut().zip(add).zip(drop).for_each(|((a, &p), &m)| *a += p - m);
+        }
     });
     out
 }
+
+/// Rows per band of [`box_mean_separable`]'s column sums: each band starts its running sums afresh.
+const BOX_BAND_ROWS: usize = 32;
 
 #[cfg(test)]
 mod tests {
@@ -236,8 +249,9 @@ mod tests {
 
     #[test]
     fn the_separable_box_mean_is_the_box_mean() {
-        let data: Vec<f32> = (0..7 * 5).map(|i| ((i * 37) % 11) as f32 - 3.0).collect();
-        let p = Plane::from_parts(7, 5, data);
+        // 70 rows: more than one band of the column sums.
+        let data: Vec<f32> = (0..7 * 70).map(|i| ((i * 37) % 11) as f32 - 3.0).collect();
+        let p = Plane::from_parts(7, 70, data);
         for r in [0, 1, 2, 6] {
             let (fast, slow) = (box_mean_separable(&p, r), box_mean(&p, r));
             for (a, b) in fast.data.iter().zip(&slow.data) {

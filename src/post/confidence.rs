@@ -30,6 +30,7 @@
 
 use rayon::prelude::*;
 
+use crate::fastmath::exp_nonpositive;
 use crate::image::{DisparityMap, Plane, RgbImage};
 use crate::imgproc::filter;
 
@@ -110,7 +111,9 @@ pub(crate) fn confidence_map(inputs: &ConfidenceInputs<'_>) -> Plane<f32> {
                 pooled[4].data[i],
             ];
             let logit = values.iter().zip(&WEIGHTS).fold(BIAS, |acc, (v, k)| acc + v * k);
-            *c = 1.0 / (1.0 + logit.exp());
+            // 1 / (1 + e^logit), with the exponent never positive.
+            let e = exp_nonpositive(-logit.abs());
+            *c = if logit > 0.0 { e / (1.0 + e) } else { 1.0 / (1.0 + e) };
         }
     });
     out
@@ -138,7 +141,7 @@ fn pixelwise(inputs: &ConfidenceInputs<'_>) -> Pixelwise {
             });
             let coarse = coarse.map_or(0.0, |(c, from)| diff(f, c.row(y)[x + from]));
             let off = lr + diff(f, d) + coarse;
-            *s = max_marginal.data[i].clamp(0.0, 1.0) * (-off / AGREEMENT_SCALE_PX).exp();
+            *s = max_marginal.data[i].clamp(0.0, 1.0) * exp_nonpositive(-off / AGREEMENT_SCALE_PX);
         }
     });
     let grey = guide.to_grey();
@@ -156,4 +159,42 @@ fn pixelwise(inputs: &ConfidenceInputs<'_>) -> Pixelwise {
     let failed = Plane::from_parts(w, h, consistent.data.iter().map(|&ok| if ok { 0.0 } else { 1.0 }).collect());
     let rejected = filter::box_mean_separable(&failed, 3);
     Pixelwise { agreement, texture, edge, rejected }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 16 × 8 map whose left half every check agrees with and whose right half the right view and the coarse
+    /// answer contradict (and failed the left-right check): the left half ranks above the right one, and an
+    /// invalid pixel ranks last.
+    #[test]
+    fn pixels_the_checks_contradict_rank_below_those_they_confirm() {
+        let (w, h) = (16, 8);
+        // Disparity 0 everywhere, so every pixel's match in the right view is the same column.
+        let d = Plane::new(w, h, 0.0f32);
+        let mut final_map = d.clone();
+        final_map.data[w + 2] = f32::INFINITY;
+        let right_half = |i: usize| i % w >= w / 2;
+        let right = Plane::from_parts(w, h, (0..w * h).map(|i| if right_half(i) { 3.0 } else { 0.0 }).collect());
+        let coarse = Plane::from_parts(w, h, (0..w * h).map(|i| if right_half(i) { 2.0 } else { 0.0 }).collect());
+        let consistent = Plane::from_parts(w, h, (0..w * h).map(|i| !right_half(i)).collect());
+        let guide = RgbImage::new(w, h);
+        let c = confidence_map(&ConfidenceInputs {
+            max_marginal: &Plane::new(w, h, 0.9),
+            decoded: &d,
+            right: Some((&right, 0)),
+            final_map: &final_map,
+            consistent: &consistent,
+            coarse: Some((&coarse, 0)),
+            guide: &guide,
+        });
+        assert_eq!(c.data[w + 2], 0.0);
+        let (mut lo_left, mut hi_right) = (f32::INFINITY, 0.0f32);
+        for (i, &v) in c.data.iter().enumerate().filter(|&(i, _)| i != w + 2) {
+            assert!((0.0..=1.0).contains(&v));
+            if right_half(i) { hi_right = hi_right.max(v) } else { lo_left = lo_left.min(v) }
+        }
+        assert!(lo_left > hi_right, "left half from {lo_left}, right half up to {hi_right}");
+    }
 }
