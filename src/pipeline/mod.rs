@@ -70,7 +70,7 @@ fn run_level(
     on_stage("upsample");
     let (w, h) = pair.left.dims();
     let up = &params.upsample;
-    let (disparity, (confidence, max_marginal)) = t.time("upsample", || {
+    let (disparity, (mut confidence, max_marginal)) = t.time("upsample", || {
         rayon::join(
             || {
                 let (low, guide) = (&low.disparity, &small.left);
@@ -83,6 +83,8 @@ fn run_level(
         )
     });
     drop(small);
+    // An invalid pixel has no confidence, whatever its neighbours' at the reduced size.
+    confidence.data.iter_mut().zip(&disparity.data).filter(|(_, d)| !d.is_finite()).for_each(|(c, _)| *c = 0.0);
     let consistent = scale::upsample_mask(&low.consistent, factor, w, h);
     Ok(PipelineOutput {
         disparity,

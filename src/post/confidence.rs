@@ -92,31 +92,38 @@ pub(crate) fn confidence_map(inputs: &ConfidenceInputs<'_>) -> Plane<f32> {
         p.data.iter_mut().for_each(|v| *v = (*v + LN_FLOOR).ln());
         p
     };
-    let pooled = [ln_mean(1), ln_mean(12), ln_mean(25), mean(&m.texture, 7), mean(&m.rejected, 7)];
+    // The log-odds summed one measure at a time, in the order of `WEIGHTS`, so that at most one pooled plane is
+    // alive beside the per-pixel ones (a tile's memory).
     let (w, h) = inputs.final_map.dims();
-    let mut out = Plane::new(w, h, 0.0f32);
-    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
-        for (x, c) in row.iter_mut().enumerate() {
-            let i = y * w + x;
-            if !inputs.final_map.data[i].is_finite() {
-                continue;
-            }
-            let values = [
-                pooled[0].data[i],
-                pooled[1].data[i],
-                pooled[2].data[i],
-                pooled[3].data[i],
-                m.edge.data[i],
-                m.rejected.data[i],
-                pooled[4].data[i],
-            ];
-            let logit = values.iter().zip(&WEIGHTS).fold(BIAS, |acc, (v, k)| acc + v * k);
-            // 1 / (1 + e^logit), with the exponent never positive.
-            let e = exp_nonpositive(-logit.abs());
-            *c = if logit > 0.0 { e / (1.0 + e) } else { 1.0 / (1.0 + e) };
+    let mut logit = Plane::new(w, h, BIAS);
+    let add = |logit: &mut Plane<f32>, values: &Plane<f32>, k: f32| {
+        logit.data.par_chunks_mut(w.max(1)).zip(values.data.par_chunks(w.max(1))).for_each(|(l, v)| {
+            l.iter_mut().zip(v).for_each(|(l, v)| *l += v * k);
+        });
+    };
+    add(&mut logit, &ln_mean(1), WEIGHTS[0]);
+    add(&mut logit, &ln_mean(12), WEIGHTS[1]);
+    add(&mut logit, &ln_mean(25), WEIGHTS[2]);
+    add(&mut logit, &mean(&m.texture, 7), WEIGHTS[3]);
+    add(&mut logit, &m.edge, WEIGHTS[4]);
+    add(&mut logit, &m.rejected, WEIGHTS[5]);
+    add(&mut logit, &mean(&m.rejected, 7), WEIGHTS[6]);
+    drop(m);
+    logit.data.par_chunks_mut(w.max(1)).zip(inputs.final_map.data.par_chunks(w.max(1))).for_each(|(row, d)| {
+        for (c, d) in row.iter_mut().zip(d) {
+            let z = *c;
+            // 1 / (1 + e^z), with the exponent never positive; an invalid pixel has none.
+            let e = exp_nonpositive(-z.abs());
+            *c = if !d.is_finite() {
+                0.0
+            } else if z > 0.0 {
+                e / (1.0 + e)
+            } else {
+                1.0 / (1.0 + e)
+            };
         }
     });
-    out
+    logit
 }
 
 /// Agreement, texture, depth edge and the left-right rejection around each pixel (see the module doc).
@@ -144,18 +151,21 @@ fn pixelwise(inputs: &ConfidenceInputs<'_>) -> Pixelwise {
             *s = max_marginal.data[i].clamp(0.0, 1.0) * exp_nonpositive(-off / AGREEMENT_SCALE_PX);
         }
     });
-    let grey = guide.to_grey();
-    let (gx, gy) = filter::central_differences(&grey);
-    let magnitude = Plane::from_parts(w, h, gx.data.iter().zip(&gy.data).map(|(a, b)| a.hypot(*b)).collect());
-    let mut texture = filter::box_mean_separable(&magnitude, 2);
-    texture.data.iter_mut().for_each(|t| *t = t.ln_1p());
-    let lo = filter::window_extreme(final_map, 1, f32::INFINITY, f32::min);
-    let hi = filter::window_extreme(final_map, 1, f32::NEG_INFINITY, f32::max);
-    let edge = Plane::from_parts(
-        w,
-        h,
-        lo.data.iter().zip(&hi.data).map(|(lo, hi)| if lo <= hi { (hi - lo).min(16.0).ln_1p() } else { 0.0 }).collect(),
-    );
+    let texture = {
+        let grey = guide.to_grey();
+        let (gx, gy) = filter::central_differences(&grey);
+        let magnitude = Plane::from_parts(w, h, gx.data.iter().zip(&gy.data).map(|(a, b)| a.hypot(*b)).collect());
+        let mut texture = filter::box_mean_separable(&magnitude, 2);
+        texture.data.iter_mut().for_each(|t| *t = t.ln_1p());
+        texture
+    };
+    let edge = {
+        let lo = filter::window_extreme(final_map, 1, f32::INFINITY, f32::min);
+        let hi = filter::window_extreme(final_map, 1, f32::NEG_INFINITY, f32::max);
+        let range =
+            lo.data.iter().zip(&hi.data).map(|(lo, hi)| if lo <= hi { (hi - lo).min(16.0).ln_1p() } else { 0.0 });
+        Plane::from_parts(w, h, range.collect())
+    };
     let failed = Plane::from_parts(w, h, consistent.data.iter().map(|&ok| if ok { 0.0 } else { 1.0 }).collect());
     let rejected = filter::box_mean_separable(&failed, 3);
     Pixelwise { agreement, texture, edge, rejected }
