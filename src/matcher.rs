@@ -64,7 +64,8 @@ pub struct Tiles {
 pub struct Output {
     /// The left view's disparity map in pixels, `inf` where invalid (when post-processing leaves holes).
     pub disparity: DisparityMap,
-    /// Per-pixel confidence of the left view, 0..1: the max-marginal before post-processing (1 for winner-take-all).
+    /// Per-pixel confidence of the disparity map, 0..1: the probability that it is within 1 px of the truth, made to
+    /// rank the errors (`post::confidence`; 0 where the map is invalid).
     pub confidence: Plane<f32>,
     /// The pixels that passed the left-right check (all of them when it is off).
     pub consistent: Plane<bool>,

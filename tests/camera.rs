@@ -208,3 +208,33 @@ fn no_trainingq_pair_is_said_to_be_wrong_and_every_swapped_one_is() {
         assert!(swapped.negative_share.is_some_and(|s| s > 0.5), "{}: {swapped}", scene.display());
     }
 }
+
+/// `jem sequence --rectify CALIB` rectifies every frame as `jem match --rectify` rectifies a pair: frame by frame
+/// the same bytes (issue 51, item 1).
+#[test]
+fn sequence_with_rectify_is_jem_match_with_rectify_frame_by_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let synth =
+        ["synth", "seq", "--frames", "2", "--motion", "pan", "--width", "64", "--height", "48", "--ndisp", "16"];
+    let out = run_in(dir.path(), &synth);
+    assert!(out.status.success(), "{}", stderr(&out));
+    // The right camera a little higher as well: the rectification then moves both views.
+    let rig = pinhole_rig_yaml(64, 48, 0.25).replace("[ -0.25, 0., 0. ]", "[ -0.25, 0.01, 0. ]");
+    std::fs::write(dir.path().join("rig.yml"), rig).unwrap();
+    let wta = ["--set", "model=wta"];
+    let args = [&["sequence", "seq", "-o", "out", "--independent", "--rectify", "rig.yml"][..], &wta].concat();
+    let out = run_in(dir.path(), &args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let plain = [&["sequence", "seq", "-o", "plain", "--independent"][..], &wta].concat();
+    assert!(run_in(dir.path(), &plain).status.success());
+    let read = |p: &str| std::fs::read(dir.path().join(p)).unwrap();
+    for k in 0..2 {
+        let (l, r) = (format!("seq/left/{k:06}.png"), format!("seq/right/{k:06}.png"));
+        let args = [&[l.as_str(), &r, "--rectify", "rig.yml", "--ndisp", "16", "-o", "m.pfm"][..], &wta].concat();
+        let out = run_in(dir.path(), &args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let got = read(&format!("out/{k:06}.pfm"));
+        assert!(got == read("m.pfm"), "frame {k} differs from jem match --rectify");
+        assert!(got != read(&format!("plain/{k:06}.pfm")), "frame {k} is not rectified");
+    }
+}

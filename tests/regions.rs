@@ -18,7 +18,7 @@ fn scene(dir: &std::path::Path) -> std::path::PathBuf {
 }
 
 #[test]
-fn r52_lr_mask_is_where_the_unfilled_run_is_invalid() {
+fn the_lr_mask_is_where_the_unfilled_run_is_invalid() {
     let dir = tempfile::tempdir().unwrap();
     let s = scene(dir.path());
     let run = |extra: &[&str]| {
@@ -58,7 +58,7 @@ fn r52_lr_mask_is_where_the_unfilled_run_is_invalid() {
 }
 
 #[test]
-fn r52_batch_writes_the_mask_and_eval_splits_the_error() {
+fn batch_writes_the_mask_and_eval_splits_the_error() {
     let dir = tempfile::tempdir().unwrap();
     let s = scene(dir.path());
     let tree = dir.path().join("trainingF");

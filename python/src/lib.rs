@@ -301,8 +301,8 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 /// are rectified first, as ``jem match --rectify`` does, and the map is of the rectified left view.
 /// ``min_confidence``: pixels whose confidence is below it are ``inf`` (as ``jem --min-confidence``).
 ///
-/// Returns the map; with ``confidence=True`` also the per-pixel confidence (max-marginal of the left view,
-/// float32 H×W), and with ``return_info=True`` also a dict: ``ndisp``, ``ndisp_measured``, ``tiled``, ``noise``
+/// Returns the map; with ``confidence=True`` also the per-pixel confidence (0..1, the probability that the
+/// disparity is within 1 px, ranking the errors; float32 H×W), and with ``return_info=True`` also a dict: ``ndisp``, ``ndisp_measured``, ``tiled``, ``noise``
 /// (σ of each view, or None with ``condition.enabled = false``), ``timings`` (seconds per stage), ``seconds``
 /// (the run, as jem batch counts it), ``memory_planned`` and ``peak_rss`` (bytes; the whole process's peak),
 /// ``checks`` (the numbers of the pair's checks: ``negative_share``, ``vertical_px``, ``vertical_limit_px``,

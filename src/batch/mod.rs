@@ -167,6 +167,8 @@ pub struct BatchOptions {
     pub skip_existing: bool,
     /// Also write where the left-right check rejected each pixel ([`crate::dataset::Pair::lr_mask_file`]).
     pub lr_mask: bool,
+    /// Also write each pair's confidence map ([`crate::dataset::ResultFiles::confidence`]), which `jem eval` scores.
+    pub confidence: bool,
     /// Memory limit of the whole batch (see `crate::check_memory`): concurrent scenes share it, a scene
     /// waits while the ones running hold too much of it, and one that needs more than all of it fails.
     pub max_memory_bytes: u64,
@@ -195,10 +197,12 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
     let inputs: Vec<&Path> =
         [Some(pair.left.as_path()), Some(pair.right.as_path()), pair.calib.as_deref()].into_iter().flatten().collect();
     let lr_mask = opts.lr_mask.then(|| pair.lr_mask_file(&opts.alg, opts.results.as_deref()));
-    let outputs: Vec<&Path> = [Some(files.disparity.as_path()), Some(files.time.as_path()), lr_mask.as_deref()]
-        .into_iter()
-        .flatten()
-        .collect();
+    let confidence_file = opts.confidence.then_some(files.confidence.as_path());
+    let outputs: Vec<&Path> =
+        [Some(files.disparity.as_path()), Some(files.time.as_path()), lr_mask.as_deref(), confidence_file]
+            .into_iter()
+            .flatten()
+            .collect();
     crate::io::check_outputs(&inputs, &outputs)?;
     let stated = match &pair.calib {
         Some(c) => Some(calib::read_ndisp(c)?),
@@ -216,11 +220,16 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
         Some(path) => Some((path.as_path(), crate::io::encode_lr_mask(path, &out.consistent)?)),
         None => None,
     };
+    let confidence =
+        opts.confidence.then(|| crate::io::encode_disparity(&files.confidence, &out.confidence)).transpose()?;
     let mut written: Vec<(&Path, &[u8])> = vec![(&files.disparity, &disparity)];
     let time = pair.time_text(out.seconds);
     written.push((&files.time, time.as_bytes()));
     if let Some((path, bytes)) = &mask {
         written.push((path, bytes));
+    }
+    if let Some(c) = &confidence {
+        written.push((files.confidence.as_path(), c.as_slice()));
     }
     for dir in written.iter().filter_map(|(p, _)| p.parent()) {
         if !dir.as_os_str().is_empty() {
@@ -252,9 +261,13 @@ fn process(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: &dyn F
 }
 
 /// Whether the pair's result is there and finished: a file that parses as a disparity map of the pair's image
-/// size (an empty, truncated or foreign file, or a folder of that name, is not a result; the pair runs again).
+/// size (an empty, truncated or foreign file, or a folder of that name, is not a result; the pair runs again), and
+/// with `--confidence` its confidence map beside it.
 fn has_complete_result(pair: &Pair, opts: &BatchOptions) -> bool {
     let files = pair.result_files(&opts.alg, opts.results.as_deref());
+    if opts.confidence && !files.confidence.is_file() {
+        return false;
+    }
     let Ok(result) = crate::io::read_disparity(&files.disparity) else { return false };
     let size = image::image_dimensions(&pair.left).ok();
     size.is_some_and(|(w, h)| (w as usize, h as usize) == result.dims())

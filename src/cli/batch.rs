@@ -53,6 +53,10 @@ pub(super) struct BatchArgs {
     /// ETH3D RESULTS/NAME/SPLIT/lrmask/.
     #[arg(long)]
     lr_mask: bool,
+    /// Also write each pair's confidence map (0..1, PFM; ranks the errors, see `jem eval`): MiddEval3
+    /// conf0NAME.pfm beside disp0NAME.pfm, KITTI RESULTS/NAME/SPLIT/conf_0/FRAME.pfm, ETH3D .../confidence/SCENE.pfm.
+    #[arg(long)]
+    confidence: bool,
     #[command(flatten)]
     pub(super) threads: ThreadsArg,
     #[command(flatten)]
@@ -201,6 +205,7 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         jobs: args.jobs,
         skip_existing: args.skip_existing,
         lr_mask: args.lr_mask,
+        confidence: args.confidence,
         max_memory_bytes: args.memory.memory_limit(),
     };
     let display = BatchDisplay::new(scenes.len(), args.jobs, global.quiet, params.clone());

@@ -34,7 +34,8 @@ pub(super) struct MatchArgs {
     /// --cloud is the rectified one, and calib.txt beside LEFT is not read.
     #[arg(long, value_name = "CALIB")]
     rectify: Option<PathBuf>,
-    /// Also write the per-pixel confidence (max-marginal of the left view) to this file (.pfm/.exr).
+    /// Also write the per-pixel confidence to this file (.pfm/.exr): 0..1, the probability that the disparity is
+    /// within 1 px, made to rank the errors (0 where the map is invalid).
     #[arg(long, value_name = "FILE")]
     confidence: Option<PathBuf>,
     /// Also write where the left-right check rejected the left view's pixel, before fill, weighted median and

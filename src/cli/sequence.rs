@@ -36,6 +36,10 @@ pub(super) struct SequenceArgs {
     /// Settle the range once, on the first frame, and hold it for the whole sequence (instead of per frame).
     #[arg(long)]
     range_once: bool,
+    /// Rectify every frame first with this stereo calibration, as `jem match --rectify` does (OpenCV FileStorage
+    /// YAML/XML or KITTI calib_cam_to_cam.txt); the maps are then of the rectified left views.
+    #[arg(long, value_name = "CALIB")]
+    rectify: Option<PathBuf>,
     #[command(flatten)]
     config: ConfigArgs,
     #[command(flatten)]
@@ -54,7 +58,13 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
     let params = args.config.params()?;
     let seq = Sequence::open(&args.dir)?;
     let total = seq.frames.len();
+    // Planned on the first frame's headers (every frame of a sequence has its size), before any image is decoded.
+    let rectification = match (&args.rectify, seq.frames.first()) {
+        (Some(c), Some(f)) => Some(super::rectify::plan(c, &f.left, &f.right, args.memory.memory_limit())?),
+        _ => None,
+    };
     let opts = RunOptions {
+        rectification: rectification.as_ref(),
         params: &params,
         ndisp: args.ndisp,
         format,

@@ -122,6 +122,9 @@ pub struct ResultFiles {
     pub disparity: PathBuf,
     /// The run time file.
     pub time: PathBuf,
+    /// The confidence map, when one is written (`jem batch --confidence`; `jem eval` scores it when it is there):
+    /// MiddEval3 `conf0NAME.pfm` beside the result, KITTI `conf_0/FRAME.pfm`, ETH3D `confidence/SCENE.pfm`.
+    pub confidence: PathBuf,
 }
 
 impl Pair {
@@ -172,14 +175,17 @@ impl Pair {
             None => ResultFiles {
                 disparity: self.root.join(format!("disp0{alg}.pfm")),
                 time: self.root.join(format!("time{alg}.txt")),
+                confidence: self.root.join(format!("conf0{alg}.pfm")),
             },
             Some(dir) if self.layout == Layout::Eth3d => ResultFiles {
                 disparity: dir.join("low_res_two_view").join(format!("{}.pfm", self.name)),
                 time: dir.join("low_res_two_view").join(format!("{}.txt", self.name)),
+                confidence: dir.join("confidence").join(format!("{}.pfm", self.name)),
             },
             Some(dir) => ResultFiles {
                 disparity: dir.join("disp_0").join(format!("{}.png", self.name)),
                 time: dir.join("time").join(format!("{}.txt", self.name)),
+                confidence: dir.join("conf_0").join(format!("{}.pfm", self.name)),
             },
         }
     }

@@ -8,6 +8,7 @@ use super::metrics::Metrics;
 use super::paper::PaperColumn;
 use super::regions::RegionReport;
 use super::report::AlgReport;
+use super::sparsification::Sparsification;
 use crate::table::Table;
 
 /// How [`render`] prints reports.
@@ -124,10 +125,19 @@ fn render_json(reports: &[AlgReport], paper: &[Option<&PaperColumn>], regions: &
                 .scenes
                 .iter()
                 .filter_map(|s| {
-                    s.metrics
-                        .as_ref()
-                        .ok()
-                        .map(|m| format!("    {}: {}", json_str(&s.name), json_metrics(Some(m), cols)))
+                    s.metrics.as_ref().ok().map(|m| {
+                        let mut fields = json_metrics(Some(m), cols);
+                        if let Some(sp) = s.sparsification {
+                            fields.pop();
+                            let _ = write!(
+                                fields,
+                                ", \"auc\": {}, \"auc_optimum\": {}}}",
+                                json_num(sp.auc),
+                                json_num(sp.optimum)
+                            );
+                        }
+                        format!("    {}: {}", json_str(&s.name), fields)
+                    })
                 })
                 .collect();
             let mut o = format!(
@@ -141,6 +151,14 @@ fn render_json(reports: &[AlgReport], paper: &[Option<&PaperColumn>], regions: &
                 json_metrics(r.weighted().as_ref(), cols),
                 json_metrics(r.mean().as_ref(), cols),
             );
+            if let Some((sp, n)) = r.mean_sparsification() {
+                let _ = write!(
+                    o,
+                    ",\n  \"sparsification\": {{\"auc\": {}, \"auc_optimum\": {}, \"scenes\": {n}}}",
+                    json_num(sp.auc),
+                    json_num(sp.optimum)
+                );
+            }
             let excluded: Vec<String> =
                 r.excluded().map(|(n, e)| format!("{}: {}", json_str(n), json_str(e))).collect();
             if !excluded.is_empty() {
@@ -264,10 +282,20 @@ fn render_text(reports: &[AlgReport], paper: &[Option<&PaperColumn>], md: bool) 
                 header.push("paper".into());
             }
         }
+        // The confidence's AUC and its optimum (in %, as the bad columns) when a scene has a confidence map.
+        let sparse = r.mean_sparsification();
+        if sparse.is_some() {
+            header.extend(["AUC".into(), "AUC opt".into()]);
+        }
         header.push("time s".into());
         let ncol = header.len();
         let mut rows = vec![header];
-        let mut push = |name: String, weight: String, m: Option<&Metrics>, pv: Option<f64>, t: Option<f64>| {
+        let mut push = |name: String,
+                        weight: String,
+                        m: Option<&Metrics>,
+                        pv: Option<f64>,
+                        sp: Option<Sparsification>,
+                        t: Option<f64>| {
             let mut r = vec![name, weight];
             for k in cols {
                 r.push(fixed(m.map(|m| m.get(k))));
@@ -275,19 +303,24 @@ fn render_text(reports: &[AlgReport], paper: &[Option<&PaperColumn>], md: bool) 
                     r.push(fixed(pv));
                 }
             }
+            if sparse.is_some() {
+                r.push(fixed(sp.map(|s| 100.0 * s.auc)));
+                r.push(fixed(sp.map(|s| 100.0 * s.optimum)));
+            }
             r.push(t.map_or("-".into(), |t| format!("{t:.3}")));
             rows.push(r);
         };
         for s in &r.scenes {
             let pv = p.and_then(|p| p.scenes.get(&s.name).copied());
             let name = if s.metrics.is_ok() { s.name.clone() } else { format!("{} (excluded)", s.name) };
-            push(name, format!("{}", s.weight), s.metrics.as_ref().ok(), pv, s.seconds);
+            push(name, format!("{}", s.weight), s.metrics.as_ref().ok(), pv, s.sparsification, s.seconds);
         }
         let strong = |s: &str| {
             if md { format!("**{s}**") } else { s.to_string() }
         };
-        push(strong("weighted"), String::new(), r.weighted().as_ref(), p.and_then(|p| p.weighted), None);
-        push("mean".into(), String::new(), r.mean().as_ref(), None, r.mean_seconds().map(|(t, _)| t));
+        push(strong("weighted"), String::new(), r.weighted().as_ref(), p.and_then(|p| p.weighted), None, None);
+        let mean_sparse = sparse.map(|(s, _)| s);
+        push("mean".into(), String::new(), r.mean().as_ref(), None, mean_sparse, r.mean_seconds().map(|(t, _)| t));
         let mut right_aligned = vec![true; ncol];
         right_aligned[0] = false;
         out.push_str(&layout(&Table { rows, right_aligned }, md));
@@ -295,6 +328,12 @@ fn render_text(reports: &[AlgReport], paper: &[Option<&PaperColumn>], md: bool) 
         let mut notes = vec![format!("{evaluated} of {} scenes evaluated", r.scenes.len())];
         if let Some((t, k)) = r.mean_seconds() {
             notes.push(format!("mean time per pair {t:.3} s (over {k})"));
+        }
+        if let Some((_, k)) = sparse {
+            let bad = if r.layout.is_kitti() { "3 px" } else { "1 px at the resolution matched" };
+            notes.push(format!(
+                "AUC: the confidence map's sparsification AUC in % (bad: off by > {bad}; mean over {k})"
+            ));
         }
         if md {
             out.push('\n');

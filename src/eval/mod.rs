@@ -53,6 +53,8 @@
 //!   their resolution and weight, scores them in parallel and collects an [`AlgReport`] with its averages.
 //! - `resolution.rs`: a MiddEval3 folder's resolution, from its path or from its scenes' names and sizes
 //!   ([`scene_resolution`], [`file_resolution`]).
+//! - `sparsification.rs`: how well a confidence map ranks the errors ([`sparsification`], the AUC of Hu &
+//!   Mordohai), scored when the result has one beside it (`conf0NAME.pfm`).
 //! - `paper.rs`: the paper's numbers ([`PaperResults`], `paper-results.tsv`), printed beside ours.
 //! - `format.rs`: [`render`] prints reports as a text or Markdown table, JSON or CSV.
 //! - `regions.rs`: where the error is (`jem eval --regions`): a MiddEval3 result's avgErr split by region (rejected
@@ -71,6 +73,7 @@ mod regions_format;
 mod report;
 mod resolution;
 pub mod sequence;
+mod sparsification;
 
 pub use format::{Format, render, render_with_regions};
 pub use kitti_fill::interpolate_background;
@@ -90,3 +93,4 @@ pub use resolution::{
     QUARTER_SIZES, Resolution, ScaleSource, file_resolution, resolution_name, scale_from_any_size, scale_from_path,
     scale_from_scene_size, scene_resolution,
 };
+pub use sparsification::{Sparsification, sparsification};

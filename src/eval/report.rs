@@ -9,10 +9,12 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use super::metrics::{MaskMode, Metrics, check_size, evaluate, evaluate_files, evaluate_scene};
+use super::metrics::{D1_THRESHOLD_PX, MaskMode, Metrics, check_size, evaluate, evaluate_files, evaluate_scene};
 use super::resolution::{resolution_name, scene_resolution};
+use super::sparsification::{Sparsification, sparsification};
 use crate::dataset::{Discovery, Layout, Pair, Purpose};
 use crate::error::{Error, Result};
+use crate::image::Plane;
 
 /// The MiddEval3 weight of a training scene: 0.5 for PianoL, Playroom, Playtable, Shelves and Vintage, 1 for
 /// every other scene (including unknown ones).
@@ -37,6 +39,8 @@ pub struct SceneResult {
     pub metrics: std::result::Result<Metrics, String>,
     /// Run time from `time<alg>.txt`, when present and readable.
     pub seconds: Option<f64>,
+    /// How well the confidence map beside the result ranks its errors, when there is one (and it reads).
+    pub sparsification: Option<Sparsification>,
     /// Left out for the data set's own files (its ground truth, mask or calib.txt is missing or unreadable), not
     /// for its result.
     pub truth_unusable: bool,
@@ -77,6 +81,17 @@ impl AlgReport {
     /// The plain mean over the evaluated scenes (`None` if none was).
     pub fn mean(&self) -> Option<Metrics> {
         self.average(|_| 1.0)
+    }
+
+    /// The mean sparsification AUC and optimum over the scenes that have one, and how many they are; `None`
+    /// when none has a confidence map.
+    pub fn mean_sparsification(&self) -> Option<(Sparsification, usize)> {
+        let all: Vec<Sparsification> = self.scenes.iter().filter_map(|s| s.sparsification).collect();
+        let n = all.len();
+        (n > 0).then(|| {
+            let mean = |f: fn(&Sparsification) -> f64| all.iter().map(f).sum::<f64>() / n as f64;
+            (Sparsification { auc: mean(|s| s.auc), optimum: mean(|s| s.optimum) }, n)
+        })
     }
 
     /// The scenes left out of the averages, with the reason.
@@ -183,7 +198,9 @@ pub fn evaluate_dir(
         .map(|((pair, dir), name)| {
             let files = pair.result_files(alg, src.results.as_deref());
             let metrics = check_truth(pair, mask_mode, src).and_then(|()| score_pair(pair, alg, scale, mask_mode, src));
+            let sparsification = metrics.is_ok().then(|| score_confidence(pair, alg, mask_mode, src)).flatten();
             SceneResult {
+                sparsification,
                 weight: if layout == Layout::Middlebury { scene_weight(&name) } else { 1.0 },
                 truth_unusable: metrics.as_ref().is_err_and(|e| !blames_result(e, &files.disparity)),
                 metrics: metrics.map_err(|e| error_chain(&e)),
@@ -257,6 +274,30 @@ fn score_pair(pair: &Pair, alg: &str, scale: u32, mask_mode: MaskMode, src: &Sou
     }
     metrics.invalid = 100.0 * invalid_before as f64 / known as f64;
     Ok(metrics)
+}
+
+/// The sparsification AUC of the confidence map beside `alg`'s result ([`Sparsification`]), when there is one: a
+/// pixel is bad when it is invalid or off by more than 1 px at the resolution matched (KITTI: 3 px, its D1
+/// threshold). A KITTI result is scored as written, before the development kit's fill.
+fn score_confidence(pair: &Pair, alg: &str, mask_mode: MaskMode, src: &Sources) -> Option<Sparsification> {
+    let files = pair.result_files(alg, src.results.as_deref());
+    if !files.confidence.is_file() {
+        return None;
+    }
+    let truth = pair.truth(mask_mode == MaskMode::All, src.gt.as_deref());
+    let confidence = crate::io::read_disparity(&files.confidence).ok()?;
+    let result = crate::io::read_disparity(&files.disparity).ok()?;
+    let gt = crate::io::read_disparity(&truth.disparity).ok()?;
+    let mask = match truth.mask.filter(|m| m.is_file() && !pair.layout.is_kitti()) {
+        Some(m) => Some(crate::io::png::load_grey8(&m).ok()?),
+        None => None,
+    };
+    let same = |p: &Plane<f32>| p.dims() == gt.dims();
+    if !same(&confidence) || !same(&result) || mask.as_ref().is_some_and(|m| m.dims() != gt.dims()) {
+        return None;
+    }
+    let bad_px = if pair.layout.is_kitti() { D1_THRESHOLD_PX as f32 } else { 1.0 };
+    sparsification(&confidence, &result, &gt, mask.as_ref(), mask_mode, bad_px)
 }
 
 /// The one scale all scene folders `dirs` (under `root`) have ([`scene_resolution`]: their path, else their name
@@ -345,6 +386,7 @@ pub(super) mod tests {
             weight: scene_weight(name),
             metrics: if ok { Ok(m) } else { Err("no result".into()) },
             seconds: Some(avgerr),
+            sparsification: None,
             truth_unusable: false,
         }
     }

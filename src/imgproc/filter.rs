@@ -220,6 +220,47 @@ pub(crate) fn box_mean(p: &Plane<f32>, r: usize) -> Plane<f32> {
     out
 }
 
+/// [`box_mean`] in O(1) per pixel rather than O(r²): running sums (in `f64`, so adding and dropping values leaves
+/// no drift) along each row over dx = −r..r, then down each column over dy = −r..r, in bands of
+/// [`BOX_BAND_ROWS`] rows; borders replicated. The bands are fixed and each is summed by one thread in a fixed
+/// order, so the result does not depend on the thread count.
+pub(crate) fn box_mean_separable(p: &Plane<f32>, r: usize) -> Plane<f32> {
+    let (w, h) = p.dims();
+    if w == 0 || h == 0 {
+        return p.clone();
+    }
+    let mut rows = Plane::new(w, h, 0.0f64);
+    rows.data.par_chunks_mut(w).zip(p.data.par_chunks(w)).for_each(|(out, src)| {
+        let at = |x: usize| f64::from(src[x.saturating_sub(r).min(w - 1)]);
+        // Window of x is padded columns x ..= x + 2r, column c of the padding being src[c − r] clamped.
+        let mut sum: f64 = (0..=2 * r).map(at).sum();
+        for (x, o) in out.iter_mut().enumerate() {
+            *o = sum;
+            sum += at(x + 2 * r + 1) - at(x);
+        }
+    });
+    let norm = 1.0 / ((2 * r + 1) * (2 * r + 1)) as f64;
+    let row = |y: usize| rows.row(y.saturating_sub(r).min(h - 1));
+    let mut out = Plane::new(w, h, 0.0f32);
+    out.data.par_chunks_mut(w * BOX_BAND_ROWS).enumerate().for_each(|(band, dst)| {
+        let y0 = band * BOX_BAND_ROWS;
+        let mut acc = vec![0.0f64; w];
+        for k in 0..=2 * r {
+            acc.iter_mut().zip(row(y0 + k)).for_each(|(a, &v)| *a += v);
+        }
+        for (dy, o) in dst.chunks_exact_mut(w).enumerate() {
+            o.iter_mut().zip(&acc).for_each(|(o, &a)| *o = (a * norm) as f32);
+            let y = y0 + dy;
+            let (add, drop) = (row(y + 2 * r + 1), row(y));
+            acc.iter_mut().zip(add).zip(drop).for_each(|((a, &p), &m)| *a += p - m);
+        }
+    });
+    out
+}
+
+/// Rows per band of [`box_mean_separable`]'s column sums: each band starts its running sums afresh.
+const BOX_BAND_ROWS: usize = 32;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -232,6 +273,19 @@ mod tests {
         // The transpose gives the same magnitude.
         let t = Plane::from_parts(3, 4, [[0.0; 3], [0.0; 3], [10.0; 3], [10.0; 3]].concat());
         assert_eq!(sobel_magnitude(&t).data, [[0.0; 3], [40.0; 3], [40.0; 3], [0.0; 3]].concat());
+    }
+
+    #[test]
+    fn the_separable_box_mean_is_the_box_mean() {
+        // 70 rows: more than one band of the column sums.
+        let data: Vec<f32> = (0..7 * 70).map(|i| ((i * 37) % 11) as f32 - 3.0).collect();
+        let p = Plane::from_parts(7, 70, data);
+        for r in [0, 1, 2, 6] {
+            let (fast, slow) = (box_mean_separable(&p, r), box_mean(&p, r));
+            for (a, b) in fast.data.iter().zip(&slow.data) {
+                assert!((a - b).abs() < 1e-5, "r {r}: {a} vs {b}");
+            }
+        }
     }
 
     #[test]

@@ -64,10 +64,23 @@ pub(crate) fn fine_pass(
     };
     let (left, right) = pass.infer_views(volume, &guide_left, buffers, on_stage, &mut t);
     on_stage("post-processing");
+    let decoded = left.disparity.clone();
     let (disparity, trusted) = pass.post_process(left.disparity, right.as_ref(), &guide_left, &mut t);
+    let confidence = t.time("confidence", || {
+        post::confidence::confidence_map(&post::confidence::ConfidenceInputs {
+            max_marginal: &left.confidence,
+            decoded: &decoded,
+            right: right.as_ref().map(|r| (&r.disparity, pass.input.left_from)),
+            final_map: &disparity,
+            consistent: &trusted,
+            coarse: pass.input.prior.map(|p| (&p.disparity, pass.input.left_from)),
+            guide: &guide_left,
+        })
+    });
     Ok(PipelineOutput {
         disparity,
-        confidence: left.confidence,
+        confidence,
+        max_marginal: left.confidence,
         consistent: trusted,
         timings: t,
         measured: None,

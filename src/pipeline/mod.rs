@@ -70,18 +70,31 @@ fn run_level(
     on_stage("upsample");
     let (w, h) = pair.left.dims();
     let up = &params.upsample;
-    let (disparity, confidence) = t.time("upsample", || {
+    let (disparity, (mut confidence, max_marginal)) = t.time("upsample", || {
         rayon::join(
             || {
                 let (low, guide) = (&low.disparity, &small.left);
                 scale::upsample_disparity_guided(low, guide, &pair.left, factor, up.edge_px, up.sigma_rgb)
             },
-            || scale::upsample_plane(&low.confidence, factor, w, h),
+            || {
+                let up = |p| scale::upsample_plane(p, factor, w, h);
+                (up(&low.confidence), up(&low.max_marginal))
+            },
         )
     });
     drop(small);
+    // An invalid pixel has no confidence, whatever its neighbours' at the reduced size.
+    confidence.data.iter_mut().zip(&disparity.data).filter(|(_, d)| !d.is_finite()).for_each(|(c, _)| *c = 0.0);
     let consistent = scale::upsample_mask(&low.consistent, factor, w, h);
-    Ok(PipelineOutput { disparity, confidence, consistent, timings: t, measured: low.measured, vertical_offset: None })
+    Ok(PipelineOutput {
+        disparity,
+        confidence,
+        max_marginal,
+        consistent,
+        timings: t,
+        measured: low.measured,
+        vertical_offset: None,
+    })
 }
 
 /// The pipeline at the pair's own resolution, appending its stage times to `t`: prepare, coarse prior, fine pass.

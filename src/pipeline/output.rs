@@ -43,9 +43,12 @@ impl Timings {
 pub struct PipelineOutput {
     /// The left view's disparity map (`inf` = invalid, when post-processing leaves holes).
     pub disparity: DisparityMap,
-    /// Per-pixel confidence of the left view before post-processing: the max-marginal (mean-field models) or
-    /// 1 (WTA).
+    /// Per-pixel confidence of the final map, 0..1, made to rank its errors ([`crate::post::confidence`]; 0 where
+    /// the map is invalid).
     pub confidence: Plane<f32>,
+    /// Per-pixel max-marginal of the left view before post-processing (mean-field models; 1 for WTA): what a
+    /// coarse answer's prior is weighted by.
+    pub(crate) max_marginal: Plane<f32>,
     /// The pixels that passed the left-right check (all of them when it is off).
     pub consistent: Plane<bool>,
     /// Time per stage.

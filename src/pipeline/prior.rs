@@ -185,9 +185,9 @@ const OWN_BEST_BAND: usize = 2;
 
 impl Prior {
     /// The prior of a coarse run's output (brought to the fine size) with weight λ = `weight`: a pixel the coarse
-    /// left-right check rejected was filled by a guess, so its factor is its confidence × `untrusted`.
+    /// left-right check rejected was filled by a guess, so its factor is its max-marginal × `untrusted`.
     pub(crate) fn from_coarse(coarse: PipelineOutput, weight: f32, flat: f32, untrusted: f32) -> Prior {
-        let mut confidence = coarse.confidence;
+        let mut confidence = coarse.max_marginal;
         confidence.data.iter_mut().zip(&coarse.consistent.data).filter(|(_, ok)| !**ok).for_each(|(c, _)| {
             *c *= untrusted;
         });

@@ -87,6 +87,7 @@ pub fn run_tiled(
     let mut out = PipelineOutput {
         disparity: Plane::new(w, h, f32::INFINITY),
         confidence: Plane::new(w, h, 0.0),
+        max_marginal: Plane::new(w, h, 0.0),
         consistent: Plane::new(w, h, false),
         timings: Timings::default(),
         measured: input.measured(),
@@ -286,6 +287,7 @@ impl TileJob<'_> {
                 let o = y * w + x;
                 out.disparity.data[o] = result.disparity.data[i] + lo as f32;
                 out.confidence.data[o] = result.confidence.data[i];
+                out.max_marginal.data[o] = result.max_marginal.data[i];
                 out.consistent.data[o] = result.consistent.data[i];
             }
         }

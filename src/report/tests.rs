@@ -39,6 +39,7 @@ fn rows_join_each_algorithms_results_and_scores_by_scene() {
         weight: crate::eval::scene_weight(name),
         metrics: if ok { Ok(m) } else { Err("no result file".into()) },
         seconds: Some(2.5),
+        sparsification: None,
         truth_unusable: false,
     };
     let report = |scenes| AlgReport {

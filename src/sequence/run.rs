@@ -61,6 +61,8 @@ pub struct RunOptions<'a> {
     /// Match the frames with the temporal model ([`Matcher::with_temporal`]): the range is then settled on the
     /// first frame whatever `range` says. `false`: each frame alone, as `jem match` matches it.
     pub temporal: bool,
+    /// Rectify every frame with this before matching (`jem sequence --rectify`, as `jem match --rectify`).
+    pub rectification: Option<&'a crate::rectify::Rectification>,
 }
 
 /// One frame matched.
@@ -168,7 +170,7 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
     for (index, frame) in seq.frames.iter().enumerate() {
         let result = out.join(format!("{}.{ext}", frame.stem));
         if opts.range == RangeRule::FirstFrame && index == 0 {
-            let (l, r) = matcher.read_pair(&frame.left, &frame.right)?;
+            let (l, r) = read_frame(&matcher, &frame.left, &frame.right, opts.rectification)?;
             let settled = matcher.search_range(&l, &r)?;
             summary.settled = Some(settled);
             matcher = matcher.with_ndisp(NdispSource::Given(settled.0));
@@ -183,7 +185,7 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
             let later_missing = opts.temporal && (index + 1..seq.frames.len()).any(|i| !done(i));
             if later_missing {
                 on_event(Event::Replayed { index, stem: &frame.stem });
-                match_frame(&mut matcher, &frame.left, &frame.right, &frame.stem, &|_| {})?;
+                match_frame(&mut matcher, opts, frame, &|_| {})?;
                 summary.replayed.push(frame.stem.clone());
             } else {
                 on_event(Event::Skipped { index, stem: &frame.stem });
@@ -193,9 +195,7 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
         }
         times.retain(|(s, _)| *s != frame.stem);
         on_event(Event::Started { index, stem: &frame.stem });
-        let (map, run) = match_frame(&mut matcher, &frame.left, &frame.right, &frame.stem, &|stage| {
-            on_event(Event::Stage { index, stage })
-        })?;
+        let (map, run) = match_frame(&mut matcher, opts, frame, &|stage| on_event(Event::Stage { index, stage }))?;
         on_event(Event::Stage { index, stage: "writing" });
         times.push((frame.stem.clone(), run.seconds));
         let order = |stem: &str| seq.frames.iter().position(|f| f.stem == stem);
@@ -209,16 +209,31 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
     Ok(summary)
 }
 
-/// Matches one pair as `jem match` does: headers and the memory limit before decoding, then the run.
-fn match_frame(
-    matcher: &mut Matcher,
+/// A frame's pair as `jem match` reads it (headers and the memory limit before decoding), rectified when asked.
+fn read_frame(
+    matcher: &Matcher,
     left: &Path,
     right: &Path,
-    stem: &str,
+    rectification: Option<&crate::rectify::Rectification>,
+) -> Result<(crate::image::RgbImage, crate::image::RgbImage)> {
+    let (l, r) = matcher.read_pair(left, right)?;
+    match rectification {
+        Some(rect) => rect.rectify_pair(&l, &r),
+        None => Ok((l, r)),
+    }
+}
+
+/// Matches one frame as `jem match` does: headers and the memory limit before decoding, the rectification when
+/// asked, then the run.
+fn match_frame(
+    matcher: &mut Matcher,
+    opts: &RunOptions<'_>,
+    frame: &super::Frame,
     on_stage: &dyn Fn(&str),
 ) -> Result<(crate::image::DisparityMap, FrameRun)> {
     on_stage("loading");
-    let (l, r) = matcher.read_pair(left, right)?;
+    let (l, r) = read_frame(matcher, &frame.left, &frame.right, opts.rectification)?;
+    let stem = &frame.stem;
     let start = Instant::now();
     let out = matcher.match_pair_with(&l, &r, &|progress| {
         if let crate::matcher::Progress::Stage(stage) = progress {

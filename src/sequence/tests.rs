@@ -311,6 +311,7 @@ fn options(params: &crate::Params) -> RunOptions<'_> {
         limit_bytes: u64::MAX,
         range: RangeRule::PerFrame,
         temporal: false,
+        rectification: None,
     }
 }
 

@@ -103,6 +103,7 @@ pub(crate) fn shift_answer(answer: &PipelineOutput, shift: Shift) -> PipelineOut
     PipelineOutput {
         disparity: moved(&answer.disparity, f32::INFINITY),
         confidence: moved(&answer.confidence, 0.0),
+        max_marginal: moved(&answer.max_marginal, 0.0),
         consistent,
         timings: Default::default(),
         measured: None,
@@ -189,6 +190,7 @@ mod tests {
         let d = Plane::from_parts(3, 1, vec![1.0, 2.0, 3.0]);
         let answer = PipelineOutput {
             confidence: Plane::new(3, 1, 0.5),
+            max_marginal: Plane::new(3, 1, 0.5),
             consistent: Plane::new(3, 1, true),
             disparity: d,
             timings: Default::default(),
@@ -198,7 +200,7 @@ mod tests {
         let moved = shift_answer(&answer, Shift { dx: 1, dy: 0, residual: 0.0 });
         assert_eq!(moved.disparity.data[..2], [2.0, 3.0]);
         assert!(moved.disparity.data[2].is_infinite());
-        assert_eq!((moved.confidence.data[2], moved.consistent.data[2]), (0.0, false));
+        assert_eq!((moved.max_marginal.data[2], moved.consistent.data[2]), (0.0, false));
         assert!(moved.consistent.data[0]);
     }
 

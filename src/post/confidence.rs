@@ -1,0 +1,210 @@
+//! The confidence of the final disparity map: for each pixel, the probability that its disparity is within 1 px
+//! (at the resolution matched) of the truth, from measures the run already has. Made to rank the errors: kept most
+//! confident first, the share of wrong pixels among the kept ones should rise as slowly as it can (the
+//! sparsification curve of Hu & Mordohai, "A quantitative evaluation of confidence measures for stereo vision",
+//! PAMI 2012; [`crate::eval::sparsification`] scores it).
+//!
+//! # The measures
+//! Per pixel i, with d the left view's decoded disparity (before post-processing), f the final one:
+//! - *agreement* sᵢ = Qᵢ · exp(−(e_lr + e_post + e_coarse) / [`AGREEMENT_SCALE_PX`]): the max-marginal Qᵢ times how
+//!   well three independent answers agree with the pixel's: the right view (e_lr = |d − d_R(x − round d)|, the
+//!   left-right check's difference), the post-processing (e_post = |f − d|: what the fill, median and planes
+//!   changed) and the coarse run (e_coarse = |f − coarse|); each difference capped at [`CAP_PX`], an answer that
+//!   is missing (out of view, invalid) counting as the cap and a check that did not run as agreement.
+//! - *texture* tᵢ = ln(1 + the mean gradient magnitude of the grey guide over 5 × 5).
+//! - *depth edge* eᵢ = ln(1 + the final map's range over 3 × 3, capped at 16 px).
+//! - *rejection* uᵢ = the share of the 7 × 7 window that failed the left-right check.
+//!
+//! Errors come in regions (a wall matched to the wrong repetition, a textureless patch that slid), so the measures
+//! enter as local means at a few scales (box means, borders replicated): ln of the mean agreement over 3 × 3,
+//! 25 × 25 and 51 × 51 windows, the texture's 15 × 15 mean, the edge, the rejection and its 15 × 15 mean.
+//! A logistic model of those seven values gives P(error > 1 px); the confidence is 1 − P, so a threshold on it
+//! (`--min-confidence`) is a bound on the expected error rate of what is kept. The weights were fitted on MiddEval3
+//! trainingQ and checked on the scenes each fold did not see (docs/tuning-log.md, "Confidence").
+//!
+//! An invalid pixel (`inf` in the final map) has confidence 0: it sorts last.
+//!
+//! # Cost
+//! O(pixels): six box means of radius up to 25 in O(r) per pixel each, one 3 × 3 min/max, rows in parallel, each
+//! row summed by one thread in a fixed order (the map does not depend on the thread count).
+
+use rayon::prelude::*;
+
+use crate::fastmath::exp_nonpositive;
+use crate::image::{DisparityMap, Plane, RgbImage};
+use crate::imgproc::filter;
+
+/// The disagreement that divides the agreement by e: half a pixel, so that an answer off by the 1 px the confidence
+/// is about already counts as a clear disagreement (1 px and 2 px ranked worse on trainingQ).
+pub(crate) const AGREEMENT_SCALE_PX: f32 = 0.5;
+
+/// Differences beyond this are all the same disagreement (e^−16 is far below any agreement kept).
+const CAP_PX: f32 = 8.0;
+
+/// Added inside ln of a mean agreement so that a window of no agreement at all stays finite (about the agreement
+/// of one pixel in 25 × 25 that agrees).
+const LN_FLOOR: f32 = 1e-3;
+
+/// The logistic model's weights on the pooled measures, in the module doc's order (agreement at three scales,
+/// texture, edge, rejection at two): their log-odds of an error.
+/// Fitted on trainingQ's 15 scenes (docs/tuning-log.md, "Confidence").
+const WEIGHTS: [f32; 7] = [-0.2299, -0.3099, -0.5103, -0.4188, 0.8911, 1.0662, 0.2715];
+/// The log-odds of an error where every measure is 0.
+const BIAS: f32 = -4.1519;
+
+/// What the confidence of a fine pass is made from.
+pub(crate) struct ConfidenceInputs<'a> {
+    /// The left view's max-marginal (1 for winner-take-all).
+    pub max_marginal: &'a Plane<f32>,
+    /// The left view's disparity as inference decoded it, before any post-processing.
+    pub decoded: &'a DisparityMap,
+    /// The right view's decoded disparity and the column of the right view where the left view's first column is
+    /// (a tile's extension; 0 otherwise), when the left-right check ran.
+    pub right: Option<(&'a DisparityMap, usize)>,
+    /// The final disparity map.
+    pub final_map: &'a DisparityMap,
+    /// The pixels that passed the left-right check.
+    pub consistent: &'a Plane<bool>,
+    /// The coarse run's disparities at this resolution and the column where the left view's first column is (as
+    /// for `right`), when there was one.
+    pub coarse: Option<(&'a DisparityMap, usize)>,
+    /// The guidance image of the left view.
+    pub guide: &'a RgbImage,
+}
+
+/// The per-pixel measures before they are pooled.
+struct Pixelwise {
+    agreement: Plane<f32>,
+    texture: Plane<f32>,
+    edge: Plane<f32>,
+    rejected: Plane<f32>,
+}
+
+/// The confidence of each pixel of the final map, 0..1 (see the module doc).
+///
+/// # Panics
+/// If the maps differ in size.
+pub(crate) fn confidence_map(inputs: &ConfidenceInputs<'_>) -> Plane<f32> {
+    let m = pixelwise(inputs);
+    let mean = filter::box_mean_separable;
+    let ln_mean = |r| {
+        let mut p = mean(&m.agreement, r);
+        p.data.iter_mut().for_each(|v| *v = (*v + LN_FLOOR).ln());
+        p
+    };
+    // The log-odds summed one measure at a time, in the order of `WEIGHTS`, so that at most one pooled plane is
+    // alive beside the per-pixel ones (a tile's memory).
+    let (w, h) = inputs.final_map.dims();
+    let mut logit = Plane::new(w, h, BIAS);
+    let add = |logit: &mut Plane<f32>, values: &Plane<f32>, k: f32| {
+        logit.data.par_chunks_mut(w.max(1)).zip(values.data.par_chunks(w.max(1))).for_each(|(l, v)| {
+            l.iter_mut().zip(v).for_each(|(l, v)| *l += v * k);
+        });
+    };
+    add(&mut logit, &ln_mean(1), WEIGHTS[0]);
+    add(&mut logit, &ln_mean(12), WEIGHTS[1]);
+    add(&mut logit, &ln_mean(25), WEIGHTS[2]);
+    add(&mut logit, &mean(&m.texture, 7), WEIGHTS[3]);
+    add(&mut logit, &m.edge, WEIGHTS[4]);
+    add(&mut logit, &m.rejected, WEIGHTS[5]);
+    add(&mut logit, &mean(&m.rejected, 7), WEIGHTS[6]);
+    drop(m);
+    logit.data.par_chunks_mut(w.max(1)).zip(inputs.final_map.data.par_chunks(w.max(1))).for_each(|(row, d)| {
+        for (c, d) in row.iter_mut().zip(d) {
+            let z = *c;
+            // 1 / (1 + e^z), with the exponent never positive; an invalid pixel has none.
+            let e = exp_nonpositive(-z.abs());
+            *c = if !d.is_finite() {
+                0.0
+            } else if z > 0.0 {
+                e / (1.0 + e)
+            } else {
+                1.0 / (1.0 + e)
+            };
+        }
+    });
+    logit
+}
+
+/// Agreement, texture, depth edge and the left-right rejection around each pixel (see the module doc).
+fn pixelwise(inputs: &ConfidenceInputs<'_>) -> Pixelwise {
+    let ConfidenceInputs { max_marginal, decoded, right, final_map, consistent, coarse, guide } = *inputs;
+    let (w, h) = final_map.dims();
+    assert_eq!(decoded.dims(), (w, h), "decoded and final maps differ in size");
+    assert_eq!(max_marginal.dims(), (w, h), "max-marginal and final map differ in size");
+    let diff = |a: f32, b: f32| if a.is_finite() && b.is_finite() { (a - b).abs().min(CAP_PX) } else { CAP_PX };
+    let mut agreement = Plane::new(w, h, 0.0f32);
+    agreement.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        for (x, s) in row.iter_mut().enumerate() {
+            let i = y * w + x;
+            let (d, f) = (decoded.data[i], final_map.data[i]);
+            let lr = right.map_or(0.0, |(right, from)| {
+                let xr = (x + from) as f32 - d.round();
+                if d.is_finite() && xr >= 0.0 && xr < right.width as f32 {
+                    diff(d, right.row(y)[xr as usize])
+                } else {
+                    CAP_PX
+                }
+            });
+            let coarse = coarse.map_or(0.0, |(c, from)| diff(f, c.row(y)[x + from]));
+            let off = lr + diff(f, d) + coarse;
+            *s = max_marginal.data[i].clamp(0.0, 1.0) * exp_nonpositive(-off / AGREEMENT_SCALE_PX);
+        }
+    });
+    let texture = {
+        let grey = guide.to_grey();
+        let (gx, gy) = filter::central_differences(&grey);
+        let magnitude = Plane::from_parts(w, h, gx.data.iter().zip(&gy.data).map(|(a, b)| a.hypot(*b)).collect());
+        let mut texture = filter::box_mean_separable(&magnitude, 2);
+        texture.data.iter_mut().for_each(|t| *t = t.ln_1p());
+        texture
+    };
+    let edge = {
+        let lo = filter::window_extreme(final_map, 1, f32::INFINITY, f32::min);
+        let hi = filter::window_extreme(final_map, 1, f32::NEG_INFINITY, f32::max);
+        let range =
+            lo.data.iter().zip(&hi.data).map(|(lo, hi)| if lo <= hi { (hi - lo).min(16.0).ln_1p() } else { 0.0 });
+        Plane::from_parts(w, h, range.collect())
+    };
+    let failed = Plane::from_parts(w, h, consistent.data.iter().map(|&ok| if ok { 0.0 } else { 1.0 }).collect());
+    let rejected = filter::box_mean_separable(&failed, 3);
+    Pixelwise { agreement, texture, edge, rejected }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 16 × 8 map whose left half every check agrees with and whose right half the right view and the coarse
+    /// answer contradict (and failed the left-right check): the left half ranks above the right one, and an
+    /// invalid pixel ranks last.
+    #[test]
+    fn pixels_the_checks_contradict_rank_below_those_they_confirm() {
+        let (w, h) = (16, 8);
+        // Disparity 0 everywhere, so every pixel's match in the right view is the same column.
+        let d = Plane::new(w, h, 0.0f32);
+        let mut final_map = d.clone();
+        final_map.data[w + 2] = f32::INFINITY;
+        let right_half = |i: usize| i % w >= w / 2;
+        let right = Plane::from_parts(w, h, (0..w * h).map(|i| if right_half(i) { 3.0 } else { 0.0 }).collect());
+        let coarse = Plane::from_parts(w, h, (0..w * h).map(|i| if right_half(i) { 2.0 } else { 0.0 }).collect());
+        let consistent = Plane::from_parts(w, h, (0..w * h).map(|i| !right_half(i)).collect());
+        let guide = RgbImage::new(w, h);
+        let c = confidence_map(&ConfidenceInputs {
+            max_marginal: &Plane::new(w, h, 0.9),
+            decoded: &d,
+            right: Some((&right, 0)),
+            final_map: &final_map,
+            consistent: &consistent,
+            coarse: Some((&coarse, 0)),
+            guide: &guide,
+        });
+        assert_eq!(c.data[w + 2], 0.0);
+        let (mut lo_left, mut hi_right) = (f32::INFINITY, 0.0f32);
+        for (i, &v) in c.data.iter().enumerate().filter(|&(i, _)| i != w + 2) {
+            assert!((0.0..=1.0).contains(&v));
+            if right_half(i) { hi_right = hi_right.max(v) } else { lo_left = lo_left.min(v) }
+        }
+        assert!(lo_left > hi_right, "left half from {lo_left}, right half up to {hi_right}");
+    }
+}
