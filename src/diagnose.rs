@@ -163,10 +163,9 @@ pub fn check_pair(
         let (l, r) = (downsample_rgb(left, factor), downsample_rgb(right, factor));
         // Half the width: the largest range a pair is matched over with any sense.
         let labels = (l.width / 2).max(2);
-        let (direct, mirrored) = rayon::join(
-            || crate::setup::range::reliable_matches(&l, &r, labels, p),
-            || crate::setup::range::reliable_matches(&l.mirrored(), &r.mirrored(), labels, p),
-        );
+        // One after the other: each is sized to fit the memory limit on its own (and runs in parallel inside).
+        let direct = crate::setup::range::reliable_matches(&l, &r, labels, p);
+        let mirrored = crate::setup::range::reliable_matches(&l.mirrored(), &r.mirrored(), labels, p);
         // Disparity 0 (the far distance) matches the same either way round.
         let count = |m: &[f32]| m.iter().filter(|&&d| d >= 1.0).count();
         let (pos, neg) = (count(&direct), count(&mirrored));
