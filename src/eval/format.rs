@@ -9,6 +9,7 @@ use super::paper::PaperColumn;
 use super::regions::RegionReport;
 use super::report::AlgReport;
 use super::sparsification::Sparsification;
+use super::text::{fixed, json_num, json_str};
 use crate::table::Table;
 
 /// How [`render`] prints reports.
@@ -78,30 +79,6 @@ pub fn render_with_regions(
             out
         }
     }
-}
-
-pub(super) fn json_str(s: &str) -> String {
-    let mut out = String::with_capacity(s.len() + 2);
-    out.push('"');
-    for c in s.chars() {
-        match c {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            '\n' => out.push_str("\\n"),
-            '\r' => out.push_str("\\r"),
-            '\t' => out.push_str("\\t"),
-            c if (c as u32) < 0x20 => {
-                let _ = write!(out, "\\u{:04x}", c as u32);
-            }
-            c => out.push(c),
-        }
-    }
-    out.push('"');
-    out
-}
-
-pub(super) fn json_num(v: f64) -> String {
-    if v.is_finite() { format!("{v}") } else { "null".into() }
 }
 
 fn json_metrics(m: Option<&Metrics>, columns: &[&str]) -> String {
@@ -233,15 +210,6 @@ fn render_csv(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String {
         row("mean", None, r.mean().as_ref(), mean_t, None, "");
     }
     out
-}
-
-/// Two decimals, `nan` for NaN, `-` for nothing.
-pub(super) fn fixed(v: Option<f64>) -> String {
-    match v {
-        Some(v) if v.is_finite() => format!("{v:.2}"),
-        Some(_) => "nan".into(),
-        None => "-".into(),
-    }
 }
 
 /// The table as aligned text, or as Markdown when `markdown`.

@@ -74,6 +74,7 @@ mod report;
 mod resolution;
 pub mod sequence;
 mod sparsification;
+mod text;
 
 pub use format::{Format, render, render_with_regions};
 pub use kitti_fill::interpolate_background;

@@ -3,8 +3,8 @@
 
 use std::fmt::Write as _;
 
-use super::format::{fixed, json_num, json_str};
 use super::regions::{REGION_KEYS, RegionReport, RegionSplit, SIZE_KEYS};
+use super::text::{fixed, json_num, json_str};
 use crate::table::Table;
 
 /// Column headings of the regions, in [`REGION_KEYS`] order.

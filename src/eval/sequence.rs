@@ -24,8 +24,9 @@
 
 use std::path::{Path, PathBuf};
 
-use super::format::{csv_field, csv_num, fixed, json_num, json_str};
+use super::format::{csv_field, csv_num};
 use super::metrics::{MaskMode, Metrics, check_size, evaluate};
+use super::text::{fixed, json_num, json_str};
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane};
 use crate::sequence::Sequence;
