@@ -43,7 +43,7 @@ impl Timings {
 pub struct PipelineOutput {
     /// The left view's disparity map (`inf` = invalid, when post-processing leaves holes).
     pub disparity: DisparityMap,
-    /// Per-pixel confidence of the final map, 0..1, made to rank its errors ([`crate::post::confidence`]; 0 where
+    /// Per-pixel confidence of the final map, 0..1, made to rank its errors (`src/post/confidence.rs`; 0 where
     /// the map is invalid).
     pub confidence: Plane<f32>,
     /// Per-pixel max-marginal of the left view before post-processing (mean-field models; 1 for WTA): what a
