@@ -29,8 +29,7 @@ pub(crate) fn sobel_x(grey: &Plane<f32>) -> Plane<f32> {
         let mid = grey.row(y);
         let down = grey.row((y + 1).min(h - 1));
         for (x, g) in row.iter_mut().enumerate() {
-            let (l, r) = (x.saturating_sub(1), (x + 1).min(w - 1));
-            *g = (up[r] - up[l]) + 2.0 * (mid[r] - mid[l]) + (down[r] - down[l]);
+            *g = sobel_at([up, mid, down], x).0;
         }
     });
     out
@@ -45,13 +44,20 @@ pub(crate) fn sobel_magnitude(grey: &Plane<f32>) -> Plane<f32> {
         let mid = grey.row(y);
         let down = grey.row((y + 1).min(h - 1));
         for (x, g) in row.iter_mut().enumerate() {
-            let (l, r) = (x.saturating_sub(1), (x + 1).min(w - 1));
-            let gx = (up[r] - up[l]) + 2.0 * (mid[r] - mid[l]) + (down[r] - down[l]);
-            let gy = (down[l] - up[l]) + 2.0 * (down[x] - up[x]) + (down[r] - up[r]);
+            let (gx, gy) = sobel_at([up, mid, down], x);
             *g = gx.hypot(gy);
         }
     });
     out
+}
+
+/// The Sobel gradients (x, y) at column `x` of the middle of three rows (the rows above and below already replicated
+/// at the image's border; columns replicated here).
+fn sobel_at([up, mid, down]: [&[f32]; 3], x: usize) -> (f32, f32) {
+    let (l, r) = (x.saturating_sub(1), (x + 1).min(mid.len() - 1));
+    let gx = (up[r] - up[l]) + 2.0 * (mid[r] - mid[l]) + (down[r] - down[l]);
+    let gy = (down[l] - up[l]) + 2.0 * (down[x] - up[x]) + (down[r] - up[r]);
+    (gx, gy)
 }
 
 /// Horizontal and vertical central differences (one-sided at the borders).
