@@ -38,9 +38,9 @@ pub(crate) struct FineInput<'a> {
     /// [`super::tile`]): the left view's inference and post-processing skip them, and the output maps start after
     /// them (0 outside tiles).
     pub left_from: usize,
-    /// Mean-field iterations of the right view when not the configured ones (a frame of a sequence, whose right
-    /// view only serves the left-right check).
-    pub right_iterations: Option<usize>,
+    /// Mean-field iterations of the left and the right view when not the configured ones (a frame of a sequence:
+    /// its prior has placed each pixel, and its right view only serves the left-right check).
+    pub iterations: Option<[usize; 2]>,
 }
 
 /// The pipeline from the cost volume on, for `input` ([`FineInput`]): cost volume (stage `cost volume`), inference
@@ -179,15 +179,23 @@ impl Pass<'_> {
     ) -> (ViewEstimate, Option<ViewEstimate>) {
         let (params, left_from) = (self.params, self.input.left_from);
         let need_right = params.post.lrc.mode != LrcMode::Off;
+        let iterations = self.input.iterations.unwrap_or([params.meanfield.iterations; 2]);
         let LeftVolume { cost: cost_left, bands: left_bands } = volume;
         let (left, cost_right) = if left_from > 0 {
             let cost_right = need_right.then(|| self.right_volume(&cost_left, buffers, t));
             let kept = t.time("cost", || cost_left.into_columns_from(left_from));
-            let left = estimate_view(params, guide_left, &kept, left_bands, t, buffers);
+            let left = estimate_view(
+                params,
+                View { image: guide_left, cost: &kept, iterations: iterations[0] },
+                left_bands,
+                t,
+                buffers,
+            );
             buffers.recycle(kept.data);
             (left, cost_right)
         } else {
-            let left = estimate_view(params, guide_left, &cost_left, left_bands, t, buffers);
+            let view = View { image: guide_left, cost: &cost_left, iterations: iterations[0] };
+            let left = estimate_view(params, view, left_bands, t, buffers);
             // The right volume goes into the left view's spent marginals, and the left volume's storage becomes the
             // right view's marginals: no new allocation for the right view.
             let cost_right = need_right.then(|| self.right_volume(&cost_left, buffers, t));
@@ -201,18 +209,8 @@ impl Pass<'_> {
                 .zip(best)
                 .map(|(prior, best)| t.time("bands", || prior.label_bands(&best, ndisp, true, params)));
             on_stage("inference (right)");
-            let right_params;
-            let params = match self.input.right_iterations {
-                Some(n) => {
-                    right_params = Params {
-                        meanfield: MeanFieldParams { iterations: n, ..params.meanfield.clone() },
-                        ..params.clone()
-                    };
-                    &right_params
-                }
-                None => params,
-            };
-            let right = estimate_view(params, &self.input.guide.right, &cost_right, right_bands, t, buffers);
+            let view = View { image: &self.input.guide.right, cost: &cost_right, iterations: iterations[1] };
+            let right = estimate_view(params, view, right_bands, t, buffers);
             buffers.recycle(cost_right.data);
             right
         });
@@ -268,13 +266,19 @@ impl Pass<'_> {
     }
 }
 
-/// Inference for one view: WTA on the cost, or mean field with the view's own image, within `bands` if given
-/// (not with the mean field's pyramid, nor for WTA). `buffers` carries the large allocations from one view to the
-/// next.
+/// One view for [`estimate_view`]: its image, its cost volume and its mean-field iterations.
+struct View<'a> {
+    image: &'a RgbImage,
+    cost: &'a CostVolume,
+    iterations: usize,
+}
+
+/// Inference for one view: WTA on the cost, or mean field with the view's own image (the configuration's mean field
+/// with the view's iterations), within `bands` if given (not with the mean field's pyramid, nor for WTA). `buffers`
+/// carries the large allocations from one view to the next.
 fn estimate_view(
     params: &Params,
-    image: &RgbImage,
-    cost: &CostVolume,
+    View { image, cost, iterations }: View<'_>,
     bands: Option<meanfield::LabelBands>,
     t: &mut Timings,
     buffers: &mut meanfield::Buffers,
@@ -289,16 +293,15 @@ fn estimate_view(
             let weights =
                 meanfield::PairwiseWeights { fcm: params.effective_fcm_weight(), lcm: params.effective_lcm_weight() };
             let reuse = std::mem::take(buffers);
-            let (q, rest) = if params.meanfield.pyramid_levels > 1 {
-                t.time("mf pyramid", || meanfield::infer_coarse_to_fine(cost, image, &params.meanfield, weights, reuse))
+            let mf_params = MeanFieldParams { iterations, ..params.meanfield.clone() };
+            let (q, rest) = if mf_params.pyramid_levels > 1 {
+                t.time("mf pyramid", || meanfield::infer_coarse_to_fine(cost, image, &mf_params, weights, reuse))
             } else {
                 let mut mf = t.time("mf setup", || match bands {
-                    Some(bands) => {
-                        meanfield::MeanField::in_label_bands(cost, image, &params.meanfield, weights, reuse, bands)
-                    }
-                    None => meanfield::MeanField::with_buffers(cost, image, &params.meanfield, weights, reuse),
+                    Some(bands) => meanfield::MeanField::in_label_bands(cost, image, &mf_params, weights, reuse, bands),
+                    None => meanfield::MeanField::with_buffers(cost, image, &mf_params, weights, reuse),
                 });
-                t.time("mf iterations", || (0..params.meanfield.iterations).for_each(|_| mf.step()));
+                t.time("mf iterations", || (0..iterations).for_each(|_| mf.step()));
                 mf.into_marginals_and_buffers()
             };
             let (disparity, confidence) =

@@ -111,19 +111,32 @@ fn run_pipeline(
     let chain = CoarseLevel::chain();
     let prior =
         if chain.applies(pair, &input) { Some(chain.prior(params, pair, &mut input, on_stage, &mut t)?) } else { None };
-    let measured = input.measured();
+    fine_at_full_resolution(params, pair, &input, prior.as_ref(), None, on_stage, t)
+}
+
+/// The fine pass on the prepared pair, with `prior` and the views' mean-field `iterations` (see [`FineInput`]),
+/// appending its stage times to `t`; the output carries what preparing the pair measured.
+fn fine_at_full_resolution(
+    params: &Params,
+    pair: &StereoPair,
+    input: &Prepared,
+    prior: Option<&prior::Prior>,
+    iterations: Option<[usize; 2]>,
+    on_stage: &dyn Fn(&str),
+    t: Timings,
+) -> Result<PipelineOutput> {
     let (guide, cost_pair) = input.pairs(pair);
     let fine = FineInput {
         guide,
         cost_pair,
         cost_params: &input.cost_params,
         grad_norm_mean: input.grad_norm_mean,
-        prior: prior.as_ref(),
+        prior,
         left_from: 0,
-        right_iterations: None,
+        iterations,
     };
     let mut out = fine_pass(params, &fine, &mut Default::default(), on_stage, t)?;
-    out.measured = measured;
+    out.measured = input.measured();
     out.vertical_offset = input.vertical_offset();
     Ok(out)
 }
@@ -138,10 +151,8 @@ pub(crate) struct FramePrior {
     pub vertical_offset: Option<crate::condition::vertical::VerticalOffset>,
     /// λ of the prior relative to the coarse prior's rule.
     pub weight_scale: f32,
-    /// Mean-field iterations of the frame's left view (`None`: the configured ones).
-    pub iterations: Option<usize>,
-    /// Mean-field iterations of its right view, which serves the left-right check only (`None`: as the left's).
-    pub right_iterations: Option<usize>,
+    /// Mean-field iterations of the frame's left and right view (`None`: the configured ones).
+    pub iterations: Option<[usize; 2]>,
 }
 
 /// The pipeline at the pair's own resolution with the previous frame's answer as the prior ([`FramePrior`]): the
@@ -174,31 +185,7 @@ pub(crate) fn run_with_prior(
     if let Some(released) = &from.released {
         prior.confidence.data.iter_mut().zip(&released.data).filter(|(_, r)| **r).for_each(|(f, _)| *f = 0.0);
     }
-    let measured = input.measured();
-    let (guide, cost_pair) = input.pairs(pair);
-    let fine = FineInput {
-        guide,
-        cost_pair,
-        cost_params: &input.cost_params,
-        grad_norm_mean: input.grad_norm_mean,
-        prior: Some(&prior),
-        left_from: 0,
-        right_iterations: from.right_iterations.or(from.iterations),
-    };
-    let fine_params;
-    let params = match from.iterations {
-        Some(n) => {
-            let mut p = params.clone();
-            p.meanfield.iterations = n;
-            fine_params = p;
-            &fine_params
-        }
-        None => params,
-    };
-    let mut out = fine_pass(params, &fine, &mut Default::default(), on_stage, t)?;
-    out.measured = measured;
-    out.vertical_offset = input.vertical_offset();
-    Ok(out)
+    fine_at_full_resolution(params, pair, &input, Some(&prior), from.iterations, on_stage, t)
 }
 
 /// The fully connected kernel's features must fit the lattice at this image size.

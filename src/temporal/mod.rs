@@ -182,8 +182,7 @@ fn moving_frame(
         released: Some(released),
         vertical_offset: prev.answer.vertical_offset,
         weight_scale: 1.0,
-        iterations: Some(params.meanfield.iterations.saturating_sub(1).max(1)),
-        right_iterations: Some(RIGHT_ITERATIONS),
+        iterations: Some([params.meanfield.iterations.saturating_sub(1).max(1), RIGHT_ITERATIONS]),
     };
     pipeline::run_with_prior(params, pair, from, on_stage)
 }
