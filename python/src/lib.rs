@@ -11,6 +11,7 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
 
 mod matcher;
+mod rectify;
 
 use jem::{Error, Params, Plane, RgbImage};
 use matcher::{MatchOptions, PyMatcher};
@@ -18,7 +19,7 @@ use numpy::ndarray::Array2;
 use numpy::{PyArray2, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyInt, PyList, PyMapping, PyString};
+use pyo3::types::{PyInt, PyList, PyMapping, PyString};
 
 /// A `jem::Error` as the Python exception a caller expects: `MemoryError` for a run that fits the memory limit
 /// neither whole nor in tiles, the matching `OSError` subclass (`FileNotFoundError`, ...) for a file the
@@ -472,72 +473,6 @@ fn to_plane(array: &Bound<'_, PyAny>, name: &str) -> PyResult<Plane<f32>> {
     Err(bad())
 }
 
-/// The rectification a stereo calibration file gives views of ``size`` (width, height; default: the size the
-/// file states), as OpenCV's ``stereoRectify(alpha=0)`` and ``initUndistortRectifyMap`` give it: a dict with
-/// ``map1x``, ``map1y`` (left) and ``map2x``, ``map2y`` (right), float32 H×W (for each rectified pixel, where in the
-/// original image it comes from: ``cv2.remap``'s maps), ``R1``, ``R2`` (3×3), ``P1``, ``P2`` (3×4), ``Q`` (4×4),
-/// ``focal``, ``baseline`` (the calibration's unit), ``doffs`` and ``size``. ``calib``: OpenCV FileStorage YAML/XML
-/// or KITTI calib_cam_to_cam.txt. Raises ValueError for a malformed or unusable calibration, OSError if it cannot be
-/// read.
-#[pyfunction]
-#[pyo3(signature = (calib, size=None))]
-fn rectify_maps<'py>(py: Python<'py>, calib: PathBuf, size: Option<(usize, usize)>) -> PyResult<Bound<'py, PyDict>> {
-    let calibration = jem::rectify::StereoCalibration::load(&calib).map_err(|e| to_py(&e))?;
-    let size = size.or(calibration.image_size).ok_or_else(|| {
-        PyValueError::new_err(format!("{}: states no image size; give size=(width, height)", calib.display()))
-    })?;
-    if size.0 == 0 || size.1 == 0 || size.0.saturating_mul(size.1) > 1 << 30 {
-        return Err(PyValueError::new_err(format!("size {size:?}: expected 1..2^30 pixels")));
-    }
-    let rect = calibration.rectification(size).map_err(|e| to_py(&e))?;
-    let ((m1x, m1y), (m2x, m2y)) =
-        py.detach(|| (rect.maps(jem::rectify::View::Left), rect.maps(jem::rectify::View::Right)));
-    let out = PyDict::new(py);
-    for (name, plane) in [("map1x", m1x), ("map1y", m1y), ("map2x", m2x), ("map2y", m2y)] {
-        out.set_item(name, to_numpy(py, plane))?;
-    }
-    let t = rect.transforms();
-    let rows = |m: &[[f64; 3]; 3]| m.iter().map(|r| r.to_vec()).collect::<Vec<_>>();
-    let rows4 = |m: &[[f64; 4]]| m.iter().map(|r| r.to_vec()).collect::<Vec<_>>();
-    out.set_item("R1", rows(&t.r1))?;
-    out.set_item("R2", rows(&t.r2))?;
-    out.set_item("P1", rows4(&t.p1))?;
-    out.set_item("P2", rows4(&t.p2))?;
-    out.set_item("Q", rows4(&rect.q()))?;
-    out.set_item("focal", rect.focal_px())?;
-    out.set_item("baseline", rect.baseline())?;
-    out.set_item("doffs", rect.doffs())?;
-    out.set_item("size", size)?;
-    Ok(out)
-}
-
-/// Rectifies a raw pair with its stereo calibration (as ``jem rectify``): the rectified views as uint8 H×W×3
-/// arrays (the images ``jem rectify`` writes), and the Middlebury calib.txt of the rectified pair as text.
-/// ``left``, ``right`` as for ``match``. Raises ValueError for a bad array or calibration, OSError if the file cannot
-/// be read.
-#[pyfunction]
-fn rectify<'py>(
-    py: Python<'py>,
-    calib: PathBuf,
-    left: &Bound<'py, PyAny>,
-    right: &Bound<'py, PyAny>,
-) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, String)> {
-    let (left, right) = (ImageArray::inspect(left, "left")?, ImageArray::inspect(right, "right")?);
-    if (left.width, left.height) != (right.width, right.height) {
-        let e = Error::SizeMismatch { left: (left.width, left.height), right: (right.width, right.height) };
-        return Err(to_py(&e));
-    }
-    let calibration = jem::rectify::StereoCalibration::load(&calib).map_err(|e| to_py(&e))?;
-    let rect = calibration.rectification((left.width, left.height)).map_err(|e| to_py(&e))?;
-    let (l, r) = (left.to_rgb()?, right.to_rgb()?);
-    let (l, r) = py.detach(|| guarded(None, || rect.rectify_pair(&l, &r)))?;
-    let bytes = |img: &RgbImage| -> Vec<u8> {
-        (0..img.len()).flat_map(|i| img.rgb(i).map(|v| v.round().clamp(0.0, 255.0) as u8)).collect()
-    };
-    let (w, h) = l.dims();
-    Ok((to_array(py, &[h, w, 3], bytes(&l))?, to_array(py, &[h, w, 3], bytes(&r))?, rect.calib_txt()))
-}
-
 /// A PFM file as float32 H×W, top row first (PFM stores rows bottom-up; this undoes it), ``inf`` kept. A 3-channel
 /// PFM gives its first channel. Raises ValueError for a malformed file, OSError if it cannot be read.
 #[pyfunction]
@@ -599,8 +534,8 @@ fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_pfm, m)?)?;
     m.add_function(wrap_pyfunction!(write_pfm, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
-    m.add_function(wrap_pyfunction!(rectify_maps, m)?)?;
-    m.add_function(wrap_pyfunction!(rectify, m)?)?;
+    m.add_function(wrap_pyfunction!(rectify::rectify_maps, m)?)?;
+    m.add_function(wrap_pyfunction!(rectify::rectify, m)?)?;
     m.add_function(wrap_pyfunction!(matcher::sequence_frames, m)?)?;
     m.add_class::<PyMatcher>()?;
     // maturin's package __init__ re-exports `*` of the native module: `__all__` makes that include __version__.

@@ -1,0 +1,81 @@
+//! `jem.rectify_maps` and `jem.rectify`: a raw pair rectified from its stereo calibration, as `jem rectify` and
+//! OpenCV's `stereoRectify(alpha=0)` + `initUndistortRectifyMap` + `remap` do.
+
+use std::path::PathBuf;
+
+use jem::{Error, RgbImage};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use super::{ImageArray, guarded, to_array, to_numpy, to_py};
+
+/// The rectification a stereo calibration file gives views of ``size`` (width, height; default: the size the
+/// file states), as OpenCV's ``stereoRectify(alpha=0)`` and ``initUndistortRectifyMap`` give it: a dict with
+/// ``map1x``, ``map1y`` (left) and ``map2x``, ``map2y`` (right), float32 H×W (for each rectified pixel, where in the
+/// original image it comes from: ``cv2.remap``'s maps), ``R1``, ``R2`` (3×3), ``P1``, ``P2`` (3×4), ``Q`` (4×4),
+/// ``focal``, ``baseline`` (the calibration's unit), ``doffs`` and ``size``. ``calib``: OpenCV FileStorage YAML/XML
+/// or KITTI calib_cam_to_cam.txt. Raises ValueError for a malformed or unusable calibration, OSError if it cannot be
+/// read.
+#[pyfunction]
+#[pyo3(signature = (calib, size=None))]
+pub(crate) fn rectify_maps<'py>(
+    py: Python<'py>,
+    calib: PathBuf,
+    size: Option<(usize, usize)>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let calibration = jem::rectify::StereoCalibration::load(&calib).map_err(|e| to_py(&e))?;
+    let size = size.or(calibration.image_size).ok_or_else(|| {
+        PyValueError::new_err(format!("{}: states no image size; give size=(width, height)", calib.display()))
+    })?;
+    if size.0 == 0 || size.1 == 0 || size.0.saturating_mul(size.1) > 1 << 30 {
+        return Err(PyValueError::new_err(format!("size {size:?}: expected 1..2^30 pixels")));
+    }
+    let rect = calibration.rectification(size).map_err(|e| to_py(&e))?;
+    let ((m1x, m1y), (m2x, m2y)) =
+        py.detach(|| (rect.maps(jem::rectify::View::Left), rect.maps(jem::rectify::View::Right)));
+    let out = PyDict::new(py);
+    for (name, plane) in [("map1x", m1x), ("map1y", m1y), ("map2x", m2x), ("map2y", m2y)] {
+        out.set_item(name, to_numpy(py, plane))?;
+    }
+    let t = rect.transforms();
+    let rows = |m: &[[f64; 3]; 3]| m.iter().map(|r| r.to_vec()).collect::<Vec<_>>();
+    let rows4 = |m: &[[f64; 4]]| m.iter().map(|r| r.to_vec()).collect::<Vec<_>>();
+    out.set_item("R1", rows(&t.r1))?;
+    out.set_item("R2", rows(&t.r2))?;
+    out.set_item("P1", rows4(&t.p1))?;
+    out.set_item("P2", rows4(&t.p2))?;
+    out.set_item("Q", rows4(&rect.q()))?;
+    out.set_item("focal", rect.focal_px())?;
+    out.set_item("baseline", rect.baseline())?;
+    out.set_item("doffs", rect.doffs())?;
+    out.set_item("size", size)?;
+    Ok(out)
+}
+
+/// Rectifies a raw pair with its stereo calibration (as ``jem rectify``): the rectified views as uint8 H×W×3
+/// arrays (the images ``jem rectify`` writes), and the Middlebury calib.txt of the rectified pair as text.
+/// ``left``, ``right`` as for ``match``. Raises ValueError for a bad array or calibration, OSError if the file cannot
+/// be read.
+#[pyfunction]
+pub(crate) fn rectify<'py>(
+    py: Python<'py>,
+    calib: PathBuf,
+    left: &Bound<'py, PyAny>,
+    right: &Bound<'py, PyAny>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, String)> {
+    let (left, right) = (ImageArray::inspect(left, "left")?, ImageArray::inspect(right, "right")?);
+    if (left.width, left.height) != (right.width, right.height) {
+        let e = Error::SizeMismatch { left: (left.width, left.height), right: (right.width, right.height) };
+        return Err(to_py(&e));
+    }
+    let calibration = jem::rectify::StereoCalibration::load(&calib).map_err(|e| to_py(&e))?;
+    let rect = calibration.rectification((left.width, left.height)).map_err(|e| to_py(&e))?;
+    let (l, r) = (left.to_rgb()?, right.to_rgb()?);
+    let (l, r) = py.detach(|| guarded(None, || rect.rectify_pair(&l, &r)))?;
+    let bytes = |img: &RgbImage| -> Vec<u8> {
+        (0..img.len()).flat_map(|i| img.rgb(i).map(|v| v.round().clamp(0.0, 255.0) as u8)).collect()
+    };
+    let (w, h) = l.dims();
+    Ok((to_array(py, &[h, w, 3], bytes(&l))?, to_array(py, &[h, w, 3], bytes(&r))?, rect.calib_txt()))
+}
