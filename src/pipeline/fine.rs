@@ -38,9 +38,18 @@ pub(crate) struct FineInput<'a> {
     /// [`super::tile`]): the left view's inference and post-processing skip them, and the output maps start after
     /// them (0 outside tiles).
     pub left_from: usize,
-    /// Mean-field iterations of the left and the right view when not the configured ones (a frame of a sequence:
-    /// its prior has placed each pixel, and its right view only serves the left-right check).
-    pub iterations: Option<[usize; 2]>,
+    /// How the views run when not as configured (a frame of a sequence, [`FrameViews`]).
+    pub views: Option<FrameViews>,
+}
+
+/// How a frame of a sequence runs its two views: its prior has placed each pixel, so fewer mean-field iterations
+/// serve, and its right view only serves the left-right check.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct FrameViews {
+    /// Mean-field iterations of the left and the right view.
+    pub iterations: [usize; 2],
+    /// The right view with the local term alone (no fully connected term: no lattice is built for it).
+    pub right_local_only: bool,
 }
 
 /// The pipeline from the cost volume on, for `input` ([`FineInput`]): cost volume (stage `cost volume`), inference
@@ -179,7 +188,7 @@ impl Pass<'_> {
     ) -> (ViewEstimate, Option<ViewEstimate>) {
         let (params, left_from) = (self.params, self.input.left_from);
         let need_right = params.post.lrc.mode != LrcMode::Off;
-        let iterations = self.input.iterations.unwrap_or([params.meanfield.iterations; 2]);
+        let iterations = self.input.views.map_or([params.meanfield.iterations; 2], |v| v.iterations);
         let LeftVolume { cost: cost_left, bands: left_bands } = volume;
         let (left, cost_right) = if left_from > 0 {
             let cost_right = need_right.then(|| self.right_volume(&cost_left, buffers, t));
@@ -210,7 +219,12 @@ impl Pass<'_> {
                 .map(|(prior, best)| t.time("bands", || prior.label_bands(&best, ndisp, true, params)));
             on_stage("inference (right)");
             let view = View { image: &self.input.guide.right, cost: &cost_right, iterations: iterations[1] };
-            let right = estimate_view(params, view, right_bands, t, buffers);
+            let local_only = self.input.views.is_some_and(|v| v.right_local_only) && params.model == Model::Jem;
+            let right = if local_only {
+                estimate_view(&Params { model: Model::Lcm, ..params.clone() }, view, right_bands, t, buffers)
+            } else {
+                estimate_view(params, view, right_bands, t, buffers)
+            };
             buffers.recycle(cost_right.data);
             right
         });

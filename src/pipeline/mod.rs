@@ -24,6 +24,7 @@ use crate::image::{Plane, StereoPair};
 use crate::params::Params;
 use crate::{lattice, scale};
 
+pub(crate) use fine::FrameViews;
 use fine::{FineInput, fine_pass};
 pub use output::{Measured, PipelineOutput, Timings, VerticalMeasured};
 use prepared::Prepared;
@@ -114,14 +115,14 @@ fn run_pipeline(
     fine_at_full_resolution(params, pair, &input, prior.as_ref(), None, on_stage, t)
 }
 
-/// The fine pass on the prepared pair, with `prior` and the views' mean-field `iterations` (see [`FineInput`]),
+/// The fine pass on the prepared pair, with `prior` and the frame's `views` (see [`FineInput`]),
 /// appending its stage times to `t`; the output carries what preparing the pair measured.
 fn fine_at_full_resolution(
     params: &Params,
     pair: &StereoPair,
     input: &Prepared,
     prior: Option<&prior::Prior>,
-    iterations: Option<[usize; 2]>,
+    views: Option<FrameViews>,
     on_stage: &dyn Fn(&str),
     t: Timings,
 ) -> Result<PipelineOutput> {
@@ -133,7 +134,7 @@ fn fine_at_full_resolution(
         grad_norm_mean: input.grad_norm_mean,
         prior,
         left_from: 0,
-        iterations,
+        views,
     };
     let mut out = fine_pass(params, &fine, &mut Default::default(), on_stage, t)?;
     out.measured = input.measured();
@@ -151,8 +152,8 @@ pub(crate) struct FramePrior {
     pub vertical_offset: Option<crate::condition::vertical::VerticalOffset>,
     /// λ of the prior relative to the coarse prior's rule.
     pub weight_scale: f32,
-    /// Mean-field iterations of the frame's left and right view (`None`: the configured ones).
-    pub iterations: Option<[usize; 2]>,
+    /// How the frame's views run (`None`: as configured).
+    pub views: Option<FrameViews>,
 }
 
 /// The pipeline at the pair's own resolution with the previous frame's answer as the prior ([`FramePrior`]): the
@@ -185,7 +186,7 @@ pub(crate) fn run_with_prior(
     if let Some(released) = &from.released {
         prior.confidence.data.iter_mut().zip(&released.data).filter(|(_, r)| **r).for_each(|(f, _)| *f = 0.0);
     }
-    fine_at_full_resolution(params, pair, &input, Some(&prior), from.iterations, on_stage, t)
+    fine_at_full_resolution(params, pair, &input, Some(&prior), from.views, on_stage, t)
 }
 
 /// The fully connected kernel's features must fit the lattice at this image size.

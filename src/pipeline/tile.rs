@@ -269,7 +269,7 @@ impl TileJob<'_> {
             grad_norm_mean: self.grad_norm_mean,
             prior: Some(&prior),
             left_from: tile.left_from(),
-            iterations: None,
+            views: None,
         };
         fine_pass(&params, &input, buffers, &|_| {}, Timings::default())
     }
@@ -389,7 +389,7 @@ mod tests {
                 grad_norm_mean: None,
                 prior: None,
                 left_from,
-                iterations: None,
+                views: None,
             };
             fine_pass(&params, &input, buffers, &|_| {}, Timings::default()).unwrap()
         };
