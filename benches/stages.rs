@@ -183,7 +183,12 @@ fn stages(c: &mut Criterion) {
     let plan =
         jem::internals::TilePlan { coarse_factor: 4, core_px: 256, tile_budget_bytes: u64::MAX, split_for_work: false };
     g.bench_function(BenchmarkId::new("default.toml in 256-px tiles", &name), |b| {
-        b.iter(|| black_box(jem::internals::run_tiled(&params, &pair, &plan, &|_| {}).expect("tiled pipeline")))
+        b.iter(|| {
+            black_box(
+                jem::internals::run_tiled(&params, &pair, &plan, &jem::internals::RunOptions::quiet())
+                    .expect("tiled pipeline"),
+            )
+        })
     });
     g.finish();
 }

@@ -24,7 +24,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (l, r) = jem::io::read_image_pair(&scene.join("im0.png"), &scene.join("im1.png"))?;
         let pair = jem::internals::StereoPair::new(l, r, ndisp)?;
         let start = std::time::Instant::now();
-        let out = jem::internals::run_tiled(&params, &pair, &plan, &|_| {})?;
+        let out = jem::internals::run_tiled(&params, &pair, &plan, &jem::internals::RunOptions::quiet())?;
         let secs = start.elapsed().as_secs_f64();
         jem::io::write_disparity(&scene.join(format!("disp0{alg}.pfm")), &out.disparity)?;
         jem::io::write_atomic(&scene.join(format!("time{alg}.txt")), format!("{secs:.6}\n").as_bytes())?;

@@ -3,7 +3,7 @@
 //! through [`crate::Matcher`].
 
 pub use crate::image::{CostVolume, StereoPair};
-pub use crate::pipeline::{PipelineOutput, run, run_observed, tile::run_tiled};
+pub use crate::pipeline::{PipelineOutput, RunOptions, run, run_observed, run_with, tile::run_tiled};
 pub use crate::rng::SplitMix64;
 pub use crate::setup::strategy::TilePlan;
 

@@ -35,6 +35,8 @@ pub struct Matcher {
     budget: Option<Arc<MemoryBudget>>,
     /// The frames of a sequence, remembered (`with_temporal`); `None`: each pair alone.
     temporal: Option<crate::temporal::State>,
+    /// Whether each match computes its confidence map (`with_confidence`).
+    confidence: bool,
 }
 
 /// How a match was set up: its range, whether it went in tiles, the memory it planned for.
@@ -65,8 +67,9 @@ pub struct Output {
     /// The left view's disparity map in pixels, `inf` where invalid (when post-processing leaves holes).
     pub disparity: DisparityMap,
     /// Per-pixel confidence of the disparity map, 0..1: the probability that it is within 1 px of the truth, made to
-    /// rank the errors (`post::confidence`; 0 where the map is invalid).
-    pub confidence: Plane<f32>,
+    /// rank the errors (`post::confidence`; 0 where the map is invalid). `None` when the matcher was told not to
+    /// compute it ([`Matcher::with_confidence`]).
+    pub confidence: Option<Plane<f32>>,
     /// The pixels that passed the left-right check (all of them when it is off).
     pub consistent: Plane<bool>,
     /// Time per stage.
@@ -85,13 +88,14 @@ pub struct Output {
 
 impl Output {
     /// The disparity map with every pixel whose confidence is below `min_confidence` made invalid (`inf`): the
-    /// reliable pixels only (`jem --min-confidence`).
-    pub fn reliable_disparity(&self, min_confidence: f32) -> DisparityMap {
+    /// reliable pixels only (`jem --min-confidence`); `None` without a confidence map.
+    pub fn reliable_disparity(&self, min_confidence: f32) -> Option<DisparityMap> {
+        let confidence = self.confidence.as_ref()?;
         let mut out = self.disparity.clone();
-        out.data.iter_mut().zip(&self.confidence.data).filter(|&(_, &c)| c < min_confidence).for_each(|(d, _)| {
+        out.data.iter_mut().zip(&confidence.data).filter(|&(_, &c)| c < min_confidence).for_each(|(d, _)| {
             *d = f32::INFINITY;
         });
-        out
+        Some(out)
     }
 }
 
@@ -118,6 +122,7 @@ impl Matcher {
             max_memory_bytes: default_memory_limit(),
             budget: None,
             temporal: None,
+            confidence: true,
         })
     }
 
@@ -150,6 +155,18 @@ impl Matcher {
     pub fn with_temporal(mut self, on: bool) -> Matcher {
         self.temporal = on.then(Default::default);
         self
+    }
+
+    /// Whether each match computes its confidence map ([`Output::confidence`]; default: yes). It costs a few per
+    /// cent of a run; `false` saves that when only the disparity map is wanted.
+    pub fn with_confidence(mut self, on: bool) -> Matcher {
+        self.confidence = on;
+        self
+    }
+
+    /// [`Matcher::with_confidence`] for a matcher in use (one that remembers frames keeps them).
+    pub fn set_confidence(&mut self, on: bool) {
+        self.confidence = on;
     }
 
     /// Forgets the frames matched so far (a new sequence starts with the next pair).
@@ -306,13 +323,14 @@ impl Matcher {
         };
         on_progress(Progress::Planned(&run_plan));
         let on_stage = |stage: &str| on_progress(Progress::Stage(stage));
+        let options = pipeline::RunOptions { on_stage: &on_stage, confidence: self.confidence };
         let start = Instant::now();
         // A remembered sequence runs its frames through the temporal model where the pipeline runs whole and at
         // full resolution; any other frame runs alone and starts the sequence again.
         let temporal = self.temporal.as_mut();
         let (out, frame) = match (plan.strategy, temporal) {
             (Strategy::Whole, Some(state)) if self.params.downscale == 1 => {
-                let (out, kind) = crate::temporal::match_frame(state, &self.params, &plan.pair, &on_stage)?;
+                let (out, kind) = crate::temporal::match_frame(state, &self.params, &plan.pair, &options)?;
                 (out, Some(kind))
             }
             (strategy, temporal) => {
@@ -321,8 +339,8 @@ impl Matcher {
                     state.reset();
                 }
                 let out = match strategy {
-                    Strategy::Whole => pipeline::run_observed(&self.params, &plan.pair, &on_stage)?,
-                    Strategy::Tiled(tiles) => pipeline::tile::run_tiled(&self.params, &plan.pair, &tiles, &on_stage)?,
+                    Strategy::Whole => pipeline::run_with(&self.params, &plan.pair, &options)?,
+                    Strategy::Tiled(tiles) => pipeline::tile::run_tiled(&self.params, &plan.pair, &tiles, &options)?,
                 };
                 (out, alone)
             }
@@ -372,11 +390,27 @@ mod tests {
         let scene = render_scene(&SynthParams { width: 64, height: 48, ndisp: 16, seed: 2 }).unwrap();
         let mut matcher = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(16));
         let out = matcher.match_pair(&scene.left, &scene.right).unwrap();
-        let kept = out.reliable_disparity(0.95);
-        for ((&d, &k), &c) in out.disparity.data.iter().zip(&kept.data).zip(&out.confidence.data) {
+        let kept = out.reliable_disparity(0.95).unwrap();
+        let confidence = out.confidence.as_ref().unwrap();
+        for ((&d, &k), &c) in out.disparity.data.iter().zip(&kept.data).zip(&confidence.data) {
             assert!(if c < 0.95 { k.is_infinite() } else { k.to_bits() == d.to_bits() });
         }
-        assert_eq!(out.reliable_disparity(0.0).data, out.disparity.data);
+        assert_eq!(out.reliable_disparity(0.0).unwrap().data, out.disparity.data);
+    }
+
+    /// A matcher told not to compute the confidence map skips that stage and gives the same disparity map.
+    #[test]
+    fn the_confidence_is_computed_only_when_asked_for() {
+        let scene = render_scene(&SynthParams { width: 64, height: 48, ndisp: 16, seed: 5 }).unwrap();
+        let matcher = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(16));
+        let with = matcher.clone().match_pair(&scene.left, &scene.right).unwrap();
+        let without = matcher.with_confidence(false).match_pair(&scene.left, &scene.right).unwrap();
+        assert!(with.confidence.is_some() && without.confidence.is_none());
+        assert!(without.reliable_disparity(0.5).is_none());
+        let bits = |o: &Output| o.disparity.data.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&with), bits(&without));
+        let stages = |o: &Output| o.timings.stages.iter().map(|(name, _)| *name).collect::<Vec<_>>();
+        assert!(stages(&with).contains(&"confidence") && !stages(&without).contains(&"confidence"));
     }
 
     #[test]

@@ -95,6 +95,8 @@ impl PyMatcher {
         return_info: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (left, right) = (ImageArray::inspect(left, "left")?, ImageArray::inspect(right, "right")?);
+        // The confidence map costs a few per cent of a run: computed only when shown or used.
+        self.matcher.set_confidence(confidence || self.options.min_confidence.is_some());
         // From the shapes, before anything is copied: a pair too large for the limit costs no memory.
         let input_bytes = left.load_bytes().saturating_add(right.load_bytes());
         let sizes = ((left.width, left.height), (right.width, right.height));
@@ -180,13 +182,14 @@ fn results<'py>(
         PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &message, 1)?;
     }
     let info = if shown.return_info { Some(info(py, &out, check)?) } else { None };
+    let missing = || to_py(&Error::Input("no confidence map was computed for this run".into()));
     let disparity = match shown.min_confidence {
-        Some(c) => out.reliable_disparity(c),
+        Some(c) => out.reliable_disparity(c).ok_or_else(missing)?,
         None => out.disparity,
     };
     let mut result = vec![to_numpy(py, disparity).into_any()];
     if shown.confidence {
-        result.push(to_numpy(py, out.confidence).into_any());
+        result.push(to_numpy(py, out.confidence.ok_or_else(missing)?).into_any());
     }
     result.extend(info);
     if result.len() == 1 {

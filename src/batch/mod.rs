@@ -208,7 +208,8 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
         Some(c) => Some(calib::read_ndisp(c)?),
         None => pair.default_ndisp(),
     };
-    let mut matcher = matcher.clone().with_ndisp(NdispSource::resolve(opts.ndisp, stated));
+    let mut matcher =
+        matcher.clone().with_ndisp(NdispSource::resolve(opts.ndisp, stated)).with_confidence(opts.confidence);
     let out = matcher.match_files(&pair.left, &pair.right, &|progress| {
         if let Progress::Stage(stage) = progress {
             on_stage(stage);
@@ -220,8 +221,10 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
         Some(path) => Some((path.as_path(), crate::io::encode_lr_mask(path, &out.consistent)?)),
         None => None,
     };
-    let confidence =
-        opts.confidence.then(|| crate::io::encode_disparity(&files.confidence, &out.confidence)).transpose()?;
+    let confidence = match (opts.confidence, &out.confidence) {
+        (true, Some(map)) => Some(crate::io::encode_disparity(&files.confidence, map)?),
+        _ => None,
+    };
     let mut written: Vec<(&Path, &[u8])> = vec![(&files.disparity, &disparity)];
     let time = pair.time_text(out.seconds);
     written.push((&files.time, time.as_bytes()));

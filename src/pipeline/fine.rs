@@ -40,6 +40,8 @@ pub(crate) struct FineInput<'a> {
     pub left_from: usize,
     /// How the views run when not as configured (a frame of a sequence, [`FrameViews`]).
     pub views: Option<FrameViews>,
+    /// Whether to compute the confidence map ([`PipelineOutput::confidence`]).
+    pub confidence: bool,
 }
 
 /// How a frame of a sequence runs its two views: its prior has placed each pixel, so fewer mean-field iterations
@@ -73,17 +75,20 @@ pub(crate) fn fine_pass(
     };
     let (left, right) = pass.infer_views(volume, &guide_left, buffers, on_stage, &mut t);
     on_stage("post-processing");
-    let decoded = left.disparity.clone();
+    // The decoded map before post-processing, for the confidence only.
+    let decoded = input.confidence.then(|| left.disparity.clone());
     let (disparity, trusted) = pass.post_process(left.disparity, right.as_ref(), &guide_left, &mut t);
-    let confidence = t.time("confidence", || {
-        post::confidence::confidence_map(&post::confidence::ConfidenceInputs {
-            max_marginal: &left.confidence,
-            decoded: &decoded,
-            right: right.as_ref().map(|r| (&r.disparity, pass.input.left_from)),
-            final_map: &disparity,
-            consistent: &trusted,
-            coarse: pass.input.prior.map(|p| (&p.disparity, pass.input.left_from)),
-            guide: &guide_left,
+    let confidence = decoded.map(|decoded| {
+        t.time("confidence", || {
+            post::confidence::confidence_map(&post::confidence::ConfidenceInputs {
+                max_marginal: &left.confidence,
+                decoded: &decoded,
+                right: right.as_ref().map(|r| (&r.disparity, pass.input.left_from)),
+                final_map: &disparity,
+                consistent: &trusted,
+                coarse: pass.input.prior.map(|p| (&p.disparity, pass.input.left_from)),
+                guide: &guide_left,
+            })
         })
     });
     Ok(PipelineOutput {

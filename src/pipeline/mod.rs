@@ -30,15 +30,41 @@ pub use output::{Measured, PipelineOutput, Timings, VerticalMeasured};
 use prepared::Prepared;
 use prior::CoarseLevel;
 
-/// Runs the whole pipeline on a pair (at 1/`params.downscale` resolution if that is > 1; see `scale`).
+/// What the caller of a run asks for beside the disparity map.
+#[derive(Clone, Copy)]
+pub struct RunOptions<'a> {
+    /// Called with each stage's name as it starts (progress display).
+    pub on_stage: &'a dyn Fn(&str),
+    /// Whether to compute the confidence map ([`PipelineOutput::confidence`]): a few per cent of a run, spent only
+    /// when asked for.
+    pub confidence: bool,
+}
+
+impl RunOptions<'_> {
+    /// No progress and no confidence map (a coarse level of the prior's chain).
+    pub fn quiet() -> RunOptions<'static> {
+        RunOptions { on_stage: &|_| {}, confidence: false }
+    }
+}
+
+/// Runs the whole pipeline on a pair (at 1/`params.downscale` resolution if that is > 1; see `scale`), the
+/// confidence map included.
 ///
 /// # Errors
 /// [`Error::InvalidParam`] if `params` does not validate, or the downscale factor is too large for the pair.
 pub fn run(params: &Params, pair: &StereoPair) -> Result<PipelineOutput> {
-    run_observed(params, pair, &|_| {})
+    run_with(params, pair, &RunOptions { on_stage: &|_| {}, confidence: true })
 }
 
 /// Like [`run`], calling `on_stage(name)` as each stage starts (for progress display).
+///
+/// # Errors
+/// As [`run`].
+pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str)) -> Result<PipelineOutput> {
+    run_with(params, pair, &RunOptions { on_stage, confidence: true })
+}
+
+/// Runs the pipeline as `options` ask ([`RunOptions`]).
 ///
 /// With `params.downscale` = N > 1: the pair is reduced by N (`scale::downsample_pair`, stage `downsample`),
 /// the pipeline runs on it, and its disparity map (`scale::upsample_disparity_guided`, `[upsample]`) and confidence
@@ -46,29 +72,29 @@ pub fn run(params: &Params, pair: &StereoPair) -> Result<PipelineOutput> {
 ///
 /// # Errors
 /// As [`run`].
-pub fn run_observed(params: &Params, pair: &StereoPair, on_stage: &dyn Fn(&str)) -> Result<PipelineOutput> {
-    run_level(params, pair, on_stage, None)
+pub fn run_with(params: &Params, pair: &StereoPair, options: &RunOptions<'_>) -> Result<PipelineOutput> {
+    run_level(params, pair, options, None)
 }
 
-/// [`run_observed`] for a level whose measured noise is at most `noise_ceiling` (a coarse level: the `noise_ceiling`
+/// [`run_with`] for a level whose measured noise is at most `noise_ceiling` (a coarse level: the `noise_ceiling`
 /// of [`crate::condition::condition_pair`]; `None` for the full resolution).
 fn run_level(
     params: &Params,
     pair: &StereoPair,
-    on_stage: &dyn Fn(&str),
+    options: &RunOptions<'_>,
     noise_ceiling: Option<[f32; 2]>,
 ) -> Result<PipelineOutput> {
     params.validate()?;
     let factor = params.downscale;
     if factor == 1 {
-        return run_pipeline(params, pair, on_stage, noise_ceiling, Timings::default());
+        return run_pipeline(params, pair, options, noise_ceiling, Timings::default());
     }
     let mut t = Timings::default();
-    on_stage("downsample");
+    (options.on_stage)("downsample");
     let small = t.time("downsample", || scale::downsample_pair(pair, factor))?;
-    let low = run_pipeline(params, &small, on_stage, noise_ceiling, t)?;
+    let low = run_pipeline(params, &small, options, noise_ceiling, t)?;
     let mut t = low.timings;
-    on_stage("upsample");
+    (options.on_stage)("upsample");
     let (w, h) = pair.left.dims();
     let up = &params.upsample;
     let (disparity, (mut confidence, max_marginal)) = t.time("upsample", || {
@@ -79,13 +105,16 @@ fn run_level(
             },
             || {
                 let up = |p| scale::upsample_plane(p, factor, w, h);
-                (up(&low.confidence), up(&low.max_marginal))
+                (low.confidence.as_ref().map(up), up(&low.max_marginal))
             },
         )
     });
     drop(small);
     // An invalid pixel has no confidence, whatever its neighbours' at the reduced size.
-    confidence.data.iter_mut().zip(&disparity.data).filter(|(_, d)| !d.is_finite()).for_each(|(c, _)| *c = 0.0);
+    if let Some(confidence) = &mut confidence {
+        let invalid = confidence.data.iter_mut().zip(&disparity.data).filter(|(_, d)| !d.is_finite());
+        invalid.for_each(|(c, _)| *c = 0.0);
+    }
     let consistent = scale::upsample_mask(&low.consistent, factor, w, h);
     Ok(PipelineOutput {
         disparity,
@@ -102,7 +131,7 @@ fn run_level(
 fn run_pipeline(
     params: &Params,
     pair: &StereoPair,
-    on_stage: &dyn Fn(&str),
+    options: &RunOptions<'_>,
     noise_ceiling: Option<[f32; 2]>,
     mut t: Timings,
 ) -> Result<PipelineOutput> {
@@ -110,12 +139,15 @@ fn run_pipeline(
     let mut input = Prepared::of(params, pair, noise_ceiling, &mut t);
     // Before the full-resolution volume exists, so the two runs' buffers are never alive together.
     let chain = CoarseLevel::chain();
-    let prior =
-        if chain.applies(pair, &input) { Some(chain.prior(params, pair, &mut input, on_stage, &mut t)?) } else { None };
-    fine_at_full_resolution(params, pair, &input, prior.as_ref(), None, on_stage, t)
+    let prior = if chain.applies(pair, &input) {
+        Some(chain.prior(params, pair, &mut input, options.on_stage, &mut t)?)
+    } else {
+        None
+    };
+    fine_at_full_resolution(params, pair, &input, prior.as_ref(), None, options, t)
 }
 
-/// The fine pass on the prepared pair, with `prior` and the frame's `views` (see [`FineInput`]),
+/// The fine pass on the prepared pair, with `prior` and the frame's `views` (see [`FineInput`]), as `options` ask,
 /// appending its stage times to `t`; the output carries what preparing the pair measured.
 fn fine_at_full_resolution(
     params: &Params,
@@ -123,7 +155,7 @@ fn fine_at_full_resolution(
     input: &Prepared,
     prior: Option<&prior::Prior>,
     views: Option<FrameViews>,
-    on_stage: &dyn Fn(&str),
+    options: &RunOptions<'_>,
     t: Timings,
 ) -> Result<PipelineOutput> {
     let (guide, cost_pair) = input.pairs(pair);
@@ -135,8 +167,9 @@ fn fine_at_full_resolution(
         prior,
         left_from: 0,
         views,
+        confidence: options.confidence,
     };
-    let mut out = fine_pass(params, &fine, &mut Default::default(), on_stage, t)?;
+    let mut out = fine_pass(params, &fine, &mut Default::default(), options.on_stage, t)?;
     out.measured = input.measured();
     out.vertical_offset = input.vertical_offset();
     Ok(out)
@@ -167,7 +200,7 @@ pub(crate) fn run_with_prior(
     params: &Params,
     pair: &StereoPair,
     from: FramePrior,
-    on_stage: &dyn Fn(&str),
+    options: &RunOptions<'_>,
 ) -> Result<PipelineOutput> {
     params.validate()?;
     check_features_fit(params, pair)?;
@@ -186,7 +219,7 @@ pub(crate) fn run_with_prior(
     if let Some(released) = &from.released {
         prior.confidence.data.iter_mut().zip(&released.data).filter(|(_, r)| **r).for_each(|(f, _)| *f = 0.0);
     }
-    fine_at_full_resolution(params, pair, &input, Some(&prior), from.views, on_stage, t)
+    fine_at_full_resolution(params, pair, &input, Some(&prior), from.views, options, t)
 }
 
 /// The fully connected kernel's features must fit the lattice at this image size.
@@ -229,7 +262,7 @@ mod tests {
         let p = Params { downscale: 2, ..Params::default() };
         let out = run(&p, &pair).unwrap();
         assert_eq!(out.disparity.dims(), (320, 240));
-        assert_eq!(out.confidence.dims(), (320, 240));
+        assert_eq!(out.confidence.map(|c| c.dims()), Some((320, 240)));
         assert_eq!(out.consistent.dims(), (320, 240));
         let consistent = out.consistent.data.iter().filter(|ok| **ok).count();
         assert!(

@@ -44,8 +44,8 @@ pub struct PipelineOutput {
     /// The left view's disparity map (`inf` = invalid, when post-processing leaves holes).
     pub disparity: DisparityMap,
     /// Per-pixel confidence of the final map, 0..1, made to rank its errors (`src/post/confidence.rs`; 0 where
-    /// the map is invalid).
-    pub confidence: Plane<f32>,
+    /// the map is invalid); `None` unless the run was asked for it ([`super::RunOptions::confidence`]).
+    pub confidence: Option<Plane<f32>>,
     /// Per-pixel max-marginal of the left view before post-processing (mean-field models; 1 for WTA): what a
     /// coarse answer's prior is weighted by.
     pub(crate) max_marginal: Plane<f32>,

@@ -124,7 +124,7 @@ impl CoarseLevel {
     pub(crate) fn run(&self, params: &Params, pair: &StereoPair, input: &Prepared) -> Result<PipelineOutput> {
         let coarse_params = self.params(params, input);
         let source = if self.on_conditioned_pair { input.pairs(pair).0 } else { pair };
-        super::run_level(&coarse_params, source, &|_| {}, input.noise_ceiling(self.factor))
+        super::run_level(&coarse_params, source, &super::RunOptions::quiet(), input.noise_ceiling(self.factor))
     }
 
     /// Runs the coarse level (stage [`CoarseLevel::stage`]) and makes its answer the prior of this level. On the

@@ -70,8 +70,9 @@ pub fn run_tiled(
     params: &Params,
     pair: &StereoPair,
     plan: &TilePlan,
-    on_stage: &dyn Fn(&str),
+    options: &super::RunOptions<'_>,
 ) -> Result<PipelineOutput> {
+    let on_stage = options.on_stage;
     params.validate()?;
     let mut t = Timings::default();
     let (w, h) = pair.left.dims();
@@ -86,7 +87,7 @@ pub fn run_tiled(
     on_stage("tiles");
     let mut out = PipelineOutput {
         disparity: Plane::new(w, h, f32::INFINITY),
-        confidence: Plane::new(w, h, 0.0),
+        confidence: options.confidence.then(|| Plane::new(w, h, 0.0)),
         max_marginal: Plane::new(w, h, 0.0),
         consistent: Plane::new(w, h, false),
         timings: Timings::default(),
@@ -110,6 +111,7 @@ pub fn run_tiled(
         prior: &prior,
         margin,
         halo: halo_px(params),
+        confidence: options.confidence,
     };
     let share = tile_share(plan.tile_budget_bytes);
     // Each stage of the tiles is reported summed over them, and the cutting and stitching as "tiles (rest)".
@@ -185,6 +187,8 @@ struct TileJob<'a> {
     margin: usize,
     /// [`halo_px`].
     halo: usize,
+    /// Whether the tiles compute their confidence maps.
+    confidence: bool,
 }
 
 /// One tile: its core, its halo, its crop, its label window.
@@ -270,6 +274,7 @@ impl TileJob<'_> {
             prior: Some(&prior),
             left_from: tile.left_from(),
             views: None,
+            confidence: self.confidence,
         };
         fine_pass(&params, &input, buffers, &|_| {}, Timings::default())
     }
@@ -286,7 +291,9 @@ impl TileJob<'_> {
                 let i = src + x - x0;
                 let o = y * w + x;
                 out.disparity.data[o] = result.disparity.data[i] + lo as f32;
-                out.confidence.data[o] = result.confidence.data[i];
+                if let (Some(out), Some(tile)) = (&mut out.confidence, &result.confidence) {
+                    out.data[o] = tile.data[i];
+                }
                 out.max_marginal.data[o] = result.max_marginal.data[i];
                 out.consistent.data[o] = result.consistent.data[i];
             }
@@ -356,8 +363,8 @@ mod tests {
         let params = Params::default();
         let whole = TilePlan { coarse_factor: 2, core_px: 1024, tile_budget_bytes: u64::MAX, split_for_work: false };
         let tiles = TilePlan { core_px: 96, ..whole };
-        let one = run_tiled(&params, &pair, &whole, &|_| {}).unwrap();
-        let many = run_tiled(&params, &pair, &tiles, &|_| {}).unwrap();
+        let one = run_tiled(&params, &pair, &whole, &crate::pipeline::RunOptions::quiet()).unwrap();
+        let many = run_tiled(&params, &pair, &tiles, &crate::pipeline::RunOptions::quiet()).unwrap();
         let (e_many, e_one, apart) = compare(&many.disparity, &one.disparity, &scene.gt, &scene.mask);
         eprintln!("tiled {e_many:.3} px, untiled {e_one:.3} px, {:.2} % apart", 100.0 * apart);
         assert!(apart <= 0.02, "{:.1} % of the pixels more than 1 px apart", 100.0 * apart);
@@ -367,7 +374,7 @@ mod tests {
         let halo = halo_px(&params);
         let need = estimate_memory_bytes(96 + 2 * halo + 40, 96 + 2 * halo, 40, &params);
         let split_plan = TilePlan { tile_budget_bytes: need / 2, ..tiles };
-        let small = run_tiled(&params, &pair, &split_plan, &|_| {}).unwrap();
+        let small = run_tiled(&params, &pair, &split_plan, &crate::pipeline::RunOptions::quiet()).unwrap();
         let (e_small, _, apart) = compare(&small.disparity, &one.disparity, &scene.gt, &scene.mask);
         assert!(apart <= 0.05 && e_small <= 1.1 * e_one + 0.05, "{apart} {e_small}");
     }
@@ -390,6 +397,7 @@ mod tests {
                 prior: None,
                 left_from,
                 views: None,
+                confidence: true,
             };
             fine_pass(&params, &input, buffers, &|_| {}, Timings::default()).unwrap()
         };
@@ -398,7 +406,7 @@ mod tests {
         let k = 40;
         let kept = pass(k, &mut buffers);
         assert_eq!(kept.disparity.dims(), (240 - k, 160));
-        assert_eq!(kept.confidence.dims(), (240 - k, 160));
+        assert_eq!(kept.confidence.map(|c| c.dims()), Some((240 - k, 160)));
         let cut = |m: &DisparityMap| m.columns_from(k);
         let gt = cut(&scene.gt);
         let mask = scene.mask.columns_from(k);
@@ -420,7 +428,9 @@ mod tests {
         let plan = TilePlan { coarse_factor: 2, core_px: 64, tile_budget_bytes: u64::MAX, split_for_work: false };
         let run = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-            pool.install(|| run_tiled(&Params::default(), &pair, &plan, &|_| {}).unwrap().disparity)
+            pool.install(|| {
+                run_tiled(&Params::default(), &pair, &plan, &crate::pipeline::RunOptions::quiet()).unwrap().disparity
+            })
         };
         let one = run(1);
         assert!(one.data.iter().all(|d| d.is_finite()));
@@ -447,6 +457,7 @@ mod tests {
                 prior,
                 margin: 4,
                 halo: halo_px(&params),
+                confidence: false,
             };
             check(&job);
         };

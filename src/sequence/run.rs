@@ -166,7 +166,8 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
     let mut matcher = Matcher::new(opts.params.clone())?
         .with_max_memory(opts.limit_bytes)
         .with_ndisp(source)
-        .with_temporal(opts.temporal);
+        .with_temporal(opts.temporal)
+        .with_confidence(false);
     for (index, frame) in seq.frames.iter().enumerate() {
         let result = out.join(format!("{}.{ext}", frame.stem));
         if opts.range == RangeRule::FirstFrame && index == 0 {

@@ -31,7 +31,7 @@ pub(crate) mod motion;
 use crate::error::Result;
 use crate::image::{Plane, StereoPair};
 use crate::params::Params;
-use crate::pipeline::{self, FramePrior, FrameViews, PipelineOutput};
+use crate::pipeline::{self, FramePrior, FrameViews, PipelineOutput, RunOptions};
 use average::{AnswerMean, ViewMeans};
 use motion::Shift;
 
@@ -110,7 +110,7 @@ pub(crate) fn match_frame(
     state: &mut State,
     params: &Params,
     pair: &StereoPair,
-    on_stage: &dyn Fn(&str),
+    options: &RunOptions<'_>,
 ) -> Result<(PipelineOutput, FrameKind)> {
     let grey = pair.left.to_grey();
     let noise = crate::condition::channel_noise(&pair.left);
@@ -121,16 +121,16 @@ pub(crate) fn match_frame(
     let cut = unexplained > CUT_UNEXPLAINED;
     let (out, kind) = match (previous, shift) {
         (Some(_), Some(s)) if !cut && (s.dx, s.dy) == (0, 0) && unexplained < STILL_UNEXPLAINED => {
-            still_frame(state, params, pair, noise, on_stage).map(|(out, frames)| (out, FrameKind::Still { frames }))?
+            still_frame(state, params, pair, noise, options).map(|(out, frames)| (out, FrameKind::Still { frames }))?
         }
         (Some(prev), Some(s)) if !cut => {
             state.still = None;
-            let out = moving_frame(params, pair, &prev, &grey, s, noise, on_stage)?;
+            let out = moving_frame(params, pair, &prev, &grey, s, noise, options)?;
             (out, FrameKind::Moving { dx: s.dx as i32, dy: s.dy as i32 })
         }
         _ => {
             state.still = None;
-            let out = pipeline::run_observed(params, pair, on_stage)?;
+            let out = pipeline::run_with(params, pair, options)?;
             state.still = Some((ViewMeans::start(&pair.left, &pair.right), AnswerMean::start(&out.disparity)));
             (out, if seen { FrameKind::Cut } else { FrameKind::First })
         }
@@ -145,20 +145,20 @@ fn still_frame(
     params: &Params,
     pair: &StereoPair,
     noise: f32,
-    on_stage: &dyn Fn(&str),
+    options: &RunOptions<'_>,
 ) -> Result<(PipelineOutput, u16)> {
     let (views, answers, out) = match state.still.take() {
         Some((mut views, mut answers)) => {
             views.fold(&pair.left, &pair.right, noise);
             let means = StereoPair::borrowed(&views.left, &views.right, pair.ndisp)?;
-            let mut out = pipeline::run_observed(params, &means, on_stage)?;
+            let mut out = pipeline::run_with(params, &means, options)?;
             answers.fold(&out.disparity, views.left_counts());
             out.disparity = answers.mean.clone();
             (views, answers, out)
         }
         // The camera has just stopped: this frame starts the means.
         None => {
-            let out = pipeline::run_observed(params, pair, on_stage)?;
+            let out = pipeline::run_with(params, pair, options)?;
             (ViewMeans::start(&pair.left, &pair.right), AnswerMean::start(&out.disparity), out)
         }
     };
@@ -175,7 +175,7 @@ fn moving_frame(
     grey: &Plane<f32>,
     shift: Shift,
     noise: f32,
-    on_stage: &dyn Fn(&str),
+    options: &RunOptions<'_>,
 ) -> Result<PipelineOutput> {
     let limit = RELEASE_NOISE_MULTIPLE * (motion::GREY_DIFFERENCE_PER_SIGMA as f32 * noise + 0.5);
     let released = motion::disagreement(&prev.grey, grey, shift, limit);
@@ -189,5 +189,5 @@ fn moving_frame(
             right_local_only: true,
         }),
     };
-    pipeline::run_with_prior(params, pair, from, on_stage)
+    pipeline::run_with_prior(params, pair, from, options)
 }

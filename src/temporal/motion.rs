@@ -122,7 +122,7 @@ pub(crate) fn shift_answer(answer: &PipelineOutput, shift: Shift) -> PipelineOut
     });
     PipelineOutput {
         disparity: moved(&answer.disparity, f32::INFINITY),
-        confidence: moved(&answer.confidence, 0.0),
+        confidence: answer.confidence.as_ref().map(|c| moved(c, 0.0)),
         max_marginal: moved(&answer.max_marginal, 0.0),
         consistent,
         timings: Default::default(),
@@ -209,7 +209,7 @@ mod tests {
     fn an_answer_moves_with_the_shift_and_is_unknown_where_it_leaves_the_frame() {
         let d = Plane::from_parts(3, 1, vec![1.0, 2.0, 3.0]);
         let answer = PipelineOutput {
-            confidence: Plane::new(3, 1, 0.5),
+            confidence: None,
             max_marginal: Plane::new(3, 1, 0.5),
             consistent: Plane::new(3, 1, true),
             disparity: d,
