@@ -162,6 +162,10 @@ fn viz_draws_a_depth_map_with_its_scale() {
     let out = run_in(dir.path(), &["viz", "z.pfm", "--depth", "-o", "z.png"]);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(stderr(&out).contains("depth coloured by 1/Z"), "{}", stderr(&out));
+    // The range's ends as a reader reads them: three significant digits, not a float's seven.
+    let line = stderr(&out);
+    let from = line.split(" from ").nth(1).and_then(|r| r.split(' ').next()).unwrap_or_default().to_string();
+    assert!(from.parse::<f32>().is_ok() && from.trim_start_matches(['0', '.']).len() <= 4, "{line}");
     let picture = jem::io::read_image(&dir.path().join("z.png")).unwrap();
     // The picture and, under it, the scale bar.
     assert!(picture.width() == 64 && picture.height() > 48 + 20, "{:?}", picture.dims());

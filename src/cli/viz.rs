@@ -102,8 +102,10 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
         if !global.quiet {
             let (w, h) = (picture.width, picture.height);
             note!(
-                "wrote {} ({w}×{h}): depth coloured by 1/Z from {near} (dark red) to {far} (indigo), scale bar below",
-                args.output.display()
+                "wrote {} ({w}×{h}): depth coloured by 1/Z from {} (dark red) to {} (indigo), scale bar below",
+                args.output.display(),
+                three_digits(near),
+                three_digits(far)
             );
         }
         return Ok(ExitCode::SUCCESS);
@@ -206,4 +208,11 @@ pub(super) fn note_inferred_resolution(dir: &Path, rows: &[jem::viz::SheetRow]) 
             rows.len()
         );
     }
+}
+
+/// `v` with three significant digits (at least its integer part): a range's ends as a reader reads them.
+fn three_digits(v: f32) -> String {
+    let decimals =
+        if v == 0.0 || !v.is_finite() { 0 } else { (2 - v.abs().log10().floor() as i32).clamp(0, 6) as usize };
+    format!("{v:.decimals$}")
 }
