@@ -87,15 +87,27 @@ pub struct Output {
 }
 
 impl Output {
+    /// The confidence map.
+    ///
+    /// # Errors
+    /// [`crate::error::Error::Input`] when the matcher was told not to compute it ([`Matcher::with_confidence`]).
+    pub fn confidence_map(&self) -> Result<&Plane<f32>> {
+        let missing = || crate::error::Error::Input("no confidence map was computed for this run".into());
+        self.confidence.as_ref().ok_or_else(missing)
+    }
+
     /// The disparity map with every pixel whose confidence is below `min_confidence` made invalid (`inf`): the
-    /// reliable pixels only (`jem --min-confidence`); `None` without a confidence map.
-    pub fn reliable_disparity(&self, min_confidence: f32) -> Option<DisparityMap> {
-        let confidence = self.confidence.as_ref()?;
+    /// reliable pixels only (`jem --min-confidence`).
+    ///
+    /// # Errors
+    /// As [`Output::confidence_map`].
+    pub fn reliable_disparity(&self, min_confidence: f32) -> Result<DisparityMap> {
+        let confidence = self.confidence_map()?;
         let mut out = self.disparity.clone();
         out.data.iter_mut().zip(&confidence.data).filter(|&(_, &c)| c < min_confidence).for_each(|(d, _)| {
             *d = f32::INFINITY;
         });
-        Some(out)
+        Ok(out)
     }
 }
 
@@ -406,7 +418,7 @@ mod tests {
         let with = matcher.clone().match_pair(&scene.left, &scene.right).unwrap();
         let without = matcher.with_confidence(false).match_pair(&scene.left, &scene.right).unwrap();
         assert!(with.confidence.is_some() && without.confidence.is_none());
-        assert!(without.reliable_disparity(0.5).is_none());
+        assert!(without.reliable_disparity(0.5).is_err() && without.confidence_map().is_err());
         let bits = |o: &Output| o.disparity.data.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&with), bits(&without));
         let stages = |o: &Output| o.timings.stages.iter().map(|(name, _)| *name).collect::<Vec<_>>();

@@ -182,14 +182,14 @@ fn results<'py>(
         PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &message, 1)?;
     }
     let info = if shown.return_info { Some(info(py, &out, check)?) } else { None };
-    let missing = || to_py(&Error::Input("no confidence map was computed for this run".into()));
-    let disparity = match shown.min_confidence {
-        Some(c) => out.reliable_disparity(c).ok_or_else(missing)?,
-        None => out.disparity,
-    };
-    let mut result = vec![to_numpy(py, disparity).into_any()];
+    let reliable = shown.min_confidence.map(|c| out.reliable_disparity(c)).transpose().map_err(|e| to_py(&e))?;
     if shown.confidence {
-        result.push(to_numpy(py, out.confidence.ok_or_else(missing)?).into_any());
+        out.confidence_map().map_err(|e| to_py(&e))?;
+    }
+    let Output { disparity, confidence, .. } = out;
+    let mut result = vec![to_numpy(py, reliable.unwrap_or(disparity)).into_any()];
+    if let Some(confidence) = confidence.filter(|_| shown.confidence) {
+        result.push(to_numpy(py, confidence).into_any());
     }
     result.extend(info);
     if result.len() == 1 {

@@ -221,10 +221,8 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
         Some(path) => Some((path.as_path(), crate::io::encode_lr_mask(path, &out.consistent)?)),
         None => None,
     };
-    let confidence = match (opts.confidence, &out.confidence) {
-        (true, Some(map)) => Some(crate::io::encode_disparity(&files.confidence, map)?),
-        _ => None,
-    };
+    let confidence =
+        opts.confidence.then(|| crate::io::encode_disparity(&files.confidence, out.confidence_map()?)).transpose()?;
     let mut written: Vec<(&Path, &[u8])> = vec![(&files.disparity, &disparity)];
     let time = pair.time_text(out.seconds);
     written.push((&files.time, time.as_bytes()));

@@ -87,11 +87,6 @@ pub(super) struct MatchArgs {
 }
 
 /// Matches one pair.
-/// The error for a confidence map the run should have computed (the matcher is told to when one is asked for).
-fn no_confidence() -> Error {
-    Error::Input("no confidence map was computed for this run".into())
-}
-
 pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let request = Request::check(args)?;
     let params = args.config.params()?;
@@ -118,7 +113,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         return Err(Error::Input(format!("the pair looks wrong (--strict: nothing written): {}", warnings.join("; "))));
     }
     // With --min-confidence, the map written holds the reliable pixels only.
-    let reliable = args.min_confidence.map(|c| out.reliable_disparity(c).ok_or_else(no_confidence)).transpose()?;
+    let reliable = args.min_confidence.map(|c| out.reliable_disparity(c)).transpose()?;
     let disparity = reliable.as_ref().unwrap_or(&out.disparity);
     write_outputs(args, &request, &out, disparity, &l)?;
     for warning in warnings.iter().filter(|_| !global.quiet) {
@@ -287,7 +282,7 @@ fn write_outputs(
     let output = args.output.as_deref().unwrap_or(Path::new("?"));
     let mut files = vec![(output, jem::io::encode_disparity(output, disparity)?)];
     if let Some(c) = &args.confidence {
-        let map = out.confidence.as_ref().ok_or_else(no_confidence)?;
+        let map = out.confidence_map()?;
         files.push((c.as_path(), jem::io::encode_disparity(c, map)?));
     }
     if let Some(m) = &args.lr_mask {
