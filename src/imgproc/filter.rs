@@ -22,21 +22,16 @@ pub(crate) fn pad_replicate(p: &Plane<f32>, px: usize, py: usize) -> Vec<f32> {
 
 /// Horizontal Sobel gradient (`[-1 0 1; -2 0 2; -1 0 1]`), borders replicated.
 pub(crate) fn sobel_x(grey: &Plane<f32>) -> Plane<f32> {
-    let (w, h) = grey.dims();
-    let mut out = Plane::new(w, h, 0.0f32);
-    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
-        let up = grey.row(y.saturating_sub(1));
-        let mid = grey.row(y);
-        let down = grey.row((y + 1).min(h - 1));
-        for (x, g) in row.iter_mut().enumerate() {
-            *g = sobel_at([up, mid, down], x).0;
-        }
-    });
-    out
+    sobel_map(grey, |gx, _| gx)
 }
 
 /// Sobel gradient magnitude √(gx² + gy²) (`[-1 0 1; -2 0 2; -1 0 1]` and its transpose), borders replicated.
 pub(crate) fn sobel_magnitude(grey: &Plane<f32>) -> Plane<f32> {
+    sobel_map(grey, f32::hypot)
+}
+
+/// `f(gx, gy)` of each pixel's Sobel gradients ([`sobel_at`]), borders replicated.
+fn sobel_map(grey: &Plane<f32>, f: impl Fn(f32, f32) -> f32 + Sync) -> Plane<f32> {
     let (w, h) = grey.dims();
     let mut out = Plane::new(w, h, 0.0f32);
     out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
@@ -45,7 +40,7 @@ pub(crate) fn sobel_magnitude(grey: &Plane<f32>) -> Plane<f32> {
         let down = grey.row((y + 1).min(h - 1));
         for (x, g) in row.iter_mut().enumerate() {
             let (gx, gy) = sobel_at([up, mid, down], x);
-            *g = gx.hypot(gy);
+            *g = f(gx, gy);
         }
     });
     out
