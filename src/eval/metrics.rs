@@ -5,7 +5,7 @@
 //!
 //! Complexity: O(w·h) per scene, one pass, no allocation besides the loaded files.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use crate::error::{Error, Result};
@@ -263,12 +263,7 @@ pub fn evaluate_files(
 /// # Errors
 /// As [`evaluate_files`], or a missing/malformed `calib.txt` or mask.
 pub fn evaluate_scene(dir: &Path, alg: &str, scale: u32, mask_mode: MaskMode) -> Result<Metrics> {
-    let result = dir.join(format!("disp0{alg}.pfm"));
-    if !result.is_file() {
-        return Err(Error::Input(format!("no result file {}", result.display())));
-    }
-    let calib_path = dir.join("calib.txt");
-    let ndisp = Calib::load(&calib_path)?.ndisp().map_err(|msg| Error::Calib { path: calib_path.clone(), msg })?;
+    let (result, ndisp) = scene_result(dir, alg)?;
     let mask = dir.join("mask0nocc.png");
     let mask = match (mask.is_file(), mask_mode) {
         (true, _) => Some(mask),
@@ -278,6 +273,21 @@ pub fn evaluate_scene(dir: &Path, alg: &str, scale: u32, mask_mode: MaskMode) ->
         }
     };
     evaluate_files(&result, &dir.join("disp0GT.pfm"), mask.as_deref(), ndisp, scale, mask_mode)
+}
+
+/// A MiddEval3 scene folder's result `disp0<alg>.pfm` (an error when there is none) and `ndisp` from its
+/// `calib.txt`.
+///
+/// # Errors
+/// No result file; a missing or malformed `calib.txt` (naming it).
+pub(crate) fn scene_result(dir: &Path, alg: &str) -> Result<(PathBuf, usize)> {
+    let result = dir.join(format!("disp0{alg}.pfm"));
+    if !result.is_file() {
+        return Err(Error::Input(format!("no result file {}", result.display())));
+    }
+    let calib_path = dir.join("calib.txt");
+    let ndisp = Calib::load(&calib_path)?.ndisp().map_err(|msg| Error::Calib { path: calib_path.clone(), msg })?;
+    Ok((result, ndisp))
 }
 
 #[cfg(test)]

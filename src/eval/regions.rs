@@ -38,13 +38,12 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
-use super::metrics::check_size;
+use super::metrics::{check_size, scene_result};
 use super::report::{AlgReport, error_chain};
 use crate::dataset::Layout;
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane, RgbImage};
 use crate::imgproc::filter::{local_mean_abs, sobel_magnitude};
-use crate::io::calib::Calib;
 
 /// The regions in priority order: their JSON keys.
 pub const REGION_KEYS: [&str; 5] = ["rejected", "near_edge", "textureless", "near_occlusion", "rest"];
@@ -249,12 +248,7 @@ fn least_textured(left: &RgbImage, scored: &[bool], share: f64) -> Vec<bool> {
 /// # Errors
 /// A missing or malformed file (naming it), maps of different sizes, or no scored pixel with a valid result.
 pub fn split_scene(dir: &Path, alg: &str, scale: u32) -> Result<RegionSplit> {
-    let result_path = dir.join(format!("disp0{alg}.pfm"));
-    if !result_path.is_file() {
-        return Err(Error::Input(format!("no result file {}", result_path.display())));
-    }
-    let calib_path = dir.join("calib.txt");
-    let ndisp = Calib::load(&calib_path)?.ndisp().map_err(|msg| Error::Calib { path: calib_path.clone(), msg })?;
+    let (result_path, ndisp) = scene_result(dir, alg)?;
     let gt_path = dir.join("disp0GT.pfm");
     let gt = crate::io::read_disparity(&gt_path)?;
     let result = crate::io::read_disparity(&result_path)?;
