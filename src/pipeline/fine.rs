@@ -200,7 +200,7 @@ impl Pass<'_> {
             let kept = t.time("cost", || cost_left.into_columns_from(left_from));
             let left = estimate_view(
                 params,
-                View { image: guide_left, cost: &kept, iterations: iterations[0] },
+                View { image: guide_left, cost: &kept, iterations: iterations[0], local_only: false },
                 left_bands,
                 t,
                 buffers,
@@ -208,7 +208,7 @@ impl Pass<'_> {
             buffers.recycle(kept.data);
             (left, cost_right)
         } else {
-            let view = View { image: guide_left, cost: &cost_left, iterations: iterations[0] };
+            let view = View { image: guide_left, cost: &cost_left, iterations: iterations[0], local_only: false };
             let left = estimate_view(params, view, left_bands, t, buffers);
             // The right volume goes into the left view's spent marginals, and the left volume's storage becomes the
             // right view's marginals: no new allocation for the right view.
@@ -223,13 +223,11 @@ impl Pass<'_> {
                 .zip(best)
                 .map(|(prior, best)| t.time("bands", || prior.label_bands(&best, ndisp, true, params)));
             on_stage("inference (right)");
-            let view = View { image: &self.input.guide.right, cost: &cost_right, iterations: iterations[1] };
+            // Only a model with both terms has a local term to keep.
             let local_only = self.input.views.is_some_and(|v| v.right_local_only) && params.model == Model::Jem;
-            let right = if local_only {
-                estimate_view(&Params { model: Model::Lcm, ..params.clone() }, view, right_bands, t, buffers)
-            } else {
-                estimate_view(params, view, right_bands, t, buffers)
-            };
+            let view =
+                View { image: &self.input.guide.right, cost: &cost_right, iterations: iterations[1], local_only };
+            let right = estimate_view(params, view, right_bands, t, buffers);
             buffers.recycle(cost_right.data);
             right
         });
@@ -285,11 +283,13 @@ impl Pass<'_> {
     }
 }
 
-/// One view for [`estimate_view`]: its image, its cost volume and its mean-field iterations.
+/// One view for [`estimate_view`]: its image, its cost volume, its mean-field iterations, and whether its mean field
+/// runs with the local term alone (no fully connected term, so no lattice; [`FrameViews::right_local_only`]).
 struct View<'a> {
     image: &'a RgbImage,
     cost: &'a CostVolume,
     iterations: usize,
+    local_only: bool,
 }
 
 /// Inference for one view: WTA on the cost, or mean field with the view's own image (the configuration's mean field
@@ -297,7 +297,7 @@ struct View<'a> {
 /// carries the large allocations from one view to the next.
 fn estimate_view(
     params: &Params,
-    View { image, cost, iterations }: View<'_>,
+    View { image, cost, iterations, local_only }: View<'_>,
     bands: Option<meanfield::LabelBands>,
     t: &mut Timings,
     buffers: &mut meanfield::Buffers,
@@ -309,8 +309,8 @@ fn estimate_view(
             ViewEstimate { disparity, confidence }
         }
         Model::Lcm | Model::Fcm | Model::Jem => {
-            let weights =
-                meanfield::PairwiseWeights { fcm: params.effective_fcm_weight(), lcm: params.effective_lcm_weight() };
+            let fcm = if local_only { 0.0 } else { params.effective_fcm_weight() };
+            let weights = meanfield::PairwiseWeights { fcm, lcm: params.effective_lcm_weight() };
             let reuse = std::mem::take(buffers);
             let mf_params = MeanFieldParams { iterations, ..params.meanfield.clone() };
             let (q, rest) = if mf_params.pyramid_levels > 1 {
