@@ -176,7 +176,7 @@ pub fn evaluate(
             invalid += 1;
             continue;
         }
-        let err = s * (f64::from(d).clamp(0.0, max_d) - f64::from(g)).abs();
+        let err = pixel_error(d, g, s, max_d);
         sum += err;
         sum_sq += err * err;
         for (count, &t) in bad.iter_mut().zip(&BAD_THRESHOLDS_PX) {
@@ -273,6 +273,12 @@ pub fn evaluate_scene(dir: &Path, alg: &str, scale: u32, mask_mode: MaskMode) ->
         }
     };
     evaluate_files(&result, &dir.join("disp0GT.pfm"), mask.as_deref(), ndisp, scale, mask_mode)
+}
+
+/// The error of a valid result `d` against the truth `g` as MiddEval3 scores it: `d` clipped to `[0, max_d]`, the
+/// difference in full-resolution pixels (× `scale`).
+pub(crate) fn pixel_error(d: f32, g: f32, scale: f64, max_d: f64) -> f64 {
+    scale * (f64::from(d).clamp(0.0, max_d) - f64::from(g)).abs()
 }
 
 /// A MiddEval3 scene folder's result `disp0<alg>.pfm` (an error when there is none) and `ndisp` from its

@@ -38,7 +38,7 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
-use super::metrics::{check_size, scene_result};
+use super::metrics::{check_size, pixel_error, scene_result};
 use super::report::{AlgReport, error_chain};
 use crate::dataset::Layout;
 use crate::error::{Error, Result};
@@ -163,7 +163,7 @@ pub fn split_by_region(inp: &RegionInputs<'_>) -> Option<RegionSplit> {
         if r == NOT_SCORED || !d.is_finite() {
             continue;
         }
-        let err = s * (f64::from(d).clamp(0.0, max_d) - f64::from(g)).abs();
+        let err = pixel_error(d, g, s, max_d);
         let r = usize::from(r);
         sum += err;
         valid += 1;
