@@ -17,11 +17,15 @@ pub struct WmedianParams {
     pub sigma_xy: f32,
     /// Colour σ of the weights, in RGB units (0..255).
     pub sigma_rgb: f32,
+    /// Also filter, after the planes, every pixel whose 3×3 neighbourhood spans more than this many pixels of
+    /// disparity (a depth edge, where a window cost puts the foreground's disparity on the background's first
+    /// pixels); 0 turns it off.
+    pub edge_px: f32,
 }
 
 impl Default for WmedianParams {
     fn default() -> Self {
-        WmedianParams { enabled: true, radius: 9, sigma_xy: 9.0, sigma_rgb: 20.0 }
+        WmedianParams { enabled: true, radius: 9, sigma_xy: 9.0, sigma_rgb: 20.0, edge_px: 2.0 }
     }
 }
 
@@ -35,6 +39,10 @@ impl WmedianParams {
             return Err(Error::param("post.wmedian.radius", self.radius, "1 to 64"));
         }
         check_positive("post.wmedian.sigma_xy", self.sigma_xy)?;
-        check_positive("post.wmedian.sigma_rgb", self.sigma_rgb)
+        check_positive("post.wmedian.sigma_rgb", self.sigma_rgb)?;
+        if !(self.edge_px >= 0.0 && self.edge_px.is_finite()) {
+            return Err(Error::param("post.wmedian.edge_px", self.edge_px, "0 (off) or a positive number of pixels"));
+        }
+        Ok(())
     }
 }

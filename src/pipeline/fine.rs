@@ -279,6 +279,12 @@ impl Pass<'_> {
             let top = (self.input.guide.ndisp - 1) as f32;
             disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
         }
+        if post.wmedian.enabled && post.wmedian.edge_px > 0.0 {
+            disparity = t.time("edges", || {
+                let targets = post::wmedian::depth_edges(&disparity, post.wmedian.edge_px);
+                post::wmedian::weighted_median(&disparity, guide_left, &targets, &post.wmedian)
+            });
+        }
         (disparity, trusted)
     }
 }

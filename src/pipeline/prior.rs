@@ -92,6 +92,8 @@ impl CoarseLevel {
         // level put it, which the fine level should be free to correct (docs/tuning-log.md, "Edge-aware
         // upsampling").
         coarse.upsample.edge_px = 0.0;
+        // For the same reason, no median at its depth edges.
+        coarse.post.wmedian.edge_px = 0.0;
         if self.same_segment_size {
             // A 1/F² of the pixels gets a 1/F² of the segments.
             coarse.post.sps.segments = params.post.sps.segments.div_ceil(self.factor * self.factor);

@@ -315,6 +315,32 @@ fn median_of_three(a: f32, b: f32, c: f32) -> f32 {
     a.max(b).min(a.min(b).max(c))
 }
 
+/// The pixels whose 3×3 neighbourhood (clipped at the border; `inf` ignored) spans more than `jump` pixels of
+/// disparity: the two sides of a depth edge. A slanted surface changes by less than a pixel per pixel, so the
+/// threshold is the same at every resolution.
+pub fn depth_edges(disp: &DisparityMap, jump: f32) -> Plane<bool> {
+    let (w, h) = disp.dims();
+    let mut out = Plane::new(w, h, false);
+    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        // Per column, the finite extremes of rows y − 1 ..= y + 1; then across three columns.
+        let rows = y.saturating_sub(1)..(y + 2).min(h);
+        let column = |x: usize| {
+            rows.clone()
+                .map(|yy| disp.data[yy * w + x])
+                .filter(|v| v.is_finite())
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)))
+        };
+        let cols: Vec<(f32, f32)> = (0..w).map(column).collect();
+        for (x, edge) in row.iter_mut().enumerate() {
+            let near = &cols[x.saturating_sub(1)..(x + 2).min(w)];
+            let lo = near.iter().map(|c| c.0).fold(f32::INFINITY, f32::min);
+            let hi = near.iter().map(|c| c.1).fold(f32::NEG_INFINITY, f32::max);
+            *edge = hi - lo > jump;
+        }
+    });
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -516,7 +542,7 @@ mod tests {
         let mut targets = Plane::new(5, 5, false);
         targets.data[12] = true;
         targets.data[11] = true;
-        let p = WmedianParams { enabled: true, radius: 2, sigma_xy: 9.0, sigma_rgb: 20.0 };
+        let p = WmedianParams { enabled: true, radius: 2, sigma_xy: 9.0, sigma_rgb: 20.0, edge_px: 0.0 };
         let out = weighted_median(&disp, &img, &targets, &p);
         let mut expected = disp.data.clone();
         expected[12] = 1.0;
@@ -545,7 +571,7 @@ mod tests {
         let mut targets = Plane::new(5, 5, false);
         targets.data[12] = true; // (2, 2): inf itself, blue; its 3×3 window has only the red 1.0 column finite
         targets.data[13] = true; // (3, 2): window radius 1 has only inf → stays inf
-        let p = WmedianParams { enabled: true, radius: 1, sigma_xy: 9.0, sigma_rgb: 20.0 };
+        let p = WmedianParams { enabled: true, radius: 1, sigma_xy: 9.0, sigma_rgb: 20.0, edge_px: 0.0 };
         let out = weighted_median(&disp, &img, &targets, &p);
         let expected = &disp.data;
         assert_eq!(out.data[..12], expected[..12]);
@@ -585,7 +611,7 @@ mod tests {
     fn matches_the_naive_reference() {
         let (disp, img, targets) = random_scene(23, 17, 7);
         for (radius, sx, sc) in [(1, 1.0, 10.0), (3, 2.0, 30.0), (5, 9.0, 20.0)] {
-            let p = WmedianParams { enabled: true, radius, sigma_xy: sx, sigma_rgb: sc };
+            let p = WmedianParams { enabled: true, radius, sigma_xy: sx, sigma_rgb: sc, edge_px: 0.0 };
             let out = weighted_median(&disp, &img, &targets, &p);
             let expected = reference_filter(&disp, &img, &targets, &p);
             // Exact equality: the weights differ only by rounding (f32 vs f64 and the e_min shift), which moves
@@ -598,7 +624,7 @@ mod tests {
     #[test]
     fn same_output_for_one_and_two_threads() {
         let (disp, img, targets) = random_scene(64, 48, 11);
-        let p = WmedianParams { enabled: true, radius: 4, sigma_xy: 4.0, sigma_rgb: 20.0 };
+        let p = WmedianParams { enabled: true, radius: 4, sigma_xy: 4.0, sigma_rgb: 20.0, edge_px: 0.0 };
         let run = |n| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
@@ -628,8 +654,77 @@ mod tests {
         assert_eq!(out.data, vec![3.5]);
     }
 
+    /// Naive reference of [`depth_edges`].
+    fn reference_edges(disp: &DisparityMap, jump: f32) -> Vec<bool> {
+        let (w, h) = disp.dims();
+        let mut out = vec![false; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let near: Vec<f32> = (y.saturating_sub(1)..(y + 2).min(h))
+                    .flat_map(|yy| (x.saturating_sub(1)..(x + 2).min(w)).map(move |xx| (yy, xx)))
+                    .map(|(yy, xx)| disp.data[yy * w + xx])
+                    .filter(|v| v.is_finite())
+                    .collect();
+                if let (Some(lo), Some(hi)) =
+                    (near.iter().copied().reduce(f32::min), near.iter().copied().reduce(f32::max))
+                {
+                    out[y * w + x] = hi - lo > jump;
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn depth_edges_match_the_reference() {
+        let mut rng = Rng::new(7);
+        for (w, h) in [(0, 0), (1, 1), (1, 5), (5, 1), (13, 9), (40, 31)] {
+            let data =
+                (0..w * h).map(|_| if rng.next_f32() < 0.1 { INF } else { (rng.next_f32() * 6.0).floor() }).collect();
+            let disp = Plane::from_parts(w, h, data);
+            for jump in [0.5, 2.0, 4.5] {
+                assert_eq!(depth_edges(&disp, jump).data, reference_edges(&disp, jump), "{w}x{h}, jump {jump}");
+            }
+        }
+        // A slant of less than a pixel per pixel is no edge.
+        let ramp = Plane::from_parts(8, 3, (0..24).map(|i| (i % 8) as f32 * 0.9).collect());
+        assert!(depth_edges(&ramp, 2.0).data.iter().all(|e| !e));
+    }
+
+    #[test]
+    fn the_median_at_depth_edges_undoes_fattening() {
+        // Background (disparity 5, grey) on the left, foreground (20, red) from x = 10; the map puts the foreground's
+        // disparity on the background's last column, as a window cost does (one pass undoes one column).
+        let (w, h) = (20, 12);
+        let mut image = RgbImage::new(w, h);
+        let mut disp = Plane::new(w, h, 5.0f32);
+        for y in 0..h {
+            for x in 0..w {
+                let fg = x >= 10;
+                let colour = if fg { [200.0, 30.0, 30.0] } else { [90.0, 90.0, 90.0] };
+                (0..3).for_each(|c| image.channel_mut(c)[y * w + x] = colour[c]);
+                if x >= 9 {
+                    disp.data[y * w + x] = 20.0;
+                }
+            }
+        }
+        let targets = depth_edges(&disp, 2.0);
+        assert!(
+            targets.data[5 * w + 8] && targets.data[5 * w + 9] && !targets.data[5 * w + 10] && !targets.data[5 * w + 3]
+        );
+        let out = weighted_median(&disp, &image, &targets, &WmedianParams::default());
+        for y in 0..h {
+            let row = &out.data[y * w..][..w];
+            assert!(row[..10].iter().all(|&d| d == 5.0) && row[10..].iter().all(|&d| d == 20.0), "row {y}: {row:?}");
+        }
+    }
+
     #[test]
     fn validate_names_keys() {
+        let p = WmedianParams { edge_px: -1.0, ..Default::default() };
+        assert!(p.validate().unwrap_err().to_string().contains("post.wmedian.edge_px"));
+        let p = WmedianParams { edge_px: f32::NAN, ..Default::default() };
+        assert!(p.validate().unwrap_err().to_string().contains("post.wmedian.edge_px"));
         let p = WmedianParams { radius: 0, ..Default::default() };
         assert!(p.validate().unwrap_err().to_string().contains("post.wmedian.radius"));
         let p = WmedianParams { sigma_rgb: 0.0, ..Default::default() };
