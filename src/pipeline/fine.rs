@@ -234,8 +234,8 @@ impl Pass<'_> {
         (left, right)
     }
 
-    /// Left-right check (with `right`), fill, weighted median and planes on the left view's `disparity`; returns the
-    /// map and the pixels that passed the check.
+    /// Left-right check (with `right`), fill, weighted median, planes and the median at depth edges on the left view's
+    /// `disparity`; returns the map and the pixels that passed the check.
     fn post_process(
         &self,
         mut disparity: DisparityMap,

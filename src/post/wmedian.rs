@@ -1,9 +1,13 @@
 //! Weighted median filter at the pixels that were invalid (paper §4.2).
 //!
 //! The paper applies the filter after occlusion filling, and only to the pixels the left-right check rejected
-//! (Mozerov & van de Weijer apply it everywhere, which is slower and blurs good pixels). Each target pixel `i`
-//! takes the weighted median of the *finite* disparities `d_j` in its (2r+1)² window (the window is clipped at the
-//! image border; the pixel itself is included when finite), with bilateral weights
+//! (Mozerov & van de Weijer apply it everywhere, which is slower and blurs good pixels). Ours: the default runs it
+//! once more after the planes at [`depth_edges`] (`post.wmedian.edge_px`), where a window cost puts the foreground's
+//! disparity on the background's first pixels and the two views agree on it (docs/tuning-log.md, "Accuracy III: the
+//! median at depth edges").
+//!
+//! Each target pixel `i` takes the weighted median of the *finite* disparities `d_j` in its (2r+1)² window (the window
+//! is clipped at the image border; the pixel itself is included when finite), with bilateral weights
 //!
 //! ```text
 //! w_ij = exp(−|x_i − x_j|² / 2σ_xy² − |I_i − I_j|² / 2σ_rgb²)        (I = RGB, 0..255)
