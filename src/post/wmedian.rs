@@ -45,6 +45,7 @@ use rayon::prelude::*;
 
 use crate::fastmath::{exp_nonpositive, lane_max, lane_min};
 use crate::image::{DisparityMap, Plane, RgbImage};
+use crate::imgproc::filter::window_extreme;
 use crate::params::WmedianParams;
 
 /// Replaces the disparity at every `targets` pixel by the weighted median of the valid disparities in its window
@@ -323,26 +324,10 @@ fn median_of_three(a: f32, b: f32, c: f32) -> f32 {
 /// disparity: the two sides of a depth edge. A slanted surface changes by less than a pixel per pixel, so the
 /// threshold is the same at every resolution.
 pub fn depth_edges(disp: &DisparityMap, jump: f32) -> Plane<bool> {
-    let (w, h) = disp.dims();
-    let mut out = Plane::new(w, h, false);
-    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
-        // Per column, the finite extremes of rows y − 1 ..= y + 1; then across three columns.
-        let rows = y.saturating_sub(1)..(y + 2).min(h);
-        let column = |x: usize| {
-            rows.clone()
-                .map(|yy| disp.data[yy * w + x])
-                .filter(|v| v.is_finite())
-                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)))
-        };
-        let cols: Vec<(f32, f32)> = (0..w).map(column).collect();
-        for (x, edge) in row.iter_mut().enumerate() {
-            let near = &cols[x.saturating_sub(1)..(x + 2).min(w)];
-            let lo = near.iter().map(|c| c.0).fold(f32::INFINITY, f32::min);
-            let hi = near.iter().map(|c| c.1).fold(f32::NEG_INFINITY, f32::max);
-            *edge = hi - lo > jump;
-        }
-    });
-    out
+    let lo = window_extreme(disp, 1, f32::INFINITY, f32::min);
+    let hi = window_extreme(disp, 1, f32::NEG_INFINITY, f32::max);
+    // No finite value in the window: lo = inf, hi = −inf, no edge.
+    Plane::from_parts(disp.width, disp.height, lo.data.iter().zip(&hi.data).map(|(lo, hi)| hi - lo > jump).collect())
 }
 
 #[cfg(test)]
