@@ -22,9 +22,10 @@ pub mod meanfield {
     pub use crate::meanfield::{MeanField, PairwiseWeights, decode_marginals, infer_mean_field};
 }
 
-/// Post-processing: the left-right check, the fill, the weighted median, the slanted planes.
+/// Post-processing: the left-right check, the fill, the weighted median, the slanted planes, the sub-pixel
+/// refinement.
 pub mod post {
-    pub use crate::post::{fill, lr_check, planes, wmedian};
+    pub use crate::post::{fill, lr_check, planes, subpixel, wmedian};
 }
 
 /// Conditioning: the vertical offset between the views.

@@ -26,6 +26,7 @@ mod explain;
 mod lrc;
 mod meanfield;
 mod sps;
+mod subpixel;
 mod wmedian;
 
 pub use condition::{ConditionParams, DenoiseParams, NoiseParams, PriorParams, StretchParams, VerticalParams};
@@ -33,6 +34,7 @@ pub use cost::CostParams;
 pub use lrc::{LrcMode, LrcParams};
 pub use meanfield::{MeanFieldParams, Normalization, Schedule};
 pub use sps::SpsParams;
+pub use subpixel::SubpixelParams;
 pub use wmedian::WmedianParams;
 
 /// Which energy the inference minimises.
@@ -61,18 +63,21 @@ pub struct PostParams {
     pub wmedian: WmedianParams,
     /// Slanted-plane smoothing.
     pub sps: SpsParams,
+    /// Sub-pixel refinement of the final map from the images.
+    pub subpixel: SubpixelParams,
 }
 
 impl PostParams {
     /// Checks every stage's values ([`LrcParams::validate`], [`WmedianParams::validate`],
-    /// [`SpsParams::validate`]).
+    /// [`SpsParams::validate`], [`SubpixelParams::validate`]).
     ///
     /// # Errors
     /// [`Error::InvalidParam`] naming the first offending key, its value and the valid range.
     pub fn validate(&self) -> Result<()> {
         self.lrc.validate()?;
         self.wmedian.validate()?;
-        self.sps.validate()
+        self.sps.validate()?;
+        self.subpixel.validate()
     }
 }
 
@@ -83,6 +88,7 @@ impl Default for PostParams {
             fill: true,
             wmedian: WmedianParams::default(),
             sps: SpsParams::default(),
+            subpixel: SubpixelParams::default(),
         }
     }
 }

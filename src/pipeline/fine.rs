@@ -234,8 +234,8 @@ impl Pass<'_> {
         (left, right)
     }
 
-    /// Left-right check (with `right`), fill, weighted median, planes and the median at depth edges on the left view's
-    /// `disparity`; returns the map and the pixels that passed the check.
+    /// Left-right check (with `right`), fill, weighted median, planes, the median at depth edges and the sub-pixel
+    /// refinement on the left view's `disparity`; returns the map and the pixels that passed the check.
     fn post_process(
         &self,
         mut disparity: DisparityMap,
@@ -283,6 +283,12 @@ impl Pass<'_> {
             disparity = t.time("edges", || {
                 let targets = post::wmedian::depth_edges(&disparity, post.wmedian.edge_px);
                 post::wmedian::weighted_median(&disparity, guide_left, &targets, &post.wmedian)
+            });
+        }
+        if post.subpixel.enabled {
+            let right = &self.input.guide.right;
+            disparity = t.time("subpixel", || {
+                post::subpixel::refine_subpixel(guide_left, right, &disparity, left_from, &post.subpixel)
             });
         }
         (disparity, trusted)

@@ -92,8 +92,10 @@ impl CoarseLevel {
         // level put it, which the fine level should be free to correct (docs/tuning-log.md, "Edge-aware
         // upsampling").
         coarse.upsample.edge_px = 0.0;
-        // For the same reason, no median at its depth edges.
+        // For the same reason, no median at its depth edges; and no sub-pixel refinement, which a prior of whole
+        // coarse pixels has no use for.
         coarse.post.wmedian.edge_px = 0.0;
+        coarse.post.subpixel.enabled = false;
         if self.same_segment_size {
             // A 1/F² of the pixels gets a 1/F² of the segments.
             coarse.post.sps.segments = params.post.sps.segments.div_ceil(self.factor * self.factor);
