@@ -235,7 +235,8 @@ impl Pass<'_> {
     }
 
     /// Left-right check (with `right`), fill, weighted median, planes, the median at depth edges and the sub-pixel
-    /// refinement on the left view's `disparity`; returns the map and the pixels that passed the check.
+    /// refinement (on the cost pair) on the left view's `disparity`; returns the map and the pixels that passed the
+    /// check.
     fn post_process(
         &self,
         mut disparity: DisparityMap,
@@ -286,10 +287,19 @@ impl Pass<'_> {
             });
         }
         if post.subpixel.enabled {
-            let right = &self.input.guide.right;
+            // On the pair the cost saw: under noise its views are the denoised ones, the better evidence (trainingQ
+            // noise σ 8 6.913 -> 6.897, clean the same).
+            let cost = self.input.cost_pair;
             disparity = t.time("subpixel", || {
-                post::subpixel::refine_subpixel(guide_left, right, &disparity, left_from, &post.subpixel)
+                let left = match left_from {
+                    0 => Cow::Borrowed(cost.left.as_ref()),
+                    from => Cow::Owned(cost.left.columns_from(from)),
+                };
+                post::subpixel::refine_subpixel(&left, &cost.right, &disparity, left_from, &post.subpixel)
             });
+            // As after the planes: never outside the range that was searched.
+            let top = (self.input.guide.ndisp - 1) as f32;
+            disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
         }
         (disparity, trusted)
     }
