@@ -9,9 +9,9 @@
 //! # Model
 //! Pixel p with the map's disparity D₀ takes the (2r + 1)² window of pixels q around it on its local plane,
 //! D(q) = D + s · (q − p), where s is the map's slope at p (central differences; 0 across a step of more than
-//! [`MAX_SLOPE`] px per px, a depth edge), and matches it against the right view at (q_x − D(q), q_y), linearly
+//! ½ px per px, a depth edge), and matches it against the right view at (q_x − D(q), q_y), linearly
 //! interpolated. Both views are first normalised locally, N = (I − μ) / √(σ² + ε²) over
-//! (2 [`NORM_RADIUS`] + 1)² pixels, so that a gain or offset between them cancels. With r = N_R − N_L at the
+//! 5 × 5 pixels, so that a gain or offset between them cancels. With r = N_R − N_L at the
 //! match and g = ∂N_R/∂x there, one Gauss–Newton step of least squares with a Gaussian prior N(D₀, s₀²) on D is
 //!
 //! ```text
@@ -20,7 +20,7 @@
 //!
 //! where σ_r² is the window's residual variance after its own least-squares step (at least the 8-bit
 //! quantisation's), so the prior weighs more where the images' evidence is noisy or absent, and s₀ is
-//! `prior_px`. [`STEPS`] steps, each at most [`MAX_STEP`] px, the total at most [`MAX_SHIFT`] px from D₀. Each
+//! `prior_px`. Two steps, each at most ¼ px, the total at most ½ px from D₀. Each
 //! pixel depends on the images and D₀ alone, so the result does not depend on the thread count.
 
 use rayon::prelude::*;
