@@ -48,8 +48,8 @@ const MAX_SHIFT: f32 = 0.5;
 const MAX_SLOPE: f32 = 0.5;
 
 /// Refines every finite disparity of `disp` (the left view's, columns from `left_from` of the right view's
-/// frame: 0 but in a tile) against the guidance views `left` and `right`, as the module doc describes. Invalid
-/// (non-finite) pixels stay as they are.
+/// frame: 0 but in a tile) against the views `left` and `right` (the pipeline passes the cost pair), as the
+/// module doc says. Invalid (non-finite) pixels stay as they are.
 ///
 /// # Panics
 /// If `left` and `disp` differ in size or `right` is shorter than `left`.
