@@ -275,10 +275,8 @@ impl Pass<'_> {
         }
         if post.sps.enabled {
             disparity = t.time("sps", || post::planes::fit_slanted_planes(guide_left, &disparity, &trusted, &post.sps));
-            // A plane extrapolated to a segment's far corner can leave the search range: the answer is never
-            // outside the range that was searched.
-            let top = (self.input.guide.ndisp - 1) as f32;
-            disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
+            // A plane extrapolated to a segment's far corner can leave the search range.
+            self.clamp_to_searched(&mut disparity);
         }
         if post.wmedian.enabled && post.wmedian.edge_px > 0.0 {
             disparity = t.time("edges", || {
@@ -297,11 +295,16 @@ impl Pass<'_> {
                 };
                 post::subpixel::refine_subpixel(&left, &cost.right, &disparity, left_from, &post.subpixel)
             });
-            // As after the planes: never outside the range that was searched.
-            let top = (self.input.guide.ndisp - 1) as f32;
-            disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
+            // Half a pixel past either end of the range, from a surface at its edge.
+            self.clamp_to_searched(&mut disparity);
         }
         (disparity, trusted)
+    }
+
+    /// Clamps every finite disparity to the range that was searched, 0..=ndisp − 1: the answer is never outside it.
+    fn clamp_to_searched(&self, disparity: &mut DisparityMap) {
+        let top = (self.input.guide.ndisp - 1) as f32;
+        disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
     }
 }
 

@@ -219,6 +219,20 @@ mod tests {
         (view(l), view(r))
     }
 
+    /// Mean and largest |out − truth| away from the borders (6 px; 12 on the left, where the right view's match
+    /// leaves the image).
+    fn interior_errors(out: &DisparityMap, truth: impl Fn(usize, usize) -> f32) -> (f32, f32) {
+        let (w, h) = out.dims();
+        let (mut worst, mut sum, mut n) = (0.0f32, 0.0f32, 0);
+        for y in 6..h - 6 {
+            for x in 12..w - 6 {
+                let e = (out.at(x, y) - truth(x, y)).abs();
+                (worst, sum, n) = (worst.max(e), sum + e, n + 1);
+            }
+        }
+        (sum / n as f32, worst)
+    }
+
     #[test]
     fn a_whole_pixel_answer_moves_to_the_true_sub_pixel_disparity() {
         let (w, h) = (60, 30);
@@ -226,14 +240,7 @@ mod tests {
             let (l, r) = textured(w, h, |_, _| truth);
             let disp = Plane::new(w, h, truth.round());
             let out = refine_subpixel(&l, &r, &disp, 0, &SubpixelParams::default());
-            let (mut worst, mut sum, mut n) = (0.0f32, 0.0f32, 0);
-            for y in 6..h - 6 {
-                for x in 12..w - 6 {
-                    let e = (out.at(x, y) - truth).abs();
-                    (worst, sum, n) = (worst.max(e), sum + e, n + 1);
-                }
-            }
-            let mean = sum / n as f32;
+            let (mean, worst) = interior_errors(&out, |_, _| truth);
             assert!(mean < 0.02 && worst < 0.08, "truth {truth}: mean error {mean} worst {worst}");
         }
     }
@@ -246,14 +253,7 @@ mod tests {
         // The answer a fifth of a pixel off everywhere, on the right slope.
         let disp = Plane::from_parts(w, h, (0..w * h).map(|i| plane((i % w) as f32, i / w) + 0.2).collect());
         let out = refine_subpixel(&l, &r, &disp, 0, &SubpixelParams::default());
-        let (mut worst, mut sum, mut n) = (0.0f32, 0.0f32, 0);
-        for y in 6..h - 6 {
-            for x in 12..w - 6 {
-                let e = (out.at(x, y) - plane(x as f32, y)).abs();
-                (worst, sum, n) = (worst.max(e), sum + e, n + 1);
-            }
-        }
-        let mean = sum / n as f32;
+        let (mean, worst) = interior_errors(&out, |x, y| plane(x as f32, y));
         assert!(mean < 0.02 && worst < 0.06, "mean error {mean} worst {worst}");
     }
 
