@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use crate::image::{DisparityMap, Plane, RgbImage};
 use crate::imgproc::filter::central_differences;
-use crate::imgproc::sample::{keys, sample_bilinear};
+use crate::imgproc::sample::{Bilinear, keys, sample_bilinear};
 use crate::params::VerticalParams;
 
 /// The side of the blocks that each give one measurement of the offset (px).
@@ -139,34 +139,59 @@ struct Measurement<'a> {
     trusted: &'a Plane<bool>,
 }
 
-/// The Lucas–Kanade step of the block with top-left (`bx`, `by`) at the current estimate `v`, or `None` where
-/// the block has too few usable pixels or no two-dimensional structure.
-fn block_step(m: &Measurement<'_>, v: &VerticalOffset, (bx, by): (usize, usize)) -> Option<BlockStep> {
+/// A block of the measurement: its top-left pixel, how many of its pixels are usable (passed the coarse check,
+/// matched inside the image) and the mean of their fit terms. Neither depends on the current estimate.
+struct Block {
+    origin: (usize, usize),
+    n: f64,
+    terms: [f64; TERMS],
+}
+
+impl Block {
+    /// The block with top-left (`bx`, `by`) of the `w × h` image.
+    fn new(m: &Measurement<'_>, (bx, by): (usize, usize)) -> Block {
+        let (w, h) = m.left.dims();
+        let (mut n, mut terms) = (0.0f64, [0.0f64; TERMS]);
+        for y in by..(by + BLOCK).min(h) {
+            for x in bx..(bx + BLOCK).min(w) {
+                if matched_column(m.disparity, m.trusted, y * w + x, w, 1).is_some() {
+                    n += 1.0;
+                    for (t, val) in terms.iter_mut().zip(VerticalOffset::terms(w, h, x as f64, y as f64)) {
+                        *t += val;
+                    }
+                }
+            }
+        }
+        terms.iter_mut().for_each(|t| *t /= n.max(1.0));
+        Block { origin: (bx, by), n, terms }
+    }
+}
+
+/// The Lucas–Kanade step of `block` at the current estimate `v`, or `None` where the block has too few usable
+/// pixels or no two-dimensional structure.
+fn block_step(m: &Measurement<'_>, v: &VerticalOffset, block: &Block) -> Option<BlockStep> {
     let Measurement { left, lgrad, right, rgrad, disparity, trusted } = *m;
     let (w, h) = left.dims();
+    if block.n < (BLOCK * BLOCK / 2) as f64 {
+        return None;
+    }
+    let (bx, by) = block.origin;
     let mut s = [0.0f64; 9]; // n, Σgx, Σgy, Σe, Σgx², Σgxgy, Σgy², Σgx·e, Σgy·e
-    let mut terms = [0.0f64; TERMS];
     for y in by..(by + BLOCK).min(h) {
         for x in bx..(bx + BLOCK).min(w) {
             let i = y * w + x;
             // One pixel of room for the gradients' neighbours.
             let Some(xr) = matched_column(disparity, trusted, i, w, 1) else { continue };
-            let yr = y as f64 + v.at(x as f64, y as f64);
-            let e = bilinear(right, xr, yr) - f64::from(left.data[i]);
-            let gx = 0.5 * (bilinear(&rgrad.0, xr, yr) + f64::from(lgrad.0.data[i]));
-            let gy = 0.5 * (bilinear(&rgrad.1, xr, yr) + f64::from(lgrad.1.data[i]));
+            let at = Bilinear::new(w, h, xr, y as f64 + v.at(x as f64, y as f64));
+            let e = at.sample(&right.data) - f64::from(left.data[i]);
+            let gx = 0.5 * (at.sample(&rgrad.0.data) + f64::from(lgrad.0.data[i]));
+            let gy = 0.5 * (at.sample(&rgrad.1.data) + f64::from(lgrad.1.data[i]));
             for (acc, val) in s.iter_mut().zip([1.0, gx, gy, e, gx * gx, gx * gy, gy * gy, gx * e, gy * e]) {
                 *acc += val;
-            }
-            for (t, val) in terms.iter_mut().zip(VerticalOffset::terms(w, h, x as f64, y as f64)) {
-                *t += val;
             }
         }
     }
     let n = s[0];
-    if n < (BLOCK * BLOCK / 2) as f64 {
-        return None;
-    }
     // With a brightness offset per block as a third unknown, the normal equations of (du, dv) are those of the
     // centred sums.
     let [_, sx, sy, se, sxx, sxy, syy, sxe, sye] = s;
@@ -180,8 +205,7 @@ fn block_step(m: &Measurement<'_>, v: &VerticalOffset, (bx, by): (usize, usize))
     }
     // gx·du + gy·dv = −e in the least-squares sense.
     let dv = -(sxx * sye - sxy * sxe) / det;
-    terms.iter_mut().for_each(|t| *t /= n);
-    Some(BlockStep { terms, dv, structure: (smaller / n).min(100.0) })
+    Some(BlockStep { terms: block.terms, dv, structure: (smaller / n).min(100.0) })
 }
 
 /// Solves the weighted least-squares fit of `targets` on `rows` (normal equations, Gaussian elimination with
@@ -232,13 +256,17 @@ pub(crate) fn estimate(
     }
     let (lgrad, rgrad) = rayon::join(|| central_differences(left), || central_differences(right));
     let measurement = Measurement { left, lgrad: &lgrad, right, rgrad: &rgrad, disparity, trusted };
-    let blocks: Vec<(usize, usize)> =
-        (0..h / BLOCK).flat_map(|j| (0..w / BLOCK).map(move |i| (i * BLOCK, j * BLOCK))).collect();
+    let blocks: Vec<Block> = (0..h / BLOCK)
+        .flat_map(|j| (0..w / BLOCK).map(move |i| (i * BLOCK, j * BLOCK)))
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|origin| Block::new(&measurement, origin))
+        .collect();
     let mut v = VerticalOffset::zero(w, h);
     // The Lucas–Kanade steps converge from within about a pixel: start from the best whole-pixel shift.
     v.coef[0] = f64::from(best_whole_shift(left, right, disparity, trusted));
     for _ in 0..ITERATIONS {
-        let steps: Vec<BlockStep> = blocks.par_iter().filter_map(|&b| block_step(&measurement, &v, b)).collect();
+        let steps: Vec<BlockStep> = blocks.par_iter().filter_map(|b| block_step(&measurement, &v, b)).collect();
         if steps.len() < 20 * TERMS {
             return None;
         }

@@ -2,15 +2,41 @@
 
 /// Bilinear sample of a row-major `w × h` plane at (x, y), clamped to the image.
 pub(crate) fn sample_bilinear(data: &[f32], w: usize, h: usize, x: f64, y: f64) -> f64 {
-    let x = x.clamp(0.0, (w - 1) as f64);
-    let y = y.clamp(0.0, (h - 1) as f64);
-    let (x0, y0) = ((x.floor() as usize).min(w.saturating_sub(2)), (y.floor() as usize).min(h.saturating_sub(2)));
-    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
-    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let at = |x: usize, y: usize| f64::from(data[y * w + x]);
-    let top = at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx;
-    let bottom = at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx;
-    top * (1.0 - fy) + bottom * fy
+    Bilinear::new(w, h, x, y).sample(data)
+}
+
+/// Where and with which weights a bilinear sample at one position reads a `w × h` plane: computed once, applied to
+/// several planes of that size (a view and its gradients) at the cost of the four reads.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Bilinear {
+    /// Index of the top-left pixel, and the offsets of the right and lower neighbours (0 on a one-pixel side).
+    at: usize,
+    right: usize,
+    down: usize,
+    fx: f64,
+    fy: f64,
+}
+
+impl Bilinear {
+    /// The sample at (x, y) of a `w × h` plane, clamped to the image.
+    pub(crate) fn new(w: usize, h: usize, x: f64, y: f64) -> Self {
+        let x = x.clamp(0.0, (w - 1) as f64);
+        let y = y.clamp(0.0, (h - 1) as f64);
+        // (x, y ≥ 0 after the clamp, so the conversion is the floor.)
+        let (x0, y0) = ((x as usize).min(w.saturating_sub(2)), (y as usize).min(h.saturating_sub(2)));
+        let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+        let (right, down) = (usize::from(x0 + 1 < w), if y0 + 1 < h { w } else { 0 });
+        Bilinear { at: y0 * w + x0, right, down, fx, fy }
+    }
+
+    /// The sample of `data` (a plane of the size given to [`Bilinear::new`]).
+    pub(crate) fn sample(&self, data: &[f32]) -> f64 {
+        let Bilinear { at, right, down, fx, fy } = *self;
+        let px = |i: usize| f64::from(data[i]);
+        let top = px(at) * (1.0 - fx) + px(at + right) * fx;
+        let bottom = px(at + down) * (1.0 - fx) + px(at + down + right) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
 }
 
 /// Keys' cubic convolution kernel (a = −½).
@@ -68,6 +94,21 @@ pub(crate) fn remap_bilinear(src: &[f32], w: usize, h: usize, map_x: &[f32], map
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bilinear_interpolates_inside_and_clamps_at_the_borders() {
+        // 3 × 2: f(x, y) = 10x + 100y, which bilinear interpolation reproduces exactly inside.
+        let data = [0.0, 10.0, 20.0, 100.0, 110.0, 120.0];
+        for (x, y, want) in
+            [(0.5, 0.5, 55.0), (1.25, 0.0, 12.5), (2.0, 1.0, 120.0), (-3.0, 0.25, 25.0), (9.0, 7.0, 120.0)]
+        {
+            assert_eq!(sample_bilinear(&data, 3, 2, x, y), want, "at ({x}, {y})");
+        }
+        // One-pixel sides: a column and a row.
+        assert_eq!(sample_bilinear(&[4.0, 8.0], 1, 2, 0.7, 0.5), 6.0);
+        assert_eq!(sample_bilinear(&[4.0, 8.0], 2, 1, 0.5, 0.7), 6.0);
+        assert_eq!(sample_bilinear(&[4.0], 1, 1, 0.3, -2.0), 4.0);
+    }
 
     #[test]
     fn remap_at_whole_pixels_copies_and_halfway_averages() {
