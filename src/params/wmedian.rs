@@ -21,11 +21,29 @@ pub struct WmedianParams {
     /// disparity (a depth edge, where a window cost puts the foreground's disparity on the background's first
     /// pixels); 0 turns it off.
     pub edge_px: f32,
+    /// The second run also filters the pixels within this many pixels of such an edge pixel (Chebyshev), and the
+    /// pixels the left-right check rejected (whose values the planes extrapolated).
+    pub edge_band: usize,
+    /// Window radius of the second run in pixels: smaller than the first run's, which must reach across a whole
+    /// occlusion.
+    pub edge_radius: usize,
+    /// Colour σ of the weights in the second run (RGB units): sharper than the first run's, as the side of an edge
+    /// a pixel belongs to is a question of its colour (the upsampling's edge rule uses the same σ).
+    pub edge_sigma_rgb: f32,
 }
 
 impl Default for WmedianParams {
     fn default() -> Self {
-        WmedianParams { enabled: true, radius: 9, sigma_xy: 9.0, sigma_rgb: 20.0, edge_px: 2.0 }
+        WmedianParams {
+            enabled: true,
+            radius: 9,
+            sigma_xy: 9.0,
+            sigma_rgb: 20.0,
+            edge_px: 2.0,
+            edge_band: 1,
+            edge_radius: 5,
+            edge_sigma_rgb: 10.0,
+        }
     }
 }
 
@@ -40,6 +58,13 @@ impl WmedianParams {
         }
         check_positive("post.wmedian.sigma_xy", self.sigma_xy)?;
         check_positive("post.wmedian.sigma_rgb", self.sigma_rgb)?;
+        if self.edge_radius == 0 || self.edge_radius > 64 {
+            return Err(Error::param("post.wmedian.edge_radius", self.edge_radius, "1 to 64"));
+        }
+        if self.edge_band > 16 {
+            return Err(Error::param("post.wmedian.edge_band", self.edge_band, "0 to 16"));
+        }
+        check_positive("post.wmedian.edge_sigma_rgb", self.edge_sigma_rgb)?;
         if !(self.edge_px >= 0.0 && self.edge_px.is_finite()) {
             return Err(Error::param("post.wmedian.edge_px", self.edge_px, "0 (off) or a positive number of pixels"));
         }

@@ -280,8 +280,11 @@ impl Pass<'_> {
         }
         if post.wmedian.enabled && post.wmedian.edge_px > 0.0 {
             disparity = t.time("edges", || {
-                let targets = post::wmedian::depth_edges(&disparity, post.wmedian.edge_px);
-                post::wmedian::weighted_median(&disparity, guide_left, &targets, &post.wmedian)
+                let wm = &post.wmedian;
+                let targets = post::wmedian::edge_targets(&disparity, wm.edge_px, wm.edge_band, &trusted);
+                let at_edges =
+                    params::WmedianParams { radius: wm.edge_radius, sigma_rgb: wm.edge_sigma_rgb, ..wm.clone() };
+                post::wmedian::weighted_median(&disparity, guide_left, &targets, &at_edges)
             });
         }
         if post.subpixel.enabled {

@@ -3,8 +3,9 @@
 //! The paper applies the filter after occlusion filling, and only to the pixels the left-right check rejected
 //! (Mozerov & van de Weijer apply it everywhere, which is slower and blurs good pixels). Ours: the default runs it
 //! once more after the planes at [`depth_edges`] (`post.wmedian.edge_px`), where a window cost puts the foreground's
-//! disparity on the background's first pixels and the two views agree on it (docs/tuning-log.md, "Accuracy III: the
-//! median at depth edges").
+//! disparity on the background's first pixels and the two views agree on it, and at the rejected pixels the planes
+//! extrapolated ([`edge_targets`]), with a smaller window and sharper colour weights (docs/tuning-log.md, "Accuracy
+//! III: the median at depth edges" and "Accuracy III: the second median").
 //!
 //! Each target pixel `i` takes the weighted median of the *finite* disparities `d_j` in its (2r+1)² window (the window
 //! is clipped at the image border; the pixel itself is included when finite), with bilateral weights
@@ -330,6 +331,20 @@ pub fn depth_edges(disp: &DisparityMap, jump: f32) -> Plane<bool> {
     Plane::from_parts(disp.width, disp.height, lo.data.iter().zip(&hi.data).map(|(lo, hi)| hi - lo > jump).collect())
 }
 
+/// The targets of the second run after the planes (`post.wmedian.edge_px` and the keys after it): the
+/// [`depth_edges`] of `disp` at `jump` and the pixels not `trusted` (the left-right check rejected them, and the
+/// planes extrapolated their values), both widened by `band` px (Chebyshev).
+pub fn edge_targets(disp: &DisparityMap, jump: f32, band: usize, trusted: &Plane<bool>) -> Plane<bool> {
+    assert_eq!(disp.dims(), trusted.dims(), "disparity map and trusted mask differ in size");
+    let (w, h) = disp.dims();
+    let seeds: Vec<bool> = depth_edges(disp, jump).data.iter().zip(&trusted.data).map(|(&e, &ok)| e || !ok).collect();
+    if band == 0 {
+        return Plane::from_parts(w, h, seeds);
+    }
+    let marks = Plane::from_parts(w, h, seeds.iter().map(|&s| f32::from(u8::from(s))).collect());
+    Plane::from_parts(w, h, window_extreme(&marks, band, 0.0, f32::max).data.iter().map(|&m| m > 0.5).collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -531,7 +546,14 @@ mod tests {
         let mut targets = Plane::new(5, 5, false);
         targets.data[12] = true;
         targets.data[11] = true;
-        let p = WmedianParams { enabled: true, radius: 2, sigma_xy: 9.0, sigma_rgb: 20.0, edge_px: 0.0 };
+        let p = WmedianParams {
+            enabled: true,
+            radius: 2,
+            sigma_xy: 9.0,
+            sigma_rgb: 20.0,
+            edge_px: 0.0,
+            ..Default::default()
+        };
         let out = weighted_median(&disp, &img, &targets, &p);
         let mut expected = disp.data.clone();
         expected[12] = 1.0;
@@ -560,7 +582,14 @@ mod tests {
         let mut targets = Plane::new(5, 5, false);
         targets.data[12] = true; // (2, 2): inf itself, blue; its 3×3 window has only the red 1.0 column finite
         targets.data[13] = true; // (3, 2): window radius 1 has only inf → stays inf
-        let p = WmedianParams { enabled: true, radius: 1, sigma_xy: 9.0, sigma_rgb: 20.0, edge_px: 0.0 };
+        let p = WmedianParams {
+            enabled: true,
+            radius: 1,
+            sigma_xy: 9.0,
+            sigma_rgb: 20.0,
+            edge_px: 0.0,
+            ..Default::default()
+        };
         let out = weighted_median(&disp, &img, &targets, &p);
         let expected = &disp.data;
         assert_eq!(out.data[..12], expected[..12]);
@@ -600,7 +629,14 @@ mod tests {
     fn matches_the_naive_reference() {
         let (disp, img, targets) = random_scene(23, 17, 7);
         for (radius, sx, sc) in [(1, 1.0, 10.0), (3, 2.0, 30.0), (5, 9.0, 20.0)] {
-            let p = WmedianParams { enabled: true, radius, sigma_xy: sx, sigma_rgb: sc, edge_px: 0.0 };
+            let p = WmedianParams {
+                enabled: true,
+                radius,
+                sigma_xy: sx,
+                sigma_rgb: sc,
+                edge_px: 0.0,
+                ..Default::default()
+            };
             let out = weighted_median(&disp, &img, &targets, &p);
             let expected = reference_filter(&disp, &img, &targets, &p);
             // Exact equality: the weights differ only by rounding (f32 vs f64 and the e_min shift), which moves
@@ -613,7 +649,14 @@ mod tests {
     #[test]
     fn same_output_for_one_and_two_threads() {
         let (disp, img, targets) = random_scene(64, 48, 11);
-        let p = WmedianParams { enabled: true, radius: 4, sigma_xy: 4.0, sigma_rgb: 20.0, edge_px: 0.0 };
+        let p = WmedianParams {
+            enabled: true,
+            radius: 4,
+            sigma_xy: 4.0,
+            sigma_rgb: 20.0,
+            edge_px: 0.0,
+            ..Default::default()
+        };
         let run = |n| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
@@ -681,6 +724,23 @@ mod tests {
     }
 
     #[test]
+    fn the_edge_targets_widen_the_edges_and_the_rejected_pixels() {
+        // A step from 5 to 20 between x = 7 and 8, one rejected pixel at (2, 4).
+        let (w, h) = (16, 9);
+        let disp = Plane::from_parts(w, h, (0..w * h).map(|i| if i % w >= 8 { 20.0 } else { 5.0 }).collect());
+        let mut trusted = Plane::new(w, h, true);
+        trusted.data[4 * w + 2] = false;
+        let (narrow, wide) = (edge_targets(&disp, 2.0, 0, &trusted), edge_targets(&disp, 2.0, 1, &trusted));
+        for y in 0..h {
+            for x in 0..w {
+                let want_narrow = (7..=8).contains(&x) || (x, y) == (2, 4);
+                let want_wide = (6..=9).contains(&x) || (x.abs_diff(2) <= 1 && y.abs_diff(4) <= 1);
+                assert_eq!((narrow.at(x, y), wide.at(x, y)), (want_narrow, want_wide), "({x}, {y})");
+            }
+        }
+    }
+
+    #[test]
     fn the_median_at_depth_edges_undoes_fattening() {
         // Background (disparity 5, grey) on the left, foreground (20, red) from x = 10; the map puts the foreground's
         // disparity on the background's last column, as a window cost does (one pass undoes one column).
@@ -718,6 +778,8 @@ mod tests {
         assert!(p.validate().unwrap_err().to_string().contains("post.wmedian.radius"));
         let p = WmedianParams { sigma_rgb: 0.0, ..Default::default() };
         assert!(p.validate().unwrap_err().to_string().contains("post.wmedian.sigma_rgb"));
+        let p = WmedianParams { edge_sigma_rgb: -2.0, ..Default::default() };
+        assert!(p.validate().unwrap_err().to_string().contains("post.wmedian.edge_sigma_rgb"));
         WmedianParams::default().validate().unwrap();
     }
 }
