@@ -27,8 +27,10 @@ pub struct WmedianParams {
     /// Window radius of the second run in pixels: smaller than the first run's, which must reach across a whole
     /// occlusion.
     pub edge_radius: usize,
-    /// Colour σ of the weights in the second run (RGB units): sharper than the first run's, as the side of an edge
-    /// a pixel belongs to is a question of its colour (the upsampling's edge rule uses the same σ).
+    /// Colour σ of the weights in the second run (RGB units) on noiseless views: sharper than the first run's, as
+    /// the side of an edge a pixel belongs to is a question of its colour (the upsampling's edge rule uses the
+    /// same σ). With the measured noise σn it widens to √(σ² + 3σn²): noise adds 6σn² to the expected squared
+    /// distance of two pixels of one colour.
     pub edge_sigma_rgb: f32,
 }
 

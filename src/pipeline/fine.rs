@@ -42,6 +42,9 @@ pub(crate) struct FineInput<'a> {
     pub views: Option<FrameViews>,
     /// Whether to compute the confidence map ([`PipelineOutput::confidence`]).
     pub confidence: bool,
+    /// The guidance pair's measured noise σn (the noisier view's, grey levels; 0 when conditioning is off): the
+    /// second median's colour weight widens with it.
+    pub noise: f32,
 }
 
 /// How a frame of a sequence runs its two views: its prior has placed each pixel, so fewer mean-field iterations
@@ -282,8 +285,10 @@ impl Pass<'_> {
             disparity = t.time("edges", || {
                 let wm = &post.wmedian;
                 let targets = post::wmedian::edge_targets(&disparity, wm.edge_px, wm.edge_band, &trusted);
-                let at_edges =
-                    params::WmedianParams { radius: wm.edge_radius, sigma_rgb: wm.edge_sigma_rgb, ..wm.clone() };
+                // Noise adds 6σn² to the expected squared RGB distance of two pixels of one colour: the σ² that keeps
+                // their weight is at least 3σn² more.
+                let sigma_rgb = (wm.edge_sigma_rgb.powi(2) + 3.0 * self.input.noise.powi(2)).sqrt();
+                let at_edges = params::WmedianParams { radius: wm.edge_radius, sigma_rgb, ..wm.clone() };
                 post::wmedian::weighted_median(&disparity, guide_left, &targets, &at_edges)
             });
         }

@@ -164,6 +164,7 @@ fn fine_at_full_resolution(
         cost_pair,
         cost_params: &input.cost_params,
         grad_norm_mean: input.grad_norm_mean,
+        noise: input.noise(),
         prior,
         left_from: 0,
         views,

@@ -128,6 +128,11 @@ impl<'a> Prepared<'a> {
         })
     }
 
+    /// The noisier view's measured σn ([`condition::PairStats::sigma`]; 0 when conditioning is off).
+    pub(crate) fn noise(&self) -> f32 {
+        self.conditioned.as_ref().map_or(0.0, |cond| cond.stats.sigma())
+    }
+
     /// The noise ceiling of a level reduced `factor`× from this one (the `noise_ceiling` of
     /// [`condition::condition_pair`]): each view's measured σn / `factor`, what an F × F box average leaves of
     /// independent noise (`None` when conditioning is off).
