@@ -50,6 +50,14 @@ impl Default for WmedianParams {
 }
 
 impl WmedianParams {
+    /// The filter's parameters in the second run, after the planes, on views with measured noise `noise` (σn, grey
+    /// levels): `edge_radius`, and `edge_sigma_rgb` widened to √(σ² + 3σn²). Noise adds 6σn² to the expected squared
+    /// RGB distance of two pixels of one colour; the σ² that keeps their weight is at least 3σn² more.
+    pub fn second_run(&self, noise: f32) -> WmedianParams {
+        let sigma_rgb = (self.edge_sigma_rgb.powi(2) + 3.0 * noise.powi(2)).sqrt();
+        WmedianParams { radius: self.edge_radius, sigma_rgb, ..self.clone() }
+    }
+
     /// Checks ranges.
     ///
     /// # Errors

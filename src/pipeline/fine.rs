@@ -285,11 +285,7 @@ impl Pass<'_> {
             disparity = t.time("edges", || {
                 let wm = &post.wmedian;
                 let targets = post::wmedian::edge_targets(&disparity, wm.edge_px, wm.edge_band, &trusted);
-                // Noise adds 6σn² to the expected squared RGB distance of two pixels of one colour: the σ² that keeps
-                // their weight is at least 3σn² more.
-                let sigma_rgb = (wm.edge_sigma_rgb.powi(2) + 3.0 * self.input.noise.powi(2)).sqrt();
-                let at_edges = params::WmedianParams { radius: wm.edge_radius, sigma_rgb, ..wm.clone() };
-                post::wmedian::weighted_median(&disparity, guide_left, &targets, &at_edges)
+                post::wmedian::weighted_median(&disparity, guide_left, &targets, &wm.second_run(self.input.noise))
             });
         }
         if post.subpixel.enabled {

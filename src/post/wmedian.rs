@@ -769,6 +769,15 @@ mod tests {
     }
 
     #[test]
+    fn the_second_run_widens_its_colour_weight_with_the_noise() {
+        let p = WmedianParams::default();
+        let clean = p.second_run(0.0);
+        assert_eq!((clean.radius, clean.sigma_rgb, clean.sigma_xy), (p.edge_radius, p.edge_sigma_rgb, p.sigma_xy));
+        // σn 8: √(10² + 3 · 8²) = √292.
+        assert!((p.second_run(8.0).sigma_rgb - 292f32.sqrt()).abs() < 1e-4);
+    }
+
+    #[test]
     fn validate_names_keys() {
         let p = WmedianParams { edge_px: -1.0, ..Default::default() };
         assert!(p.validate().unwrap_err().to_string().contains("post.wmedian.edge_px"));
