@@ -171,6 +171,15 @@ fn stages(c: &mut Criterion) {
     g.bench_function(BenchmarkId::new("slanted planes", &name), |b| {
         b.iter(|| black_box(post::planes::fit_slanted_planes(pair.left(), &median, &trusted, &sps)))
     });
+    // The second median, after the planes: at depth edges and the rejected pixels, with its own window and weight.
+    let planes = post::planes::fit_slanted_planes(pair.left(), &median, &trusted, &sps);
+    let edges = post::wmedian::edge_targets(&planes, wm.edge_px, wm.edge_band, &trusted);
+    let share = 100.0 * edges.data().iter().filter(|t| **t).count() as f64 / edges.data().len() as f64;
+    let second = wm.second_run(0.0);
+    g.sample_size(20);
+    g.bench_function(BenchmarkId::new(format!("median at edges ({share:.1}% targets)"), &name), |b| {
+        b.iter(|| black_box(post::wmedian::weighted_median(&planes, pair.left(), &edges, &second)))
+    });
     g.finish();
 
     let mut g = c.benchmark_group("end-to-end");

@@ -19,10 +19,12 @@
 //! Per target pixel, O(n) for the n ≤ (2r+1)² window values, so the stage is O(T·r²) for T targets:
 //! 1. gather the finite values and their exponents (branch-free when a window row has no `inf`);
 //! 2. compute the weights and test the previous result on the row as a guess (m is the lower weighted median iff
-//!    Σ_{v<m} w < ½ΣW ≤ Σ_{v≤m} w) — neighbouring targets mostly share their median;
+//!    Σ_{v<m} w < ½ΣW ≤ Σ_{v≤m} w) — neighbouring targets mostly share their median (in the first run; after the
+//!    planes the values vary continuously and the guess rarely holds);
 //! 3. otherwise count the weights into 128 equal-width value bins (ordered, since the bin index is monotone in the
-//!    value), find the bin holding the median, and run a weighted quickselect (three-way partition,
-//!    median-of-three pivot) on that bin's values only.
+//!    value), find the bin holding the median — summing and clearing only the bins that hold weight, a window
+//!    of 121 values touches few of them — and run a weighted quickselect (three-way partition, median-of-three
+//!    pivot) on that bin's values only, gathered by a branch-free compaction.
 //!
 //! The weights use `crate::fastmath::exp_nonpositive` (relative error < 5e-7 against `f32::exp`, tested) so the loop
 //! vectorises; the reductions (min, max, sums) run in independent lanes combined in a fixed order, so that they
@@ -171,6 +173,37 @@ fn filter_row<'c>(ctx: &RowContext<'c>, scratch: &mut Scratch, y: usize, row: &m
 
 /// Number of value bins [`Scratch::median`] uses to narrow the search.
 const BINS: usize = 128;
+const _: () = assert!(BINS <= 256 && BINS % 64 == 0, "bin indices are stored as u8, the set of bins in u64 words");
+
+/// A set of bin indices below [`BINS`], one bit each, listed in increasing order.
+#[derive(Clone, Copy, Default)]
+struct Occupancy([u64; BINS / 64]);
+
+impl Occupancy {
+    /// The set of these indices.
+    fn of(indices: &[u8]) -> Self {
+        let mut words = [0u64; BINS / 64];
+        for &b in indices {
+            for (i, word) in words.iter_mut().enumerate() {
+                *word |= u64::from(usize::from(b) / 64 == i) << (b % 64);
+            }
+        }
+        Occupancy(words)
+    }
+
+    /// The members in increasing order.
+    fn iter(self) -> impl Iterator<Item = usize> {
+        self.0.into_iter().enumerate().flat_map(|(i, mut word)| {
+            std::iter::from_fn(move || {
+                (word != 0).then(|| {
+                    let bit = word.trailing_zeros() as usize;
+                    word &= word - 1;
+                    64 * i + bit
+                })
+            })
+        })
+    }
+}
 
 /// Per-thread buffers of the filter: the window's finite values and their weights (structure of arrays, so the
 /// weight and sum loops vectorise).
@@ -181,7 +214,11 @@ struct Scratch {
     wts: Vec<f32>,
     /// Weight per value bin, four lanes per bin: `bins[4 * bin + lane]`.
     bins: Vec<f64>,
-    /// The (value, weight) pairs of the bin that holds the median.
+    /// The bins that hold weight; all others are zero.
+    occupied: Occupancy,
+    /// The bin of each value (an index below [`BINS`]).
+    bin_of: Vec<u8>,
+    /// The (value, weight) pairs of the bin that holds the median (first), and scratch space after them.
     in_bin: Vec<(f32, f32)>,
 }
 
@@ -191,6 +228,8 @@ impl Scratch {
             vals: Vec::with_capacity(capacity),
             wts: Vec::with_capacity(capacity),
             bins: vec![0.0; 4 * BINS],
+            occupied: Occupancy::default(),
+            bin_of: Vec::with_capacity(capacity),
             in_bin: Vec::with_capacity(capacity),
         }
     }
@@ -242,32 +281,53 @@ impl Scratch {
                 return m;
             }
         }
+        // The bin index, clamped in f32 so that the loop vectorises (same index as truncating, then clamping).
         let scale = BINS as f32 / (v_max - v_min);
-        let bin = |v: f32| (((v - v_min) * scale) as usize).min(BINS - 1);
-        self.bins.fill(0.0);
-        for (k, (&v, &wt)) in self.vals.iter().zip(&self.wts).enumerate() {
-            self.bins[bin(v) * 4 + (k & 3)] += f64::from(wt);
+        let last = (BINS - 1) as f32;
+        self.bin_of.resize(self.vals.len(), 0);
+        for (b, &v) in self.bin_of.iter_mut().zip(&self.vals) {
+            *b = ((v - v_min) * scale).min(last) as u8;
         }
-        let bin_weight = |lanes: &[f64]| (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
-        let total: f64 = self.bins.chunks_exact(4).map(bin_weight).sum();
+        // Only the bins the last window used hold weight: clear those.
+        for b in self.occupied.iter() {
+            self.bins[4 * b..4 * b + 4].fill(0.0);
+        }
+        self.occupied = Occupancy::of(&self.bin_of);
+        for (k, (&b, &wt)) in self.bin_of.iter().zip(&self.wts).enumerate() {
+            self.bins[usize::from(b) * 4 + (k & 3)] += f64::from(wt);
+        }
+        // The sums run over the occupied bins only, in bin order: adding an empty bin's +0 changes no sum, and an
+        // empty bin is never where the cumulative weight first reaches half (it reached it at an earlier bin).
+        let bin_weight = |b: usize| {
+            let lanes = &self.bins[4 * b..4 * b + 4];
+            (lanes[0] + lanes[1]) + (lanes[2] + lanes[3])
+        };
+        let total: f64 = self.occupied.iter().map(bin_weight).sum();
         let half = 0.5 * total;
         let mut below = 0.0f64;
         let mut k = BINS - 1;
-        for (b, lanes) in self.bins.chunks_exact(4).enumerate() {
-            let bw = bin_weight(lanes);
+        for b in self.occupied.iter() {
+            let bw = bin_weight(b);
             if below + bw >= half {
                 k = b;
                 break;
             }
             below += bw;
         }
-        self.in_bin.clear();
-        self.in_bin.extend(self.vals.iter().zip(&self.wts).map(|(&v, &wt)| (v, wt)).filter(|&(v, _)| bin(v) == k));
-        if self.in_bin.is_empty() {
+        // The bin's items, in their window order, by a branch-free compaction: each item is written to the next
+        // free place, which advances only when the item is in the bin.
+        let k = k as u8;
+        self.in_bin.resize(self.vals.len(), (0.0, 0.0));
+        let mut len = 0;
+        for ((&v, &wt), &b) in self.vals.iter().zip(&self.wts).zip(&self.bin_of) {
+            self.in_bin[len] = (v, wt);
+            len += usize::from(b == k);
+        }
+        if len == 0 {
             // Only reachable through rounding when the last bins are empty: take the largest value.
             return v_max;
         }
-        weighted_lower_median(&mut self.in_bin, (half - below).max(f64::MIN_POSITIVE))
+        weighted_lower_median(&mut self.in_bin[..len], (half - below).max(f64::MIN_POSITIVE))
     }
 }
 
@@ -439,8 +499,18 @@ mod tests {
 
     /// [`Scratch::median`] on (value, weight) pairs, passed in as exponents −ln w. Returns the median and the
     /// (value, weight) pairs it actually used (exp(ln w) need not give w back exactly), for the reference.
+    /// The median of `items` through [`Scratch::median`] with no guess, on a scratch that earlier windows used (as
+    /// on a row: the bins they filled must not leak into this one).
     fn binned_median(items: &[(f32, f32)]) -> (f32, Vec<(f32, f32)>) {
-        let mut s = Scratch::new(items.len());
+        thread_local! {
+            static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::new(0));
+        }
+        SCRATCH.with_borrow_mut(|s| binned_median_in(s, items))
+    }
+
+    fn binned_median_in(s: &mut Scratch, items: &[(f32, f32)]) -> (f32, Vec<(f32, f32)>) {
+        s.vals.clear();
+        s.wts.clear();
         s.vals.extend(items.iter().map(|it| it.0));
         s.wts.extend(items.iter().map(|&(_, w)| if w > 0.0 { -w.ln() } else { 1e3 }));
         let e_min = s.wts.iter().copied().fold(f32::INFINITY, f32::min);
@@ -479,6 +549,15 @@ mod tests {
         assert_eq!(binned_median(&[(4.0, 1.0), (1.0, 1.0), (4.0, 1.0), (1.0, 1.0)]).0, 1.0);
         assert_eq!(binned_median(&[(4.0, 1.0), (1.0, 1.0), (4.0, 1.0), (1.0, 0.5)]).0, 4.0);
         assert_eq!(binned_median(&[(2.0, 1.0)]).0, 2.0);
+    }
+
+    #[test]
+    fn occupancy_lists_each_bin_once_in_order() {
+        let set = Occupancy::of(&[127, 3, 64, 3, 0, 63, 65]);
+        assert_eq!(set.iter().collect::<Vec<_>>(), [0, 3, 63, 64, 65, 127]);
+        assert_eq!(Occupancy::of(&[]).iter().count(), 0);
+        let all: Vec<u8> = (0..BINS as u8).rev().collect();
+        assert!(Occupancy::of(&all).iter().eq(0..BINS));
     }
 
     #[test]
