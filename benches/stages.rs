@@ -180,6 +180,12 @@ fn stages(c: &mut Criterion) {
     g.bench_function(BenchmarkId::new(format!("median at edges ({share:.1}% targets)"), &name), |b| {
         b.iter(|| black_box(post::wmedian::weighted_median(&planes, pair.left(), &edges, &second)))
     });
+    // The sub-pixel refinement of the final map, on the views themselves (the pipeline passes the cost pair).
+    let last = post::wmedian::weighted_median(&planes, pair.left(), &edges, &second);
+    let refine = &params.post.subpixel;
+    g.bench_function(BenchmarkId::new("sub-pixel refinement", &name), |b| {
+        b.iter(|| black_box(post::subpixel::refine_subpixel(pair.left(), pair.right(), &last, 0, refine)))
+    });
     g.finish();
 
     let mut g = c.benchmark_group("end-to-end");

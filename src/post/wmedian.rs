@@ -173,7 +173,8 @@ fn filter_row<'c>(ctx: &RowContext<'c>, scratch: &mut Scratch, y: usize, row: &m
 
 /// Number of value bins [`Scratch::median`] uses to narrow the search.
 const BINS: usize = 128;
-const _: () = assert!(BINS <= 256 && BINS.is_multiple_of(64), "bin indices are stored as u8, the set of bins in u64 words");
+const _: () =
+    assert!(BINS <= 256 && BINS.is_multiple_of(64), "bin indices are stored as u8, the set of bins in u64 words");
 
 /// A set of bin indices below [`BINS`], one bit each, listed in increasing order.
 #[derive(Clone, Copy, Default)]
