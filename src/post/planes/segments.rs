@@ -62,6 +62,13 @@ pub(super) fn sweep(scene: &Scene, labels: &mut [u32], models: &[SegModel], pos_
                 for x in (px..w).step_by(3) {
                     let i = y * w + x;
                     let s = cur[i];
+                    // Most pixels are inside their segment: all four neighbours in it, nothing to consider.
+                    if y > 0 && x > 0 && x + 1 < w && y + 1 < h {
+                        let same = |n: usize| cur[n] == s;
+                        if same(i - w) && same(i - 1) && same(i + 1) && same(i + w) {
+                            continue;
+                        }
+                    }
                     let mut cand = [u32::MAX; 4];
                     let mut nc = 0;
                     for n in [
