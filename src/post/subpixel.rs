@@ -214,18 +214,8 @@ impl Window<'_> {
                         let xr = at_x[l] + (1.0 - sx[l]) * dx;
                         // Outside the right view a lane adds nothing (adding +0 leaves a sum as it is).
                         let inside = (0.0..=top).contains(&xr);
-                        let xr = xr.clamp(0.0, top);
-                        let x0 = (xr as u32 as usize).min(wr - 2);
-                        let f = xr - x0 as u32 as f32;
-                        let ([n0, g0], [n1, g1]) = (right[x0], right[x0 + 1]);
-                        let res = n0 + f * (n1 - n0) - nl[l + k];
-                        let g = g0 + f * (g1 - g0);
-                        let keep = |v: f32| if inside { v } else { 0.0 };
-                        sum.num += keep(g * res);
-                        sum.den += keep(g * g);
-                        sum.rr += keep(res * res);
-                        sum.floor += keep(iv[l + k]);
-                        sum.n += usize::from(inside);
+                        let (res, g) = match_at(right, xr.clamp(0.0, top), nl[l + k]);
+                        sum.add(res, g, iv[l + k], inside);
                     }
                 }
             }
@@ -263,19 +253,8 @@ impl Window<'_> {
                     if !(0.0..=top).contains(&xr) {
                         continue;
                     }
-                    let x0 = (xr as u32 as usize).min(wr - 2);
-                    let f = xr - x0 as u32 as f32;
-                    let ([n0, g0], [n1, g1]) = (right[x0], right[x0 + 1]);
-                    let res = n0 + f * (n1 - n0) - l;
-                    // Central differences, interpolated: smoother under noise than the interpolant's own slope
-                    // (which would make each step exact on clean views; on trainingQ the two differ by 0.1 %, on
-                    // its noise σ 8 copy the central differences are 0.6 % better).
-                    let g = g0 + f * (g1 - g0);
-                    sum.num += g * res;
-                    sum.den += g * g;
-                    sum.rr += res * res;
-                    sum.floor += v;
-                    sum.n += 1;
+                    let (res, g) = match_at(right, xr, l);
+                    sum.add(res, g, v, true);
                 }
             }
             match sum.step(d, d0, prior) {
@@ -285,6 +264,19 @@ impl Window<'_> {
         }
         d
     }
+}
+
+/// The residual N_R − `l` and the gradient ∂N_R/∂x of the right view's row `right` (value and central difference
+/// per pixel) at `xr` in [0, width − 1], both interpolated linearly.
+#[inline(always)]
+fn match_at(right: &[[f32; 2]], xr: f32, l: f32) -> (f32, f32) {
+    let x0 = (xr as u32 as usize).min(right.len() - 2);
+    let f = xr - x0 as u32 as f32;
+    let ([n0, g0], [n1, g1]) = (right[x0], right[x0 + 1]);
+    // Central differences, interpolated: smoother under noise than the interpolant's own slope (which would make
+    // each step exact on clean views; on trainingQ the two differ by 0.1 %, on its noise σ 8 copy the central
+    // differences are 0.6 % better).
+    (n0 + f * (n1 - n0) - l, g0 + f * (g1 - g0))
 }
 
 /// One Gauss–Newton step's sums over a window.
@@ -303,6 +295,18 @@ struct Sums {
 }
 
 impl Sums {
+    /// Adds one sample (residual, gradient, the left view's 1 / (σ² + ε²)) if `inside` the right view; otherwise
+    /// adds +0 to each sum, which leaves it as it is.
+    #[inline(always)]
+    fn add(&mut self, res: f32, g: f32, floor: f32, inside: bool) {
+        let keep = |v: f32| if inside { v } else { 0.0 };
+        self.num += keep(g * res);
+        self.den += keep(g * g);
+        self.rr += keep(res * res);
+        self.floor += keep(floor);
+        self.n += usize::from(inside);
+    }
+
     /// The disparity after this step from `d` (with D₀ = `d0`; `prior` is 1 / s₀²), or `None` where the window
     /// cannot tell (fewer than two samples, no finite step): the refinement stops there.
     #[inline(always)]

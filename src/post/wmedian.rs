@@ -498,10 +498,8 @@ mod tests {
         }
     }
 
-    /// [`Scratch::median`] on (value, weight) pairs, passed in as exponents −ln w. Returns the median and the
-    /// (value, weight) pairs it actually used (exp(ln w) need not give w back exactly), for the reference.
-    /// The median of `items` through [`Scratch::median`] with no guess, on a scratch that earlier windows used (as
-    /// on a row: the bins they filled must not leak into this one).
+    /// [`binned_median_in`] on one scratch per thread that earlier windows used (as on a row: the bins they filled
+    /// must not leak into this one).
     fn binned_median(items: &[(f32, f32)]) -> (f32, Vec<(f32, f32)>) {
         thread_local! {
             static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::new(0));
@@ -509,6 +507,8 @@ mod tests {
         SCRATCH.with_borrow_mut(|s| binned_median_in(s, items))
     }
 
+    /// [`Scratch::median`] with no guess on (value, weight) pairs, passed in as exponents −ln w. Returns the median
+    /// and the (value, weight) pairs it actually used (exp(ln w) need not give w back exactly), for the reference.
     fn binned_median_in(s: &mut Scratch, items: &[(f32, f32)]) -> (f32, Vec<(f32, f32)>) {
         s.vals.clear();
         s.wts.clear();
