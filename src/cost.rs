@@ -141,51 +141,20 @@ pub(crate) fn build_cost_volume_then<R: Send>(
     storage: Vec<f32>,
     then: impl Fn(usize, &mut [f32]) -> R + Sync,
 ) -> (CostVolume, Vec<R>) {
-    assert_eq!(left.dims(), right.dims(), "left and right images differ in size");
     let (w, h) = left.dims();
-    let (grey_l, grey_r) = (left.to_grey(), right.to_grey());
-    // Census support (both views): a bit is compared only where its neighbour is within `census_support` of the
-    // centre in both windows; a bit outside the support counts ½, the expected distance of a bit that says nothing
-    // (a constant count of 1 would favour the labels whose two masks overlap least).
-    let (cw, ch) = (p.census_width, p.census_height);
-    let census = |g: &Plane<f32>| {
-        let mask = (p.census_support > 0.0).then(|| support_mask(g, cw, ch, p.census_support));
-        (census_transform_banded(g, cw, ch, p.census_dead_band), mask)
-    };
-    let ((cen_l, mask_l), (cen_r, mask_r)) = rayon::join(|| census(&grey_l), || census(&grey_r));
-    let (mut gx_l, mut gx_r) = (sobel_x(&grey_l), sobel_x(&grey_r));
-    if p.grad_norm_radius > 0 {
-        let r = p.grad_norm_radius;
-        let (sl, sr) = rayon::join(|| local_mean_abs(&gx_l, r), || local_mean_abs(&gx_r, r));
-        let mean = grad_norm_mean.unwrap_or_else(|| plane_mean(&sl));
-        normalise_gradient(&mut gx_l, &sl, mean, p.grad_norm_eps);
-        normalise_gradient(&mut gx_r, &sr, mean, p.grad_norm_eps);
-    }
-    let out_of_view = truncation_cost(p);
-    let (a, tc, b, tg) = (p.census_weight, p.census_trunc, p.grad_weight, p.grad_trunc);
+    let rows = CostRows::new(left, right, p, grad_norm_mean);
     // Every entry is written below, rows in parallel: a fresh allocation is zeroed by the OS (no fill pass), a
     // reused one keeps what it held until then.
     let data = crate::image::reuse_storage(storage, w * h * ndisp);
     let mut vol = CostVolume { width: w, height: h, ndisp, data };
-    let rows = CostRows {
-        cen_l: &cen_l,
-        cen_r: &cen_r,
-        mask_l: mask_l.as_ref(),
-        mask_r: mask_r.as_ref(),
-        gx_l: &gx_l,
-        gx_r: &gx_r,
-        weights: [a, tc, b, tg],
-        out_of_view,
-        bits: (p.census_width * p.census_height - 1) as u32,
-    };
     let after = vol
         .data
         .par_chunks_mut(w * ndisp)
         .enumerate()
         .map_init(
-            || (vec![0u64; w], vec![0.0f32; w], vec![0u64; w]),
-            |(cr_rev, gr_rev, mr_rev), (y, row)| {
-                cost_row(&rows, y, ndisp, cr_rev, gr_rev, mr_rev, row);
+            || RowScratch::new(w),
+            |scratch, (y, row)| {
+                cost_row(&rows, y, ndisp, scratch, row);
                 then(y, row)
             },
         )
@@ -195,36 +164,84 @@ pub(crate) fn build_cost_volume_then<R: Send>(
 
 /// What [`cost_row`] reads: both views' census codes, support masks and gradients, the weights and truncations
 /// `[census_weight, census_trunc, grad_weight, grad_trunc]`, and the out-of-view cost.
-struct CostRows<'a> {
-    cen_l: &'a Plane<u64>,
-    cen_r: &'a Plane<u64>,
+struct CostRows {
+    cen_l: Plane<u64>,
+    cen_r: Plane<u64>,
+    /// The ternary Census's second plane (`cost.census_ternary` > 0): the neighbours brighter than the centre by
+    /// more than the threshold (the first plane then holds those darker by more than it).
+    bright: Option<(Plane<u64>, Plane<u64>)>,
     /// The support masks (`None`: every bit is compared).
-    mask_l: Option<&'a Plane<u64>>,
-    mask_r: Option<&'a Plane<u64>>,
-    gx_l: &'a Plane<f32>,
-    gx_r: &'a Plane<f32>,
+    mask_l: Option<Plane<u64>>,
+    mask_r: Option<Plane<u64>>,
+    gx_l: Plane<f32>,
+    gx_r: Plane<f32>,
     weights: [f32; 4],
     out_of_view: f32,
     /// Bits per Census code.
     bits: u32,
 }
 
-/// The costs of row `y` (all pixels, `ndisp` labels each) into `row`; `cr_rev`, `gr_rev` and `mr_rev` are scratch
-/// rows. The Hamming distance counts the bits inside both pixels' support.
+impl CostRows {
+    /// Both views' Census codes, support masks and (normalised) gradients, ḡ of the gradient normalisation given or
+    /// measured on `left` (see [`build_cost_volume_then`]).
+    ///
+    /// # Panics
+    /// If the images differ in size or the Census window is invalid.
+    fn new(left: &RgbImage, right: &RgbImage, p: &CostParams, grad_norm_mean: Option<f32>) -> CostRows {
+        assert_eq!(left.dims(), right.dims(), "left and right images differ in size");
+        let (grey_l, grey_r) = (left.to_grey(), right.to_grey());
+        // Census support (both views): a bit is compared only where its neighbour is within `census_support` of the
+        // centre in both windows; a bit outside the support counts ½, the expected distance of a bit that says
+        // nothing (a constant count of 1 would favour the labels whose two masks overlap least).
+        let (cw, ch) = (p.census_width, p.census_height);
+        let census = |g: &Plane<f32>| {
+            let mask = (p.census_support > 0.0).then(|| support_mask(g, cw, ch, p.census_support));
+            (census_transform_banded(g, cw, ch, p.census_dead_band + p.census_ternary), mask)
+        };
+        let ((cen_l, mask_l), (cen_r, mask_r)) = rayon::join(|| census(&grey_l), || census(&grey_r));
+        let bright = (p.census_ternary > 0.0).then(|| {
+            let band = p.census_dead_band + p.census_ternary;
+            let brighter = |g: &Plane<f32>| {
+                let negated = Plane::from_parts(g.width, g.height, g.data.iter().map(|v| -v).collect());
+                census_transform_banded(&negated, cw, ch, band)
+            };
+            rayon::join(|| brighter(&grey_l), || brighter(&grey_r))
+        });
+        let (mut gx_l, mut gx_r) = (sobel_x(&grey_l), sobel_x(&grey_r));
+        if p.grad_norm_radius > 0 {
+            let r = p.grad_norm_radius;
+            let (sl, sr) = rayon::join(|| local_mean_abs(&gx_l, r), || local_mean_abs(&gx_r, r));
+            let mean = grad_norm_mean.unwrap_or_else(|| plane_mean(&sl));
+            normalise_gradient(&mut gx_l, &sl, mean, p.grad_norm_eps);
+            normalise_gradient(&mut gx_r, &sr, mean, p.grad_norm_eps);
+        }
+        CostRows {
+            cen_l,
+            cen_r,
+            bright,
+            mask_l,
+            mask_r,
+            gx_l,
+            gx_r,
+            weights: [p.census_weight, p.census_trunc, p.grad_weight, p.grad_trunc],
+            out_of_view: truncation_cost(p),
+            bits: (p.census_width * p.census_height - 1) as u32,
+        }
+    }
+}
+
+/// The costs of row `y` (all pixels, `ndisp` labels each) into `row`, the right view's row reversed into `scratch`.
+/// The Hamming distance counts the bits inside both pixels' support.
 /// Compiled for AVX2 + FMA + POPCNT as well, picked at run time (same results).
 #[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma+popcnt")))]
-fn cost_row<'c>(
-    rows: &CostRows<'c>,
-    y: usize,
-    ndisp: usize,
-    cr_rev: &mut [u64],
-    gr_rev: &mut [f32],
-    mr_rev: &mut [u64],
-    row: &mut [f32],
-) {
-    let CostRows { cen_l, cen_r, mask_l, mask_r, gx_l, gx_r, weights: [a, tc, b, tg], out_of_view, bits } = *rows;
+fn cost_row(rows: &CostRows, y: usize, ndisp: usize, scratch: &mut RowScratch, row: &mut [f32]) {
+    let CostRows { cen_l, cen_r, bright, mask_l, mask_r, gx_l, gx_r, weights: [a, tc, b, tg], out_of_view, bits } =
+        rows;
+    let (a, tc, b, tg, out_of_view, bits) = (*a, *tc, *b, *tg, *out_of_view, *bits);
+    let (mask_l, mask_r) = (mask_l.as_ref(), mask_r.as_ref());
     let w = cen_l.width;
     let all = census_bits_mask(bits as usize);
+    let RowScratch { cr_rev, gr_rev, mr_rev, br_rev } = scratch;
     // The right row reversed: label d of left pixel x reads right pixel x − d = w−1−k with
     // k = w−1−x+d, so consecutive labels are consecutive k and the label loop runs forwards.
     for (k, ((c, g), m)) in cr_rev.iter_mut().zip(gr_rev.iter_mut()).zip(mr_rev.iter_mut()).enumerate() {
@@ -232,7 +249,13 @@ fn cost_row<'c>(
         *g = gx_r.data[y * w + w - 1 - k];
         *m = mask_r.map_or(all, |mr| mr.data[y * w + w - 1 - k]);
     }
+    if let Some((_, br)) = bright {
+        for (k, c) in br_rev.iter_mut().enumerate() {
+            *c = br.data[y * w + w - 1 - k];
+        }
+    }
     let (cl_row, gl_row, ml_row) = (cen_l.row(y), gx_l.row(y), mask_l.map(|m| m.row(y)));
+    let bl_row = bright.as_ref().map(|(bl, _)| bl.row(y));
     for (x, costs) in row.chunks_exact_mut(ndisp).enumerate() {
         let (cl, gl, ml) = (cl_row[x], gl_row[x], ml_row.map_or(all, |m| m[x]));
         let in_view = ndisp.min(x + 1);
@@ -241,18 +264,50 @@ fn cost_row<'c>(
         let gr = &gr_rev[k0..][..in_view];
         let mr = &mr_rev[k0..][..in_view];
         let (inside, outside) = costs.split_at_mut(in_view);
-        for (((c, &cr), &gr), &mr) in inside.iter_mut().zip(cr).zip(gr).zip(mr) {
-            // Twice the distance: 2 per differing bit inside the support, 1 per bit outside it.
-            let m = ml & mr;
-            let twice = 2 * ((cl ^ cr) & m).count_ones() + bits - m.count_ones();
-            // Through i32 (twice ≤ 192): AVX2 converts signed integers to floats in one instruction, unsigned ones
-            // in several. The truncations as compares and selects, without `f32::min`'s NaN fix-up (the same
-            // values: nothing here is NaN).
+        // Through i32 (twice ≤ 192): AVX2 converts signed integers to floats in one instruction, unsigned ones
+        // in several. The truncations as compares and selects, without `f32::min`'s NaN fix-up (the same
+        // values: nothing here is NaN).
+        let total = |twice: u32, gr: f32| {
             let ham = twice as i32 as f32 * 0.5;
             let grad = (gl - gr).abs();
-            *c = a * if ham < tc { ham } else { tc } + b * if grad < tg { grad } else { tg };
+            a * if ham < tc { ham } else { tc } + b * if grad < tg { grad } else { tg }
+        };
+        match bl_row {
+            None => {
+                for (((c, &cr), &gr), &mr) in inside.iter_mut().zip(cr).zip(gr).zip(mr) {
+                    // Twice the distance: 2 per differing bit inside the support, 1 per bit outside it.
+                    let m = ml & mr;
+                    *c = total(2 * ((cl ^ cr) & m).count_ones() + bits - m.count_ones(), gr);
+                }
+            }
+            Some(bl_row) => {
+                let bl = bl_row[x];
+                let br = &br_rev[k0..][..in_view];
+                for ((((c, &cr), &gr), &mr), &br) in inside.iter_mut().zip(cr).zip(gr).zip(mr).zip(br) {
+                    // Twice the distance: each of the two planes' differing bits inside the support, 1 per bit
+                    // outside it (a neighbour darker in one view and brighter in the other differs in both).
+                    let m = ml & mr;
+                    *c = total(((cl ^ cr) & m).count_ones() + ((bl ^ br) & m).count_ones() + bits - m.count_ones(), gr);
+                }
+            }
         }
         outside.fill(out_of_view);
+    }
+}
+
+/// The per-thread rows [`cost_row`] reverses the right view's codes, gradients, masks and (ternary) second plane
+/// into.
+struct RowScratch {
+    cr_rev: Vec<u64>,
+    gr_rev: Vec<f32>,
+    mr_rev: Vec<u64>,
+    br_rev: Vec<u64>,
+}
+
+impl RowScratch {
+    /// Scratch for rows of `w` pixels.
+    fn new(w: usize) -> RowScratch {
+        RowScratch { cr_rev: vec![0; w], gr_rev: vec![0.0; w], mr_rev: vec![0; w], br_rev: vec![0; w] }
     }
 }
 

@@ -50,6 +50,9 @@ pub struct RunPlan {
     pub tiles: Option<Tiles>,
     /// The memory the run planned for, in bytes (what the limit was checked against).
     pub memory_bytes: u64,
+    /// The reduction of the working resolution chosen for the pair: 1 = its own resolution; 2ᵏ when its k finest
+    /// octaves hold no detail of their own (`[working]`; `downscale` is apart from it).
+    pub working_factor: usize,
 }
 
 /// How a tiled run was cut.
@@ -324,6 +327,8 @@ impl Matcher {
     /// Runs a planned pair.
     fn run(&mut self, plan: &Plan<'_>, on_progress: &dyn Fn(Progress<'_>)) -> Result<Output> {
         let (w, h) = plan.pair.left.dims();
+        // Owned: the temporal state below borrows `self` mutably.
+        let params = plan.params(&self.params).into_owned();
         let run_plan = RunPlan {
             ndisp: plan.pair.ndisp,
             ndisp_measured: plan.ndisp_measured,
@@ -331,7 +336,8 @@ impl Matcher {
                 Strategy::Whole => None,
                 Strategy::Tiled(t) => Some(Tiles { core_px: t.core_px, coarse_factor: t.coarse_factor }),
             },
-            memory_bytes: plan.strategy.memory_bytes(w, h, plan.pair.ndisp, &self.params),
+            memory_bytes: plan.strategy.memory_bytes(w, h, plan.pair.ndisp, &params),
+            working_factor: plan.working_factor,
         };
         on_progress(Progress::Planned(&run_plan));
         let on_stage = |stage: &str| on_progress(Progress::Stage(stage));
@@ -341,8 +347,8 @@ impl Matcher {
         // full resolution; any other frame runs alone and starts the sequence again.
         let temporal = self.temporal.as_mut();
         let (out, frame) = match (plan.strategy, temporal) {
-            (Strategy::Whole, Some(state)) if self.params.downscale == 1 => {
-                let (out, kind) = crate::temporal::match_frame(state, &self.params, &plan.pair, &options)?;
+            (Strategy::Whole, Some(state)) if params.downscale == 1 => {
+                let (out, kind) = crate::temporal::match_frame(state, &params, &plan.pair, &options)?;
                 (out, Some(kind))
             }
             (strategy, temporal) => {
@@ -351,8 +357,8 @@ impl Matcher {
                     state.reset();
                 }
                 let out = match strategy {
-                    Strategy::Whole => pipeline::run_with(&self.params, &plan.pair, &options)?,
-                    Strategy::Tiled(tiles) => pipeline::tile::run_tiled(&self.params, &plan.pair, &tiles, &options)?,
+                    Strategy::Whole => pipeline::run_with(&params, &plan.pair, &options)?,
+                    Strategy::Tiled(tiles) => pipeline::tile::run_tiled(&params, &plan.pair, &tiles, &options)?,
                 };
                 (out, alone)
             }

@@ -62,30 +62,46 @@ pub(crate) fn factor_fits(width: usize, ndisp: usize, factor: usize) -> bool {
 /// If `factor` is 0.
 pub(crate) fn downsample_rgb(image: &RgbImage, factor: usize) -> RgbImage {
     let (w, h) = image.dims();
-    let (sw, sh) = (reduced_len(w, factor), reduced_len(h, factor));
-    let mut out = RgbImage::new(sw, sh);
-    if sw == 0 || sh == 0 {
-        return out;
-    }
+    let mut out = RgbImage::new(reduced_len(w, factor), reduced_len(h, factor));
     for (dst, src) in out.channels.iter_mut().zip(&image.channels) {
-        dst.par_chunks_mut(sw).enumerate().for_each_init(
-            || vec![0.0f32; w],
-            |column_sums, (by, out_row)| {
-                let (y0, y1) = (by * factor, ((by + 1) * factor).min(h));
-                // Column sums over the block's rows, then block sums along the row, in a fixed order.
-                column_sums.copy_from_slice(&src[y0 * w..][..w]);
-                for y in y0 + 1..y1 {
-                    column_sums.iter_mut().zip(&src[y * w..][..w]).for_each(|(s, v)| *s += v);
-                }
-                for ((bx, o), block) in out_row.iter_mut().enumerate().zip(column_sums.chunks(factor)) {
-                    let count = (block.len() * (y1 - y0)) as f32;
-                    debug_assert_eq!(block.len(), ((bx + 1) * factor).min(w) - bx * factor);
-                    *o = block.iter().sum::<f32>() / count;
-                }
-            },
-        );
+        downsample_channel(src, w, h, factor, dst);
     }
     out
+}
+
+/// Reduces a plane by `factor` × `factor` box averaging, as [`downsample_rgb`] each channel.
+///
+/// # Panics
+/// If `factor` is 0.
+pub(crate) fn downsample_plane(plane: &Plane<f32>, factor: usize) -> Plane<f32> {
+    let (w, h) = plane.dims();
+    let mut out = Plane::new(reduced_len(w, factor), reduced_len(h, factor), 0.0f32);
+    downsample_channel(&plane.data, w, h, factor, &mut out.data);
+    out
+}
+
+/// One row-major `w` × `h` channel reduced by `factor` into `dst` (the reduced size, written in full).
+fn downsample_channel(src: &[f32], w: usize, h: usize, factor: usize, dst: &mut [f32]) {
+    let sw = reduced_len(w, factor);
+    if sw == 0 || reduced_len(h, factor) == 0 {
+        return;
+    }
+    dst.par_chunks_mut(sw).enumerate().for_each_init(
+        || vec![0.0f32; w],
+        |column_sums, (by, out_row)| {
+            let (y0, y1) = (by * factor, ((by + 1) * factor).min(h));
+            // Column sums over the block's rows, then block sums along the row, in a fixed order.
+            column_sums.copy_from_slice(&src[y0 * w..][..w]);
+            for y in y0 + 1..y1 {
+                column_sums.iter_mut().zip(&src[y * w..][..w]).for_each(|(s, v)| *s += v);
+            }
+            for ((bx, o), block) in out_row.iter_mut().enumerate().zip(column_sums.chunks(factor)) {
+                let count = (block.len() * (y1 - y0)) as f32;
+                debug_assert_eq!(block.len(), ((bx + 1) * factor).min(w) - bx * factor);
+                *o = block.iter().sum::<f32>() / count;
+            }
+        },
+    );
 }
 
 /// Reduces both views by `factor` and the search range to `ceil(ndisp / factor)`.

@@ -249,6 +249,10 @@ fn match_with_progress(
                 let was = stated.map_or("no range given".to_string(), |s| format!("calib.txt says {s}"));
                 note!("ndisp {}, measured on the pair ({was}; --ndisp N sets it)", plan.ndisp);
             }
+            if plan.working_factor > 1 {
+                let f = plan.working_factor;
+                note!("working at 1/{f}: the views' finest octaves hold no detail of their own (upsampled or out of focus); [working] auto = false matches at full size");
+            }
             if let Some(tiles) = plan.tiles {
                 note!(
                     "running in tiles of {} px after a coarse level at 1/{} (bounded memory)",

@@ -66,6 +66,9 @@ pub struct PairStats {
     pub gain: [f32; 2],
     /// Noise σ of the left and right view after the stretch, in grey levels (mean of the channels).
     pub noise: [f32; 2],
+    /// Noise σ of the left and right view of the pair the matching cost sees: [`PairStats::noise`], or measured
+    /// again on the views the denoiser or the sharpness matching filtered (at most `noise`).
+    pub cost_noise: [f32; 2],
     /// The Gaussian blur σ (px) given to the left and the right view of the cost pair so that their sharpness
     /// matches ([`sharpness`]; 0 = none).
     pub cost_blur: [f32; 2],
@@ -85,6 +88,11 @@ impl PairStats {
     /// The noisier view's σn: what the adaptive stages scale with.
     pub fn sigma(&self) -> f32 {
         self.noise[0].max(self.noise[1])
+    }
+
+    /// The noisier view's σn in the pair the matching cost sees ([`PairStats::cost_noise`]).
+    pub fn cost_sigma(&self) -> f32 {
+        self.cost_noise[0].max(self.cost_noise[1])
     }
 
     /// The Census band's multiple of the blocking for a pair measured so: `c.noise.block_band` where JPEG was detected,
@@ -184,7 +192,15 @@ pub(crate) fn condition_pair<'a>(
             cost = Some(pair);
         }
     }
-    Conditioned { guide, cost, stats: PairStats { gain, noise, cost_blur, blocking, jpeg } }
+    // What the Census comparisons of the cost pair see of the noise (its ternary threshold follows it).
+    let cost_noise = match &cost {
+        Some(c) => {
+            let (l, r) = rayon::join(|| channel_noise(&c.left), || channel_noise(&c.right));
+            [l.min(nl), r.min(nr)]
+        }
+        None => noise,
+    };
+    Conditioned { guide, cost, stats: PairStats { gain, noise, cost_noise, cost_blur, blocking, jpeg } }
 }
 
 /// Test images shared by the conditioning stages' tests.

@@ -71,6 +71,9 @@ pub struct NoiseParams {
     /// Widens `cost.grad_norm_eps` by this multiple of σn (when the normalisation is on): the gradient term is
     /// normalised only where the local contrast stands well above the noise.
     pub grad_eps_per_sigma: f32,
+    /// The ternary Census's threshold (`cost.census_ternary`) widened by this multiple of the noise of a grey-level
+    /// difference (0.945·σn: two pixels' grey noise, 0.668·σn each); 0 = the binary Census.
+    pub ternary_per_sigma: f32,
 }
 
 /// `[condition.prior]`: the coarse prior (`crate::pipeline`'s coarse chain): the pipeline first runs on the pair
@@ -180,7 +183,13 @@ impl Default for DenoiseParams {
 
 impl Default for NoiseParams {
     fn default() -> Self {
-        NoiseParams { jpeg: true, block_band: 1.0, support_per_sigma: 2.5, grad_eps_per_sigma: 30.0 }
+        NoiseParams {
+            jpeg: true,
+            block_band: 1.0,
+            support_per_sigma: 2.5,
+            grad_eps_per_sigma: 30.0,
+            ternary_per_sigma: 0.0,
+        }
     }
 }
 
@@ -234,7 +243,13 @@ impl ConditionParams {
             sharpness_ratio: 0.0,
             stretch: StretchParams { enabled: false, ..on.stretch },
             denoise: DenoiseParams { strength: 0.0, ..on.denoise },
-            noise: NoiseParams { jpeg: false, block_band: 0.0, support_per_sigma: 0.0, grad_eps_per_sigma: 0.0 },
+            noise: NoiseParams {
+                jpeg: false,
+                block_band: 0.0,
+                support_per_sigma: 0.0,
+                grad_eps_per_sigma: 0.0,
+                ternary_per_sigma: 0.0,
+            },
             prior: PriorParams { per_sigma: 0.0, confidence: false, detail: 0.0, spread: 0, ..on.prior },
             vertical: VerticalParams { enabled: false, ..on.vertical },
         }
@@ -268,6 +283,7 @@ impl ConditionParams {
         check_nonneg("condition.noise.block_band", n.block_band)?;
         check_nonneg("condition.noise.support_per_sigma", n.support_per_sigma)?;
         check_nonneg("condition.noise.grad_eps_per_sigma", n.grad_eps_per_sigma)?;
+        check_nonneg("condition.noise.ternary_per_sigma", n.ternary_per_sigma)?;
         check_nonneg("condition.prior.per_sigma", p.per_sigma)?;
         check_nonneg("condition.prior.untrusted", p.untrusted)?;
         check_nonneg("condition.prior.detail", p.detail)?;

@@ -16,6 +16,11 @@ pub struct CostParams {
     /// Census dead band in grey levels: a bit is set only when the neighbour is darker than the centre by more
     /// than this (0 = the plain Census).
     pub census_dead_band: f32,
+    /// Ternary Census threshold in grey levels: each neighbour is darker than the centre by more than this,
+    /// brighter by more than this, or neither (two bit planes; a neighbour that is "neither" in one view and darker
+    /// or brighter in the other counts ½, opposite signs 1). Comparisons of nearly equal pixels, which noise flips,
+    /// then cost little. 0 = the binary Census; widened with the measured noise by `condition.noise.ternary_per_sigma`.
+    pub census_ternary: f32,
     /// Census support in grey levels: a bit is compared only where its neighbour is within this of the centre in
     /// both views' windows, and counts ½ elsewhere (the neighbours of another surface, across a strong edge, say
     /// nothing about the centre's disparity and pull it to theirs); 0 = every bit is compared (the paper's Census).
@@ -44,6 +49,7 @@ impl Default for CostParams {
             census_width: 7,
             census_height: 7,
             census_dead_band: 0.0,
+            census_ternary: 0.0,
             census_support: 40.0,
             census_weight: 1.0,
             census_trunc: 48.0,
@@ -74,6 +80,7 @@ impl CostParams {
             ));
         }
         check_nonneg("cost.census_dead_band", self.census_dead_band)?;
+        check_nonneg("cost.census_ternary", self.census_ternary)?;
         check_nonneg("cost.census_support", self.census_support)?;
         check_nonneg("cost.census_weight", self.census_weight)?;
         check_nonneg("cost.census_trunc", self.census_trunc)?;

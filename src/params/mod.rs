@@ -28,6 +28,7 @@ mod meanfield;
 mod sps;
 mod subpixel;
 mod wmedian;
+mod working;
 
 pub use condition::{ConditionParams, DenoiseParams, NoiseParams, PriorParams, StretchParams, VerticalParams};
 pub use cost::CostParams;
@@ -36,6 +37,7 @@ pub use meanfield::{MeanFieldParams, Normalization, Schedule};
 pub use sps::SpsParams;
 pub use subpixel::SubpixelParams;
 pub use wmedian::WmedianParams;
+pub use working::WorkingParams;
 
 /// Which energy the inference minimises.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -127,7 +129,10 @@ pub struct Params {
     /// time of inference.
     /// See `crate::scale`.
     pub downscale: usize,
-    /// How the reduced run's disparity map is brought back to the input size (`downscale` > 1).
+    /// The working resolution chosen per pair (with `downscale` = 1).
+    pub working: WorkingParams,
+    /// How the reduced run's disparity map is brought back to the input size (`downscale` > 1, or a working
+    /// resolution below the input's).
     pub upsample: UpsampleParams,
     /// Input conditioning (photometric alignment, contrast, denoising).
     pub condition: ConditionParams,
@@ -144,6 +149,7 @@ impl Default for Params {
         Params {
             model: Model::Jem,
             downscale: 1,
+            working: WorkingParams::default(),
             upsample: UpsampleParams::default(),
             condition: Default::default(),
             cost: CostParams::default(),
@@ -233,6 +239,7 @@ impl Params {
         if self.downscale == 0 {
             return Err(Error::param("downscale", 0, "an integer >= 1; 1 = full resolution"));
         }
+        self.working.validate()?;
         check_nonneg("upsample.edge_px", self.upsample.edge_px)?;
         check_positive("upsample.sigma_rgb", self.upsample.sigma_rgb)?;
         self.condition.validate()?;

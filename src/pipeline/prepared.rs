@@ -51,6 +51,8 @@ impl<'a> Prepared<'a> {
             // JPEG: steps no larger than the block grid's own are compression artefacts, not texture.
             cost_params.census_dead_band +=
                 cond.stats.block_band(c) * cond.stats.blocking[0].max(cond.stats.blocking[1]);
+            // Two pixels' grey noise (0.668·σn each) in a Census comparison of the cost pair: 0.945·σn.
+            cost_params.census_ternary += c.noise.ternary_per_sigma * 0.945 * cond.stats.cost_sigma();
             if cost_params.census_support > 0.0 {
                 cost_params.census_support += c.noise.support_per_sigma * cond.stats.sigma();
             }

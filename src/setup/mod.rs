@@ -11,6 +11,9 @@
 pub(crate) mod memory;
 pub(crate) mod range;
 pub(crate) mod strategy;
+pub(crate) mod working;
+
+use std::borrow::Cow;
 
 use crate::error::{Error, Result};
 use crate::image::{RgbImage, StereoPair};
@@ -116,6 +119,18 @@ pub(crate) struct Plan<'a> {
     pub strategy: Strategy,
     /// Whether the range was measured on the pair (rather than given or stated).
     pub ndisp_measured: bool,
+    /// The working resolution's reduction ([`working::working_factor`]; 1 = the input's own resolution).
+    pub working_factor: usize,
+}
+
+impl Plan<'_> {
+    /// The parameters the pair runs with: `params`, at the working resolution when it is below the input's.
+    pub(crate) fn params<'p>(&self, params: &'p Params) -> Cow<'p, Params> {
+        match self.working_factor {
+            1 => Cow::Borrowed(params),
+            f => Cow::Owned(Params { downscale: f, ..params.clone() }),
+        }
+    }
 }
 
 /// Settles the range of `left`/`right` (see [`NdispSource`]) and how to run the pair within `limit_bytes`.
@@ -144,8 +159,10 @@ pub(crate) fn plan_match<'a>(
     }
     let (ndisp, ndisp_measured) = search_range(left, right, source, params, limit_bytes)?;
     let pair = StereoPair::borrowed(left, right, ndisp)?;
-    let strategy = Strategy::choose(pair.left.width, pair.left.height, pair.ndisp, params, limit_bytes)?;
-    Ok(Plan { pair, strategy, ndisp_measured })
+    let working_factor = working::working_factor(left, ndisp, params);
+    let run = Params { downscale: params.downscale * working_factor, ..params.clone() };
+    let strategy = Strategy::choose(pair.left.width, pair.left.height, pair.ndisp, &run, limit_bytes)?;
+    Ok(Plan { pair, strategy, ndisp_measured, working_factor })
 }
 
 /// The search range of a decoded pair: `source`'s when it is a real bound ([`NdispSource::rule`]), else measured
