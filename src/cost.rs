@@ -194,13 +194,15 @@ impl CostRows {
         // centre in both windows; a bit outside the support counts ½, the expected distance of a bit that says
         // nothing (a constant count of 1 would favour the labels whose two masks overlap least).
         let (cw, ch) = (p.census_width, p.census_height);
+        // With the ternary Census the first plane holds the neighbours darker than the centre by more than the
+        // threshold and a second one those brighter by more than it (the Census of the negated image).
+        let band = p.census_dead_band + p.census_ternary;
         let census = |g: &Plane<f32>| {
             let mask = (p.census_support > 0.0).then(|| support_mask(g, cw, ch, p.census_support));
-            (census_transform_banded(g, cw, ch, p.census_dead_band + p.census_ternary), mask)
+            (census_transform_banded(g, cw, ch, band), mask)
         };
         let ((cen_l, mask_l), (cen_r, mask_r)) = rayon::join(|| census(&grey_l), || census(&grey_r));
         let bright = (p.census_ternary > 0.0).then(|| {
-            let band = p.census_dead_band + p.census_ternary;
             let brighter = |g: &Plane<f32>| {
                 let negated = Plane::from_parts(g.width, g.height, g.data.iter().map(|v| -v).collect());
                 census_transform_banded(&negated, cw, ch, band)
@@ -565,7 +567,8 @@ mod tests {
             let CostParams {
                 census_width,
                 census_height,
-                census_dead_band: band,
+                census_dead_band: dead_band,
+                census_ternary: ternary,
                 census_support: tau,
                 census_weight: a,
                 census_trunc: tc,
@@ -589,8 +592,13 @@ mod tests {
                     let (n_other, c_other) = (Self::grey(&self.other, xo + dx, y + dy), Self::grey(&self.other, xo, y));
                     // Support: the neighbour counts when it is within τ of the centre in both windows (τ = 0: off).
                     let inside = tau == 0.0 || ((n_this - c_this).abs() <= tau && (n_other - c_other).abs() <= tau);
-                    let differ = (n_this < c_this - band) != (n_other < c_other - band);
-                    twice += if inside { 2 * u32::from(differ) } else { 1 };
+                    // The ternary Census: darker, brighter or neither (beyond the dead band and the threshold);
+                    // the binary one: darker beyond the dead band, or not.
+                    let band = dead_band + ternary;
+                    let dark = (n_this < c_this - band) != (n_other < c_other - band);
+                    let bright = (n_this > c_this + band) != (n_other > c_other + band);
+                    let differ = if ternary > 0.0 { u32::from(dark) + u32::from(bright) } else { 2 * u32::from(dark) };
+                    twice += if inside { differ } else { 1 };
                 }
             }
             let grad = (self.gradient(&self.this, x, y) - self.gradient(&self.other, xo, y)).abs();
@@ -653,6 +661,7 @@ mod tests {
                     census_width: 5,
                     census_height: 3,
                     census_dead_band: 3.0,
+                    census_ternary: 0.0,
                     census_support: 0.0,
                     census_weight: 2.0,
                     census_trunc: 5.0,
@@ -668,6 +677,7 @@ mod tests {
                     census_width: 9,
                     census_height: 7,
                     census_dead_band: 0.5,
+                    census_ternary: 2.5,
                     census_support: 90.0,
                     census_weight: 0.7,
                     census_trunc: 21.0,
@@ -683,6 +693,7 @@ mod tests {
                     census_width: 1,
                     census_height: 3,
                     census_dead_band: 0.0,
+                    census_ternary: 1.0,
                     census_support: 85.0,
                     census_weight: 1.0,
                     census_trunc: 1.0,
@@ -718,6 +729,25 @@ mod tests {
             }
         }
         assert!(checked > 50_000, "{checked}");
+    }
+
+    /// A flat surface with noise below the ternary threshold has the same codes in both views (distance 0 at
+    /// the true disparity), where the binary Census's comparisons of near-equal pixels flip with the noise.
+    #[test]
+    fn ternary_census_ignores_noise_below_its_threshold() {
+        let (w, h) = (24, 9);
+        // Grey 100 with noise of at most ±0.4 grey levels, different in the two views; the right view is the
+        // left one's surface moved by 2 px.
+        let jitter = |seed| noise(w, h, seed).into_iter().map(|v| 100.0 + (v / 255.0 - 0.5) * 0.8).collect();
+        let (left, right) = (grey_image(w, h, jitter(3)), grey_image(w, h, jitter(4)));
+        let at_true_label = |p: &CostParams| {
+            let vol = build_cost_volume(&left, &right, 3, p);
+            (4..w - 4).map(|x| vol.pixel(4 * w + x)[2]).sum::<f32>()
+        };
+        let binary = CostParams { census_support: 0.0, grad_weight: 0.0, ..CostParams::default() };
+        let ternary = CostParams { census_ternary: 1.0, ..binary.clone() };
+        assert_eq!(at_true_label(&ternary), 0.0, "every comparison is within the threshold: all equal");
+        assert!(at_true_label(&binary) > 100.0, "the binary Census's bits follow the noise");
     }
 
     /// Bit-for-bit equality of a volume with a reference, naming the first differing entry.

@@ -81,6 +81,7 @@ impl CostParams {
         }
         check_nonneg("cost.census_dead_band", self.census_dead_band)?;
         check_nonneg("cost.census_ternary", self.census_ternary)?;
+
         check_nonneg("cost.census_support", self.census_support)?;
         check_nonneg("cost.census_weight", self.census_weight)?;
         check_nonneg("cost.census_trunc", self.census_trunc)?;

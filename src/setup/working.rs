@@ -99,3 +99,76 @@ pub(crate) fn empty_octaves(grey: &Plane<f32>, sigma: f32, max_octaves: u32) -> 
     }
     max_octaves
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// White noise texture (every octave full) in 0..255.
+    fn texture(w: usize, h: usize, seed: u64) -> Plane<f32> {
+        let mut rng = crate::rng::SplitMix64::new(seed);
+        Plane::from_parts(w, h, (0..w * h).map(|_| (rng.next_u64() % 256) as f32).collect())
+    }
+
+    /// `p` enlarged `k` times by bilinear interpolation (pixel centres aligned).
+    fn upsampled(p: &Plane<f32>, k: usize) -> Plane<f32> {
+        let (w, h) = (p.width * k, p.height * k);
+        let at = |x: f32, y: f32| {
+            let (x, y) = (x.clamp(0.0, (p.width - 1) as f32), y.clamp(0.0, (p.height - 1) as f32));
+            let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+            let (x1, y1) = ((x0 + 1).min(p.width - 1), (y0 + 1).min(p.height - 1));
+            let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+            let row = |y| p.at(x0, y) * (1.0 - fx) + p.at(x1, y) * fx;
+            row(y0) * (1.0 - fy) + row(y1) * fy
+        };
+        let src = |i: usize| (i as f32 + 0.5) / k as f32 - 0.5;
+        Plane::from_parts(w, h, (0..w * h).map(|i| at(src(i % w), src(i / w))).collect())
+    }
+
+    fn with_noise(p: &Plane<f32>, sigma: f32, seed: u64) -> Plane<f32> {
+        let n = texture(p.width, p.height, seed);
+        // Uniform noise of standard deviation sigma: (u − ½)·√12·σ.
+        let data = p.data.iter().zip(&n.data).map(|(v, u)| v + (u / 255.0 - 0.5) * 12f32.sqrt() * sigma).collect();
+        Plane::from_parts(p.width, p.height, data)
+    }
+
+    #[test]
+    fn a_full_band_image_keeps_its_octaves_and_an_upsampled_one_drops_them() {
+        let base = texture(96, 80, 1);
+        let full = detail_ratio(&base, 0.0).unwrap();
+        assert!(full > 0.9, "white noise texture: every octave full, ρ {full}");
+        assert_eq!(empty_octaves(&base, 0.0, 3), 0);
+        let x2 = upsampled(&base, 2);
+        let r2 = detail_ratio(&x2, 0.0).unwrap();
+        assert!(r2 < DETAIL_RATIO, "2× upsampled: ρ {r2}");
+        assert_eq!(empty_octaves(&x2, 0.0, 3), 1);
+        assert_eq!(empty_octaves(&upsampled(&base, 4), 0.0, 3), 2);
+        assert_eq!(empty_octaves(&upsampled(&base, 4), 0.0, 1), 1, "held to max_octaves");
+    }
+
+    /// Noise added at the upsampled size fills the top octave with energy, not with detail: measured with its σ,
+    /// the octave still reads as empty; without it (σ 0), noise would pass for detail.
+    #[test]
+    fn noise_in_an_upsampled_image_is_not_taken_for_detail() {
+        // Faint texture (σ about 11 grey levels) and noise of σ 4.
+        let faint = texture(96, 80, 2);
+        let faint = Plane::from_parts(96, 80, faint.data.iter().map(|v| 100.0 + 0.15 * v).collect());
+        let x2 = with_noise(&upsampled(&faint, 2), 4.0, 9);
+        assert_eq!(empty_octaves(&x2, 4.0, 3), 1);
+        assert_eq!(empty_octaves(&x2, 0.0, 3), 0, "the noise's share is what the correction takes out");
+    }
+
+    #[test]
+    fn the_working_factor_keeps_the_range_below_the_width_and_follows_the_switches() {
+        let grey = upsampled(&texture(64, 48, 3), 4);
+        let img = RgbImage::from_channels(grey.width, grey.height, [grey.data.clone(), grey.data.clone(), grey.data])
+            .unwrap();
+        let params = Params::default();
+        assert_eq!(working_factor(&img, 16, &params), 4);
+        // 1/4 would leave 64 labels on 64 columns: 1/2 is the most.
+        assert_eq!(working_factor(&img, 254, &params), 2);
+        let off = Params { working: crate::params::WorkingParams { auto: false, ..params.working }, ..params.clone() };
+        assert_eq!(working_factor(&img, 16, &off), 1);
+        assert_eq!(working_factor(&img, 16, &Params { downscale: 2, ..params }), 1, "downscale given: its own");
+    }
+}
