@@ -49,7 +49,7 @@ pub fn read_pfm(path: &Path) -> Result<Plane<f32>> {
     let pfm_error = |msg| Error::Pfm { path: path.to_path_buf(), msg };
     // The header first (three short lines), then exactly the body it announces plus one byte to detect more:
     // a device or a huge file is never read whole.
-    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut file = super::open_regular(path)?;
     let mut bytes = Vec::new();
     file.by_ref().take(3 * (MAX_LINE as u64 + 2)).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
     let (width, height, channels, _, body_start) = header(&bytes).map_err(pfm_error)?;
@@ -65,7 +65,7 @@ pub fn read_pfm(path: &Path) -> Result<Plane<f32>> {
 /// [`Error::Io`] if it cannot be read, [`Error::Pfm`] naming the path if the header is malformed.
 pub(crate) fn read_pfm_size(path: &Path) -> Result<(usize, usize)> {
     use std::io::Read;
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let file = super::open_regular(path)?;
     let mut bytes = Vec::new();
     file.take(3 * (MAX_LINE as u64 + 2)).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
     let (width, height, ..) = header(&bytes).map_err(|msg| Error::Pfm { path: path.to_path_buf(), msg })?;

@@ -49,16 +49,24 @@ pub struct ImageHeader {
 /// # Errors
 /// As [`load_rgb`], for the header.
 pub(crate) fn read_header(path: &Path) -> Result<ImageHeader> {
+    let (width, height, file_bytes, sample_bytes) = header_parts(path)?;
+    let px = width as u64 * height as u64;
+    let load_bytes = file_bytes.saturating_add(sample_bytes).saturating_add(12 * px);
+    Ok(ImageHeader { width, height, load_bytes })
+}
+
+/// An image file's size (width, height), its length in bytes and the bytes of its decoded samples (at its own bit
+/// depth and channels), from the header.
+fn header_parts(path: &Path) -> Result<(usize, usize, u64, u64)> {
     use image::ImageDecoder;
-    let file_bytes = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
-    let reader = ImageReader::open(path).map_err(|e| Error::io(path, e))?;
+    let file = super::open_regular(path)?;
+    let file_bytes = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    let reader = ImageReader::new(std::io::BufReader::new(file));
     let reader = reader.with_guessed_format().map_err(|e| Error::io(path, e))?;
     check_format(path, &reader)?;
     let decoder = reader.into_decoder().map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     let (w, h) = decoder.dimensions();
-    let px = u64::from(w) * u64::from(h);
-    let load_bytes = file_bytes.saturating_add(decoder.total_bytes()).saturating_add(12 * px);
-    Ok(ImageHeader { width: w as usize, height: h as usize, load_bytes })
+    Ok((w as usize, h as usize, file_bytes, decoder.total_bytes()))
 }
 
 /// Reads the headers of both images of a pair, before either is decoded: their common size and the memory
@@ -130,7 +138,7 @@ pub(crate) fn decode(path: &Path) -> Result<DynamicImage> {
 
 /// [`decode`], with the decoder's allocation limit `max_bytes` (`None`: the decoder's default).
 fn decode_within(path: &Path, max_bytes: Option<u64>) -> Result<DynamicImage> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_regular(path)?;
     let mut reader = ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| Error::io(path, e))?;
     check_format(path, &reader)?;
     if let Some(max) = max_bytes {
@@ -252,7 +260,7 @@ pub(crate) fn encode_disparity_png16(path: &Path, map: &DisparityMap) -> Result<
 /// # Errors
 /// [`Error::Io`] or [`Error::Image`] naming the path.
 pub(crate) fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_regular(path)?;
     let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
         .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     // A disparity PNG is one 16-bit channel (KITTI convention); an 8-bit or colour image is a picture, and
@@ -274,7 +282,7 @@ pub(crate) fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
 /// # Errors
 /// [`Error::Io`] or [`Error::Image`] naming the path.
 pub(crate) fn load_grey8(path: &Path) -> Result<Plane<u8>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_regular(path)?;
     let img = image::load_from_memory(&bytes).map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     let grey = img.to_luma8();
     Ok(Plane::from_parts(grey.width() as usize, grey.height() as usize, grey.into_raw()))
