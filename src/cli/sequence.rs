@@ -97,6 +97,11 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
     };
     let replayed = std::cell::Cell::new(0usize);
     let on_event = |event: Event<'_>| match event {
+        Event::Note(line) => {
+            if !quiet {
+                note!("{line}");
+            }
+        }
         Event::Replayed { index, .. } => {
             header();
             if !quiet && replayed.replace(replayed.get() + 1) == 0 {

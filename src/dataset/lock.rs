@@ -283,6 +283,22 @@ pub fn lock_results(
     Ok(lock)
 }
 
+/// Locks a folder that one run writes as a whole (a sequence's output folder) against a second writer: its
+/// `.jem-lock`, taken over when stale, as [`lock_results`] locks a results folder.
+///
+/// # Errors
+/// [`Error::Input`] naming the folder, the lock file and the run holding it when another live run (or one this
+/// machine cannot check) holds it, or naming a lock that cannot be read; [`Error::Io`] if the lock cannot be made.
+pub fn lock_folder(dir: &Path) -> Result<ResultsLock> {
+    let me = Identity::new(None);
+    let mut lock =
+        ResultsLock { files: Vec::new(), token: me.token.clone(), taken_over: Vec::new(), refused: Vec::new() };
+    let file = dir.join(".jem-lock");
+    acquire(&file, &me, &mut lock).map_err(NotTaken::into_error)?;
+    lock.files.push(file);
+    Ok(lock)
+}
+
 /// The live runs holding a lock on the results of `alg` for these pairs, one line each (the folder and who holds
 /// it), for `jem eval`, which reads results that a batch may still be writing. Stale locks are not listed; a lock
 /// this machine cannot check (another host or PID namespace) or cannot read (named, as `jem batch` names it) is.

@@ -204,6 +204,19 @@ impl Rectification {
         &self.transforms
     }
 
+    /// A fingerprint of what the rectification does (the size, both cameras, the rotations and projections; FNV-1a
+    /// of their bits): equal for two calibrations that rectify alike, different when a value changes.
+    pub fn fingerprint(&self) -> u64 {
+        let t = &self.transforms;
+        let cameras = self.cameras.iter().flat_map(|c| c.matrix.iter().flatten().chain(&c.distortion));
+        let rotations = t.r1.iter().chain(&t.r2).flatten();
+        let projections = t.p1.iter().chain(&t.p2).flatten();
+        let size = [self.size.0 as f64, self.size.1 as f64];
+        cameras.chain(rotations).chain(projections).chain(&size).fold(crate::rng::FNV_OFFSET, |h, v| {
+            crate::rng::fnv1a(h, &v.to_bits().to_le_bytes())
+        })
+    }
+
     /// The rectified views' focal length in pixels.
     pub fn focal_px(&self) -> f64 {
         self.transforms.p1[0][0]
