@@ -63,6 +63,9 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
         (Some(c), Some(f)) => Some(super::rectify::plan(c, &f.left, &f.right, args.memory.memory_limit())?),
         _ => None,
     };
+    if let (Some(rect), Some(calib)) = (&rectification, &args.rectify) {
+        super::rectify::warn(rect, calib, global.quiet);
+    }
     let opts = RunOptions {
         rectification: rectification.as_ref(),
         params: &params,
