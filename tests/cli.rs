@@ -1153,17 +1153,24 @@ fn a_max_memory_below_one_byte_is_refused() {
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
-/// Issue 41, item 7: absurd but finite camera values. A focal length times baseline that overflows is refused
-/// before any work (1ea02dd: exit 0, a depth map of `inf` and a PLY of points at ±inf); products that stay finite
-/// but put every depth beyond `f32` give no point at all, and `inf` depth exactly where there is no point.
+/// Issue 41, item 7: absurd but finite camera values. A focal length times baseline beyond 32-bit floats is
+/// refused before any work (1ea02dd: exit 0, a depth map of `inf` and a PLY of points at ±inf; with 1e30 × 1e30,
+/// finite in 64 bits, later an all-`inf` depth map and an empty cloud); values whose product fits but put some
+/// points beyond `f32` give no such point, and `inf` depth exactly where there is no point. A flag's own bad
+/// value is blamed on the flag, not on the calib.txt beside the views.
 #[test]
 fn overflowing_geometry_writes_no_infinite_point() {
     let dir = tempfile::tempdir().unwrap();
     synth_scene(dir.path(), &["S", "--width", "64", "--height", "48", "--ndisp", "16"]);
     let run = ["S/im0.png", "S/im1.png", "-o", "d.pfm", "--depth", "z.pfm", "--cloud", "c.ply", "--set", "model=wta"];
-    let huge = ["--focal", "1e300", "--baseline", "1e300"];
-    assert_clean_failure(dir.path(), &[&run[..], &huge].concat(), &["overflows", "baseline"]);
-    let out = run_in(dir.path(), &[&run[..], &["--focal", "1e30", "--baseline", "1e30"]].concat());
+    for huge in [["--focal", "1e30", "--baseline", "1e30"], ["--focal", "1e300", "--baseline", "1e300"]] {
+        assert_clean_failure(dir.path(), &[&run[..], &huge].concat(), &["beyond 32-bit floats", "baseline"]);
+    }
+    let nan = ["--max-depth", "NaN"];
+    assert_clean_failure(dir.path(), &[&run[..], &nan].concat(), &["invalid --max-depth NaN"]);
+    let err = stderr(&run_in(dir.path(), &[&run[..], &nan].concat()));
+    assert!(!err.contains("calib.txt"), "the flag's value is not calib.txt's: {err}");
+    let out = run_in(dir.path(), &[&run[..], &["--focal", "1", "--baseline", "1e38"]].concat());
     assert!(out.status.success(), "{}", stderr(&out));
     let ply = std::fs::read(dir.path().join("c.ply")).unwrap();
     let end = b"end_header\n";
@@ -1173,6 +1180,7 @@ fn overflowing_geometry_writes_no_infinite_point() {
     assert!(points.iter().flatten().all(|v| v.is_finite()), "a non-finite point");
     let depth = pfm::read_pfm(&dir.path().join("z.pfm")).unwrap();
     assert_eq!(depth.data().iter().filter(|z| z.is_finite()).count(), points.len(), "depth and cloud disagree");
+    assert!(!points.is_empty() && points.len() < 64 * 48, "{} points", points.len());
 }
 
 /// Issue 41, item 11: the image decoder's own allocation limit is `--max-memory` (checked from the headers
