@@ -243,6 +243,21 @@ fn sequence_with_rectify_is_jem_match_with_rectify_frame_by_frame() {
     }
 }
 
+/// The same image given as both views matches at 0 everywhere and was "100 % valid" without a word: a warning
+/// says it is the same image (and `--strict` writes nothing).
+#[test]
+fn the_same_image_twice_is_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let out = run_in(dir.path(), &["S/im0.png", "S/im0.png", "-o", "d.pfm", "--ndisp", "16", "--set", "model=wta"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("warning: the two views are the same image")), "{err}");
+    let out = run_in(dir.path(), &["S/im0.png", "S/im0.png", "-o", "e.pfm", "--ndisp", "16", "--strict"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(!dir.path().join("e.pfm").exists());
+}
+
 /// Calibrations that cannot be right are refused with the key named, as `jem rectify` and `--rectify` read them:
 /// a matrix that is no rotation (OpenCV turns any into the nearest rotation without a word), a reflection (it was
 /// "a vertical baseline"), a given R1 that is no rotation, a size that is no size, a translation beyond floating

@@ -232,6 +232,7 @@ fn info<'py>(py: Python<'py>, out: &Output, check: &PairCheck) -> PyResult<Bound
     checks.set_item("clipped", (check.clipped[0], check.clipped[1]))?;
     checks.set_item("sharpness_ratio", check.sharpness_ratio)?;
     checks.set_item("focus_beyond", check.focus_beyond)?;
+    checks.set_item("identical_share", check.identical_share)?;
     info.set_item("checks", checks)?;
     info.set_item("warnings", check.warnings())?;
     Ok(info.into_any())
