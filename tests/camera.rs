@@ -286,7 +286,11 @@ fn calibrations_that_cannot_be_right_are_refused_naming_the_key() {
         ("width.yml", rig.replace("image_width: 64", "image_width: -5"), "image_width/image_height -5 × 48"),
         ("height.yml", rig.replace("image_height: 48", "image_height: 0"), "image_width/image_height 64 × 0"),
         ("far.yml", rig.replace("[ -0.25, 0., 0. ]", "[ -1e300, 0., 0. ]"), "T (-1e300, 0, 0) is too long"),
-        ("dup.yml", format!("{rig}T: !!opencv-matrix\n   rows: 3\n   cols: 1\n   dt: d\n   data: [ 1., 0., 0. ]\n"), "T is given twice"),
+        (
+            "dup.yml",
+            format!("{rig}T: !!opencv-matrix\n   rows: 3\n   cols: 1\n   dt: d\n   data: [ 1., 0., 0. ]\n"),
+            "T is given twice",
+        ),
     ];
     for (name, text, needle) in cases {
         std::fs::write(dir.path().join(name), text).unwrap();

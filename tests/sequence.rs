@@ -198,7 +198,11 @@ fn a_sequence_folder_records_its_rectification() {
     assert!(err.contains("1 run, 2 already there"), "{err}");
     ok(dir.path(), &["sequence", "seq", "-o", "raw", "--set", "model=wta"]);
     std::fs::remove_file(dir.path().join("raw/000002.pfm")).unwrap();
-    fails(dir.path(), &["sequence", "seq", "-o", "raw", "--set", "model=wta", "--rectify", "rig.yml"], &["unrectified"]);
+    fails(
+        dir.path(),
+        &["sequence", "seq", "-o", "raw", "--set", "model=wta", "--rectify", "rig.yml"],
+        &["unrectified"],
+    );
 }
 
 /// A run that writes no frame (a range the frames cannot hold) leaves nothing: neither its record nor the folder

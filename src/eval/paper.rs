@@ -56,7 +56,8 @@ impl PaperResults {
                 return Err(format!("line {}: scene {} is listed twice (first on line {first})", n + 1, f[0]));
             }
             let weight = f[1].parse::<f64>().ok().filter(|w| w.is_finite() && *w > 0.0);
-            let weight = weight.ok_or_else(|| format!("line {}: bad weight {:?} (expected a number > 0)", n + 1, f[1]))?;
+            let weight =
+                weight.ok_or_else(|| format!("line {}: bad weight {:?} (expected a number > 0)", n + 1, f[1]))?;
             let values = f[2..]
                 .iter()
                 .zip(&columns)

@@ -168,9 +168,7 @@ mod tests {
         let k = [[80.0, 0.0, 31.5], [0.0, 80.0, 23.5], [0.0, 0.0, 1.0]];
         let plain = Intrinsics { matrix: k, distortion: [0.0; 8] };
         let wild = Intrinsics { distortion: [1e30, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], ..plain };
-        let views = |a: &Intrinsics, b: &Intrinsics| {
-            empty_views([a, b], [&IDENTITY, &IDENTITY], [&k, &k], (64, 48))
-        };
+        let views = |a: &Intrinsics, b: &Intrinsics| empty_views([a, b], [&IDENTITY, &IDENTITY], [&k, &k], (64, 48));
         assert!(views(&plain, &plain).is_empty());
         let lines = views(&plain, &wild);
         assert_eq!(lines.len(), 1, "{lines:?}");

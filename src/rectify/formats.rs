@@ -307,7 +307,9 @@ mod tests {
         assert!(parse_yaml(twice).unwrap_err().contains("T is given twice"));
         let xml = "<opencv_storage><image_width>640</image_width><image_width>320</image_width></opencv_storage>";
         assert!(parse_xml(xml).unwrap_err().contains("image_width is given twice"));
-        assert!(parse_kitti("S_02: 1 2\nK_02: 1 0 0 0 1 0 0 0 1\nS_02: 3 4\n").unwrap_err().contains("S_02 is given twice"));
+        assert!(
+            parse_kitti("S_02: 1 2\nK_02: 1 0 0 0 1 0 0 0 1\nS_02: 3 4\n").unwrap_err().contains("S_02 is given twice")
+        );
     }
 
     #[test]

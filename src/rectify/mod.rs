@@ -222,9 +222,11 @@ impl Rectification {
         let rotations = t.r1.iter().chain(&t.r2).flatten();
         let projections = t.p1.iter().chain(&t.p2).flatten();
         let size = [self.size.0 as f64, self.size.1 as f64];
-        cameras.chain(rotations).chain(projections).chain(&size).fold(crate::rng::FNV_OFFSET, |h, v| {
-            crate::rng::fnv1a(h, &v.to_bits().to_le_bytes())
-        })
+        cameras
+            .chain(rotations)
+            .chain(projections)
+            .chain(&size)
+            .fold(crate::rng::FNV_OFFSET, |h, v| crate::rng::fnv1a(h, &v.to_bits().to_le_bytes()))
     }
 
     /// The rectified views' focal length in pixels.

@@ -31,6 +31,24 @@ pub(crate) fn estimate_memory_bytes(width: usize, height: usize, ndisp: usize, p
 
 /// [`estimate_memory_bytes`] with the downscale factor given explicitly.
 fn estimate_at_factor(width: usize, height: usize, ndisp: usize, params: &Params, factor: usize) -> u64 {
+    let full_size = if factor > 1 { DOWNSCALED_FULL_SIZE_BYTES_PER_PX * width as u64 * height as u64 } else { 0 };
+    reduced_run_bytes(width, height, ndisp, params, factor) + full_size
+}
+
+/// The memory of the coarse level of a tiled run (`params.downscale` its factor, > 1): its run at the reduced size
+/// and its own full-size copies (the reduced pair's source and the maps it brings back, 32 bytes per input pixel).
+/// The pair and the stitched maps are counted beside it (`FULL_SIZE_BYTES_PER_PX` of the tile plan), not here.
+pub(crate) fn coarse_level_bytes(width: usize, height: usize, ndisp: usize, params: &Params) -> u64 {
+    let factor = params.downscale.max(1);
+    reduced_run_bytes(width, height, ndisp, params, factor)
+        + COARSE_FULL_SIZE_BYTES_PER_PX * width as u64 * height as u64
+}
+
+/// Bytes per input pixel the coarse level of a tiled run holds at the full size ([`coarse_level_bytes`]).
+const COARSE_FULL_SIZE_BYTES_PER_PX: u64 = 32;
+
+/// The run at 1/`factor` of the size (see [`estimate_memory_bytes`]), without what is held at the input's size.
+fn reduced_run_bytes(width: usize, height: usize, ndisp: usize, params: &Params, factor: usize) -> u64 {
     let (w, h, m) =
         (scale::reduced_len(width, factor), scale::reduced_len(height, factor), scale::reduced_ndisp(ndisp, factor));
     let n = w as u64 * h as u64;
@@ -47,8 +65,7 @@ fn estimate_at_factor(width: usize, height: usize, ndisp: usize, params: &Params
         Model::Wta => 0,
         _ => (1..params.meanfield.pyramid_levels as u32).map(|k| (2 + next_q) * volume.div_ceil(4u64.pow(k))).sum(),
     };
-    let full_size = if factor > 1 { DOWNSCALED_FULL_SIZE_BYTES_PER_PX * width as u64 * height as u64 } else { 0 };
-    volumes * volume + pyramid + 300 * n + full_size + PROCESS_BYTES
+    volumes * volume + pyramid + 300 * n + PROCESS_BYTES
 }
 
 /// Bytes per input pixel a downscaled run holds at the input's size, at the most: the pair (24), the maps brought
