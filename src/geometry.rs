@@ -270,7 +270,9 @@ fn colour(image: &RgbImage, i: usize) -> [u8; 3] {
 pub fn point_cloud(disparity: &DisparityMap, image: &RgbImage, camera: &Camera) -> PointCloud {
     assert_eq!(disparity.dims(), image.dims(), "image and disparity map differ in size");
     let w = disparity.width;
-    let mut cloud = PointCloud::default();
+    // Counted first, so that the vectors hold their points exactly (grown, they held up to twice as many).
+    let n = disparity.data.iter().enumerate().filter(|&(i, &d)| camera.point(i % w, i / w, d).is_some()).count();
+    let mut cloud = PointCloud { points: Vec::with_capacity(n), colours: Vec::with_capacity(n) };
     for (i, &d) in disparity.data.iter().enumerate() {
         if let Some(p) = camera.point(i % w, i / w, d) {
             cloud.points.push(p);

@@ -36,6 +36,15 @@ pub fn decode_image(path: &Path) -> Result<image::DynamicImage> {
     png::decode(path)
 }
 
+/// [`decode_image`] within a memory limit of `max_bytes`: the header is read first, and an image whose decoding
+/// (the file, its samples and a converted copy of them) would not fit is refused before anything is decoded.
+///
+/// # Errors
+/// As [`read_image`]; [`Error::OutOfMemory`] naming the file when its decoding does not fit.
+pub fn decode_image_within(path: &Path, max_bytes: u64) -> Result<image::DynamicImage> {
+    png::decode_bounded(path, max_bytes)
+}
+
 /// Both views of a pair ([`read_image`]), decoded in parallel.
 ///
 /// # Errors
@@ -680,7 +689,8 @@ mod tests {
         assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
         let zero = dir.path().join("zero.png");
         std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
-        for (path, kind) in [(&fifo, "a FIFO"), (&zero, "a character device"), (&dir.path().to_path_buf(), "a folder")] {
+        for (path, kind) in [(&fifo, "a FIFO"), (&zero, "a character device"), (&dir.path().to_path_buf(), "a folder")]
+        {
             let results = [
                 read_capped(path, 100, "test").map(drop),
                 read_regular(path).map(drop),
