@@ -225,14 +225,29 @@ fn a_failed_sequence_run_leaves_nothing_and_names_the_frame() {
     assert!(dir.path().join("out/000001.pfm").is_file());
 }
 
-/// `-o` naming a file, not a folder, says what to give instead of the system's "File exists".
+/// `-o` naming a file, not a folder (or a folder under a file), says what to give instead of the system's "File
+/// exists" or "Not a directory"; so do the other commands that make a folder.
 #[test]
 fn a_sequence_output_that_is_a_file_is_refused_with_what_to_do() {
     let dir = tempfile::tempdir().unwrap();
     small_pan(dir.path());
     std::fs::write(dir.path().join("afile"), b"x").unwrap();
-    fails(dir.path(), &["sequence", "seq", "-o", "afile"], &["afile", "not a folder", "give -o a folder"]);
+    fails(dir.path(), &["sequence", "seq", "-o", "afile"], &["afile", "not a folder", "give the name of a folder"]);
+    fails(dir.path(), &["sequence", "seq", "-o", "afile/out"], &["afile: is a file", "afile/out cannot be made"]);
     assert_eq!(std::fs::read(dir.path().join("afile")).unwrap(), b"x");
+    // The other commands that make a folder say the same, not the system's "File exists" or "Not a directory".
+    for args in [
+        &["synth", "afile"][..],
+        &["synth", "afile/x"],
+        &["synth", "afile", "--frames", "2"],
+        &["degrade", "seq", "afile/x", "--recipe", "noise:4"],
+    ] {
+        let out = run_in(dir.path(), args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains("afile") && !err.contains("File exists") && !err.contains("Not a directory"), "{err}");
+        assert!(err.contains("not a folder") || err.contains("is a file"), "{args:?}: {err}");
+    }
 }
 
 /// A frame whose name holds a line break would split its line of times.txt: refused, naming the folder.

@@ -95,7 +95,7 @@ pub(super) fn run(args: &RectifyArgs, global: &GlobalArgs) -> Result<ExitCode> {
             files.push(jem::io::pfm::encode_pfm(&y));
         }
     }
-    std::fs::create_dir_all(&args.output).map_err(|e| Error::io(&args.output, e))?;
+    jem::io::create_folder(&args.output)?;
     let pairs: Vec<(&Path, &[u8])> = output_refs.iter().copied().zip(files.iter().map(Vec::as_slice)).collect();
     jem::io::write_all_or_none(&pairs)?;
     if !global.quiet {

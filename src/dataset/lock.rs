@@ -262,7 +262,7 @@ pub fn lock_results(
         if !dirs.insert(dir.clone()) {
             continue;
         }
-        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        crate::io::create_folder(&dir)?;
         let file = dir.join(&name);
         match acquire(&file, &me, &mut lock) {
             Ok(()) => lock.files.push(file),

@@ -465,6 +465,41 @@ pub fn read_capped(path: &Path, max: u64, what: &str) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
+/// Creates the folder `dir` and the folders above it that are missing, for outputs. A name that is taken by a file
+/// is refused with what to do, instead of the system's "File exists" or "Not a directory".
+///
+/// # Errors
+/// [`Error::Input`] naming `dir`, or the file above it that is in the way; [`Error::Io`] when it cannot be made.
+pub fn create_folder(dir: &Path) -> Result<()> {
+    check_folder_name(dir)?;
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))
+}
+
+/// Checks that the folder `dir` exists or can be made: neither it nor a folder above it is a file
+/// ([`create_folder`]'s refusals, without making anything).
+///
+/// # Errors
+/// As [`create_folder`].
+pub fn check_folder_name(dir: &Path) -> Result<()> {
+    if dir.is_dir() {
+        return Ok(());
+    }
+    if std::fs::symlink_metadata(dir).is_ok() {
+        return Err(Error::Input(format!(
+            "{}: exists and is not a folder; give the name of a folder (a new one is made)",
+            dir.display()
+        )));
+    }
+    if let Some(file) = dir.ancestors().skip(1).find(|a| !a.as_os_str().is_empty() && a.exists() && !a.is_dir()) {
+        return Err(Error::Input(format!(
+            "{}: is a file, so the folder {} cannot be made in it; give another name",
+            file.display(),
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
 /// The largest config file read.
 pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
 /// The largest calib.txt read.
@@ -727,6 +762,22 @@ mod tests {
         }
         want.sort();
         assert_eq!(files(dir.path()), want);
+    }
+
+    /// A folder name taken by a file, or under one, is refused with what to do (not the system's "File exists" or
+    /// "Not a directory"); an existing folder is fine and a missing one is made.
+    #[test]
+    fn a_folder_is_made_unless_a_file_is_in_the_way() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("f");
+        std::fs::write(&file, b"x").unwrap();
+        let e = create_folder(&file).unwrap_err().to_string();
+        assert!(e.ends_with("f: exists and is not a folder; give the name of a folder (a new one is made)"), "{e}");
+        let e = create_folder(&file.join("a/b")).unwrap_err().to_string();
+        assert!(e.contains("f: is a file, so the folder") && e.contains("f/a/b cannot be made"), "{e}");
+        create_folder(&dir.path().join("new/deep")).unwrap();
+        create_folder(&dir.path().join("new/deep")).unwrap();
+        assert!(dir.path().join("new/deep").is_dir() && check_folder_name(&dir.path().join("x/y")).is_ok());
     }
 
     /// The names in a folder, sorted.

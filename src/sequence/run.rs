@@ -184,15 +184,8 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
 /// # Errors
 /// [`Error::Input`] when it exists and is not a folder, [`Error::Io`] when it cannot be made.
 fn make_folder(out: &Path) -> Result<bool> {
-    if out.exists() && !out.is_dir() {
-        return Err(Error::Input(format!(
-            "{}: exists and is not a folder; give -o a folder name (a new one, or one an earlier run of this \
-             sequence wrote)",
-            out.display()
-        )));
-    }
-    let created = !out.exists();
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    let created = !out.is_dir();
+    crate::io::create_folder(out)?;
     Ok(created)
 }
 
