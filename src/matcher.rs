@@ -315,8 +315,9 @@ impl Matcher {
     /// views, a vertical offset beyond the alignment, a range over half the width, no texture, an exposure or focus
     /// difference beyond the front end); `out` is the match's output (its measured range and noise).
     ///
-    /// The swap check runs within what the memory limit leaves beside what the caller holds by then
-    /// ([`CHECK_HELD_BYTES_PER_PX`]): given the whole limit, it took a downscaled run past it.
+    /// The swap check runs within what the memory limit leaves beside what the caller holds by then (the pair, the
+    /// output maps and the check's grey views: 41 bytes a pixel): given the whole limit, it took a downscaled run
+    /// past it.
     pub fn check_pair(&self, left: &RgbImage, right: &RgbImage, out: &Output) -> crate::PairCheck {
         let width = left.width().max(1) as f32;
         let range_share = out.plan.ndisp_measured.then(|| out.plan.ndisp as f32 / width);
