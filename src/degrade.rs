@@ -496,7 +496,7 @@ fn degrade_scene(scene: &Path, dest: &Path, rel: &Path, recipe: &Recipe, seed: u
     for name in COPIED_FILES {
         let from = scene.join(name);
         if from.is_file() {
-            let bytes = std::fs::read(&from).map_err(|e| Error::io(&from, e))?;
+            let bytes = crate::io::read_regular(&from)?;
             crate::io::write_atomic(&dest.join(name), &bytes)?;
         }
     }

@@ -241,9 +241,9 @@ impl PointCloud {
 /// A PLY's header for `points` vertices, in a buffer with room for them.
 fn ply_header(points: usize) -> Vec<u8> {
     let header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment jem: left camera frame, baseline units\nelement vertex {points}\n\
-         property float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n\
-         property uchar blue\nend_header\n"
+        "ply\nformat binary_little_endian 1.0\ncomment jem: left camera frame, baseline units\n\
+         element vertex {points}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\n\
+         property uchar green\nproperty uchar blue\nend_header\n"
     );
     let mut out = Vec::with_capacity(header.len() + points * 15);
     out.extend_from_slice(header.as_bytes());

@@ -338,14 +338,23 @@ fn opencv_one_dimensional_arrays_are_read() {
         .replace("%YAML:1.0", "%YAML 1.2");
     assert!(yaml.contains("opencv-nd-matrix\n   sizes: [ 5 ]") && yaml.contains("sizes: [ 3 ]"), "{yaml}");
     std::fs::write(dir.path().join("nd.yml"), yaml).unwrap();
-    let xml = "<?xml version=\"1.0\"?>\n<opencv_storage>\n<K1 type_id=\"opencv-matrix\">\n  <rows>3</rows>\n  \
-               <cols>3</cols>\n  <dt>d</dt>\n  <data>\n    80. 0. 31.5 0. 80. 23.5 0. 0. 1.</data></K1>\n\
-               <D1 type_id=\"opencv-nd-matrix\">\n  <sizes>\n    5</sizes>\n  <dt>d</dt>\n  <data>\n    0. 0. 0. 0. 0.</data></D1>\n\
-               <K2 type_id=\"opencv-matrix\">\n  <rows>3</rows>\n  <cols>3</cols>\n  <dt>d</dt>\n  <data>\n    80. 0. 31.5 0. 80. 23.5 0. 0. 1.</data></K2>\n\
-               <D2 type_id=\"opencv-nd-matrix\">\n  <sizes>\n    5</sizes>\n  <dt>d</dt>\n  <data>\n    0. 0. 0. 0. 0.</data></D2>\n\
-               <R type_id=\"opencv-matrix\">\n  <rows>3</rows>\n  <cols>3</cols>\n  <dt>d</dt>\n  <data>\n    1. 0. 0. 0. 1. 0. 0. 0. 1.</data></R>\n\
-               <T type_id=\"opencv-nd-matrix\">\n  <sizes>\n    3</sizes>\n  <dt>d</dt>\n  <data>\n    -0.25 0. 0.</data></T>\n\
-               </opencv_storage>\n";
+    let element = |name: &str, kind: &str, shape: &str, data: &str| {
+        format!("<{name} type_id=\"{kind}\">\n  {shape}\n  <dt>d</dt>\n  <data>\n    {data}</data></{name}>\n")
+    };
+    let matrix = |name: &str, data: &str| element(name, "opencv-matrix", "<rows>3</rows>\n  <cols>3</cols>", data);
+    let vector = |name: &str, n: usize, data: &str| {
+        element(name, "opencv-nd-matrix", &format!("<sizes>\n    {n}</sizes>"), data)
+    };
+    let k = "80. 0. 31.5 0. 80. 23.5 0. 0. 1.";
+    let xml = format!(
+        "<?xml version=\"1.0\"?>\n<opencv_storage>\n{}{}{}{}{}{}</opencv_storage>\n",
+        matrix("K1", k),
+        vector("D1", 5, "0. 0. 0. 0. 0."),
+        matrix("K2", k),
+        vector("D2", 5, "0. 0. 0. 0. 0."),
+        matrix("R", "1. 0. 0. 0. 1. 0. 0. 0. 1."),
+        vector("T", 3, "-0.25 0. 0.")
+    );
     std::fs::write(dir.path().join("nd.xml"), xml).unwrap();
     std::fs::write(dir.path().join("rig.yml"), &rig).unwrap();
     let out = run_in(dir.path(), &["rectify", "rig.yml", "S/im0.png", "S/im1.png", "-o", "A"]);

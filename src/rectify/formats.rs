@@ -294,8 +294,9 @@ mod tests {
         assert_eq!((n["D1"].rows, n["D1"].cols), (1, 5));
         assert_eq!(n["D1"].data, vec![-0.21, 0.09, 0.0012, -0.0007, -0.015]);
         assert_eq!((n["Z"].rows, n["Z"].cols), (1, 6));
-        let xml = "<?xml version=\"1.0\"?>\n<opencv_storage>\n<T type_id=\"opencv-nd-matrix\">\n  <sizes>\n    3</sizes>\n  \
-                   <dt>d</dt>\n  <data>\n    -0.12 0.0035 -0.0021</data></T>\n</opencv_storage>\n";
+        let xml = "<?xml version=\"1.0\"?>\n<opencv_storage>\n<T type_id=\"opencv-nd-matrix\">\n  \
+                   <sizes>\n    3</sizes>\n  <dt>d</dt>\n  <data>\n    -0.12 0.0035 -0.0021</data></T>\n\
+                   </opencv_storage>\n";
         let n = parse_xml(xml).unwrap();
         assert_eq!((n["T"].rows, n["T"].cols, n["T"].data.len()), (1, 3, 3));
     }
