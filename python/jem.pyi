@@ -105,39 +105,54 @@ def match(
     """
 
 def depth(
-    disp: npt.NDArray[np.floating[Any]], f: float, baseline: float, doffs: float = 0.0, max_depth: Optional[float] = None
+    disp: npt.NDArray[np.floating[Any]],
+    f: float,
+    baseline: float,
+    doffs: float = 0.0,
+    max_depth: Optional[float] = None,
+    max_memory: Optional[int] = None,
 ) -> _Map:
     """Metric depth Z = f·baseline / (disp + doffs), float32, ``inf`` where there is none or beyond ``max_depth``
-    (default f·baseline, the depth of a one-pixel disparity)."""
+    (default f·baseline, the depth of a one-pixel disparity). ``max_memory``: bytes the call may hold (default:
+    as ``match``); a map too large raises MemoryError before anything is allocated."""
 
 def cloud(
     disp: npt.NDArray[np.floating[Any]], left: _Image, f: float, baseline: float, cx: float, cy: float,
-    doffs: float = 0.0, max_depth: Optional[float] = None,
+    doffs: float = 0.0, max_depth: Optional[float] = None, max_memory: Optional[int] = None,
 ) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
     """The point cloud ``--cloud`` writes: (points float32 N×3, colours uint8 N×3), one row per pixel with a depth,
-    in row order; X = (x − cx)·Z/f, Y = (y − cy)·Z/f, Z = f·baseline / (d + doffs), in the baseline's unit."""
+    in row order; X = (x − cx)·Z/f, Y = (y − cy)·Z/f, Z = f·baseline / (d + doffs), in the baseline's unit.
+    ``max_memory`` as ``depth``."""
 
 def colorize(
-    disp: npt.NDArray[np.floating[Any]], vmin: Optional[float] = None, vmax: Optional[float] = None
+    disp: npt.NDArray[np.floating[Any]],
+    vmin: Optional[float] = None,
+    vmax: Optional[float] = None,
+    max_memory: Optional[int] = None,
 ) -> npt.NDArray[np.uint8]:
     """The disparity map in colour as ``jem viz`` draws it: uint8 H×W×3, invalid pixels black; the range defaults to
-    the map's finite range."""
+    the map's finite range. ``max_memory`` as ``depth``."""
 
-def read_pfm(path: _Path) -> _Map:
-    """A PFM file as float32 H×W, top row first, ``inf`` kept."""
+def read_pfm(path: _Path, max_memory: Optional[int] = None) -> _Map:
+    """A PFM file as float32 H×W, top row first, ``inf`` kept; the header's size is checked against ``max_memory``
+    (as ``depth``) before the body is read."""
 
-def write_pfm(path: _Path, array: npt.NDArray[np.floating[Any]]) -> None:
+def write_pfm(path: _Path, array: npt.NDArray[np.floating[Any]], max_memory: Optional[int] = None) -> None:
     """Writes a 2-D float array (any floating type, as float32) as a little-endian greyscale PFM (Middlebury rows
-    bottom-up), atomically; an existing path that is not a regular file (a device, a FIFO) raises ValueError."""
+    bottom-up), atomically; an existing path that is not a regular file (a device, a FIFO) raises ValueError.
+    ``max_memory`` as ``depth``."""
 
-def read_image(path: _Path) -> _Image:
-    """A PNG, PPM/PGM, JPEG, BMP, TIFF or WebP as uint8 or uint16, H×W (grey) or H×W×3 (RGB), as ``jem`` reads it."""
+def read_image(path: _Path, max_memory: Optional[int] = None) -> _Image:
+    """A PNG, PPM/PGM, JPEG, BMP, TIFF or WebP as uint8 or uint16, H×W (grey) or H×W×3 (RGB), as ``jem`` reads it.
+    The header is checked first: a decoding beyond ``max_memory`` (as ``depth``) raises MemoryError, a path that is
+    not a regular file (a FIFO, ``/dev/zero``) ValueError, before anything is read."""
 
 class Matcher:
     """Matches pairs with one configuration; with ``temporal=True`` the pairs are the frames of one stereo
     sequence, in order, each matched with what the frames before it showed (a still camera's frames averaged and
     its answers settled; a moving camera's previous answer, moved by its shift, as the prior; scene cuts detected).
-    Arguments as ``match``. OpenCV users: like ``cv2.StereoSGBM_create(...)`` then ``.compute(L, R)``."""
+    Arguments as ``match``. OpenCV users: like ``cv2.StereoSGBM_create(...)`` then ``.compute(L, R)``. Calls on one
+    matcher from several threads take turns (each waits, the GIL released, for the one in progress)."""
 
     def __init__(
         self,
@@ -163,12 +178,17 @@ def sequence_frames(dir: _Path) -> list[Tuple[str, str, str]]:
     """The frames of a sequence folder (``left/`` + ``right/`` paired by name, or a KITTI raw drive), in order:
     ``(stem, left_path, right_path)``."""
 
-def rectify_maps(calib: _Path, size: Optional[Tuple[int, int]] = None) -> dict[str, Any]:
+def rectify_maps(
+    calib: _Path, size: Optional[Tuple[int, int]] = None, max_memory: Optional[int] = None
+) -> dict[str, Any]:
     """The rectification of a stereo calibration (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt) for views
     of ``size`` (width, height; default: the size the file states), as ``cv2.stereoRectify(alpha=0)`` and
     ``cv2.initUndistortRectifyMap`` give it: ``map1x``, ``map1y``, ``map2x``, ``map2y`` (float32 H×W, cv2.remap's
-    maps), ``R1``, ``R2``, ``P1``, ``P2``, ``Q`` (nested lists), ``focal``, ``baseline``, ``doffs``, ``size``."""
+    maps), ``R1``, ``R2``, ``P1``, ``P2``, ``Q`` (nested lists), ``focal``, ``baseline``, ``doffs``, ``size``.
+    ``max_memory`` as ``depth``; a view that would come out mostly black is a UserWarning."""
 
-def rectify(calib: _Path, left: _Image, right: _Image) -> Tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8], str]:
+def rectify(
+    calib: _Path, left: _Image, right: _Image, max_memory: Optional[int] = None
+) -> Tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8], str]:
     """The rectified views (uint8 H×W×3, what ``jem rectify`` writes) and the rectified pair's Middlebury
-    calib.txt text."""
+    calib.txt text. ``max_memory`` as ``depth``, checked from the shapes."""

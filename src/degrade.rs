@@ -399,7 +399,7 @@ pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Resul
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    std::fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
+    crate::io::create_folder(&parent)?;
     let scenes = crate::dataset::walk::find_scenes(&[src.to_path_buf()])?;
     if scenes.is_empty() {
         return Err(Error::Input(format!(
@@ -496,7 +496,7 @@ fn degrade_scene(scene: &Path, dest: &Path, rel: &Path, recipe: &Recipe, seed: u
     for name in COPIED_FILES {
         let from = scene.join(name);
         if from.is_file() {
-            let bytes = std::fs::read(&from).map_err(|e| Error::io(&from, e))?;
+            let bytes = crate::io::read_regular(&from)?;
             crate::io::write_atomic(&dest.join(name), &bytes)?;
         }
     }

@@ -15,6 +15,8 @@
 //! - **Exposure**: the share of pixels clipped to black or white in one view and not the other (detail lost
 //!   there cannot be matched; a gain or an offset the front end stretches away).
 //! - **Focus**: the views' sharpness ratio beyond the largest blur the front end gives the sharper view.
+//! - **The same image twice**: nearly every pixel equal in both views (the same file given twice, say): a
+//!   disparity of 0 everywhere, "100 % valid", says nothing about the scene.
 
 use crate::image::{Plane, RgbImage};
 use crate::imgproc::filter::{central_differences, gaussian_blur_plane};
@@ -43,6 +45,10 @@ const MAX_CLIPPED_DIFFERENCE: f32 = 0.10;
 /// The largest blur (σ, px) the front end gives the sharper view (`condition::sharpness`).
 const MAX_MATCHING_BLUR: f32 = 3.0;
 
+/// More pixels than this share equal in both views (within half a grey level): the same image twice. Two cameras
+/// never see that (their noise alone differs), even of a scene all at infinity.
+const MAX_IDENTICAL_SHARE: f32 = 0.99;
+
 /// What was checked on a pair (see the module doc); `None` where it could not be measured.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PairCheck {
@@ -63,12 +69,21 @@ pub struct PairCheck {
     pub sharpness_ratio: f32,
     /// Whether the focus difference is beyond what the front end matches.
     pub focus_beyond: bool,
+    /// The share of pixels whose colour is the same in both views, within half a grey level.
+    pub identical_share: f32,
 }
 
 impl PairCheck {
     /// One line per problem found (no line for a pair that looks right).
     pub fn warnings(&self) -> Vec<String> {
         let mut out = Vec::new();
+        if self.identical_share > MAX_IDENTICAL_SHARE {
+            out.push(format!(
+                "the two views are the same image ({:.1} % of the pixels equal): there is nothing to match; give the \
+                 left and the right camera's views",
+                100.0 * self.identical_share
+            ));
+        }
         if let Some(share) = self.negative_share
             && share > 0.5
         {
@@ -133,7 +148,7 @@ impl std::fmt::Display for PairCheck {
         write!(
             f,
             "checked: negative-disparity share {}, vertical offset {} (alignment up to {} px), range {} of the width, \
-             textured {:.1} %, clipped {:.1} / {:.1} %, sharpness ratio {:.2}",
+             textured {:.1} %, clipped {:.1} / {:.1} %, sharpness ratio {:.2}, identical {:.1} %",
             opt(self.negative_share, 100.0, " %"),
             opt(self.vertical_px, 1.0, " px"),
             self.vertical_limit_px,
@@ -141,7 +156,8 @@ impl std::fmt::Display for PairCheck {
             100.0 * self.textured_share,
             100.0 * self.clipped[0],
             100.0 * self.clipped[1],
-            self.sharpness_ratio
+            self.sharpness_ratio,
+            100.0 * self.identical_share
         )
     }
 }
@@ -183,7 +199,14 @@ pub fn check_pair(
         clipped: [clipped_share(left), clipped_share(right)],
         sharpness_ratio,
         focus_beyond,
+        identical_share: identical_share(left, right),
     }
+}
+
+/// The share of pixels whose three channels differ by at most half a grey level between the views.
+fn identical_share(left: &RgbImage, right: &RgbImage) -> f32 {
+    let same = |i: usize| left.rgb(i).iter().zip(right.rgb(i)).all(|(a, b)| (a - b).abs() <= 0.5);
+    (0..left.len()).filter(|&i| same(i)).count() as f32 / left.len().max(1) as f32
 }
 
 /// Each row's mean grey level less its mean over the [`PROFILE_DETREND`] rows around it.
@@ -301,6 +324,19 @@ mod tests {
         let c = check(&l, &r);
         assert!(c.warnings().is_empty(), "{c}: {:?}", c.warnings());
         assert!(c.negative_share.unwrap() < 0.5 && c.vertical_px.unwrap().abs() < 0.5, "{c}");
+    }
+
+    /// The same image as both views matches at 0 everywhere, "100 % valid": said to be the same image. A good
+    /// pair, and one view made a little brighter (still almost the same image to the eye), are not.
+    #[test]
+    fn the_same_image_twice_is_said_to_be() {
+        let (l, r) = scene();
+        let c = check(&l, &l);
+        assert!(c.identical_share == 1.0, "{c}");
+        assert!(c.warnings().iter().any(|w| w.starts_with("the two views are the same image (100.0 %")), "{c}");
+        assert!(check(&l, &r).identical_share < 0.5, "{}", check(&l, &r));
+        let brighter = mapped(&l, |x, y, c| (c[y * l.width() + x] + 2.0).min(255.0));
+        assert!(!check(&l, &brighter).warnings().iter().any(|w| w.contains("same image")));
     }
 
     #[test]

@@ -82,6 +82,13 @@ pub enum Error {
     },
     /// Any other invalid input, with a message.
     Input(String),
+    /// A frame of a sequence failed (its error is the source).
+    Frame {
+        /// The frame's stem.
+        stem: String,
+        /// What went wrong.
+        source: Box<Error>,
+    },
 }
 
 impl fmt::Display for Error {
@@ -108,6 +115,7 @@ impl fmt::Display for Error {
                 human_bytes(*limit)
             ),
             Error::Input(msg) => f.write_str(msg),
+            Error::Frame { stem, .. } => write!(f, "frame {stem}"),
         }
     }
 }
@@ -117,6 +125,7 @@ impl std::error::Error for Error {
         match self {
             Error::Image { source, .. } => Some(source),
             Error::Exr { source, .. } => Some(source),
+            Error::Frame { source, .. } => Some(source.as_ref()),
             _ => None,
         }
     }

@@ -48,6 +48,47 @@ pub struct CameraOverrides {
     pub max_depth: Option<f64>,
 }
 
+/// Whether a depth of `v` fits a 32-bit float (what depth maps and clouds hold): f·B, the depth of a one-pixel
+/// disparity, beyond it would make every depth `inf` and the cloud empty.
+pub fn fits_f32(v: f64) -> bool {
+    v.is_finite() && v.abs() <= f64::from(f32::MAX)
+}
+
+impl CameraOverrides {
+    /// The values given on the command line checked, each invalid one named by its flag, all in one message: a
+    /// finite number, the focal length, the baseline and the maximum depth positive (an infinite maximum depth
+    /// keeps every depth).
+    ///
+    /// # Errors
+    /// [`Error::Input`] naming every invalid flag and its value.
+    pub fn check(&self) -> Result<()> {
+        let values = [
+            ("--focal", self.focal, true),
+            ("--baseline", self.baseline, true),
+            ("--cx", self.cx, false),
+            ("--cy", self.cy, false),
+            ("--doffs", self.doffs, false),
+        ];
+        let mut invalid: Vec<String> = values
+            .iter()
+            .filter_map(|&(flag, value, positive)| {
+                let v = value?;
+                let ok = v.is_finite() && (!positive || v > 0.0);
+                (!ok).then(|| format!("{flag} {v} (expected a finite number{})", if positive { " > 0" } else { "" }))
+            })
+            .collect();
+        if let Some(z) = self.max_depth
+            && z.is_nan() | (z <= 0.0)
+        {
+            invalid.push(format!("--max-depth {z} (expected a depth > 0)"));
+        }
+        if invalid.is_empty() {
+            return Ok(());
+        }
+        Err(Error::Input(format!("invalid {}", invalid.join(", "))))
+    }
+}
+
 /// The 3 × 3 matrix of a `cam0=[f 0 cx; 0 f cy; 0 0 1]` value, row-major.
 fn matrix(text: &str) -> Option<[f64; 9]> {
     let inner = text.trim().strip_prefix('[')?.strip_suffix(']')?;
@@ -67,14 +108,17 @@ impl Camera {
     /// meaningful). `doffs` defaults to 0.
     ///
     /// # Errors
-    /// One error naming every value missing or invalid at once, the file read (or that none was found at
-    /// `calib_path`) and the flags that give them: [`Error::Calib`] when the file exists, [`Error::Input`] when not.
+    /// [`Error::Input`] naming the flags of invalid values given on the command line
+    /// ([`CameraOverrides::check`]); else one error naming every value missing or invalid at once, the file read
+    /// (or that none was found at `calib_path`) and the flags that give them: [`Error::Calib`] when the file
+    /// exists, [`Error::Input`] when not; [`Error::Input`] when f·B is beyond 32-bit floats ([`fits_f32`]).
     pub fn resolve(
         calib: Option<&Calib>,
         calib_path: &Path,
         overrides: &CameraOverrides,
         with_principal_point: bool,
     ) -> Result<Camera> {
+        overrides.check()?;
         let cam0 = calib.and_then(|c| c.get("cam0")).and_then(matrix);
         let key = |k: &str| calib.and_then(|c| c.get(k)).and_then(|v| v.trim().parse::<f64>().ok());
         let mut missing: Vec<(&str, &str)> = Vec::new();
@@ -102,11 +146,6 @@ impl Camera {
         if !doffs.is_finite() {
             invalid.push(format!("doffs {doffs} (expected a finite number)"));
         }
-        if let Some(z) = overrides.max_depth
-            && z.is_nan() | (z <= 0.0)
-        {
-            invalid.push(format!("maximum depth {z} (expected > 0)"));
-        }
         for (name, v) in [("focal length", focal), ("baseline", baseline)] {
             if v.is_finite() && v <= 0.0 && !missing.iter().any(|(w, _)| w.starts_with(name)) {
                 invalid.push(format!("{name} {v} (expected > 0)"));
@@ -131,10 +170,10 @@ impl Camera {
         }
         let max_depth = overrides.max_depth.unwrap_or(focal * baseline);
         let camera = Camera { focal, cx, cy, baseline, doffs, max_depth };
-        if !(camera.focal * camera.baseline).is_finite() {
+        if !fits_f32(camera.focal * camera.baseline) {
             return Err(Error::Input(format!(
-                "focal length {:?} times baseline {:?} overflows: no depth f·B / d could be written; check \
-                 {}'s cam0 and baseline (or --focal, --baseline)",
+                "focal length {:?} times baseline {:?} is beyond 32-bit floats: no depth f·B / d could be written; \
+                 check {}'s cam0 and baseline (or --focal, --baseline)",
                 camera.focal,
                 camera.baseline,
                 calib_path.display()
@@ -191,22 +230,37 @@ pub struct PointCloud {
 impl PointCloud {
     /// The cloud as a binary little-endian PLY: `x y z` (float) and `red green blue` (uchar).
     pub fn to_ply(&self) -> Vec<u8> {
-        let header = format!(
-            "ply\nformat binary_little_endian 1.0\ncomment jem: left camera frame, baseline units\nelement vertex {}\n\
-             property float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n\
-             property uchar blue\nend_header\n",
-            self.points.len()
-        );
-        let mut out = Vec::with_capacity(header.len() + self.points.len() * 15);
-        out.extend_from_slice(header.as_bytes());
+        let mut out = ply_header(self.points.len());
         for (p, c) in self.points.iter().zip(&self.colours) {
-            for v in p {
-                out.extend_from_slice(&v.to_le_bytes());
-            }
-            out.extend_from_slice(c);
+            push_vertex(&mut out, p, c);
         }
         out
     }
+}
+
+/// A PLY's header for `points` vertices, in a buffer with room for them.
+fn ply_header(points: usize) -> Vec<u8> {
+    let header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment jem: left camera frame, baseline units\n\
+         element vertex {points}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\n\
+         property uchar green\nproperty uchar blue\nend_header\n"
+    );
+    let mut out = Vec::with_capacity(header.len() + points * 15);
+    out.extend_from_slice(header.as_bytes());
+    out
+}
+
+/// One vertex of a PLY: the point's three floats and its colour.
+fn push_vertex(out: &mut Vec<u8>, point: &[f32; 3], colour: &[u8; 3]) {
+    for v in point {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out.extend_from_slice(colour);
+}
+
+/// The colour of pixel `i` of `image`, rounded to 8 bits.
+fn colour(image: &RgbImage, i: usize) -> [u8; 3] {
+    image.rgb(i).map(|c| c.round().clamp(0.0, 255.0) as u8)
 }
 
 /// The point cloud of the pixels with a depth, coloured from `image`.
@@ -216,11 +270,13 @@ impl PointCloud {
 pub fn point_cloud(disparity: &DisparityMap, image: &RgbImage, camera: &Camera) -> PointCloud {
     assert_eq!(disparity.dims(), image.dims(), "image and disparity map differ in size");
     let w = disparity.width;
-    let mut cloud = PointCloud::default();
+    // Counted first, so that the vectors hold their points exactly (grown, they held up to twice as many).
+    let n = disparity.data.iter().enumerate().filter(|&(i, &d)| camera.point(i % w, i / w, d).is_some()).count();
+    let mut cloud = PointCloud { points: Vec::with_capacity(n), colours: Vec::with_capacity(n) };
     for (i, &d) in disparity.data.iter().enumerate() {
         if let Some(p) = camera.point(i % w, i / w, d) {
             cloud.points.push(p);
-            cloud.colours.push(image.rgb(i).map(|c| c.round().clamp(0.0, 255.0) as u8));
+            cloud.colours.push(colour(image, i));
         }
     }
     cloud
@@ -231,7 +287,16 @@ pub fn point_cloud(disparity: &DisparityMap, image: &RgbImage, camera: &Camera) 
 /// # Panics
 /// If `image` and `disparity` differ in size.
 pub fn encode_ply(disparity: &DisparityMap, image: &RgbImage, camera: &Camera) -> Vec<u8> {
-    point_cloud(disparity, image, camera).to_ply()
+    assert_eq!(disparity.dims(), image.dims(), "image and disparity map differ in size");
+    // The bytes of `point_cloud(..).to_ply()`, written straight into a buffer of the file's size: the cloud's
+    // growing vectors held up to twice their points beside the file (a downscaled run's peak at full size).
+    let w = disparity.width;
+    let points = || disparity.data.iter().enumerate().filter_map(|(i, &d)| Some((i, camera.point(i % w, i / w, d)?)));
+    let mut out = ply_header(points().count());
+    for (i, p) in points() {
+        push_vertex(&mut out, &p, &colour(image, i));
+    }
+    out
 }
 
 #[cfg(test)]
@@ -270,7 +335,7 @@ mod tests {
             ..Default::default()
         };
         let e = Camera::resolve(None, Path::new("calib.txt"), &huge, true).unwrap_err().to_string();
-        assert!(e.contains("overflows") && e.contains("baseline"), "{e}");
+        assert!(e.contains("beyond 32-bit floats") && e.contains("baseline"), "{e}");
         let c = Camera { focal: 1e30, cx: 1.0, cy: 0.5, baseline: 1e30, doffs: 0.0, max_depth: f64::INFINITY };
         let disp = Plane::from_parts(3, 2, vec![1.0, 2.0, 3.0, 1e32, 2e32, f32::INFINITY]);
         let depth = depth_map(&disp, &c);
@@ -309,7 +374,7 @@ mod tests {
         assert_eq!((c.focal, c.baseline, c.doffs), (500.0, 0.1, 0.0));
         let both_bad = CameraOverrides { focal: Some(0.0), baseline: Some(-2.0), ..Default::default() };
         let e = Camera::resolve(None, path, &both_bad, false).unwrap_err().to_string();
-        assert!(e.contains("focal length 0 (expected > 0), baseline -2 (expected > 0)"), "{e}");
+        assert_eq!(e, "invalid --focal 0 (expected a finite number > 0), --baseline -2 (expected a finite number > 0)");
     }
 
     /// By default a point is kept up to the depth of a one-pixel disparity (the sky, at about 0, is left out);
@@ -329,8 +394,30 @@ mod tests {
             Camera::resolve(None, Path::new("calib.txt"), &bad, false)
                 .unwrap_err()
                 .to_string()
-                .contains("maximum depth")
+                .contains("--max-depth -1 (expected a depth > 0)")
         );
+    }
+
+    /// A value given by a flag that cannot be used is blamed on the flag, not on the calib.txt read beside it
+    /// (`--max-depth NaN` was "calib.txt: invalid maximum depth NaN (read from this file)"); a focal length times
+    /// baseline beyond 32-bit floats, finite in 64 bits, is refused (every depth was `inf`, the cloud empty).
+    #[test]
+    fn flags_are_blamed_for_their_values_and_a_depth_beyond_f32_is_refused() {
+        let calib = Calib::parse("cam0=[500 0 10; 0 500 8; 0 0 1]\nbaseline=100\n").unwrap();
+        let path = Path::new("scene/calib.txt");
+        for (overrides, flag) in [
+            (CameraOverrides { max_depth: Some(f64::NAN), ..Default::default() }, "--max-depth NaN"),
+            (CameraOverrides { focal: Some(f64::INFINITY), ..Default::default() }, "--focal inf"),
+            (CameraOverrides { doffs: Some(f64::NAN), ..Default::default() }, "--doffs NaN"),
+        ] {
+            let e = Camera::resolve(Some(&calib), path, &overrides, true).unwrap_err().to_string();
+            assert!(e.starts_with("invalid ") && e.contains(flag) && !e.contains("calib.txt"), "{e}");
+        }
+        let far = CameraOverrides { focal: Some(1e20), baseline: Some(1e20), ..Default::default() };
+        let e = Camera::resolve(Some(&calib), path, &far, true).unwrap_err().to_string();
+        assert!(e.contains("beyond 32-bit floats"), "{e}");
+        let near = CameraOverrides { focal: Some(1e18), baseline: Some(1e20), ..Default::default() };
+        assert!(Camera::resolve(Some(&calib), path, &near, true).is_ok());
     }
 
     /// Depth and points follow Z = f·B / (d + doffs), X = (x − cx)·Z / f, Y = (y − cy)·Z / f; invalid pixels and
@@ -360,5 +447,6 @@ mod tests {
         assert_eq!((f(0, 0), f(0, 1), f(0, 2)), (-4.0, -2.0, 1000.0));
         assert_eq!((f(2, 0), f(2, 1), f(2, 2)), (-8.0, 0.0, 2000.0));
         assert_eq!(&body[2 * 15 + 12..2 * 15 + 15], &[200, 0, 0]);
+        assert_eq!(ply, point_cloud(&disp, &img, &c).to_ply(), "the file is the cloud's PLY");
     }
 }

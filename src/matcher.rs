@@ -317,11 +317,17 @@ impl Matcher {
     /// Checks a matched pair for what would make any disparity map of it wrong ([`crate::PairCheck`]: swapped
     /// views, a vertical offset beyond the alignment, a range over half the width, no texture, an exposure or focus
     /// difference beyond the front end); `out` is the match's output (its measured range and noise).
+    ///
+    /// The swap check runs within what the memory limit leaves beside what the caller holds by then (the pair, the
+    /// output maps and the check's grey views: 41 bytes a pixel): given the whole limit, it took a downscaled run
+    /// past it.
     pub fn check_pair(&self, left: &RgbImage, right: &RgbImage, out: &Output) -> crate::PairCheck {
         let width = left.width().max(1) as f32;
         let range_share = out.plan.ndisp_measured.then(|| out.plan.ndisp as f32 / width);
         let noise = out.measured.map(|m| (m.stats.sigma(), m.stats.gain[0]));
-        crate::diagnose::check_pair(left, right, &self.params.cost, noise, range_share, self.max_memory_bytes)
+        let held = CHECK_HELD_BYTES_PER_PX.saturating_mul(left.len() as u64);
+        let budget = self.max_memory_bytes.saturating_sub(held);
+        crate::diagnose::check_pair(left, right, &self.params.cost, noise, range_share, budget)
     }
 
     /// Runs a planned pair.
@@ -368,6 +374,10 @@ impl Matcher {
         Ok(Output { disparity, confidence, consistent, timings, measured, plan: run_plan, seconds, frame })
     }
 }
+
+/// Bytes per pixel of the pair a caller holds while it is checked ([`Matcher::check_pair`]): both views (24), the
+/// output maps (disparity, confidence, consistent: 9) and the check's own grey views (8).
+pub(crate) const CHECK_HELD_BYTES_PER_PX: u64 = 24 + 9 + 8;
 
 /// Holds `bytes` of `budget`, reporting the wait as a stage.
 fn wait_for<'b>(

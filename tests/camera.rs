@@ -242,3 +242,148 @@ fn sequence_with_rectify_is_jem_match_with_rectify_frame_by_frame() {
         assert!(got != read(&format!("plain/{k:06}.pfm")), "frame {k} is not rectified");
     }
 }
+
+/// The same image given as both views matches at 0 everywhere and was "100 % valid" without a word: a warning
+/// says it is the same image (and `--strict` writes nothing).
+#[test]
+fn the_same_image_twice_is_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let out = run_in(dir.path(), &["S/im0.png", "S/im0.png", "-o", "d.pfm", "--ndisp", "16", "--set", "model=wta"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("warning: the two views are the same image")), "{err}");
+    let out = run_in(dir.path(), &["S/im0.png", "S/im0.png", "-o", "e.pfm", "--ndisp", "16", "--strict"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(!dir.path().join("e.pfm").exists());
+}
+
+/// Calibrations that cannot be right are refused with the key named, as `jem rectify` and `--rectify` read them:
+/// a matrix that is no rotation (OpenCV turns any into the nearest rotation without a word), a reflection (it was
+/// "a vertical baseline"), a given R1 that is no rotation, a size that is no size, a translation beyond floating
+/// point (it was "T is zero"), a key given twice (jem took the last, OpenCV the first). One whose lens sends the
+/// views outside the raw images (`k1 = 1e30`), which OpenCV rectifies into black views, is warned about.
+#[test]
+fn calibrations_that_cannot_be_right_are_refused_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let rig = pinhole_rig_yaml(64, 48, 0.25);
+    let identity = "[ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]";
+    let with_r = |r: &str| rig.replace(identity, r);
+    let given = |r1: &str| {
+        let p = "[ 80., 0., 31.5, 0., 0., 80., 23.5, 0., 0., 0., 1., 0. ]";
+        let p2 = "[ 80., 0., 31.5, -20., 0., 80., 23.5, 0., 0., 0., 1., 0. ]";
+        let m = |name: &str, rows: usize, cols: usize, data: &str| {
+            format!("{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: {data}\n")
+        };
+        format!("{rig}{}{}{}{}", m("R1", 3, 3, r1), m("R2", 3, 3, identity), m("P1", 3, 4, p), m("P2", 3, 4, p2))
+    };
+    let cases: Vec<(&str, String, &str)> = vec![
+        ("counting.yml", with_r("[ 1., 2., 3., 4., 5., 6., 7., 8., 9. ]"), "R is not a rotation"),
+        ("twice.yml", with_r("[ 2., 0., 0., 0., 2., 0., 0., 0., 2. ]"), "R is not a rotation"),
+        ("mirror.yml", with_r("[ 1., 0., 0., 0., 1., 0., 0., 0., -1. ]"), "R is a reflection"),
+        ("r1.yml", given("[ 3., 0., 0., 0., 3., 0., 0., 0., 3. ]"), "R1 is not a rotation"),
+        ("width.yml", rig.replace("image_width: 64", "image_width: -5"), "image_width/image_height -5 × 48"),
+        ("height.yml", rig.replace("image_height: 48", "image_height: 0"), "image_width/image_height 64 × 0"),
+        ("far.yml", rig.replace("[ -0.25, 0., 0. ]", "[ -1e300, 0., 0. ]"), "T (-1e300, 0, 0) is too long"),
+        (
+            "dup.yml",
+            format!("{rig}T: !!opencv-matrix\n   rows: 3\n   cols: 1\n   dt: d\n   data: [ 1., 0., 0. ]\n"),
+            "T is given twice",
+        ),
+    ];
+    for (name, text, needle) in cases {
+        std::fs::write(dir.path().join(name), text).unwrap();
+        let before = files_in(dir.path());
+        for args in [
+            vec!["rectify", name, "S/im0.png", "S/im1.png", "-o", "R"],
+            vec!["S/im0.png", "S/im1.png", "--rectify", name, "-o", "d.pfm"],
+        ] {
+            let out = run_in(dir.path(), &args);
+            let err = stderr(&out);
+            assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+            assert!(err.starts_with(&format!("error: {name}: ")) && err.contains(needle), "{args:?}: {err}");
+            assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+            assert_eq!(files_in(dir.path()), before, "{args:?} left files");
+        }
+    }
+    // The file's own R1, R2, P1, P2 (a saved stereoRectify result) with a lens no camera has.
+    let wild = given(identity).replacen("[ 0., 0., 0., 0., 0. ]", "[ 1e30, 0., 0., 0., 0. ]", 1);
+    std::fs::write(dir.path().join("wild.yml"), wild).unwrap();
+    let out = run_in(dir.path(), &["rectify", "wild.yml", "S/im0.png", "S/im1.png", "-o", "W"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("warning: wild.yml: the rectified left view is") && err.contains("% black"), "{err}");
+    let strict = ["S/im0.png", "S/im1.png", "--rectify", "wild.yml", "-o", "w.pfm", "--strict", "--set", "model=wta"];
+    let out = run_in(dir.path(), &strict);
+    assert_eq!(out.status.code(), Some(2), "--strict makes it an error: {}", stderr(&out));
+}
+
+/// `cv2.FileStorage` writes a 1-D numpy array (a distortion vector `np.array([...])`, a translation) as an
+/// `opencv-nd-matrix`, in YAML and XML; they are read (it was "missing D1/distCoeffs1").
+#[test]
+fn opencv_one_dimensional_arrays_are_read() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let rig = pinhole_rig_yaml(64, 48, 0.25);
+    let nd = |name: &str, data: &str, n: usize| {
+        format!("{name}: !!opencv-nd-matrix\n   sizes: [ {n} ]\n   dt: d\n   data: {data}\n")
+    };
+    let plain = |name: &str, rows: usize, cols: usize, data: &str| {
+        format!("{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: {data}\n")
+    };
+    let yaml = rig
+        .replace(&plain("D1", 1, 5, "[ 0., 0., 0., 0., 0. ]"), &nd("D1", "[ 0., 0.,\n       0., 0., 0. ]", 5))
+        .replace(&plain("T", 3, 1, "[ -0.25, 0., 0. ]"), &nd("T", "[ -0.25, 0., 0. ]", 3))
+        .replace("%YAML:1.0", "%YAML 1.2");
+    assert!(yaml.contains("opencv-nd-matrix\n   sizes: [ 5 ]") && yaml.contains("sizes: [ 3 ]"), "{yaml}");
+    std::fs::write(dir.path().join("nd.yml"), yaml).unwrap();
+    let element = |name: &str, kind: &str, shape: &str, data: &str| {
+        format!("<{name} type_id=\"{kind}\">\n  {shape}\n  <dt>d</dt>\n  <data>\n    {data}</data></{name}>\n")
+    };
+    let matrix = |name: &str, data: &str| element(name, "opencv-matrix", "<rows>3</rows>\n  <cols>3</cols>", data);
+    let vector = |name: &str, n: usize, data: &str| {
+        element(name, "opencv-nd-matrix", &format!("<sizes>\n    {n}</sizes>"), data)
+    };
+    let k = "80. 0. 31.5 0. 80. 23.5 0. 0. 1.";
+    let xml = format!(
+        "<?xml version=\"1.0\"?>\n<opencv_storage>\n{}{}{}{}{}{}</opencv_storage>\n",
+        matrix("K1", k),
+        vector("D1", 5, "0. 0. 0. 0. 0."),
+        matrix("K2", k),
+        vector("D2", 5, "0. 0. 0. 0. 0."),
+        matrix("R", "1. 0. 0. 0. 1. 0. 0. 0. 1."),
+        vector("T", 3, "-0.25 0. 0.")
+    );
+    std::fs::write(dir.path().join("nd.xml"), xml).unwrap();
+    std::fs::write(dir.path().join("rig.yml"), &rig).unwrap();
+    let out = run_in(dir.path(), &["rectify", "rig.yml", "S/im0.png", "S/im1.png", "-o", "A"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for (calib, folder) in [("nd.yml", "B"), ("nd.xml", "C")] {
+        let out = run_in(dir.path(), &["rectify", calib, "S/im0.png", "S/im1.png", "-o", folder]);
+        assert!(out.status.success(), "{calib}: {}", stderr(&out));
+        for f in ["im0.png", "im1.png", "calib.txt"] {
+            let (a, b) = (dir.path().join("A").join(f), dir.path().join(folder).join(f));
+            assert_eq!(std::fs::read(a).unwrap(), std::fs::read(b).unwrap(), "{calib}: {f}");
+        }
+    }
+}
+
+/// `jem rectify -o DIR` refuses a folder that holds a scene, as `jem synth` does: the new pair and calib.txt
+/// would sit beside the old scene's ground truth and results. A folder that is a file says what to give.
+#[test]
+fn rectify_refuses_a_folder_that_holds_a_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    synth_scene(dir.path(), "T");
+    std::fs::write(dir.path().join("rig.yml"), pinhole_rig_yaml(64, 48, 0.25)).unwrap();
+    let before = files_in(&dir.path().join("T"));
+    let out = run_in(dir.path(), &["rectify", "rig.yml", "S/im0.png", "S/im1.png", "-o", "T"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("T: already holds a scene"), "{err}");
+    assert_eq!(files_in(&dir.path().join("T")), before);
+    std::fs::write(dir.path().join("afile"), b"x").unwrap();
+    let out = run_in(dir.path(), &["rectify", "rig.yml", "S/im0.png", "S/im1.png", "-o", "afile"]);
+    assert!(stderr(&out).contains("afile: exists and is not a folder; give -o"), "{}", stderr(&out));
+}

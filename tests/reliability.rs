@@ -422,6 +422,46 @@ fn unreadable_locks_fail_their_scene_and_never_hang() {
     }
 }
 
+/// A FIFO where an input is read never makes a command wait for a writer: a result `jem batch --skip-existing`
+/// checks (a FIFO `disp0Q.pfm`), a calibration (`jem rectify`, `--rectify`), a config (`-c`), an image. Each is
+/// refused at once, naming the file, and left as it is.
+#[test]
+fn a_fifo_input_is_refused_not_waited_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    synth(d, "set/a", (64, 48), 16, 1);
+    synth(d, "set/b", (64, 48), 16, 2);
+    let fifo = |p: &Path| assert!(Command::new("mkfifo").arg(p).status().unwrap().success());
+    fifo(&d.join("set/a/disp0Q.pfm"));
+    let out = output_within(
+        jem().current_dir(d).args(["batch", "set", "--alg", "Q", "--skip-existing", "--set", "model=wta"]),
+        Duration::from_secs(60),
+    );
+    let text = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{text}");
+    assert!(text.contains("set/a/disp0Q.pfm: is a FIFO (named pipe), not a regular file"), "{text}");
+    assert!(d.join("set/b/disp0Q.pfm").is_file(), "the other scene runs: {text}");
+    assert_eq!(kind(&d.join("set/a/disp0Q.pfm")), "fifo");
+    fifo(&d.join("cal.yml"));
+    fifo(&d.join("c.toml"));
+    std::fs::create_dir(d.join("c")).unwrap();
+    fifo(&d.join("c/im1.png"));
+    let cases: [(&[&str], &str); 4] = [
+        (&["rectify", "cal.yml", "set/b/im0.png", "set/b/im1.png", "-o", "r"], "cal.yml"),
+        (&["set/b/im0.png", "set/b/im1.png", "--rectify", "cal.yml", "-o", "r.pfm"], "cal.yml"),
+        (&["set/b/im0.png", "set/b/im1.png", "-c", "c.toml", "-o", "r.pfm"], "c.toml"),
+        (&["set/b/im0.png", "c/im1.png", "-o", "r.pfm", "--ndisp", "16"], "c/im1.png"),
+    ];
+    for (args, name) in cases {
+        let out = output_within(jem().current_dir(d).args(args), Duration::from_secs(60));
+        let text = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {text}");
+        assert!(text.contains(&format!("{name}: is a FIFO (named pipe), not a regular file")), "{args:?}: {text}");
+    }
+    assert!(!d.join("r").exists() && !d.join("r.pfm").exists());
+    assert_eq!((kind(&d.join("cal.yml")), kind(&d.join("c/im1.png"))), ("fifo", "fifo"));
+}
+
 /// Results accepted by their data set's fingerprint after a move: if `source.txt` kept naming the old folder, they
 /// would be "the results of /…/MV1/training" (gone) once the data set grows and its fingerprint changes. The batch
 /// that accepts a moved tree rewrites `source.txt` (atomically) to name where it is.

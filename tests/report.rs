@@ -264,3 +264,49 @@ fn report_renders_loads_every_picture_and_sorts_in_a_browser() {
     assert_eq!(lines.first(), Some(&"images 15 broken 0"), "{verdict}");
     assert_eq!(&lines[1..], ["initial S1,S2,S3", "ascending S1,S3,S2", "descending S2,S3,S1"], "{verdict}");
 }
+
+/// `kill -9` of a report leaves the hidden temporary files of the pictures it had staged (a signal that cannot be
+/// caught); the next report into the same place removes them, since their process is gone.
+#[test]
+fn a_rerun_removes_what_a_killed_report_left() {
+    let tmp = tempfile::tempdir().unwrap();
+    let set = tmp.path().join("trainingQ");
+    for i in 0..6 {
+        let dir = set.join(format!("S{i:02}"));
+        std::fs::create_dir_all(&dir).unwrap();
+        let params = jem::synth::SynthParams { width: 480, height: 360, ndisp: 32, seed: i + 1 };
+        let scene = jem::synth::render_scene(&params).unwrap();
+        jem::synth::write_scene(&dir, &scene).unwrap();
+        jem::io::write_disparity(&dir.join("disp0A.pfm"), &scene.gt).unwrap();
+    }
+    let temps = |dir: &Path| -> Vec<String> {
+        let mut found: Vec<String> = files_in(dir).into_iter().filter(|n| n.contains(".jem-tmp")).collect();
+        if dir.join("r_files").is_dir() {
+            found.extend(files_in(&dir.join("r_files")).into_iter().filter(|n| n.contains(".jem-tmp")));
+        }
+        found
+    };
+    let mut child = jem()
+        .current_dir(tmp.path())
+        .args(["--threads", "1", "report", "trainingQ", "--alg", "A", "-o", "r.html"])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while temps(tmp.path()).len() < 2 {
+        if child.try_wait().unwrap().is_some() || start.elapsed() > Duration::from_secs(120) {
+            let _ = child.kill();
+            eprintln!("note: skipping: the report ended before it could be killed mid-way");
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    assert!(Command::new("kill").args(["-KILL", &child.id().to_string()]).status().unwrap().success());
+    child.wait().unwrap();
+    let left = temps(tmp.path());
+    assert!(!left.is_empty(), "kill -9 leaves its temporary files");
+    let out = report(tmp.path(), &["trainingQ", "--alg", "A", "-o", "r.html"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(temps(tmp.path()), Vec::<String>::new(), "left by the killed run: {left:?}");
+    assert!(tmp.path().join("r.html").is_file());
+}

@@ -2,6 +2,7 @@
 
 mod common;
 
+use std::os::unix::fs::FileTypeExt;
 use std::path::Path;
 
 use common::{files_in, run_in, stderr};
@@ -152,4 +153,181 @@ fn sequences_are_not_written_over_a_scene_or_sequence() {
     let err = ok(dir.path(), &["degrade", "scene", "noisy", "--recipe", "noise:4", "--frames", "3", "--pan", "2"]);
     assert!(err.contains("wrote a sequence of 3 frames to noisy"), "{err}");
     assert_eq!(files_in(&dir.path().join("noisy")), ["calib.txt", "gt", "left", "made.txt", "mask", "right"]);
+}
+
+/// A pinhole rig's OpenCV calibration for `w × h` views, baseline `b` (the views of `small_pan` are its rectified
+/// pair: the rectification is the identity).
+fn rig_yaml(w: usize, h: usize, b: f64) -> String {
+    let (cx, cy) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
+    let m = |name: &str, rows: usize, cols: usize, data: &str| {
+        format!("{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: {data}\n")
+    };
+    let k = format!("[ 80., 0., {cx}, 0., 80., {cy}, 0., 0., 1. ]");
+    let d = "[ 0., 0., 0., 0., 0. ]";
+    let r = "[ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]";
+    format!(
+        "%YAML:1.0\n---\n{}{}{}{}{}{}image_width: {w}\nimage_height: {h}\n",
+        m("K1", 3, 3, &k),
+        m("D1", 1, 5, d),
+        m("K2", 3, 3, &k),
+        m("D2", 1, 5, d),
+        m("R", 3, 3, r),
+        m("T", 3, 1, &format!("[ {}, 0., 0. ]", -b))
+    )
+}
+
+/// The rectification is part of what a sequence folder records: a rerun without `--rectify` (or with another
+/// calibration, also one changed in place under the same name) is another run, refused instead of mixing
+/// rectified and raw frames; the same calibration resumes.
+#[test]
+fn a_sequence_folder_records_its_rectification() {
+    let dir = tempfile::tempdir().unwrap();
+    small_pan(dir.path());
+    std::fs::write(dir.path().join("rig.yml"), rig_yaml(128, 80, 0.25)).unwrap();
+    fn run<'a>(extra: &[&'a str]) -> Vec<&'a str> {
+        [&["sequence", "seq", "-o", "out", "--set", "model=wta"][..], extra].concat()
+    }
+    ok(dir.path(), &run(&["--rectify", "rig.yml"]));
+    std::fs::remove_file(dir.path().join("out/000002.pfm")).unwrap();
+    fails(dir.path(), &run(&[]), &["out/sequence.txt", "another run", "rectified frames", "no --rectify"]);
+    std::fs::write(dir.path().join("rig.yml"), rig_yaml(128, 80, 0.5)).unwrap();
+    fails(dir.path(), &run(&["--rectify", "rig.yml"]), &["out/sequence.txt", "another rectification"]);
+    assert!(!dir.path().join("out/000002.pfm").exists(), "nothing written by the refused runs");
+    std::fs::write(dir.path().join("rig.yml"), rig_yaml(128, 80, 0.25)).unwrap();
+    let err = ok(dir.path(), &run(&["--rectify", "rig.yml"]));
+    assert!(err.contains("1 run, 2 already there"), "{err}");
+    ok(dir.path(), &["sequence", "seq", "-o", "raw", "--set", "model=wta"]);
+    std::fs::remove_file(dir.path().join("raw/000002.pfm")).unwrap();
+    fails(
+        dir.path(),
+        &["sequence", "seq", "-o", "raw", "--set", "model=wta", "--rectify", "rig.yml"],
+        &["unrectified"],
+    );
+}
+
+/// A run that writes no frame (a range the frames cannot hold) leaves nothing: neither its record nor the folder
+/// it made, so the corrected rerun is not taken for another run. Its error names the frame.
+#[test]
+fn a_failed_sequence_run_leaves_nothing_and_names_the_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    small_pan(dir.path());
+    fails(dir.path(), &["sequence", "seq", "-o", "out", "--ndisp", "100000"], &["frame 000000", "ndisp = 100000"]);
+    assert!(!dir.path().join("out").exists(), "{:?}", files_in(dir.path()));
+    std::fs::create_dir(dir.path().join("kept")).unwrap();
+    fails(dir.path(), &["sequence", "seq", "-o", "kept", "--ndisp", "100000"], &["frame 000000"]);
+    assert!(files_in(&dir.path().join("kept")).is_empty(), "{:?}", files_in(&dir.path().join("kept")));
+    ok(dir.path(), &["sequence", "seq", "-o", "out", "--ndisp", "24", "--set", "model=wta"]);
+    // A frame that cannot be read is named, and the frames before it stay.
+    std::fs::write(dir.path().join("seq/left/000002.png"), b"not a png").unwrap();
+    std::fs::remove_file(dir.path().join("out/000002.pfm")).unwrap();
+    let args = ["sequence", "seq", "-o", "out", "--ndisp", "24", "--set", "model=wta", "-q"];
+    fails(dir.path(), &args, &["frame 000002", "seq/left/000002.png"]);
+    assert!(dir.path().join("out/000001.pfm").is_file());
+}
+
+/// `-o` naming a file, not a folder (or a folder under a file), says what to give instead of the system's "File
+/// exists" or "Not a directory"; so do the other commands that make a folder.
+#[test]
+fn a_sequence_output_that_is_a_file_is_refused_with_what_to_do() {
+    let dir = tempfile::tempdir().unwrap();
+    small_pan(dir.path());
+    std::fs::write(dir.path().join("afile"), b"x").unwrap();
+    fails(dir.path(), &["sequence", "seq", "-o", "afile"], &["afile", "not a folder", "give the name of a folder"]);
+    fails(dir.path(), &["sequence", "seq", "-o", "afile/out"], &["afile: is a file", "afile/out cannot be made"]);
+    assert_eq!(std::fs::read(dir.path().join("afile")).unwrap(), b"x");
+    // The other commands that make a folder say the same, not the system's "File exists" or "Not a directory".
+    for args in [
+        &["synth", "afile"][..],
+        &["synth", "afile/x"],
+        &["synth", "afile", "--frames", "2"],
+        &["degrade", "seq", "afile/x", "--recipe", "noise:4"],
+    ] {
+        let out = run_in(dir.path(), args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains("afile") && !err.contains("File exists") && !err.contains("Not a directory"), "{err}");
+        assert!(err.contains("not a folder") || err.contains("is a file"), "{args:?}: {err}");
+    }
+}
+
+/// A frame whose name holds a line break would split its line of times.txt: refused, naming the folder.
+#[test]
+fn a_frame_name_with_a_line_break_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    small_pan(dir.path());
+    for side in ["left", "right"] {
+        let folder = dir.path().join("seq").join(side);
+        std::fs::rename(folder.join("000001.png"), folder.join("0000\n01.png")).unwrap();
+    }
+    fails(dir.path(), &["sequence", "seq", "-o", "out", "--independent"], &["seq/left", "line break"]);
+    assert!(!dir.path().join("out").exists());
+}
+
+/// A FIFO where an output of the folder goes (a frame's map, times.txt, sequence.txt) is refused at once, naming
+/// it, instead of a read that waits for a writer forever; it is left as it is.
+#[test]
+fn a_fifo_in_a_sequence_folder_is_refused_not_waited_on() {
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    small_pan(dir.path());
+    let args = ["sequence", "seq", "-o", "out", "--independent", "--set", "model=wta"];
+    ok(dir.path(), &args);
+    for name in ["000002.pfm", "times.txt", "sequence.txt"] {
+        let saved = std::fs::read(dir.path().join("out").join(name)).unwrap();
+        let path = dir.path().join("out").join(name);
+        std::fs::remove_file(&path).unwrap();
+        assert!(std::process::Command::new("mkfifo").arg(&path).status().unwrap().success());
+        let mut child = common::jem()
+            .current_dir(dir.path())
+            .args(args)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let start = Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if start.elapsed() > Duration::from_secs(60) {
+                child.kill().unwrap();
+                panic!("jem sequence waits on the FIFO {name}");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let out = child.wait_with_output().unwrap();
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains(name) && err.contains("FIFO"), "{err}");
+        assert!(std::fs::symlink_metadata(&path).unwrap().file_type().is_fifo(), "{name} left as it was");
+        std::fs::remove_file(&path).unwrap();
+        std::fs::write(&path, saved).unwrap();
+    }
+}
+
+/// A second run into a sequence folder while one writes to it is refused, naming the lock: two runs (one of them
+/// `--independent`) both exited 0 and left a folder whose record and frames disagreed. The lock goes with the
+/// run.
+#[test]
+fn a_sequence_folder_is_locked_while_a_run_writes_it() {
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["synth", "seq", "--frames", "12", "--width", "480", "--height", "360", "--ndisp", "48", "-q"];
+    ok(dir.path(), &args);
+    let mut first = common::jem()
+        .current_dir(dir.path())
+        .args(["--threads", "1", "sequence", "seq", "-o", "out", "-q"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lock = dir.path().join("out/.jem-lock");
+    let start = Instant::now();
+    while !lock.exists() {
+        assert!(first.try_wait().unwrap().is_none(), "the first run ended before its lock was seen");
+        assert!(start.elapsed() < Duration::from_secs(120), "no lock appeared");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    fails(dir.path(), &["sequence", "seq", "-o", "out", "--independent"], &["out", "is writing", ".jem-lock"]);
+    let status = first.wait().unwrap();
+    assert!(status.success(), "the first run is not disturbed");
+    assert!(!lock.exists(), "the lock goes with the run");
+    let record = std::fs::read_to_string(dir.path().join("out/sequence.txt")).unwrap();
+    assert!(record.contains("mode=temporal"), "{record}");
 }

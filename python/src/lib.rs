@@ -5,11 +5,14 @@
 //! arrays are copied is [`jem::Matcher::check_size`] (what `jem match` checks from the image headers), so an array
 //! gives the map the command line writes for the same file, byte for byte. This file converts arrays (as
 //! [`jem::io::read_image`] converts a decoded image: 8-bit values as they are, 16-bit ones divided by 257) and
-//! errors, releases the GIL around the work and keeps panics and failed allocations from crossing into Python.
+//! errors, releases the GIL around the work and keeps panics and failed allocations from crossing into Python:
+//! what a call holds for its caller is checked against its memory limit (`max_memory`) from the arrays' shapes or
+//! the files' headers first, and the arrays are copied into fallible allocations (`MemoryError`, never an abort).
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
 
+mod maps;
 mod matcher;
 mod rectify;
 
@@ -176,6 +179,35 @@ fn mib(bytes: u64) -> String {
     format!("{:.1} MiB", bytes as f64 / f64::from(1u32 << 20))
 }
 
+/// The memory limit of a call: `max_memory` (bytes, at least 1) or the command line's default (80 % of RAM, and of
+/// the address space left under `ulimit -v`).
+fn memory_limit(max_memory: Option<i64>) -> PyResult<u64> {
+    Ok(positive("max_memory", max_memory)?.unwrap_or_else(jem::default_memory_limit))
+}
+
+/// Refuses, before anything is allocated, a call `what` on a `width` × `height` image that holds `bytes_per_px` a
+/// pixel beyond `limit` bytes: a MemoryError with the size, the need and the limit.
+fn check_memory(what: &str, (width, height): (usize, usize), bytes_per_px: u64, limit: u64) -> PyResult<()> {
+    let need = (width as u64).saturating_mul(height as u64).saturating_mul(bytes_per_px);
+    if need <= limit {
+        return Ok(());
+    }
+    Err(PyMemoryError::new_err(format!(
+        "{what}: a {width}x{height} image needs about {} but the memory limit is {} (max_memory)",
+        mib(need),
+        mib(limit)
+    )))
+}
+
+/// An empty vector with room for `n` values, allocated fallibly: a failure is a MemoryError naming `what`.
+fn reserve<T>(what: &str, n: usize) -> PyResult<Vec<T>> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n).map_err(|_| {
+        PyMemoryError::new_err(format!("{what}: cannot allocate {}", mib((n * std::mem::size_of::<T>()) as u64)))
+    })?;
+    Ok(v)
+}
+
 /// A Python value as a TOML value (what `--set key=value` would parse it to).
 fn toml_value(value: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
     // bool before int: True is an int in Python.
@@ -307,8 +339,8 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 /// (σ of each view, or None with ``condition.enabled = false``), ``timings`` (seconds per stage), ``seconds``
 /// (the run, as jem batch counts it), ``memory_planned`` and ``peak_rss`` (bytes; the whole process's peak),
 /// ``checks`` (the numbers of the pair's checks: ``negative_share``, ``vertical_px``, ``vertical_limit_px``,
-/// ``range_share``, ``textured_share``, ``clipped``, ``sharpness_ratio``, ``focus_beyond``) and ``warnings`` (the
-/// lines ``jem`` prints for a pair that looks wrong, each also a UserWarning).
+/// ``range_share``, ``textured_share``, ``clipped``, ``sharpness_ratio``, ``focus_beyond``, ``identical_share``)
+/// and ``warnings`` (the lines ``jem`` prints for a pair that looks wrong, each also a UserWarning).
 ///
 /// The GIL is released while matching, so pairs can run in Python threads. Ctrl-C (KeyboardInterrupt) is
 /// honoured only when the call returns.
@@ -340,166 +372,21 @@ fn match_pair<'py>(
     min_confidence: Option<f32>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let options = MatchOptions::new(false, rectify, min_confidence)?;
-    let mut matcher = PyMatcher::build(ndisp, calib_ndisp, config, overrides, threads, max_memory, options)?;
+    let matcher = PyMatcher::build(ndisp, calib_ndisp, config, overrides, threads, max_memory, options)?;
     matcher.run(py, left, right, confidence, return_info)
 }
 
-/// Metric depth Z = f·baseline / (disp + doffs), float32 H×W, in the baseline's unit; ``inf`` where the
-/// disparity is invalid or d + doffs ≤ 0 (as ``jem --depth``). ``f``: focal length in pixels; ``doffs``: the
-/// x-difference of the principal points (Middlebury calib.txt). ``max_depth``: depths beyond it are ``inf`` too
-/// (default f·baseline, the depth of a one-pixel disparity, as ``jem --depth``; ``float("inf")`` keeps all).
-#[pyfunction]
-#[pyo3(signature = (disp, f, baseline, doffs=0.0, max_depth=None))]
-fn depth<'py>(
-    py: Python<'py>,
-    disp: &Bound<'py, PyAny>,
-    f: f64,
-    baseline: f64,
-    doffs: f64,
-    max_depth: Option<f64>,
-) -> PyResult<Bound<'py, PyArray2<f32>>> {
-    let camera = checked_camera(f, baseline, 0.0, 0.0, doffs, max_depth)?;
-    let map = to_plane(disp, "disp")?;
-    Ok(to_numpy(py, py.detach(|| jem::geometry::depth_map(&map, &camera))))
-}
-
-/// The point cloud of a disparity map, as ``jem LEFT RIGHT --cloud C.ply`` writes it: ``(points, colours)``, the
-/// points float32 N×3 (X, Y, Z in the left camera's frame: x right, y down, z forward, in the baseline's unit;
-/// X = (x − cx)·Z/f, Y = (y − cy)·Z/f, Z = f·baseline / (d + doffs)), the colours uint8 N×3 (RGB, the pixel of
-/// ``left``), one row per pixel with a depth, in row order (the PLY's vertices, in order). ``left``: the image,
-/// as ``match`` takes it (H×W, H×W×3 or H×W×4; uint8 or uint16), the size of ``disp``. ``f``, ``cx``, ``cy``:
-/// ``cam0`` of a calib.txt, in pixels; ``doffs``: its x-difference of the principal points; ``max_depth``: no
-/// point beyond it (default f·baseline, as ``--cloud``; ``float("inf")`` keeps all).
-#[pyfunction]
-#[pyo3(signature = (disp, left, f, baseline, cx, cy, doffs=0.0, max_depth=None))]
-#[allow(clippy::too_many_arguments)] // the camera's five numbers, as calib.txt gives them
-fn cloud<'py>(
-    py: Python<'py>,
-    disp: &Bound<'py, PyAny>,
-    left: &Bound<'py, PyAny>,
-    f: f64,
-    baseline: f64,
-    cx: f64,
-    cy: f64,
-    doffs: f64,
-    max_depth: Option<f64>,
-) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-    let camera = checked_camera(f, baseline, cx, cy, doffs, max_depth)?;
-    let map = to_plane(disp, "disp")?;
-    let image = ImageArray::inspect(left, "left")?;
-    if (image.width, image.height) != map.dims() {
-        return Err(PyValueError::new_err(format!(
-            "left is {}×{} but disp is {}×{} (width × height)",
-            image.width,
-            image.height,
-            map.dims().0,
-            map.dims().1
-        )));
-    }
-    let image = image.to_rgb()?;
-    let cloud = py.detach(|| jem::geometry::point_cloud(&map, &image, &camera));
-    let n = cloud.points.len();
-    let points: Vec<f32> = cloud.points.into_iter().flatten().collect();
-    let colours: Vec<u8> = cloud.colours.into_iter().flatten().collect();
-    Ok((to_array(py, &[n, 3], points)?, to_array(py, &[n, 3], colours)?))
-}
-
-/// A camera from Python's numbers: ``f`` and ``baseline`` positive, all finite, and their product too;
-/// ``max_depth`` positive (infinite keeps every depth), by default f·baseline (a one-pixel disparity's depth).
-fn checked_camera(
-    f: f64,
-    baseline: f64,
-    cx: f64,
-    cy: f64,
-    doffs: f64,
-    max_depth: Option<f64>,
-) -> PyResult<jem::geometry::Camera> {
-    let finite = [f, baseline, cx, cy, doffs].iter().all(|v| v.is_finite()) && (f * baseline).is_finite();
-    if !(finite && f > 0.0 && baseline > 0.0) {
-        return Err(PyValueError::new_err(format!(
-            "f {f} and baseline {baseline} must be positive and finite (and their product), cx {cx}, cy {cy} and \
-             doffs {doffs} finite"
-        )));
-    }
-    let max_depth = max_depth.unwrap_or(f * baseline);
-    if max_depth.is_nan() || max_depth <= 0.0 {
-        return Err(PyValueError::new_err(format!("max_depth {max_depth} must be positive")));
-    }
-    Ok(jem::geometry::Camera { focal: f, cx, cy, baseline, doffs, max_depth })
-}
-
-/// A disparity map in colour, as ``jem viz`` draws it: uint8 H×W×3 (RGB), dark indigo (low) through blue,
-/// green, yellow to dark red (high), invalid (``inf``, NaN) pixels black; the same bytes as the PNG ``jem viz
-/// DISP -o OUT.png --vmin A --vmax B`` writes. ``vmin``, ``vmax``: the range the colours span (default: the map's
-/// finite range, as ``jem viz`` without a calib.txt beside DISP). Raises ValueError for a bound that is not
-/// finite or a range that is empty or reversed.
-#[pyfunction]
-#[pyo3(signature = (disp, vmin=None, vmax=None))]
-fn colorize<'py>(
-    py: Python<'py>,
-    disp: &Bound<'py, PyAny>,
-    vmin: Option<f64>,
-    vmax: Option<f64>,
-) -> PyResult<Bound<'py, PyAny>> {
-    let map = to_plane(disp, "disp")?;
-    let given = (vmin.map(|v| v as f32), vmax.map(|v| v as f32));
-    let (lo, hi) = jem::viz::colour_range(&map, given, None, ("vmin", "vmax")).map_err(|e| to_py(&e))?;
-    let canvas = py.detach(|| jem::viz::colorize(&map, lo, hi));
-    to_array(py, &[canvas.height, canvas.width, 3], canvas.data)
-}
-
-/// A 2-D floating-point array (any strides) as a plane of f32: float32 as it is, float64 rounded, and the other
-/// floating types (float16, longdouble) through numpy's conversion to float32.
-fn to_plane(array: &Bound<'_, PyAny>, name: &str) -> PyResult<Plane<f32>> {
-    let bad = || PyValueError::new_err(format!("{name}: expected a 2-D floating-point numpy array (e.g. float32)"));
-    if let Ok(a) = array.cast::<PyUntypedArray>()
-        && a.ndim() == 2
-        && a.dtype().kind() == b'f'
-        && array.cast::<PyArray2<f32>>().is_err()
-        && array.cast::<PyArray2<f64>>().is_err()
-    {
-        return to_plane(&array.call_method1("astype", ("float32",))?, name);
-    }
-    if let Ok(a) = array.cast::<PyArray2<f32>>() {
-        let view = a.readonly();
-        let (h, w) = view.as_array().dim();
-        return Plane::from_vec(w, h, view.as_array().iter().copied().collect()).map_err(|e| to_py(&e));
-    }
-    if let Ok(a) = array.cast::<PyArray2<f64>>() {
-        let view = a.readonly();
-        let (h, w) = view.as_array().dim();
-        return Plane::from_vec(w, h, view.as_array().iter().map(|&v| v as f32).collect()).map_err(|e| to_py(&e));
-    }
-    Err(bad())
-}
-
-/// A PFM file as float32 H×W, top row first (PFM stores rows bottom-up; this undoes it), ``inf`` kept. A 3-channel
-/// PFM gives its first channel. Raises ValueError for a malformed file, OSError if it cannot be read.
-#[pyfunction]
-fn read_pfm(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArray2<f32>>> {
-    let map = py.detach(|| jem::io::pfm::read_pfm(&path)).map_err(|e| to_py(&e))?;
-    Ok(to_numpy(py, map))
-}
-
-/// Writes a 2-D float array (float32; any other floating type, float16 or float64, converted to float32) as a
-/// greyscale little-endian PFM, rows bottom-up as Middlebury's files, atomically (a temporary file renamed into
-/// place): the bytes ``jem`` writes. An existing ``path`` that is not a regular file (a device, a FIFO) is refused
-/// with ValueError, never replaced.
-#[pyfunction]
-fn write_pfm(py: Python<'_>, path: PathBuf, array: &Bound<'_, PyAny>) -> PyResult<()> {
-    let map = to_plane(array, "array")?;
-    if map.data().is_empty() {
-        return Err(PyValueError::new_err("array: a PFM cannot hold an empty image"));
-    }
-    py.detach(|| jem::io::pfm::write_pfm(&path, &map)).map_err(|e| to_py(&e))
-}
-
-/// A PNG, PPM/PGM, JPEG, BMP, TIFF or WebP file as a numpy array, as ``jem`` reads it: uint8 or uint16 (the file's bit depth),
-/// H×W for grey, H×W×3 (RGB) for colour; alpha is dropped. Raises ValueError for an undecodable file, OSError
+/// A PNG, PPM/PGM, JPEG, BMP, TIFF or WebP file as a numpy array, as ``jem`` reads it: uint8 or uint16 (the file's
+/// bit depth), H×W for grey, H×W×3 (RGB) for colour; alpha is dropped. The header is read first: a file whose
+/// decoding needs more than ``max_memory`` bytes (default: as ``match``) raises MemoryError before anything is
+/// decoded (a small file may declare a huge image), and one that is not a regular file (a FIFO, ``/dev/zero``)
+/// raises ValueError before it is read, as ``jem`` refuses them. Raises ValueError for an undecodable file, OSError
 /// if it cannot be read.
 #[pyfunction]
-fn read_image(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyAny>> {
-    let img = py.detach(|| jem::io::decode_image(&path)).map_err(|e| to_py(&e))?;
+#[pyo3(signature = (path, max_memory=None))]
+fn read_image(py: Python<'_>, path: PathBuf, max_memory: Option<i64>) -> PyResult<Bound<'_, PyAny>> {
+    let limit = memory_limit(max_memory)?;
+    let img = py.detach(|| jem::io::decode_image_within(&path, limit)).map_err(|e| to_py(&e))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let grey = !img.color().has_color();
     let sixteen = img.color().bytes_per_pixel() / img.color().channel_count() > 1;
@@ -528,11 +415,11 @@ fn to_array<'py, T: numpy::Element>(py: Python<'py>, shape: &[usize], data: Vec<
 fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(match_pair, m)?)?;
-    m.add_function(wrap_pyfunction!(depth, m)?)?;
-    m.add_function(wrap_pyfunction!(cloud, m)?)?;
-    m.add_function(wrap_pyfunction!(colorize, m)?)?;
-    m.add_function(wrap_pyfunction!(read_pfm, m)?)?;
-    m.add_function(wrap_pyfunction!(write_pfm, m)?)?;
+    m.add_function(wrap_pyfunction!(maps::depth, m)?)?;
+    m.add_function(wrap_pyfunction!(maps::cloud, m)?)?;
+    m.add_function(wrap_pyfunction!(maps::colorize, m)?)?;
+    m.add_function(wrap_pyfunction!(maps::read_pfm, m)?)?;
+    m.add_function(wrap_pyfunction!(maps::write_pfm, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
     m.add_function(wrap_pyfunction!(rectify::rectify_maps, m)?)?;
     m.add_function(wrap_pyfunction!(rectify::rectify, m)?)?;

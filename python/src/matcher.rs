@@ -3,13 +3,14 @@
 //! `jem.match` is a `Matcher` that is used once.
 
 use std::path::PathBuf;
+use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use jem::rectify::{Rectification, StereoCalibration};
 use jem::{Error, FrameKind, NdispSource, Output, PairCheck, Params};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::{ImageArray, guarded, load_params, positive, to_numpy, to_py};
+use super::{ImageArray, check_memory, guarded, load_params, positive, to_numpy, to_py};
 
 /// Matches rectified pairs with one configuration; with ``temporal=True`` the pairs are the frames of one stereo
 /// sequence, in order, and each is matched with what the frames before it showed (a still camera's frames are
@@ -20,8 +21,18 @@ use super::{ImageArray, guarded, load_params, positive, to_numpy, to_py};
 /// ``max_memory``; with ``temporal=True`` the range of the first frame is held for the sequence.
 /// ``match(left, right, confidence=False, return_info=False)`` returns what ``jem.match`` returns (the info dict
 /// also has ``frame``: how the frame was matched, e.g. ``"still"``, ``"moving"``, ``"cut"``).
-#[pyclass(name = "Matcher", module = "jem")]
+///
+/// One matcher may be called from several threads: its calls take turns (``match`` and ``reset`` wait, with the GIL
+/// released, for the call in progress to end), so each gets the result it would get alone at that point of the
+/// sequence. Pairs match in parallel on matchers of their own.
+#[pyclass(name = "Matcher", module = "jem", frozen)]
 pub(crate) struct PyMatcher {
+    /// Everything a call changes, held by one call at a time ([`PyMatcher::turn`]).
+    state: Mutex<State>,
+}
+
+/// A matcher's state.
+pub(crate) struct State {
     matcher: jem::Matcher,
     params: Params,
     threads: Option<usize>,
@@ -63,6 +74,21 @@ impl MatchOptions {
 }
 
 impl PyMatcher {
+    /// The state, once the call in progress (from another thread) has ended: waited for with the GIL released, so
+    /// that the call in progress, which needs the GIL to return, can end. A panic is caught inside a call (a
+    /// RuntimeError) and never poisons the lock; a poisoned one would be taken as it is.
+    fn turn(&self, py: Python<'_>) -> MutexGuard<'_, State> {
+        loop {
+            match self.state.try_lock() {
+                Ok(state) => return state,
+                Err(TryLockError::Poisoned(p)) => return p.into_inner(),
+                Err(TryLockError::WouldBlock) => {
+                    py.detach(|| drop(self.state.lock()));
+                }
+            }
+        }
+    }
+
     /// A matcher from `jem.match`'s arguments.
     pub(crate) fn build(
         ndisp: Option<i64>,
@@ -82,11 +108,25 @@ impl PyMatcher {
         let limit = positive("max_memory", max_memory)?.unwrap_or_else(jem::default_memory_limit);
         let matcher = jem::Matcher::new(params.clone()).map_err(|e| to_py(&e))?;
         let matcher = matcher.with_ndisp(source).with_max_memory(limit).with_temporal(options.temporal);
-        Ok(PyMatcher { matcher, params, threads, options })
+        Ok(PyMatcher { state: Mutex::new(State { matcher, params, threads, options }) })
     }
 
-    /// Matches one pair of arrays and builds what `match` returns.
+    /// Matches one pair of arrays and builds what `match` returns, in its turn ([`PyMatcher::turn`]).
     pub(crate) fn run<'py>(
+        &self,
+        py: Python<'py>,
+        left: &Bound<'py, PyAny>,
+        right: &Bound<'py, PyAny>,
+        confidence: bool,
+        return_info: bool,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        self.turn(py).run(py, left, right, confidence, return_info)
+    }
+}
+
+impl State {
+    /// [`PyMatcher::run`], with the state held.
+    fn run<'py>(
         &mut self,
         py: Python<'py>,
         left: &Bound<'py, PyAny>,
@@ -101,7 +141,15 @@ impl PyMatcher {
         let input_bytes = left.load_bytes().saturating_add(right.load_bytes());
         let sizes = ((left.width, left.height), (right.width, right.height));
         self.matcher.check_size(sizes.0, sizes.1, input_bytes).map_err(|e| to_py(&e))?;
+        if self.options.calibration.is_some() {
+            // The rectified pair and a view's maps beside the arrays, as `jem match --rectify` checks them.
+            let per_px = jem::rectify::RECTIFY_BYTES_PER_PX.saturating_add(24);
+            check_memory("rectify", sizes.0, per_px, self.matcher.max_memory())?;
+        }
         let rectification = self.options.rectification((left.width, left.height))?;
+        if let Some(rect) = rectification {
+            warn_all(py, &rect.warnings())?;
+        }
         let (l, r) = (left.to_rgb()?, right.to_rgb()?);
         let (matcher, threads) = (&mut self.matcher, self.threads);
         let (out, check) = py.detach(|| {
@@ -143,7 +191,7 @@ impl PyMatcher {
     /// ``jem.match``; a temporal matcher remembers the pair as the next frame.
     #[pyo3(name = "match", signature = (left, right, confidence=false, return_info=false))]
     fn match_pair<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         left: &Bound<'py, PyAny>,
         right: &Bound<'py, PyAny>,
@@ -153,9 +201,10 @@ impl PyMatcher {
         self.run(py, left, right, confidence, return_info)
     }
 
-    /// Forgets the frames matched so far: the next pair starts a new sequence.
-    fn reset(&mut self) {
-        self.matcher.reset();
+    /// Forgets the frames matched so far: the next pair starts a new sequence (after the call in progress from
+    /// another thread, if any).
+    fn reset(&self, py: Python<'_>) {
+        self.turn(py).matcher.reset();
     }
 }
 
@@ -177,10 +226,8 @@ fn results<'py>(
     shown: Shown,
 ) -> PyResult<Bound<'py, PyAny>> {
     let (w, h) = out.disparity.dims();
-    for warning in params.image_warnings(w, h).into_iter().chain(check.warnings()) {
-        let message = std::ffi::CString::new(warning).unwrap_or_default();
-        PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &message, 1)?;
-    }
+    let warnings: Vec<String> = params.image_warnings(w, h).into_iter().chain(check.warnings()).collect();
+    warn_all(py, &warnings)?;
     let info = if shown.return_info { Some(info(py, &out, check)?) } else { None };
     let reliable = shown.min_confidence.map(|c| out.reliable_disparity(c)).transpose().map_err(|e| to_py(&e))?;
     if shown.confidence {
@@ -196,6 +243,15 @@ fn results<'py>(
         return Ok(result.remove(0));
     }
     Ok(pyo3::types::PyTuple::new(py, result)?.into_any())
+}
+
+/// Each line a UserWarning.
+pub(crate) fn warn_all(py: Python<'_>, lines: &[String]) -> PyResult<()> {
+    for line in lines {
+        let message = std::ffi::CString::new(line.as_str()).unwrap_or_default();
+        PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &message, 1)?;
+    }
+    Ok(())
 }
 
 /// The info dict of a match (see `jem.match`).
@@ -232,6 +288,7 @@ fn info<'py>(py: Python<'py>, out: &Output, check: &PairCheck) -> PyResult<Bound
     checks.set_item("clipped", (check.clipped[0], check.clipped[1]))?;
     checks.set_item("sharpness_ratio", check.sharpness_ratio)?;
     checks.set_item("focus_beyond", check.focus_beyond)?;
+    checks.set_item("identical_share", check.identical_share)?;
     info.set_item("checks", checks)?;
     info.set_item("warnings", check.warnings())?;
     Ok(info.into_any())

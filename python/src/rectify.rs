@@ -8,22 +8,32 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::{ImageArray, guarded, to_array, to_numpy, to_py};
+use super::matcher::warn_all;
+use super::{ImageArray, check_memory, guarded, memory_limit, reserve, to_array, to_numpy, to_py};
+
+/// Bytes per pixel `rectify_maps` holds: both views' maps, two `f32` each.
+const MAPS_BYTES_PER_PX: u64 = 16;
+/// Bytes per pixel `rectify` holds at the most: the views as planes (24), what rectifying holds beyond them
+/// ([`jem::rectify::RECTIFY_BYTES_PER_PX`]) and the 8-bit views returned (6).
+const RECTIFY_CALL_BYTES_PER_PX: u64 = 24 + jem::rectify::RECTIFY_BYTES_PER_PX + 6;
 
 /// The rectification a stereo calibration file gives views of ``size`` (width, height; default: the size the
 /// file states), as OpenCV's ``stereoRectify(alpha=0)`` and ``initUndistortRectifyMap`` give it: a dict with
 /// ``map1x``, ``map1y`` (left) and ``map2x``, ``map2y`` (right), float32 H×W (for each rectified pixel, where in the
 /// original image it comes from: ``cv2.remap``'s maps), ``R1``, ``R2`` (3×3), ``P1``, ``P2`` (3×4), ``Q`` (4×4),
 /// ``focal``, ``baseline`` (the calibration's unit), ``doffs`` and ``size``. ``calib``: OpenCV FileStorage YAML/XML
-/// or KITTI calib_cam_to_cam.txt. Raises ValueError for a malformed or unusable calibration, OSError if it cannot be
-/// read.
+/// or KITTI calib_cam_to_cam.txt. ``max_memory``: bytes the maps may take (default: as ``match``). Raises ValueError
+/// for a malformed or unusable calibration, MemoryError for maps beyond ``max_memory``, OSError if it cannot be
+/// read; warns (UserWarning) for a rectified view that comes out mostly black.
 #[pyfunction]
-#[pyo3(signature = (calib, size=None))]
+#[pyo3(signature = (calib, size=None, max_memory=None))]
 pub(crate) fn rectify_maps<'py>(
     py: Python<'py>,
     calib: PathBuf,
     size: Option<(usize, usize)>,
+    max_memory: Option<i64>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let limit = memory_limit(max_memory)?;
     let calibration = jem::rectify::StereoCalibration::load(&calib).map_err(|e| to_py(&e))?;
     let size = size.or(calibration.image_size).ok_or_else(|| {
         PyValueError::new_err(format!("{}: states no image size; give size=(width, height)", calib.display()))
@@ -31,7 +41,9 @@ pub(crate) fn rectify_maps<'py>(
     if size.0 == 0 || size.1 == 0 || size.0.saturating_mul(size.1) > 1 << 30 {
         return Err(PyValueError::new_err(format!("size {size:?}: expected 1..2^30 pixels")));
     }
+    check_memory("rectify_maps", size, MAPS_BYTES_PER_PX, limit)?;
     let rect = calibration.rectification(size).map_err(|e| to_py(&e))?;
+    warn_all(py, &rect.warnings())?;
     let ((m1x, m1y), (m2x, m2y)) =
         py.detach(|| (rect.maps(jem::rectify::View::Left), rect.maps(jem::rectify::View::Right)));
     let out = PyDict::new(py);
@@ -55,27 +67,35 @@ pub(crate) fn rectify_maps<'py>(
 
 /// Rectifies a raw pair with its stereo calibration (as ``jem rectify``): the rectified views as uint8 H×W×3
 /// arrays (the images ``jem rectify`` writes), and the Middlebury calib.txt of the rectified pair as text.
-/// ``left``, ``right`` as for ``match``. Raises ValueError for a bad array or calibration, OSError if the file cannot
-/// be read.
+/// ``left``, ``right`` as for ``match``, checked against ``max_memory`` (bytes; default: as ``match``) from their
+/// shapes before they are copied. Raises ValueError for a bad array or calibration, MemoryError for views beyond
+/// ``max_memory``, OSError if the file cannot be read; warns (UserWarning) for a view that comes out mostly black.
 #[pyfunction]
+#[pyo3(signature = (calib, left, right, max_memory=None))]
 pub(crate) fn rectify<'py>(
     py: Python<'py>,
     calib: PathBuf,
     left: &Bound<'py, PyAny>,
     right: &Bound<'py, PyAny>,
+    max_memory: Option<i64>,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, String)> {
+    let limit = memory_limit(max_memory)?;
     let (left, right) = (ImageArray::inspect(left, "left")?, ImageArray::inspect(right, "right")?);
     if (left.width, left.height) != (right.width, right.height) {
         let e = Error::SizeMismatch { left: (left.width, left.height), right: (right.width, right.height) };
         return Err(to_py(&e));
     }
+    check_memory("rectify", (left.width, left.height), RECTIFY_CALL_BYTES_PER_PX, limit)?;
     let calibration = jem::rectify::StereoCalibration::load(&calib).map_err(|e| to_py(&e))?;
     let rect = calibration.rectification((left.width, left.height)).map_err(|e| to_py(&e))?;
+    warn_all(py, &rect.warnings())?;
     let (l, r) = (left.to_rgb()?, right.to_rgb()?);
     let (l, r) = py.detach(|| guarded(None, || rect.rectify_pair(&l, &r)))?;
-    let bytes = |img: &RgbImage| -> Vec<u8> {
-        (0..img.len()).flat_map(|i| img.rgb(i).map(|v| v.round().clamp(0.0, 255.0) as u8)).collect()
+    let bytes = |img: &RgbImage| -> PyResult<Vec<u8>> {
+        let mut out = reserve::<u8>("rectify", 3 * img.len())?;
+        out.extend((0..img.len()).flat_map(|i| img.rgb(i).map(|v| v.round().clamp(0.0, 255.0) as u8)));
+        Ok(out)
     };
     let (w, h) = l.dims();
-    Ok((to_array(py, &[h, w, 3], bytes(&l))?, to_array(py, &[h, w, 3], bytes(&r))?, rect.calib_txt()))
+    Ok((to_array(py, &[h, w, 3], bytes(&l)?)?, to_array(py, &[h, w, 3], bytes(&r)?)?, rect.calib_txt()))
 }

@@ -95,3 +95,42 @@ def test_depth_stops_at_one_pixel_of_disparity_unless_told():
     np.testing.assert_array_equal(jem.depth(disp, 500.0, 0.2, max_depth=float("inf"))[0, 1], np.float32(200.0))
     with pytest.raises(ValueError, match="max_depth"):
         jem.depth(disp, 500.0, 0.2, max_depth=-1.0)
+
+
+def test_one_matcher_called_from_several_threads_serialises_the_calls(synth_pair):
+    """Four threads matching through one Matcher each get the map (three of four got "Already borrowed"); the
+    calls take turns, each waiting with the GIL released."""
+    reference = jem.match(*synth_pair, ndisp=48)
+    matcher = jem.Matcher(ndisp=48)
+    with ThreadPoolExecutor(4) as pool:
+        maps = list(pool.map(lambda _: matcher.match(*synth_pair), range(4)))
+    assert len(maps) == 4
+    for disp in maps:
+        assert disp.view(np.uint32).tolist() == reference.view(np.uint32).tolist()
+
+
+def test_reset_during_a_match_waits_for_it(synth_pair):
+    """``reset()`` from another thread while a temporal matcher matches waits for the match in progress (it raised
+    "Already borrowed"); every match still gives a map, each frame matched as a first frame or after the ones
+    since the last reset."""
+    matcher = jem.Matcher(ndisp=48, temporal=True)
+    results, errors = [], []
+
+    def frames():
+        try:
+            results.extend(matcher.match(*synth_pair, return_info=True) for _ in range(3))
+        except Exception as e:  # noqa: BLE001 - the test reports whatever was raised
+            errors.append(e)
+
+    worker = threading.Thread(target=frames)
+    worker.start()
+    resets = 0
+    while worker.is_alive():
+        matcher.reset()
+        resets += 1
+        time.sleep(0.01)
+    worker.join()
+    assert not errors and resets > 0, errors
+    assert len(results) == 3
+    for disp, info in results:
+        assert disp.shape == (240, 320) and info["frame"] in ("first", "still")

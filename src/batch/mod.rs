@@ -234,7 +234,7 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
     }
     for dir in written.iter().filter_map(|(p, _)| p.parent()) {
         if !dir.as_os_str().is_empty() {
-            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            crate::io::create_folder(dir)?;
         }
     }
     crate::io::write_all_or_none(&written)?;

@@ -108,7 +108,10 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let load_time = start.elapsed();
     let out = match_with_progress(&mut matcher, (&l, &r), request.stated_ndisp, global.quiet)?;
     let check = matcher.check_pair(&l, &r, &out);
-    let warnings = check.warnings();
+    let mut warnings = check.warnings();
+    if let (Some(rect), Some(calib)) = (&request.rectification, &args.rectify) {
+        warnings.extend(rect.warnings().into_iter().map(|w| format!("{}: {w}", calib.display())));
+    }
     if args.strict && !warnings.is_empty() {
         return Err(Error::Input(format!("the pair looks wrong (--strict: nothing written): {}", warnings.join("; "))));
     }

@@ -21,7 +21,7 @@ pub(super) struct RectifyArgs {
     left: PathBuf,
     /// The right camera's image, the same size.
     right: PathBuf,
-    /// Output folder (created if missing): im0.png, im1.png, calib.txt.
+    /// Output folder (created if missing; one that holds a scene already is refused): im0.png, im1.png, calib.txt.
     #[arg(long, short, value_name = "DIR")]
     output: PathBuf,
     /// Also write the maps (for each rectified pixel, where in the original image it comes from) as
@@ -53,6 +53,14 @@ pub(super) fn plan(calib: &Path, left: &Path, right: &Path, max_memory: u64) -> 
     Ok(rectification)
 }
 
+/// Prints (unless `quiet`) a line per rectified view that would come out mostly black
+/// ([`Rectification::warnings`]).
+pub(super) fn warn(rectification: &Rectification, calib: &Path, quiet: bool) {
+    for warning in rectification.warnings().iter().filter(|_| !quiet) {
+        note!("warning: {}: {warning}", calib.display());
+    }
+}
+
 /// Rectifies one pair.
 pub(super) fn run(args: &RectifyArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let names = ["im0.png", "im1.png", "calib.txt"];
@@ -61,9 +69,16 @@ pub(super) fn run(args: &RectifyArgs, global: &GlobalArgs) -> Result<ExitCode> {
         outputs.extend(["map0x.pfm", "map0y.pfm", "map1x.pfm", "map1y.pfm"].map(|n| args.output.join(n)));
     }
     if args.output.exists() && !args.output.is_dir() {
-        return Err(Error::Input(format!("{}: exists and is not a folder", args.output.display())));
+        return Err(Error::Input(format!(
+            "{}: exists and is not a folder; give -o the name of a new folder",
+            args.output.display()
+        )));
     }
+    // A folder holding a scene (im0.png, im1.png, calib.txt, ground truth, results) would get a new pair beside
+    // results and ground truth of the old one, as `jem synth` refuses.
+    jem::synth::check_scene_folder(&args.output)?;
     let rectification = plan(&args.calib, &args.left, &args.right, args.memory.memory_limit())?;
+    warn(&rectification, &args.calib, global.quiet);
     let output_refs: Vec<&Path> = outputs.iter().map(PathBuf::as_path).collect();
     jem::io::check_outputs(&[&args.calib, &args.left, &args.right], &output_refs)?;
     let (left, right) = jem::io::read_image_pair(&args.left, &args.right)?;
@@ -80,7 +95,7 @@ pub(super) fn run(args: &RectifyArgs, global: &GlobalArgs) -> Result<ExitCode> {
             files.push(jem::io::pfm::encode_pfm(&y));
         }
     }
-    std::fs::create_dir_all(&args.output).map_err(|e| Error::io(&args.output, e))?;
+    jem::io::create_folder(&args.output)?;
     let pairs: Vec<(&Path, &[u8])> = output_refs.iter().copied().zip(files.iter().map(Vec::as_slice)).collect();
     jem::io::write_all_or_none(&pairs)?;
     if !global.quiet {

@@ -63,6 +63,9 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
         (Some(c), Some(f)) => Some(super::rectify::plan(c, &f.left, &f.right, args.memory.memory_limit())?),
         _ => None,
     };
+    if let (Some(rect), Some(calib)) = (&rectification, &args.rectify) {
+        super::rectify::warn(rect, calib, global.quiet);
+    }
     let opts = RunOptions {
         rectification: rectification.as_ref(),
         params: &params,
@@ -97,6 +100,11 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
     };
     let replayed = std::cell::Cell::new(0usize);
     let on_event = |event: Event<'_>| match event {
+        Event::Note(line) => {
+            if !quiet {
+                note!("{line}");
+            }
+        }
         Event::Replayed { index, .. } => {
             header();
             if !quiet && replayed.replace(replayed.get() + 1) == 0 {

@@ -262,7 +262,7 @@ pub fn lock_results(
         if !dirs.insert(dir.clone()) {
             continue;
         }
-        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        crate::io::create_folder(&dir)?;
         let file = dir.join(&name);
         match acquire(&file, &me, &mut lock) {
             Ok(()) => lock.files.push(file),
@@ -280,6 +280,22 @@ pub fn lock_results(
             check_other_parts(&dir, &name, shard)?;
         }
     }
+    Ok(lock)
+}
+
+/// Locks a folder that one run writes as a whole (a sequence's output folder) against a second writer: its
+/// `.jem-lock`, taken over when stale, as [`lock_results`] locks a results folder.
+///
+/// # Errors
+/// [`Error::Input`] naming the folder, the lock file and the run holding it when another live run (or one this
+/// machine cannot check) holds it, or naming a lock that cannot be read; [`Error::Io`] if the lock cannot be made.
+pub fn lock_folder(dir: &Path) -> Result<ResultsLock> {
+    let me = Identity::new(None);
+    let mut lock =
+        ResultsLock { files: Vec::new(), token: me.token.clone(), taken_over: Vec::new(), refused: Vec::new() };
+    let file = dir.join(".jem-lock");
+    acquire(&file, &me, &mut lock).map_err(NotTaken::into_error)?;
+    lock.files.push(file);
     Ok(lock)
 }
 

@@ -33,7 +33,7 @@ use std::str::FromStr;
 use crate::error::Result;
 
 pub(crate) use lock::lock_holds;
-pub use lock::{ResultsLock, lock_results, writers};
+pub use lock::{ResultsLock, lock_folder, lock_results, writers};
 pub use results::check_results_dirs;
 
 /// The search range of a KITTI frame when nothing else gives one (0..191, the usual choice for KITTI).

@@ -13,6 +13,9 @@ use std::path::{Component, Path, PathBuf};
 use super::{Discovery, Pair, Purpose, SOURCE_FILE, discover};
 use crate::error::{Error, Result};
 
+/// The largest [`SOURCE_FILE`] read (it holds three short lines).
+const MAX_SOURCE_BYTES: u64 = 64 << 10;
+
 /// What a results folder's [`SOURCE_FILE`] says for `pair`'s data set, written from the results folder `dir`.
 fn source_text(pair: &Pair, dir: &Path) -> String {
     let root = std::fs::canonicalize(&pair.root).unwrap_or_else(|_| pair.root.clone());
@@ -140,6 +143,7 @@ pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, cla
             Some(_) => continue,
             None => {}
         }
+        crate::io::check_folder_name(&dir)?;
         if let (Ok(d), Ok(r)) = (resolve_to_existing(&dir), std::fs::canonicalize(&pair.root))
             && d.starts_with(&r)
         {
@@ -153,7 +157,7 @@ pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, cla
         // are, rather than report every result missing, or compute them all again beside them.
         if let Some(old) = dir.parent()
             && !dir.exists()
-            && let Ok(have) = std::fs::read(old.join(SOURCE_FILE))
+            && let Ok(have) = crate::io::read_capped(&old.join(SOURCE_FILE), MAX_SOURCE_BYTES, SOURCE_FILE)
             && holds(&String::from_utf8_lossy(&have), pair, old).is_ok()
         {
             return Err(Error::Input(format!(
@@ -165,9 +169,9 @@ pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, cla
             )));
         }
         let source = dir.join(SOURCE_FILE);
-        let moved = match std::fs::read(&source) {
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => false,
-            Err(e) => return Err(Error::io(&source, e)),
+        let moved = match crate::io::read_capped(&source, MAX_SOURCE_BYTES, SOURCE_FILE) {
+            Err(Error::Io { source: e, .. }) if e.kind() == std::io::ErrorKind::NotFound => false,
+            Err(e) => return Err(e),
             Ok(have) => match holds(&String::from_utf8_lossy(&have), pair, &dir) {
                 Ok(how) => how == Match::Fingerprint,
                 Err(Mismatch::Malformed(why)) => {
@@ -204,7 +208,7 @@ pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, cla
     for (dir, (pair, moved)) in claimed.iter().filter(|_| claim) {
         let source = dir.join(SOURCE_FILE);
         if *moved || !source.is_file() {
-            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            crate::io::create_folder(dir)?;
             crate::io::write_atomic(&source, source_text(pair, dir).as_bytes())?;
         }
     }

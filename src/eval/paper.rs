@@ -30,7 +30,8 @@ impl PaperResults {
     /// Parses the TSV text.
     ///
     /// # Errors
-    /// A message naming the line for a missing header, a bad weight, or a row with the wrong number of fields.
+    /// A message naming the line for a missing header, a column or scene given twice, a weight that is not a
+    /// positive number, a value that is neither a number ≥ 0 nor missing, or a row with the wrong number of fields.
     /// Empty fields and `-` are missing values.
     pub fn parse(text: &str) -> std::result::Result<Self, String> {
         let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'));
@@ -40,25 +41,40 @@ impl PaperResults {
             return Err("the header must be `scene<TAB>weight<TAB>COLUMN...`".into());
         }
         let columns: Vec<String> = head[2..].iter().map(|s| s.to_string()).collect();
-        let mut rows = Vec::new();
+        if let Some((k, c)) = columns.iter().enumerate().find(|(k, c)| columns[..*k].contains(c)) {
+            let first = columns.iter().position(|x| x == c).unwrap_or(k);
+            return Err(format!("the header names column {c:?} twice (fields {} and {})", first + 3, k + 3));
+        }
+        let mut rows: Vec<(String, f64, Vec<Option<f64>>)> = Vec::new();
+        let mut seen: BTreeMap<String, usize> = BTreeMap::new();
         for (n, line) in lines {
             let f: Vec<&str> = line.split('\t').map(str::trim).collect();
             if f.len() != head.len() {
                 return Err(format!("line {}: {} fields, the header has {}", n + 1, f.len(), head.len()));
             }
-            let weight = f[1].parse::<f64>().map_err(|_| format!("line {}: bad weight {:?}", n + 1, f[1]))?;
-            let values = f[2..].iter().map(|v| v.parse::<f64>().ok().filter(|v| v.is_finite())).collect();
+            if let Some(first) = seen.insert(f[0].to_string(), n + 1) {
+                return Err(format!("line {}: scene {} is listed twice (first on line {first})", n + 1, f[0]));
+            }
+            let weight = f[1].parse::<f64>().ok().filter(|w| w.is_finite() && *w > 0.0);
+            let weight =
+                weight.ok_or_else(|| format!("line {}: bad weight {:?} (expected a number > 0)", n + 1, f[1]))?;
+            let values = f[2..]
+                .iter()
+                .zip(&columns)
+                .map(|(v, column)| value(v).map_err(|why| format!("line {}: {column} {v:?} {why}", n + 1)))
+                .collect::<std::result::Result<_, _>>()?;
             rows.push((f[0].to_string(), weight, values));
         }
         Ok(PaperResults { columns, rows })
     }
 
-    /// Reads and parses a TSV file.
+    /// Reads and parses a TSV file (at most 1 MiB).
     ///
     /// # Errors
     /// [`Error::Io`] or [`Error::Input`] naming the path.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::io::read_capped(path, 1 << 20, "paper results file")?;
+        let text = String::from_utf8(bytes).map_err(|_| Error::Input(format!("{}: not UTF-8 text", path.display())))?;
         Self::parse(&text).map_err(|msg| Error::Input(format!("{}: {msg}", path.display())))
     }
 
@@ -88,6 +104,18 @@ impl PaperResults {
     }
 }
 
+/// One value of the table: a number ≥ 0 (an error is never negative), or missing (empty or `-`).
+fn value(field: &str) -> std::result::Result<Option<f64>, &'static str> {
+    if field.is_empty() || field == "-" {
+        return Ok(None);
+    }
+    match field.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(Some(v)),
+        Ok(_) => Err("is not a score (expected a number >= 0)"),
+        Err(_) => Err("is not a number (empty or - for a missing value)"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -104,5 +132,25 @@ mod tests {
         assert!(p.column("C").unwrap_err().to_string().contains("A, B"));
         assert!(PaperResults::parse("scene\tweight\tA\nTeddy\t1\n").is_err());
         assert!(PaperResults::parse("scene\tA\n").is_err());
+    }
+
+    /// A scene listed twice (which row counts?), a negative score or weight, or a value that is not a number (read
+    /// as missing before, silently leaving the scene out of the mean) is refused, naming the line.
+    #[test]
+    fn duplicate_rows_negative_and_non_numeric_values_are_refused() {
+        let head = "scene\tweight\tA\tB\n";
+        for (rows, needle) in [
+            ("Teddy\t1\t2\t3\nTeddy\t1\t2\t4\n", "line 3: scene Teddy is listed twice (first on line 2)"),
+            ("Teddy\t1\t-2\t3\n", "line 2: A \"-2\" is not a score"),
+            ("Teddy\t1\t2\tabc\n", "line 2: B \"abc\" is not a number"),
+            ("Teddy\t1\tnan\t2\n", "line 2: A \"nan\" is not a score"),
+            ("Teddy\t-1\t2\t3\n", "line 2: bad weight \"-1\""),
+        ] {
+            let e = PaperResults::parse(&format!("{head}{rows}")).unwrap_err();
+            assert!(e.contains(needle), "{e}");
+        }
+        assert!(PaperResults::parse("scene\tweight\tA\tA\n").unwrap_err().contains("column \"A\" twice"));
+        let ok = PaperResults::parse(&format!("{head}Teddy\t1\t\t-\n")).unwrap();
+        assert!(ok.column("A").unwrap().scenes.is_empty());
     }
 }

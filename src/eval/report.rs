@@ -356,7 +356,7 @@ fn scene_names(root: &Path, pairs: &[Pair], locations: &[PathBuf]) -> Vec<String
 /// The number in a run-time file, if the file exists and holds one finite non-negative number (alone, or after
 /// `runtime` as in ETH3D's files).
 fn read_seconds(path: &Path) -> Option<f64> {
-    let text = std::fs::read_to_string(path).ok()?;
+    let text = crate::io::read_small_text(path, 64 << 10)?;
     let text = text.trim();
     let number = text.strip_prefix("runtime").map_or(text, str::trim_start);
     number.parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0)

@@ -231,7 +231,7 @@ pub fn evaluate_sequence(
 
 /// The extension of the results: the format `jem sequence` recorded, else `pfm`.
 fn result_extension(results: &Path) -> String {
-    let record = std::fs::read_to_string(results.join(crate::sequence::RUN_FILE)).unwrap_or_default();
+    let record = crate::io::read_small_text(&results.join(crate::sequence::RUN_FILE), 1 << 20).unwrap_or_default();
     record.lines().find_map(|l| l.strip_prefix("format=")).unwrap_or("pfm").to_string()
 }
 
@@ -259,7 +259,7 @@ fn load_frame(results: &Path, f: &crate::sequence::Frame, ext: &str) -> std::res
 
 /// The `(stem, seconds)` lines of a times file.
 fn read_times(path: &Path) -> Vec<(String, f64)> {
-    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let text = crate::io::read_small_text(path, 64 << 20).unwrap_or_default();
     text.lines()
         .filter_map(|l| {
             let (stem, seconds) = l.rsplit_once(' ')?;

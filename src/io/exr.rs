@@ -46,7 +46,7 @@ pub(crate) fn write_exr(path: &Path, map: &Plane<f32>) -> Result<()> {
 /// # Errors
 /// [`JemError::Io`] or [`JemError::Exr`] naming the path.
 pub(crate) fn read_exr(path: &Path) -> Result<Plane<f32>> {
-    let bytes = std::fs::read(path).map_err(|e| JemError::io(path, e))?;
+    let bytes = super::read_regular(path)?;
     let image = read()
         .no_deep_data()
         .largest_resolution_level()

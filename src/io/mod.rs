@@ -36,6 +36,15 @@ pub fn decode_image(path: &Path) -> Result<image::DynamicImage> {
     png::decode(path)
 }
 
+/// [`decode_image`] within a memory limit of `max_bytes`: the header is read first, and an image whose decoding
+/// (the file, its samples and a converted copy of them) would not fit is refused before anything is decoded.
+///
+/// # Errors
+/// As [`read_image`]; [`Error::OutOfMemory`] naming the file when its decoding does not fit.
+pub fn decode_image_within(path: &Path, max_bytes: u64) -> Result<image::DynamicImage> {
+    png::decode_bounded(path, max_bytes)
+}
+
 /// Both views of a pair ([`read_image`]), decoded in parallel.
 ///
 /// # Errors
@@ -389,20 +398,106 @@ pub fn read_disparity(path: &Path) -> Result<DisparityMap> {
     }
 }
 
-/// Reads a whole file of at most `max` bytes (a config, a calib.txt, a PFM header): a device, a pipe or a huge
-/// file given by mistake is refused after `max` + 1 bytes instead of filling the memory.
+/// Opens a file for reading when it is a regular file (through symbolic links), and refuses anything else before
+/// a read can block or never end: a FIFO waits for a writer forever, `/dev/zero` has no end, a folder has no
+/// bytes. The file is opened without blocking and checked again once open (it may have been replaced meanwhile).
 ///
 /// # Errors
-/// [`Error::Io`] naming the path, or [`Error::Input`] when the file is larger than `max`.
+/// [`Error::Io`] naming the path when it cannot be opened, [`Error::Input`] naming it and what it is when it is not
+/// a regular file.
+pub fn open_regular(path: &Path) -> Result<std::fs::File> {
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    check_regular(path, &meta)?;
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NONBLOCK);
+    }
+    let file = options.open(path).map_err(|e| Error::io(path, e))?;
+    check_regular(path, &file.metadata().map_err(|e| Error::io(path, e))?)?;
+    Ok(file)
+}
+
+/// Refuses a file that is not a regular one ([`open_regular`]).
+fn check_regular(path: &Path, meta: &std::fs::Metadata) -> Result<()> {
+    if meta.is_file() {
+        return Ok(());
+    }
+    let what = if meta.is_dir() { "a folder" } else { file_kind(meta) };
+    Err(Error::Input(format!("{}: is {what}, not a regular file; jem reads only regular files", path.display())))
+}
+
+/// A regular file's bytes ([`open_regular`]), all of them.
+///
+/// # Errors
+/// As [`open_regular`], and [`Error::Io`] naming the path when it cannot be read.
+pub fn read_regular(path: &Path) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let mut file = open_regular(path)?;
+    let mut bytes = Vec::new();
+    file.read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
+    Ok(bytes)
+}
+
+/// A regular file's text ([`read_regular`]), at most `max` bytes of it ([`read_capped`]); `None` when it is
+/// missing, not a regular file, too large or not UTF-8: for the small files jem writes beside its results and
+/// reads back when they are there.
+pub(crate) fn read_small_text(path: &Path, max: u64) -> Option<String> {
+    String::from_utf8(read_capped(path, max, "file").ok()?).ok()
+}
+
+/// Reads a whole file of at most `max` bytes (a config, a calib.txt, a PFM header): a device, a pipe or a huge
+/// file given by mistake is refused ([`open_regular`]), and a file larger than `max` is refused after `max` + 1
+/// bytes instead of filling the memory.
+///
+/// # Errors
+/// [`Error::Io`] naming the path, or [`Error::Input`] when it is not a regular file or is larger than `max`.
 pub fn read_capped(path: &Path, max: u64, what: &str) -> Result<Vec<u8>> {
     use std::io::Read;
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let file = open_regular(path)?;
     let mut bytes = Vec::new();
     file.take(max + 1).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
     if bytes.len() as u64 > max {
         return Err(Error::Input(format!("{}: larger than {max} bytes, too large for a {what}", path.display())));
     }
     Ok(bytes)
+}
+
+/// Creates the folder `dir` and the folders above it that are missing, for outputs. A name that is taken by a file
+/// is refused with what to do, instead of the system's "File exists" or "Not a directory".
+///
+/// # Errors
+/// [`Error::Input`] naming `dir`, or the file above it that is in the way; [`Error::Io`] when it cannot be made.
+pub fn create_folder(dir: &Path) -> Result<()> {
+    check_folder_name(dir)?;
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))
+}
+
+/// Checks that the folder `dir` exists or can be made: neither it nor a folder above it is a file
+/// ([`create_folder`]'s refusals, without making anything).
+///
+/// # Errors
+/// As [`create_folder`].
+pub fn check_folder_name(dir: &Path) -> Result<()> {
+    if dir.is_dir() {
+        return Ok(());
+    }
+    if std::fs::symlink_metadata(dir).is_ok() {
+        return Err(Error::Input(format!(
+            "{}: exists and is not a folder; give the name of a folder (a new one is made)",
+            dir.display()
+        )));
+    }
+    if let Some(file) = dir.ancestors().skip(1).find(|a| !a.as_os_str().is_empty() && a.exists() && !a.is_dir()) {
+        return Err(Error::Input(format!(
+            "{}: is a file, so the folder {} cannot be made in it; give another name",
+            file.display(),
+            dir.display()
+        )));
+    }
+    Ok(())
 }
 
 /// The largest config file read.
@@ -471,15 +566,41 @@ fn stage(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> R
     }
 }
 
-/// `dir/.name.jem-tmp-<pid>-<nanoseconds>-<n>`: hidden, in the destination's folder (so the rename stays on one
-/// file system), and unique per write — also between processes on different machines of a cluster that share
-/// the folder (their process ids may coincide; the clock and the counter keep them apart).
+/// `dir/.name.jem-tmp-<host>-<pid>-<nanoseconds>-<n>`: hidden, in the destination's folder (so the rename stays on
+/// one file system), and unique per write — also between processes on different machines of a cluster that share
+/// the folder (their process ids may coincide; the host, the clock and the counter keep them apart). The host and
+/// pid let a later run remove what a killed one left ([`sweep_stale_temps`]).
 fn temp_path(path: &Path) -> PathBuf {
     static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
     let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
     let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    path.with_file_name(format!(".{name}.jem-tmp-{}-{nanos}-{n}", std::process::id()))
+    let host = crate::process::host_name();
+    path.with_file_name(format!(".{name}{TEMP_MARK}{host}-{}-{nanos}-{n}", std::process::id()))
+}
+
+/// What marks a temporary file's name ([`temp_path`]).
+const TEMP_MARK: &str = ".jem-tmp-";
+
+/// Removes the temporary files ([`temp_path`]) in `dir` that a run of this machine left when it was killed
+/// (`kill -9` cannot be caught): those whose process is gone. Another machine's, and a live run's, are left alone;
+/// without `/proc` nothing is removed.
+pub(crate) fn sweep_stale_temps(dir: &Path) {
+    if !crate::process::proc_available() {
+        return;
+    }
+    let mark = format!("{TEMP_MARK}{}-", crate::process::host_name());
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(name) = name.to_str().filter(|n| n.starts_with('.')) else { continue };
+        let Some((_, rest)) = name.split_once(&mark) else { continue };
+        let Some(pid) = rest.split('-').next().and_then(|p| p.parse::<u32>().ok()) else { continue };
+        let gone = crate::process::pid_exists(pid) == Some(false);
+        if gone && entry.file_type().is_ok_and(|t| t.is_file()) {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
 }
 
 #[cfg(test)]
@@ -592,6 +713,71 @@ mod tests {
         let mut names = files(dir.path());
         names.retain(|n| n.starts_with('.') || n == "ok.pfm");
         assert!(names.is_empty(), "no temporary file, and the other file of the pair not written: {names:?}");
+    }
+
+    /// Every reader refuses what is not a regular file before reading: a FIFO (which would wait for a writer), a
+    /// device without end (`/dev/zero`), a folder; through a symbolic link too.
+    #[test]
+    fn readers_refuse_fifos_devices_and_folders() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("f.pfm");
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+        let zero = dir.path().join("zero.png");
+        std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+        for (path, kind) in [(&fifo, "a FIFO"), (&zero, "a character device"), (&dir.path().to_path_buf(), "a folder")]
+        {
+            let results = [
+                read_capped(path, 100, "test").map(drop),
+                read_regular(path).map(drop),
+                pfm::read_pfm(path).map(drop),
+                read_image(path).map(drop),
+                read_image_header(path).map(drop),
+            ];
+            for r in results {
+                let e = r.unwrap_err().to_string();
+                assert!(e.contains(kind) && e.contains("not a regular file"), "{}: {e}", path.display());
+            }
+        }
+    }
+
+    /// A temporary file of a run of this machine that is gone (`kill -9`) is removed by the next sweep; a live
+    /// run's, another machine's and other files are left.
+    #[test]
+    fn stale_temporary_files_of_dead_runs_are_swept() {
+        let dir = tempfile::tempdir().unwrap();
+        let host = crate::process::host_name();
+        let dead = format!(".page.html.jem-tmp-{host}-4000000000-1-0");
+        let live = format!(".page.html.jem-tmp-{host}-{}-1-0", std::process::id());
+        let other = ".page.html.jem-tmp-elsewhere-4000000000-1-0".to_string();
+        for name in [&dead, &live, &other, &"page.html".to_string()] {
+            std::fs::write(dir.path().join(name), b"x").unwrap();
+        }
+        let ours = temp_path(&dir.path().join("page.html"));
+        let name = ours.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(name.starts_with(&format!(".page.html.jem-tmp-{host}-{}-", std::process::id())), "{name}");
+        sweep_stale_temps(dir.path());
+        let mut want = vec![live, other, "page.html".to_string()];
+        if !crate::process::proc_available() {
+            want.push(dead);
+        }
+        want.sort();
+        assert_eq!(files(dir.path()), want);
+    }
+
+    /// A folder name taken by a file, or under one, is refused with what to do (not the system's "File exists" or
+    /// "Not a directory"); an existing folder is fine and a missing one is made.
+    #[test]
+    fn a_folder_is_made_unless_a_file_is_in_the_way() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("f");
+        std::fs::write(&file, b"x").unwrap();
+        let e = create_folder(&file).unwrap_err().to_string();
+        assert!(e.ends_with("f: exists and is not a folder; give the name of a folder (a new one is made)"), "{e}");
+        let e = create_folder(&file.join("a/b")).unwrap_err().to_string();
+        assert!(e.contains("f: is a file, so the folder") && e.contains("f/a/b cannot be made"), "{e}");
+        create_folder(&dir.path().join("new/deep")).unwrap();
+        create_folder(&dir.path().join("new/deep")).unwrap();
+        assert!(dir.path().join("new/deep").is_dir() && check_folder_name(&dir.path().join("x/y")).is_ok());
     }
 
     /// The names in a folder, sorted.

@@ -49,7 +49,7 @@ pub fn read_pfm(path: &Path) -> Result<Plane<f32>> {
     let pfm_error = |msg| Error::Pfm { path: path.to_path_buf(), msg };
     // The header first (three short lines), then exactly the body it announces plus one byte to detect more:
     // a device or a huge file is never read whole.
-    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut file = super::open_regular(path)?;
     let mut bytes = Vec::new();
     file.by_ref().take(3 * (MAX_LINE as u64 + 2)).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
     let (width, height, channels, _, body_start) = header(&bytes).map_err(pfm_error)?;
@@ -59,13 +59,36 @@ pub fn read_pfm(path: &Path) -> Result<Plane<f32>> {
     decode(&bytes).map_err(pfm_error)
 }
 
+/// [`read_pfm`] within a memory limit: the size the header announces is checked first (the file's body and the map
+/// made of it, 8 bytes a value), so that a header announcing more than `max_bytes` is refused before the body is
+/// read.
+///
+/// # Errors
+/// As [`read_pfm`]; [`Error::OutOfMemory`] naming the file when the map does not fit.
+pub fn read_pfm_within(path: &Path, max_bytes: u64) -> Result<Plane<f32>> {
+    use std::io::Read;
+    let file = super::open_regular(path)?;
+    let mut bytes = Vec::new();
+    file.take(3 * (MAX_LINE as u64 + 2)).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
+    let (width, height, channels, ..) = header(&bytes).map_err(|msg| Error::Pfm { path: path.to_path_buf(), msg })?;
+    let need = (width as u64).saturating_mul(height as u64).saturating_mul(channels as u64).saturating_mul(8);
+    if need > max_bytes {
+        return Err(Error::OutOfMemory {
+            needed: need,
+            limit: max_bytes,
+            hint: format!("{}: its {width}x{height} map does not fit; raise the memory limit", path.display()),
+        });
+    }
+    read_pfm(path)
+}
+
 /// A PFM file's width and height, from its header (the body is not read).
 ///
 /// # Errors
 /// [`Error::Io`] if it cannot be read, [`Error::Pfm`] naming the path if the header is malformed.
 pub(crate) fn read_pfm_size(path: &Path) -> Result<(usize, usize)> {
     use std::io::Read;
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let file = super::open_regular(path)?;
     let mut bytes = Vec::new();
     file.take(3 * (MAX_LINE as u64 + 2)).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
     let (width, height, ..) = header(&bytes).map_err(|msg| Error::Pfm { path: path.to_path_buf(), msg })?;

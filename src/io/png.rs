@@ -1,7 +1,8 @@
 //! Raster images: loading the formats of [`IMAGE_FORMATS`] into [`RgbImage`], writing 8-bit colour PNGs and 16-bit
 //! disparity PNGs.
 //!
-//! Loading accepts 8- and 16-bit grey, grey+alpha, RGB and RGBA (and TIFF's float samples, through 16 bits);
+//! Loading accepts 8- and 16-bit grey, grey+alpha, RGB and RGBA (and TIFF's float samples on the 0..1 scale,
+//! through 16 bits; a float sample outside it, which would be clipped, or a NaN is refused);
 //! samples are scaled to 0..=255 `f32` (16-bit values divided by 257), alpha is dropped. The format is sniffed
 //! from the content, not the name; another format (GIF, AVIF, ...) is refused with the list of these.
 
@@ -49,16 +50,43 @@ pub struct ImageHeader {
 /// # Errors
 /// As [`load_rgb`], for the header.
 pub(crate) fn read_header(path: &Path) -> Result<ImageHeader> {
+    let (width, height, file_bytes, sample_bytes) = header_parts(path)?;
+    let px = width as u64 * height as u64;
+    let load_bytes = file_bytes.saturating_add(sample_bytes).saturating_add(12 * px);
+    Ok(ImageHeader { width, height, load_bytes })
+}
+
+/// An image file's size (width, height), its length in bytes and the bytes of its decoded samples (at its own bit
+/// depth and channels), from the header.
+fn header_parts(path: &Path) -> Result<(usize, usize, u64, u64)> {
     use image::ImageDecoder;
-    let file_bytes = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
-    let reader = ImageReader::open(path).map_err(|e| Error::io(path, e))?;
+    let file = super::open_regular(path)?;
+    let file_bytes = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    let reader = ImageReader::new(std::io::BufReader::new(file));
     let reader = reader.with_guessed_format().map_err(|e| Error::io(path, e))?;
     check_format(path, &reader)?;
     let decoder = reader.into_decoder().map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     let (w, h) = decoder.dimensions();
-    let px = u64::from(w) * u64::from(h);
-    let load_bytes = file_bytes.saturating_add(decoder.total_bytes()).saturating_add(12 * px);
-    Ok(ImageHeader { width: w as usize, height: h as usize, load_bytes })
+    Ok((w as usize, h as usize, file_bytes, decoder.total_bytes()))
+}
+
+/// [`decode`] within `max_bytes`: from the header, the file, its decoded samples and a converted copy of them
+/// (what a caller converting the samples holds) must fit, else nothing is decoded (a small file may declare a
+/// huge image); the decoder is held to the limit too.
+///
+/// # Errors
+/// As [`decode`]; [`Error::OutOfMemory`] naming the file when its decoding does not fit.
+pub(crate) fn decode_bounded(path: &Path, max_bytes: u64) -> Result<DynamicImage> {
+    let (w, h, file_bytes, sample_bytes) = header_parts(path)?;
+    let need = file_bytes.saturating_add(sample_bytes.saturating_mul(2));
+    if need > max_bytes {
+        return Err(Error::OutOfMemory {
+            needed: need,
+            limit: max_bytes,
+            hint: format!("{}: decoding its {w}x{h} image does not fit; raise the memory limit", path.display()),
+        });
+    }
+    decode_within(path, Some(max_bytes))
 }
 
 /// Reads the headers of both images of a pair, before either is decoded: their common size and the memory
@@ -130,7 +158,7 @@ pub(crate) fn decode(path: &Path) -> Result<DynamicImage> {
 
 /// [`decode`], with the decoder's allocation limit `max_bytes` (`None`: the decoder's default).
 fn decode_within(path: &Path, max_bytes: Option<u64>) -> Result<DynamicImage> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_regular(path)?;
     let mut reader = ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| Error::io(path, e))?;
     check_format(path, &reader)?;
     if let Some(max) = max_bytes {
@@ -138,7 +166,28 @@ fn decode_within(path: &Path, max_bytes: Option<u64>) -> Result<DynamicImage> {
         limits.max_alloc = Some(max);
         reader.limits(limits);
     }
-    reader.decode().map_err(|source| Error::Image { path: path.to_path_buf(), source })
+    let img = reader.decode().map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
+    check_float_samples(path, &img)?;
+    Ok(img)
+}
+
+/// Refuses a floating-point image (TIFF's float samples) whose colour samples leave the 0..1 scale they are read
+/// on: grey levels 0..255 stored as floats would all be clipped to white, and a NaN read as white too.
+fn check_float_samples(path: &Path, img: &DynamicImage) -> Result<()> {
+    let (samples, channels) = match img {
+        DynamicImage::ImageRgb32F(b) => (b.as_raw(), 3),
+        DynamicImage::ImageRgba32F(b) => (b.as_raw(), 4),
+        _ => return Ok(()),
+    };
+    let colour = samples.chunks_exact(channels).flat_map(|px| &px[..3]);
+    match colour.copied().find(|v| !(0.0..=1.0).contains(v)) {
+        None => Ok(()),
+        Some(v) => Err(Error::Input(format!(
+            "{}: a floating-point image with a sample {v} outside 0..1; jem reads float samples on the 0..1 scale \
+             (save the image with 8- or 16-bit samples, or scale it to 0..1)",
+            path.display()
+        ))),
+    }
 }
 
 /// Converts a decoded image to planar RGB `f32` (0..=255).
@@ -252,7 +301,7 @@ pub(crate) fn encode_disparity_png16(path: &Path, map: &DisparityMap) -> Result<
 /// # Errors
 /// [`Error::Io`] or [`Error::Image`] naming the path.
 pub(crate) fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_regular(path)?;
     let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
         .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     // A disparity PNG is one 16-bit channel (KITTI convention); an 8-bit or colour image is a picture, and
@@ -274,7 +323,7 @@ pub(crate) fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
 /// # Errors
 /// [`Error::Io`] or [`Error::Image`] naming the path.
 pub(crate) fn load_grey8(path: &Path) -> Result<Plane<u8>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_regular(path)?;
     let img = image::load_from_memory(&bytes).map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     let grey = img.to_luma8();
     Ok(Plane::from_parts(grey.width() as usize, grey.height() as usize, grey.into_raw()))
@@ -355,6 +404,34 @@ mod tests {
         let text = dir.path().join("t.png");
         std::fs::write(&text, b"hello").unwrap();
         assert!(load_rgb(&text).unwrap_err().to_string().contains("t.png"));
+    }
+
+    /// A float TIFF is read on the 0..1 scale; one whose samples leave it (grey levels 0..255 stored as floats,
+    /// which were all clipped to white) or are not numbers (read as white) is refused, naming the file.
+    #[test]
+    fn float_tiffs_outside_zero_to_one_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let save = |name: &str, f: &dyn Fn(u32) -> f32| {
+            let img = image::Rgb32FImage::from_fn(4, 2, |x, y| image::Rgb([f(x + 4 * y); 3]));
+            let path = dir.path().join(name);
+            DynamicImage::ImageRgb32F(img).save(&path).unwrap();
+            path
+        };
+        let unit = save("unit.tif", &|i| i as f32 / 7.0);
+        let read = load_rgb(&unit).unwrap();
+        let want = (65535.0 * 3.0 / 7.0f32).round() / 257.0;
+        assert!((read.rgb(3)[0] - want).abs() < 1e-3, "{:?}", read.rgb(3));
+        for (name, f, shown) in [
+            ("grey.tif", &(|i: u32| 30.0 * i as f32) as &dyn Fn(u32) -> f32, "30"),
+            ("nan.tif", &|_| f32::NAN, "NaN"),
+            ("negative.tif", &|i| i as f32 / 7.0 - 0.5, "-0.5"),
+        ] {
+            let path = save(name, f);
+            for e in [load_rgb(&path).unwrap_err(), decode(&path).unwrap_err()] {
+                let msg = e.to_string();
+                assert!(msg.contains(name) && msg.contains(shown) && msg.contains("outside 0..1"), "{msg}");
+            }
+        }
     }
 
     #[test]

@@ -18,6 +18,7 @@
 //! ```
 
 mod camera;
+mod checks;
 mod formats;
 mod linalg;
 mod maps;
@@ -204,6 +205,30 @@ impl Rectification {
         &self.transforms
     }
 
+    /// One line per rectified view that comes out mostly black (more than half of its pixels from outside the raw
+    /// image: a lens model that cannot be right, such as `k1 = 1e30`); OpenCV rectifies such a calibration the same
+    /// way, so it is said, not refused.
+    pub fn warnings(&self) -> Vec<String> {
+        let (t, [a, b]) = (&self.transforms, &self.cameras);
+        let left3 = |p: &[[f64; 4]; 3]| -> Mat3 { [0, 1, 2].map(|i| [p[i][0], p[i][1], p[i][2]]) };
+        checks::empty_views([a, b], [&t.r1, &t.r2], [&left3(&t.p1), &left3(&t.p2)], self.size)
+    }
+
+    /// A fingerprint of what the rectification does (the size, both cameras, the rotations and projections; FNV-1a
+    /// of their bits): equal for two calibrations that rectify alike, different when a value changes.
+    pub fn fingerprint(&self) -> u64 {
+        let t = &self.transforms;
+        let cameras = self.cameras.iter().flat_map(|c| c.matrix.iter().flatten().chain(&c.distortion));
+        let rotations = t.r1.iter().chain(&t.r2).flatten();
+        let projections = t.p1.iter().chain(&t.p2).flatten();
+        let size = [self.size.0 as f64, self.size.1 as f64];
+        cameras
+            .chain(rotations)
+            .chain(projections)
+            .chain(&size)
+            .fold(crate::rng::FNV_OFFSET, |h, v| crate::rng::fnv1a(h, &v.to_bits().to_le_bytes()))
+    }
+
     /// The rectified views' focal length in pixels.
     pub fn focal_px(&self) -> f64 {
         self.transforms.p1[0][0]
@@ -355,6 +380,35 @@ impl<'a> Lookup<'a> {
         Some([0, 1, 2].map(|i| [0, 1, 2].map(|j| node.data[3 * i + j])))
     }
 
+    /// A required rotation matrix ([`checks::not_a_rotation`]).
+    fn rotation(&mut self, names: &[&str]) -> Option<Mat3> {
+        let m = self.mat3(names)?;
+        self.checked(checks::not_a_rotation(self.find(names)?.0, &m), m)
+    }
+
+    /// A required translation ([`checks::not_a_translation`]).
+    fn translation(&mut self, names: &[&str]) -> Option<Vec3> {
+        let t = self.vec3(names)?;
+        self.checked(checks::not_a_translation(self.find(names)?.0, &t), t)
+    }
+
+    /// `value`, or `None` with `why` recorded.
+    fn checked<T>(&mut self, why: Option<String>, value: T) -> Option<T> {
+        match why {
+            Some(why) => {
+                self.bad.push(why);
+                None
+            }
+            None => Some(value),
+        }
+    }
+
+    /// A projection whose values are finite, when the file has one.
+    fn finite_proj(&mut self, names: &[&str]) -> Option<[[f64; 4]; 3]> {
+        let p = self.proj(names)?;
+        self.checked(checks::not_finite(self.find(names)?.0, p.as_flattened()), p)
+    }
+
     fn vec3(&mut self, names: &[&str]) -> Option<Vec3> {
         let (name, node) = self.required(names)?;
         if node.data.len() != 3 {
@@ -391,6 +445,10 @@ impl<'a> Lookup<'a> {
             self.bad.push(format!("{} must have positive focal lengths", matrix[0]));
             return None;
         }
+        if let Some(why) = checks::not_finite(dname, &d.data) {
+            self.bad.push(why);
+            return None;
+        }
         let mut distortion = [0.0; 8];
         distortion[..n.min(8)].copy_from_slice(&d.data[..n.min(8)]);
         Some(Intrinsics { matrix: k, distortion })
@@ -409,16 +467,21 @@ impl<'a> Lookup<'a> {
     }
 }
 
-/// An image size from `image_width`/`image_height`, or a `[w, h]` node.
-fn stated_size(nodes: &Nodes, names: &[&str]) -> Option<(usize, usize)> {
-    let scalar = |n: &str| nodes.get(n).and_then(|v| v.data.first().copied());
-    let from = |w: f64, h: f64| {
-        (w >= 1.0 && h >= 1.0 && w.fract() == 0.0 && h.fract() == 0.0).then_some((w as usize, h as usize))
+/// An image size from `image_width`/`image_height`, or a `[w, h]` node ([`checks::image_size`]); a stated size
+/// that is no size is recorded in `look` and gives `None`.
+fn stated_size(look: &mut Lookup<'_>, names: &[&str]) -> Option<(usize, usize)> {
+    let scalar = |n: &str| look.nodes.get(n).and_then(|v| v.data.first().copied());
+    let size = if let (Some(w), Some(h)) = (scalar("image_width"), scalar("image_height")) {
+        checks::image_size("image_width/image_height", w, h)
+    } else {
+        let (name, node) = names.iter().find_map(|n| look.nodes.get_key_value(*n))?;
+        if node.data.len() != 2 {
+            look.bad.push(format!("{name} has {} values (an image size has 2: width, height)", node.data.len()));
+            return None;
+        }
+        checks::image_size(name, node.data[0], node.data[1])
     };
-    if let (Some(w), Some(h)) = (scalar("image_width"), scalar("image_height")) {
-        return from(w, h);
-    }
-    names.iter().find_map(|n| nodes.get(*n)).filter(|v| v.data.len() == 2).and_then(|v| from(v.data[0], v.data[1]))
+    size.map_err(|why| look.bad.push(why)).ok()
 }
 
 fn from_opencv(nodes: &Nodes, path: &Path) -> Result<StereoCalibration> {
@@ -426,16 +489,17 @@ fn from_opencv(nodes: &Nodes, path: &Path) -> Result<StereoCalibration> {
     let left = look.camera(&["K1", "M1", "cameraMatrix1"], &["D1", "distCoeffs1"]);
     let right = look.camera(&["K2", "M2", "cameraMatrix2"], &["D2", "distCoeffs2"]);
     let rotation = match look.find(&["R"]) {
-        Some((_, node)) if node.data.len() == 3 => {
-            Some(linalg::rotation_from_vector(&[node.data[0], node.data[1], node.data[2]]))
+        Some((name, node)) if node.data.len() == 3 => {
+            let v = [node.data[0], node.data[1], node.data[2]];
+            look.checked(checks::not_finite(name, &v), linalg::rotation_from_vector(&v))
         }
-        _ => look.mat3(&["R"]),
+        _ => look.rotation(&["R"]),
     };
-    let translation = look.vec3(&["T"]);
+    let translation = look.translation(&["T"]);
     let given = match (look.find(&["R1"]), look.find(&["R2"])) {
         (Some(_), Some(_)) => {
-            let (r1, r2) = (look.mat3(&["R1"]), look.mat3(&["R2"]));
-            let (p1, p2) = (look.proj(&["P1"]), look.proj(&["P2"]));
+            let (r1, r2) = (look.rotation(&["R1"]), look.rotation(&["R2"]));
+            let (p1, p2) = (look.finite_proj(&["P1"]), look.finite_proj(&["P2"]));
             match (r1, r2, p1, p2) {
                 (Some(r1), Some(r2), Some(p1), Some(p2)) => Some(RectifyingTransforms { r1, r2, p1, p2 }),
                 _ => None,
@@ -443,11 +507,11 @@ fn from_opencv(nodes: &Nodes, path: &Path) -> Result<StereoCalibration> {
         }
         _ => None,
     };
+    let image_size = stated_size(&mut look, &["image_size", "imageSize", "size"]);
     look.finish(path, "an OpenCV stereo calibration has K1/M1, D1, K2/M2, D2, R and T")?;
     let (Some(left), Some(right), Some(rotation), Some(translation)) = (left, right, rotation, translation) else {
         unreachable!("every missing value was reported")
     };
-    let image_size = stated_size(nodes, &["image_size", "imageSize", "size"]);
     Ok(StereoCalibration {
         path: path.to_path_buf(),
         cameras: [left, right],
@@ -466,9 +530,10 @@ fn from_kitti(nodes: &Nodes, path: &Path) -> Result<StereoCalibration> {
     let mut look = Lookup::new(nodes);
     let left = look.camera(&["K_02"], &["D_02"]);
     let right = look.camera(&["K_03"], &["D_03"]);
-    let (r02, r03) = (look.mat3(&["R_02"]), look.mat3(&["R_03"]));
+    let (r02, r03) = (look.rotation(&["R_02"]), look.rotation(&["R_03"]));
     let (t02, t03) = (look.vec3(&["T_02"]), look.vec3(&["T_03"]));
-    let (p02, p03) = (look.proj(&["P_rect_02"]), look.proj(&["P_rect_03"]));
+    let (p02, p03) = (look.finite_proj(&["P_rect_02"]), look.finite_proj(&["P_rect_03"]));
+    let (raw_size, rect_size) = (stated_size(&mut look, &["S_02"]), stated_size(&mut look, &["S_rect_02"]));
     look.finish(path, "KITTI's calib_cam_to_cam.txt has K_02, D_02, R_02, T_02 and the same for 03")?;
     let (Some(left), Some(right), Some(r02), Some(r03), Some(t02), Some(t03)) = (left, right, r02, r03, t02, t03)
     else {
@@ -478,7 +543,10 @@ fn from_kitti(nodes: &Nodes, path: &Path) -> Result<StereoCalibration> {
     let rotation = linalg::mul(&r03, &linalg::transpose(&r02));
     let rt = linalg::mul_vec(&rotation, &t02);
     let translation = [t03[0] - rt[0], t03[1] - rt[1], t03[2] - rt[2]];
-    let prerectified = match (p02, p03, stated_size(nodes, &["S_rect_02"])) {
+    if let Some(why) = checks::not_a_translation("T_03 − R·T_02 (camera 03 seen from camera 02)", &translation) {
+        return Err(calib_error(path, why));
+    }
+    let prerectified = match (p02, p03, rect_size) {
         (Some(p1), Some(p2), Some(size)) => Some(Prerectified { size, p1, p2 }),
         _ => None,
     };
@@ -487,7 +555,7 @@ fn from_kitti(nodes: &Nodes, path: &Path) -> Result<StereoCalibration> {
         cameras: [left, right],
         rotation,
         translation,
-        image_size: stated_size(nodes, &["S_02"]),
+        image_size: raw_size,
         given: None,
         prerectified,
     })

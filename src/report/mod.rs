@@ -259,6 +259,9 @@ pub fn write_report(dir: &Path, out: &Path, opts: &ReportOptions) -> Result<Repo
     if created {
         std::fs::create_dir(&files).map_err(|e| Error::io(&files, e))?;
     }
+    // What a killed report (kill -9) left: its temporary pictures and page.
+    crate::io::sweep_stale_temps(&files);
+    crate::io::sweep_stale_temps(out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")));
     let written = (|| {
         let mut set = crate::io::AllOrNone::new();
         let names: Vec<String> = (0..rows.len()).map(|i| file_stem(i, &rows[i].name)).collect();

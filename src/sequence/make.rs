@@ -74,7 +74,8 @@ pub fn sequence_from_scene(scene: &Path, out: &Path, how: &FromScene) -> Result<
         crate::eval::check_size(&mask_path, "mask", m.dims(), "the images", (w, h))?;
     }
     let calib_path = scene.join("calib.txt");
-    let calib = std::fs::read_to_string(&calib_path).map_err(|e| Error::io(&calib_path, e))?;
+    let calib = String::from_utf8(crate::io::read_capped(&calib_path, crate::io::MAX_CALIB_BYTES, "calib.txt")?)
+        .map_err(|_| Error::Calib { path: calib_path.clone(), msg: "not a text file".into() })?;
     let calib = calib_with_width(&calib, window);
     let note = format!(
         "made from {} by jem {}: {} frames, window {window} px moving {} px per frame, recipe {}, seed {}\n",

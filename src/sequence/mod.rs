@@ -206,7 +206,8 @@ fn is_image(path: &Path) -> bool {
 /// The images of `folder` as `(stem, path)`, sorted by stem.
 ///
 /// # Errors
-/// [`Error::Io`] for an unreadable folder, [`Error::Input`] for two images of one stem.
+/// [`Error::Io`] for an unreadable folder, [`Error::Input`] for two images of one stem or a stem holding a control
+/// character.
 fn list_images(folder: &Path) -> Result<Vec<(String, PathBuf)>> {
     let entries = std::fs::read_dir(folder).map_err(|e| Error::io(folder, e))?;
     let mut frames: Vec<(String, PathBuf)> = Vec::new();
@@ -218,6 +219,14 @@ fn list_images(folder: &Path) -> Result<Vec<(String, PathBuf)>> {
             continue;
         }
         let Some(stem) = path.file_stem().and_then(|s| s.to_str()).map(str::to_owned) else { continue };
+        if stem.chars().any(char::is_control) {
+            // A line break in a frame's name would split its line of times.txt (and of every report) in two.
+            return Err(Error::Input(format!(
+                "{}: frame {:?} has a control character (a line break?) in its name; rename the file",
+                folder.display(),
+                stem
+            )));
+        }
         frames.push((stem, path));
     }
     frames.sort();

@@ -11,12 +11,15 @@
 //!   pair to its disparity map: the range measurement when there is one, and the run; loading and writing are
 //!   left out);
 //! - [`RUN_FILE`]: what made the folder (the sequence, the mode, the output format, a fingerprint of the
-//!   configuration), and [`CONFIG_FILE`], the effective configuration.
+//!   configuration, and of the rectification with `--rectify`), and [`CONFIG_FILE`], the effective configuration;
+//!   both written with the first frame, so a run that writes no frame leaves no record (nor a folder it made);
+//! - `.jem-lock` while a run writes into it ([`crate::dataset::lock_folder`]): a second run is refused.
 //!
 //! Each frame's map and the times file are written together, all or none ([`crate::io::write_all_or_none`]), so an
-//! interrupted run leaves only whole frames. A rerun into the same folder with the same sequence, mode, format
-//! and configuration skips the frames already there (a map that decodes at the frame's size, with its time) and
-//! runs the rest; a folder written by another run is refused rather than mixed.
+//! interrupted run leaves only whole frames. A rerun into the same folder with the same sequence, mode, format,
+//! configuration and rectification skips the frames already there (a map that decodes at the frame's size, with
+//! its time) and runs the rest; a folder written by another run is refused rather than mixed. A file where an
+//! output goes that is not a regular file (a FIFO) is refused before anything is read from it.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -34,6 +37,9 @@ pub const TIMES_FILE: &str = "times.txt";
 pub const RUN_FILE: &str = "sequence.txt";
 /// The effective configuration of the run that made an output folder.
 pub const CONFIG_FILE: &str = "config.toml";
+
+/// The largest record or times file read back (a line per frame: a million frames fit).
+const MAX_RECORD_BYTES: u64 = 64 << 20;
 
 /// How the search range is settled over a sequence.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -89,6 +95,8 @@ pub struct FrameRun {
 /// What [`run`] reports as it goes (in frame order, from the calling thread).
 #[derive(Debug)]
 pub enum Event<'a> {
+    /// A line to show before the frames (the stale lock of a run that is gone, taken over).
+    Note(&'a str),
     /// Frame `index` is in the folder already and is not run again.
     Skipped {
         /// Its position in the sequence.
@@ -142,25 +150,62 @@ pub struct RunSummary {
 
 /// Matches every frame of `seq` into the folder `out` (created if missing), skipping frames an earlier run of
 /// the same kind left there (see the module doc). Frames run one after another; each uses the threads of the
-/// current rayon pool.
+/// current rayon pool. The folder is locked against a second run for the time of this one
+/// ([`crate::dataset::lock_folder`]), and its record ([`RUN_FILE`], [`CONFIG_FILE`]) is written with the
+/// first frame: a run that writes no frame leaves nothing (a folder it made is removed again).
 ///
 /// # Errors
-/// [`Error::Input`] when `out` is the sequence folder or one of its input folders, or holds another run's
-/// results; any error of loading, planning (memory) or running a frame, naming its files. Frames written before
-/// the error stay, whole, and a rerun continues from them.
+/// [`Error::Input`] when `out` is the sequence folder or one of its input folders, a file, or holds another run's
+/// results, when another run holds its lock, or a file where an output goes is not a regular file; any error of
+/// loading, planning (memory) or running a frame, naming the frame ([`Error::Frame`]). Frames written before the
+/// error stay, whole, and a rerun continues from them.
 pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(Event<'_>)) -> Result<RunSummary> {
     check_output_folder(seq, out)?;
-    let ext = extension(opts.format);
     let source = seq.ndisp_source(opts.ndisp)?;
     let record = record_text(seq, opts, source);
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    claim_folder(seq, out, ext, &record)?;
-    let config = opts.params.to_toml();
-    crate::io::write_all_or_none(&[
-        (&out.join(RUN_FILE), record.as_bytes()),
-        (&out.join(CONFIG_FILE), config.as_bytes()),
-    ])?;
+    let created = make_folder(out)?;
+    let result = (|| {
+        let lock = crate::dataset::lock_folder(out)?;
+        for note in lock.taken_over() {
+            on_event(Event::Note(note));
+        }
+        crate::io::sweep_stale_temps(out);
+        run_locked(seq, out, opts, source, &record, on_event)
+    })();
+    if result.is_err() && created {
+        // Empty unless a frame was written (then it stays, with its record, for a rerun to continue).
+        let _ = std::fs::remove_dir(out);
+    }
+    result
+}
 
+/// Creates the output folder `out` if missing; whether it was created.
+///
+/// # Errors
+/// [`Error::Input`] when it exists and is not a folder, [`Error::Io`] when it cannot be made.
+fn make_folder(out: &Path) -> Result<bool> {
+    let created = !out.is_dir();
+    crate::io::create_folder(out)?;
+    Ok(created)
+}
+
+/// [`run`] in the locked folder.
+fn run_locked(
+    seq: &Sequence,
+    out: &Path,
+    opts: &RunOptions<'_>,
+    source: NdispSource,
+    record: &str,
+    on_event: &dyn Fn(Event<'_>),
+) -> Result<RunSummary> {
+    let ext = extension(opts.format);
+    let results = seq.frames.iter().map(|f| out.join(format!("{}.{ext}", f.stem)));
+    for path in [RUN_FILE, CONFIG_FILE, TIMES_FILE].map(|n| out.join(n)).into_iter().chain(results) {
+        crate::io::check_replaceable(&path)?;
+    }
+    claim_folder(seq, out, ext, record)?;
+    let config = opts.params.to_toml();
+    let mut recorded = false;
     let mut times = read_times(&out.join(TIMES_FILE));
     let mut summary = RunSummary::default();
     let mut matcher = Matcher::new(opts.params.clone())?
@@ -169,10 +214,14 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
         .with_temporal(opts.temporal)
         .with_confidence(false);
     for (index, frame) in seq.frames.iter().enumerate() {
+        let named = |e: Error| Error::Frame { stem: frame.stem.clone(), source: Box::new(e) };
         let result = out.join(format!("{}.{ext}", frame.stem));
         if opts.range == RangeRule::FirstFrame && index == 0 {
-            let (l, r) = read_frame(&matcher, &frame.left, &frame.right, opts.rectification)?;
-            let settled = matcher.search_range(&l, &r)?;
+            let settled = (|| {
+                let (l, r) = read_frame(&matcher, &frame.left, &frame.right, opts.rectification)?;
+                matcher.search_range(&l, &r)
+            })()
+            .map_err(named)?;
             summary.settled = Some(settled);
             matcher = matcher.with_ndisp(NdispSource::Given(settled.0));
         }
@@ -186,7 +235,7 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
             let later_missing = opts.temporal && (index + 1..seq.frames.len()).any(|i| !done(i));
             if later_missing {
                 on_event(Event::Replayed { index, stem: &frame.stem });
-                match_frame(&mut matcher, opts, frame, &|_| {})?;
+                match_frame(&mut matcher, opts, frame, &|_| {}).map_err(named)?;
                 summary.replayed.push(frame.stem.clone());
             } else {
                 on_event(Event::Skipped { index, stem: &frame.stem });
@@ -196,14 +245,22 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
         }
         times.retain(|(s, _)| *s != frame.stem);
         on_event(Event::Started { index, stem: &frame.stem });
-        let (map, run) = match_frame(&mut matcher, opts, frame, &|stage| on_event(Event::Stage { index, stage }))?;
+        let on_stage = |stage: &str| on_event(Event::Stage { index, stage });
+        let (map, run) = match_frame(&mut matcher, opts, frame, &on_stage).map_err(named)?;
         on_event(Event::Stage { index, stage: "writing" });
         times.push((frame.stem.clone(), run.seconds));
         let order = |stem: &str| seq.frames.iter().position(|f| f.stem == stem);
         times.sort_by_key(|(s, _)| order(s));
-        let bytes = crate::io::encode_disparity(&result, &map)?;
+        let bytes = crate::io::encode_disparity(&result, &map).map_err(named)?;
         let times_text: String = times.iter().map(|(s, t)| format!("{s} {t:.6}\n")).collect();
-        crate::io::write_all_or_none(&[(&result, &bytes), (&out.join(TIMES_FILE), times_text.as_bytes())])?;
+        let (run_file, config_file, times_file) = (out.join(RUN_FILE), out.join(CONFIG_FILE), out.join(TIMES_FILE));
+        let mut files: Vec<(&Path, &[u8])> = vec![(&result, &bytes), (&times_file, times_text.as_bytes())];
+        if !recorded {
+            // With the first frame written, never before: a run that fails before it leaves no record.
+            files.extend([(run_file.as_path(), record.as_bytes()), (config_file.as_path(), config.as_bytes())]);
+        }
+        crate::io::write_all_or_none(&files).map_err(named)?;
+        recorded = true;
         on_event(Event::Finished { index, run: &run });
         summary.ran.push(run);
     }
@@ -289,8 +346,11 @@ fn record_text(seq: &Sequence, opts: &RunOptions<'_>, source: NdispSource) -> St
         (RangeRule::FirstFrame, NdispSource::Unknown) => "measured on the first frame".into(),
     };
     let fingerprint = crate::rng::fnv1a(crate::rng::FNV_OFFSET, opts.params.to_toml().as_bytes());
+    // What the rectification does (its cameras, rotations and projections), not only the file it came from: a
+    // calibration file changed in place rectifies the frames differently.
+    let rectify = opts.rectification.map_or("none".to_string(), |r| format!("{:016x}", r.fingerprint()));
     format!(
-        "source={}\nmode={}\nformat={}\nrange={range}\nconfig={fingerprint:016x}\njem={}\n",
+        "source={}\nmode={}\nformat={}\nrange={range}\nconfig={fingerprint:016x}\nrectify={rectify}\njem={}\n",
         root.display(),
         if opts.temporal { "temporal" } else { "independent" },
         extension(opts.format),
@@ -300,7 +360,7 @@ fn record_text(seq: &Sequence, opts: &RunOptions<'_>, source: NdispSource) -> St
 
 /// Reads the `source=` line of an output folder's [`RUN_FILE`]: the sequence it holds the results of.
 pub fn recorded_source(out: &Path) -> Option<PathBuf> {
-    let text = std::fs::read_to_string(out.join(RUN_FILE)).ok()?;
+    let text = crate::io::read_small_text(&out.join(RUN_FILE), MAX_RECORD_BYTES)?;
     text.lines().find_map(|l| l.strip_prefix("source=")).map(PathBuf::from)
 }
 
@@ -344,15 +404,22 @@ fn claim_folder(seq: &Sequence, out: &Path, ext: &str, record: &str) -> Result<(
         }
         return Ok(());
     }
-    let old = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-    let keys = ["source", "mode", "format", "range", "config"];
+    let old = String::from_utf8(crate::io::read_capped(&path, MAX_RECORD_BYTES, RUN_FILE)?)
+        .map_err(|_| Error::Input(format!("{}: not a text file; use another folder", path.display())))?;
+    let keys = ["source", "mode", "format", "range", "config", "rectify"];
     let value = |text: &str, key: &str| {
         text.lines().find_map(|l| l.strip_prefix(key).and_then(|r| r.strip_prefix('='))).map(str::to_owned)
     };
     if let Some(key) = keys.iter().find(|k| value(&old, k) != value(record, k)) {
-        let what = match *key {
-            "config" => format!("another configuration (see {CONFIG_FILE})"),
-            _ => format!("{key} {}", value(&old, key).unwrap_or_default()),
+        let what = match (*key, value(&old, key)) {
+            ("config", _) => format!("another configuration (see {CONFIG_FILE})"),
+            ("rectify", Some(r)) if r == "none" => "unrectified frames (this run has --rectify)".to_string(),
+            ("rectify", Some(_)) if value(record, key).as_deref() == Some("none") => {
+                "rectified frames (this run has no --rectify)".to_string()
+            }
+            ("rectify", Some(_)) => "another rectification (another calibration)".to_string(),
+            (_, None) => format!("no {key} recorded (an older jem's run)"),
+            (_, Some(v)) => format!("{key} {v}"),
         };
         return Err(Error::Input(format!(
             "{}: holds the results of another run, with {what}; use another folder",
@@ -364,7 +431,7 @@ fn claim_folder(seq: &Sequence, out: &Path, ext: &str, record: &str) -> Result<(
 
 /// The `(stem, seconds)` lines of a times file (none when it is missing or unreadable).
 fn read_times(path: &Path) -> Vec<(String, f64)> {
-    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let text = crate::io::read_small_text(path, MAX_RECORD_BYTES).unwrap_or_default();
     text.lines()
         .filter_map(|l| {
             let (stem, seconds) = l.rsplit_once(' ')?;

@@ -50,7 +50,10 @@ pub fn write_sequence(
     files: &mut dyn FnMut() -> Vec<(&'static str, String)>,
 ) -> Result<Vec<String>> {
     if out.exists() && !out.is_dir() {
-        return Err(Error::Input(format!("{}: exists and is not a folder", out.display())));
+        return Err(Error::Input(format!(
+            "{}: exists and is not a folder; give the name of a folder (a new one is made)",
+            out.display()
+        )));
     }
     let taken = TAKEN.iter().find(|n| out.join(n).exists());
     if let Some(name) = taken {
@@ -60,7 +63,7 @@ pub fn write_sequence(
         )));
     }
     let created = !out.exists();
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    crate::io::create_folder(out)?;
     let prefix = format!(".jem-tmp-{}-", crate::process::host_name());
     crate::degrade::sweep_stale(out, &prefix);
     let tmp = out.join(format!("{prefix}{}", std::process::id()));

@@ -2,7 +2,7 @@
 //! memory model ([`super::memory`]) before anything large is allocated. The tiled run itself is the pipeline's
 //! (`pipeline/tile.rs`, whose module doc explains the cut and the memory of a tile).
 
-use super::memory::{check_memory, estimate_memory_bytes};
+use super::memory::{check_memory, coarse_level_bytes, estimate_memory_bytes};
 use crate::error::Result;
 use crate::params::Params;
 
@@ -64,7 +64,7 @@ pub(crate) fn plan_tiles(
     let mut coarse = params.clone();
     let factor = (1..8).map(|k| 1usize << k).find(|&f| {
         coarse.downscale = f;
-        crate::scale::factor_fits(width, ndisp, f) && estimate_memory_bytes(width, height, ndisp, &coarse) <= budget
+        crate::scale::factor_fits(width, ndisp, f) && coarse_level_bytes(width, height, ndisp, &coarse) <= budget
     })?;
     Some(TilePlan { coarse_factor: factor, core_px: 1024, tile_budget_bytes: budget, split_for_work: true })
 }

@@ -169,7 +169,7 @@ fn render(scene: &Scene, params: &SynthParams) -> SynthScene {
 /// [`Error::Input`] for a folder holding a scene; [`Error::Io`] or [`Error::Image`] naming the file.
 pub fn write_scene(dir: &Path, scene: &SynthScene) -> Result<()> {
     check_scene_folder(dir)?;
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    crate::io::create_folder(dir)?;
     let (w, h) = scene.left.dims();
     let rgb = |name: &str, img: &RgbImage| {
         let mut bytes = Vec::new();
