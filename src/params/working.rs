@@ -14,11 +14,15 @@ pub struct WorkingParams {
     pub auto: bool,
     /// The most octaves dropped (the reduction is at most 2^max_octaves).
     pub max_octaves: u32,
+    /// The smallest working image, in millions of pixels: an octave is dropped only while the reduced view keeps
+    /// this many (smaller, the pipeline's windows and segments cover too much of the scene and its range too few
+    /// labels; trainingQ, what it is tuned on, holds 0.17–0.37).
+    pub min_megapixels: f64,
 }
 
 impl Default for WorkingParams {
     fn default() -> Self {
-        WorkingParams { auto: true, max_octaves: 3 }
+        WorkingParams { auto: true, max_octaves: 3, min_megapixels: 0.1 }
     }
 }
 
@@ -30,6 +34,9 @@ impl WorkingParams {
     pub fn validate(&self) -> Result<()> {
         if self.max_octaves > 6 {
             return Err(Error::param("working.max_octaves", self.max_octaves, "0 to 6"));
+        }
+        if !(0.0..=1000.0).contains(&self.min_megapixels) {
+            return Err(Error::param("working.min_megapixels", self.min_megapixels, "0 to 1000"));
         }
         Ok(())
     }

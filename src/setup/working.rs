@@ -20,6 +20,11 @@
 //! 0.40–0.54, FlyingThings3D renders 0.35–0.50); trainingQ enlarged 2× (bicubic, then noise σ 1.3) 0.13–0.16 and
 //! 4× 0.15–0.19 in both of its top octaves. The boundary, 1/4, sits between the two families with a factor of 1.3
 //! to each side.
+//!
+//! An octave is dropped only while the reduced view keeps `working.min_megapixels` (0.1 M): a soft image is soft
+//! at any size, and below that the pipeline's windows and segments cover too much of the scene. Measured: trainingQ
+//! blurred (Gaussian σ 1.2) reads r 0.15–0.17, as trainingQ enlarged 2×; the enlargement matched at half size
+//! scores 3.24 (at its own 3.44), the blurred pairs matched at half size (0.04–0.09 M) 5.63 (at their own 4.97).
 
 use rayon::prelude::*;
 
@@ -67,26 +72,29 @@ pub(crate) fn detail_ratio(grey: &Plane<f32>, sigma: f32) -> Option<f64> {
 
 /// The working resolution's reduction for a pair whose left view is `left` and whose search range is `ndisp`: 2ᵏ,
 /// k the finest octaves of the left view that hold no detail of its own ([`empty_octaves`], at most
-/// `working.max_octaves`), and no more than keeps the reduced range below the reduced width. 1 (the input's own
+/// `working.max_octaves`, the reduced view at least `working.min_megapixels`), and no more than keeps the reduced
+/// range below the reduced width. 1 (the input's own
 /// resolution) when `working.auto` is off or `downscale` is set.
 pub(crate) fn working_factor(left: &RgbImage, ndisp: usize, params: &Params) -> usize {
     if !params.working.auto || params.downscale != 1 {
         return 1;
     }
     let sigma = GREY_NOISE_PER_SIGMA * crate::condition::channel_noise(left);
-    let octaves = empty_octaves(&left.to_grey(), sigma, params.working.max_octaves);
+    let min_pixels = (params.working.min_megapixels * 1e6) as usize;
+    let octaves = empty_octaves(&left.to_grey(), sigma, params.working.max_octaves, min_pixels);
     (0..=octaves).rev().map(|k| 1usize << k).find(|&f| scale::factor_fits(left.width, ndisp, f)).unwrap_or(1)
 }
 
 /// How many times (0 to `max_octaves`) the grey image can be halved before its finest octave holds detail of its
-/// own: the octaves above it carry only an upsampling's interpolation and noise. `sigma` is the image's noise.
-pub(crate) fn empty_octaves(grey: &Plane<f32>, sigma: f32, max_octaves: u32) -> u32 {
+/// own (the octaves above it carry only an upsampling's interpolation and noise) or the halved image would hold
+/// fewer than `min_pixels`. `sigma` is the image's noise.
+pub(crate) fn empty_octaves(grey: &Plane<f32>, sigma: f32, max_octaves: u32, min_pixels: usize) -> u32 {
     let mut image = grey.clone();
     let mut sigma = sigma;
     for k in 0..max_octaves {
-        match detail_ratio(&image, sigma) {
-            Some(r) if r < DETAIL_RATIO => {}
-            _ => return k,
+        let halved = (image.width / 2) * (image.height / 2);
+        if halved < min_pixels || !detail_ratio(&image, sigma).is_some_and(|r| r < DETAIL_RATIO) {
+            return k;
         }
         image = scale::downsample_plane(&image, 2);
         sigma /= 2.0;
@@ -145,42 +153,53 @@ mod tests {
         Plane::from_parts(p.width, p.height, p.data.iter().map(|v| v + sigma * unit()).collect())
     }
 
-    /// Measured: the scene 0.54, enlarged 2× 0.127, 4× 0.124 in each of its top two octaves.
+    /// Measured: the scene r 0.54; enlarged 2× 0.127, 4× 0.124 in each of its top two octaves.
     #[test]
-    fn a_detailed_image_keeps_its_octaves_and_an_enlarged_one_drops_them() {
+    fn an_enlarged_image_drops_its_octaves_and_a_detailed_one_keeps_them() {
         let base = scene(1);
         let r = detail_ratio(&base, 0.0).unwrap();
         assert!(r > 2.0 * DETAIL_RATIO, "the scene: r {r}");
-        assert_eq!(empty_octaves(&base, 0.0, 3), 0);
+        assert_eq!(empty_octaves(&base, 0.0, 3, 0), 0);
+        assert_eq!(empty_octaves(&with_noise(&base, 3.0, 5), 3.0, 3, 0), 0, "noise does not hide its detail");
         let x2 = upsampled(&base, 2);
         let r2 = detail_ratio(&x2, 0.0).unwrap();
         assert!(r2 < 0.6 * DETAIL_RATIO, "2× enlarged: r {r2}");
-        assert_eq!(empty_octaves(&x2, 0.0, 3), 1);
-        let x4 = upsampled(&base, 4);
-        assert_eq!(empty_octaves(&x4, 0.0, 3), 2);
-        assert_eq!(empty_octaves(&x4, 0.0, 1), 1, "held to max_octaves");
+        assert_eq!(empty_octaves(&x2, 0.0, 3, 0), 1);
+        let x4 = with_noise(&upsampled(&base, 4), 3.0, 7);
+        assert_eq!(empty_octaves(&x4, 3.0, 3, 0), 2);
+        assert_eq!(empty_octaves(&x4, 3.0, 1, 0), 1, "held to max_octaves");
+    }
+
+    /// 640 × 480 enlarged 4×: halved twice it would hold 19 200 pixels, once 76 800.
+    #[test]
+    fn an_octave_is_dropped_only_while_the_reduced_image_keeps_its_smallest_size() {
+        let x4 = upsampled(&scene(2), 4);
+        assert_eq!(empty_octaves(&x4, 0.0, 3, 19_200), 2);
+        assert_eq!(empty_octaves(&x4, 0.0, 3, 19_201), 1);
+        assert_eq!(empty_octaves(&x4, 0.0, 3, 76_801), 0);
     }
 
     /// Noise added after the enlargement fills the top octave with energy, not with detail: measured with its σ the
-    /// octave still reads as empty; without it (σ 0) the noise would pass for detail.
+    /// octave reads as empty; without it (σ 0) the noise would pass for detail.
     #[test]
     fn noise_in_an_enlarged_image_is_not_taken_for_detail() {
         let x2 = with_noise(&upsampled(&scene(2), 2), 3.0, 9);
-        assert_eq!(empty_octaves(&x2, 3.0, 3), 1);
-        assert_eq!(empty_octaves(&x2, 0.0, 3), 0, "the noise's share is what the correction takes out");
-        // The same noise on the scene at its own size: its detail is still seen.
-        assert_eq!(empty_octaves(&with_noise(&scene(2), 3.0, 9), 3.0, 3), 0);
+        assert_eq!(empty_octaves(&x2, 3.0, 3, 0), 1);
+        assert_eq!(empty_octaves(&x2, 0.0, 3, 0), 0, "the noise's share is what the correction takes out");
     }
 
     #[test]
     fn the_working_factor_keeps_the_range_below_the_width_and_follows_the_switches() {
+        // A camera's noise: independent in each channel.
         let grey = upsampled(&scene(3), 4);
-        let img = RgbImage::from_channels(grey.width, grey.height, [grey.data.clone(), grey.data.clone(), grey.data])
-            .unwrap();
-        let params = Params::default();
+        let channel = |seed| with_noise(&grey, 3.0, seed).data;
+        let img = RgbImage::from_channels(grey.width, grey.height, [channel(4), channel(5), channel(6)]).unwrap();
+        let small = crate::params::WorkingParams { min_megapixels: 0.01, ..Params::default().working };
+        let params = Params { working: small, ..Params::default() };
         assert_eq!(working_factor(&img, 16, &params), 4);
         // 640 columns and 638 labels: at 1/4, 160 labels on 160 columns; at 1/2, 319 on 320 still fit.
         assert_eq!(working_factor(&img, 638, &params), 2);
+        assert_eq!(working_factor(&img, 16, &Params::default()), 1, "0.1 M: 320 × 240 is too small");
         let off = Params { working: crate::params::WorkingParams { auto: false, ..params.working }, ..params.clone() };
         assert_eq!(working_factor(&img, 16, &off), 1);
         assert_eq!(working_factor(&img, 16, &Params { downscale: 2, ..params }), 1, "downscale given: its own");
