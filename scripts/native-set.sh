@@ -5,6 +5,7 @@
 #   OUT/x2/trainingH           trainingQ upscaled 2× (views bicubic, truth ×2 by pixel replication, masks nearest;
 #                              examples/upscale.rs), then noise σ 1.3 at the new size; scored in H pixels (×2)
 #   OUT/x4/trainingF           the same 4×, scored in full-size pixels (×1)
+#   OUT/x2c/trainingH, x4c/trainingF   the same enlargements without the noise
 #   OUT/H/trainingH            MiddEval3 trainingH im0/im1 of Motorcycle and PlaytableP (no truth; calib.txt from
 #                              trainingQ's with the sizes and range ×2), when IGEV is given (see below)
 #   OUT/HQ/trainingQ           links to trainingQ's truth for those two, where scripts/h-on-q.py writes the H
@@ -41,6 +42,8 @@ for k in 2 4; do
     # shellcheck disable=SC2086 # the scene names are words
     "$upscale" "$q" "$tmp/x$k" $k $scenes > /dev/null
     "$jem" degrade "$tmp/x$k" "$out/x$k/$split" --recipe noise:1.3 --seed 1 --quiet
+    mkdir -p "$out/x${k}c"
+    mv "$tmp/x$k" "$out/x${k}c/$split"
 done
 
 if [[ -n $igev ]]; then
@@ -56,4 +59,4 @@ if [[ -n $igev ]]; then
         done
     done
 fi
-echo "wrote $out: n1 n2 n3 (trainingQ + noise), x2 (trainingH), x4 (trainingF)${igev:+, H and HQ}"
+echo "wrote $out: n1 n2 n3 (trainingQ + noise), x2 (trainingH), x4 (trainingF), x2c x4c (no noise)${igev:+, H and HQ}"

@@ -188,7 +188,7 @@ impl Default for NoiseParams {
             block_band: 1.0,
             support_per_sigma: 2.5,
             grad_eps_per_sigma: 30.0,
-            ternary_per_sigma: 1.0,
+            ternary_per_sigma: 0.5,
         }
     }
 }
