@@ -234,9 +234,10 @@ enum Command {
     Batch(BatchArgs),
     /// Match every frame of a stereo sequence: `jem sequence DIR -o OUTDIR [--independent]`.
     ///
-    /// DIR holds left/ and right/ with the frames (PNG, PPM/PGM or JPEG), paired by file stem in sorted order,
-    /// and optionally calib.txt (Middlebury keys), gt/<stem>.pfm and mask/<stem>.png (for `jem eval OUTDIR`); or it
-    /// is a KITTI raw drive folder (image_02/data, image_03/data). Unequal counts or unpaired names are refused.
+    /// DIR holds left/ and right/ with the frames (PNG, PPM/PGM, JPEG, BMP, TIFF or WebP), paired by file stem in
+    /// sorted order, and optionally calib.txt (Middlebury keys), gt/<stem>.pfm and mask/<stem>.png (for `jem eval
+    /// OUTDIR`); or it is a KITTI raw drive folder (image_02/data, image_03/data). Unequal counts or unpaired names
+    /// are refused.
     /// Writes OUTDIR/<stem>.pfm (--ext exr|png for the other formats) per frame, times.txt (a line per frame: stem
     /// and seconds from the decoded pair to its map), sequence.txt (what made the folder) and config.toml.
     /// By default each frame is matched with the temporal model: a still camera's frames averaged, a moving

@@ -14,8 +14,8 @@ use super::{GlobalArgs, MemoryArg, ThreadsArg};
 /// Arguments of `jem sequence` (the help text is on [`Command::Sequence`](super::Command::Sequence)).
 #[derive(Args, Debug, Clone)]
 pub(super) struct SequenceArgs {
-    /// The sequence folder: left/ and right/ holding the frames (PNG, PPM/PGM, JPEG), paired by file name, with an
-    /// optional calib.txt; or a KITTI raw drive folder (image_02/data, image_03/data).
+    /// The sequence folder: left/ and right/ holding the frames (PNG, PPM/PGM, JPEG, BMP, TIFF, WebP), paired by
+    /// file name, with an optional calib.txt; or a KITTI raw drive folder (image_02/data, image_03/data).
     #[arg(value_name = "DIR")]
     dir: PathBuf,
     /// Output folder (created if missing): OUTDIR/<frame stem>.EXT per frame, times.txt, sequence.txt, config.toml.

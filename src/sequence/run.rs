@@ -207,6 +207,10 @@ fn run_locked(
     let config = opts.params.to_toml();
     let mut recorded = false;
     let mut times = read_times(&out.join(TIMES_FILE));
+    // Each map is decoded once, here, before any frame runs: the frames written after a frame decide whether it is
+    // replayed, and asking each frame about every later one would decode n²/2 maps.
+    let written = written_frames(seq, out, ext, &times);
+    let last_missing = written.iter().rposition(|w| !w);
     let mut summary = RunSummary::default();
     let mut matcher = Matcher::new(opts.params.clone())?
         .with_max_memory(opts.limit_bytes)
@@ -225,15 +229,10 @@ fn run_locked(
             summary.settled = Some(settled);
             matcher = matcher.with_ndisp(NdispSource::Given(settled.0));
         }
-        let done = |i: usize| {
-            let f = &seq.frames[i];
-            times.iter().any(|(s, _)| *s == f.stem) && is_complete(&out.join(format!("{}.{ext}", f.stem)), &f.left)
-        };
-        if done(index) {
+        if written[index] {
             // The temporal model's state after a frame is not in the folder: a written frame before one still to
             // run is matched again to rebuild it (not written again); once every frame is written, none is.
-            let later_missing = opts.temporal && (index + 1..seq.frames.len()).any(|i| !done(i));
-            if later_missing {
+            if opts.temporal && last_missing.is_some_and(|m| m > index) {
                 on_event(Event::Replayed { index, stem: &frame.stem });
                 match_frame(&mut matcher, opts, frame, &|_| {}).map_err(named)?;
                 summary.replayed.push(frame.stem.clone());
@@ -440,8 +439,23 @@ fn read_times(path: &Path) -> Vec<(String, f64)> {
         .collect()
 }
 
+/// Which frames an earlier run finished: a line in the times file and a map that decodes at the frame's size.
+fn written_frames(seq: &Sequence, out: &Path, ext: &str, times: &[(String, f64)]) -> Vec<bool> {
+    let timed: std::collections::HashSet<&str> = times.iter().map(|(s, _)| s.as_str()).collect();
+    let map = |f: &super::Frame| out.join(format!("{}.{ext}", f.stem));
+    seq.frames.iter().map(|f| timed.contains(f.stem.as_str()) && is_complete(&map(f), &f.left)).collect()
+}
+
+#[cfg(test)]
+thread_local! {
+    /// The maps [`is_complete`] read on this thread (a test counts them: a rerun reads each map once).
+    pub(super) static MAPS_READ: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
 /// Whether `result` is a finished frame: a disparity map that decodes, at the size of the frame's left image.
 fn is_complete(result: &Path, left: &Path) -> bool {
+    #[cfg(test)]
+    MAPS_READ.with(|n| n.set(n.get() + 1));
     let Ok(map) = crate::io::read_disparity(result) else { return false };
     crate::io::png::read_header(left).is_ok_and(|h| (h.width, h.height) == map.dims())
 }
