@@ -190,7 +190,8 @@ enum Command {
     /// writes a stereo sequence as `jem sequence` reads it, exact ground truth per frame: --motion static, pan (the
     /// camera sideways: near objects move faster than the background), dolly (the camera forward: disparities
     /// grow), object (one object moves, the camera stands), cut (another scene from frame N/2); --noise S adds
-    /// fresh sensor noise to every frame. truth.txt lists each frame's camera position, scene and object shift.
+    /// fresh sensor noise to every frame, --gain-jitter P and --exposure-step K:P change the exposure. truth.txt lists
+    /// each frame's camera position, scene, object shift and gain.
     Synth(SynthArgs),
     /// Write a degraded copy of a scene tree (noise, low light, exposure mismatch, blur, misalignment, JPEG), seeded.
     ///

@@ -88,6 +88,8 @@ pub struct FrameRun {
     pub valid: f64,
     /// How the temporal model matched it (`None` without the model).
     pub kind: Option<crate::temporal::FrameKind>,
+    /// The exposure change the temporal model compensated in it (`None`: none, or without the model).
+    pub exposure: Option<crate::temporal::Exposure>,
     /// The pipeline's stages and their seconds, in order (a stage run more than once, summed).
     pub stages: Vec<(&'static str, f64)>,
 }
@@ -211,6 +213,8 @@ fn run_locked(
     // replayed, and asking each frame about every later one would decode n²/2 maps.
     let written = written_frames(seq, out, ext, &times);
     let last_missing = written.iter().rposition(|w| !w);
+    let order: std::collections::HashMap<&str, usize> =
+        seq.frames.iter().enumerate().map(|(i, f)| (f.stem.as_str(), i)).collect();
     let mut summary = RunSummary::default();
     let mut matcher = Matcher::new(opts.params.clone())?
         .with_max_memory(opts.limit_bytes)
@@ -248,8 +252,7 @@ fn run_locked(
         let (map, run) = match_frame(&mut matcher, opts, frame, &on_stage).map_err(named)?;
         on_event(Event::Stage { index, stage: "writing" });
         times.push((frame.stem.clone(), run.seconds));
-        let order = |stem: &str| seq.frames.iter().position(|f| f.stem == stem);
-        times.sort_by_key(|(s, _)| order(s));
+        times.sort_by_key(|(s, _)| order.get(s.as_str()).copied());
         let bytes = crate::io::encode_disparity(&result, &map).map_err(named)?;
         let times_text: String = times.iter().map(|(s, t)| format!("{s} {t:.6}\n")).collect();
         let (run_file, config_file, times_file) = (out.join(RUN_FILE), out.join(CONFIG_FILE), out.join(TIMES_FILE));
@@ -308,6 +311,7 @@ fn match_frame(
         seconds,
         valid,
         kind: out.frame,
+        exposure: out.exposure,
         stages: stage_seconds(&out.timings),
     };
     Ok((map, run))
