@@ -127,15 +127,14 @@ pub(crate) fn match_frame(
     let compared = previous.as_ref().map(|p| compare(&p.grey, &grey));
     let unexplained = compared.as_ref().map_or(0.0, |c| motion::unexplained(c.shift, &grey, noise));
     let cut = unexplained > CUT_UNEXPLAINED;
-    let (out, kind, exposure) = match compared {
-        Some(c) if !cut && (c.shift.dx, c.shift.dy) == (0, 0) && unexplained < STILL_UNEXPLAINED => {
+    let (out, kind, exposure) = match (previous, compared) {
+        (Some(_), Some(c)) if !cut && (c.shift.dx, c.shift.dy) == (0, 0) && unexplained < STILL_UNEXPLAINED => {
             let (out, frames, exposure) = still_frame(state, params, pair, noise, options)?;
             (out, FrameKind::Still { frames }, exposure)
         }
-        Some(c) if !cut => {
+        (Some(prev), Some(c)) if !cut => {
             state.still = None;
-            let prev = previous.as_ref().expect("compared with a previous frame");
-            let out = moving_frame(params, pair, prev, &c, &grey, noise, options)?;
+            let out = moving_frame(params, pair, &prev, &c, &grey, noise, options)?;
             (out, FrameKind::Moving { dx: c.shift.dx as i32, dy: c.shift.dy as i32 }, c.exposure)
         }
         _ => {
