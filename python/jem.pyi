@@ -170,7 +170,8 @@ class Matcher:
         self, left: _Image, right: _Image, confidence: bool = False, return_info: bool = False
     ) -> Union[_Map, Tuple[_Map, _Map], Tuple[_Map, dict[str, Any]], Tuple[_Map, _Map, dict[str, Any]]]:
         """As ``jem.match``; a temporal matcher remembers the pair as the next frame (the info dict's ``frame``:
-        ``"first"``, ``"still"``, ``"moving"`` or ``"cut"``; ``frames_averaged``; ``shift``)."""
+        ``"first"``, ``"still"``, ``"moving"`` or ``"cut"``; ``frames_averaged``; ``shift``; ``exposure``: the
+        (gain, offset) compensated in the frame, or None)."""
     def reset(self) -> None:
         """Forgets the frames matched so far: the next pair starts a new sequence."""
 

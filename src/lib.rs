@@ -80,7 +80,7 @@ pub mod viz;
 pub use diagnose::PairCheck;
 pub use error::{Error, Result};
 pub use image::{DisparityMap, Plane, RgbImage};
-pub use matcher::{FrameKind, Matcher, Output, Progress, RunPlan, Tiles, default_memory_limit};
+pub use matcher::{Exposure, FrameKind, Matcher, Output, Progress, RunPlan, Tiles, default_memory_limit};
 pub use params::{LrcMode, Model, Params};
 pub use pipeline::{Measured, Timings, VerticalMeasured};
 pub use process::peak_rss_bytes;

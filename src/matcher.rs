@@ -14,7 +14,7 @@ use crate::pipeline::{self, Measured, PipelineOutput, Timings};
 use crate::setup::memory::MemoryBudget;
 use crate::setup::strategy::Strategy;
 use crate::setup::{self, NdispSource, Plan};
-pub use crate::temporal::FrameKind;
+pub use crate::temporal::{Exposure, FrameKind};
 
 /// Matches rectified stereo pairs with one configuration.
 ///
@@ -87,6 +87,9 @@ pub struct Output {
     /// How the frame was matched, for a matcher that remembers frames ([`Matcher::with_temporal`]); `None` for a
     /// pair matched alone.
     pub frame: Option<FrameKind>,
+    /// The exposure change the temporal model compensated in this frame (against the previous frame or the
+    /// still camera's running mean); `None` when there was none, or for a pair matched alone.
+    pub exposure: Option<Exposure>,
 }
 
 impl Output {
@@ -352,10 +355,10 @@ impl Matcher {
         // A remembered sequence runs its frames through the temporal model where the pipeline runs whole and at
         // full resolution; any other frame runs alone and starts the sequence again.
         let temporal = self.temporal.as_mut();
-        let (out, frame) = match (plan.strategy, temporal) {
+        let (out, frame, exposure) = match (plan.strategy, temporal) {
             (Strategy::Whole, Some(state)) if params.downscale == 1 => {
-                let (out, kind) = crate::temporal::match_frame(state, &params, &plan.pair, &options)?;
-                (out, Some(kind))
+                let (out, kind, exposure) = crate::temporal::match_frame(state, &params, &plan.pair, &options)?;
+                (out, Some(kind), exposure)
             }
             (strategy, temporal) => {
                 let alone = temporal.is_some().then_some(FrameKind::First);
@@ -366,12 +369,12 @@ impl Matcher {
                     Strategy::Whole => pipeline::run_with(&params, &plan.pair, &options)?,
                     Strategy::Tiled(tiles) => pipeline::tile::run_tiled(&params, &plan.pair, &tiles, &options)?,
                 };
-                (out, alone)
+                (out, alone, None)
             }
         };
         let seconds = start.elapsed().as_secs_f64();
         let PipelineOutput { disparity, confidence, consistent, timings, measured, .. } = out;
-        Ok(Output { disparity, confidence, consistent, timings, measured, plan: run_plan, seconds, frame })
+        Ok(Output { disparity, confidence, consistent, timings, measured, plan: run_plan, seconds, frame, exposure })
     }
 }
 

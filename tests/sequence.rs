@@ -120,6 +120,20 @@ fn a_temporal_sequence_says_how_each_frame_was_matched_and_resumes() {
 }
 
 #[test]
+fn a_still_camera_whose_exposure_steps_is_still_and_says_what_was_compensated() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["synth", "seq", "--frames", "3", "--width", "128", "--height", "80", "--ndisp", "24", "--noise", "4"];
+    ok(dir.path(), &[&args[..], &["--exposure-step", "2:10"]].concat());
+    let truth = std::fs::read_to_string(dir.path().join("seq/truth.txt")).unwrap();
+    assert!(truth.contains("000001 0.000000 0.000000000 0 0.000 0.000 1.000000"), "{truth}");
+    assert!(truth.contains("000002 0.000000 0.000000000 0 0.000 0.000 1.100000"), "{truth}");
+    let err = ok(dir.path(), &["sequence", "seq", "-o", "out"]);
+    assert!(err.contains("[2/3] 000001: ndisp 24, still camera, the mean of up to 2 frames, 0."), "{err}");
+    assert!(err.contains("[3/3] 000002: ndisp 24, still camera, the mean of up to 3 frames, exposure ×1."), "{err}");
+    fails(dir.path(), &[&args[..], &["--exposure-step", "2"]].concat(), &["FRAME:PERCENT"]);
+}
+
+#[test]
 fn sequences_that_do_not_pair_fail_with_one_line_naming_the_folder() {
     let dir = tempfile::tempdir().unwrap();
     small_pan(dir.path());

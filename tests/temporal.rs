@@ -1,13 +1,18 @@
 //! The temporal model through the public API: a `Matcher` that remembers frames, on synthetic sequences with exact
 //! ground truth (`jem::synth` renders them in memory).
 
-use jem::synth::{MASK_VISIBLE, Motion, SequenceParams, SynthParams, render_frame};
+use jem::synth::{GainChange, MASK_VISIBLE, Motion, SequenceParams, SynthParams, render_frame};
 use jem::{FrameKind, Matcher, NdispSource, Output, Params};
 
 /// Frames of a synthetic sequence: the pairs and their ground truth with its mask.
 fn frames(motion: Motion, noise: f64, n: usize) -> Vec<jem::synth::SynthScene> {
+    frames_lit(motion, noise, n, GainChange::default())
+}
+
+/// [`frames`] under a changing exposure.
+fn frames_lit(motion: Motion, noise: f64, n: usize, gain: GainChange) -> Vec<jem::synth::SynthScene> {
     let scene = SynthParams { width: 200, height: 140, ndisp: 32, seed: 5 };
-    let params = SequenceParams { scene, frames: n, motion, noise_sigma: noise };
+    let params = SequenceParams { scene, frames: n, motion, noise_sigma: noise, gain };
     (0..n).map(|k| render_frame(&params, k).unwrap().0).collect()
 }
 
@@ -64,6 +69,41 @@ fn a_still_noisy_camera_settles_and_gains_accuracy() {
     assert!(flicker_kept < 0.5 * flicker_alone, "flicker {flicker_kept:.3} against {flicker_alone:.3}");
 }
 
+/// Frames 4–7's mean error and frames 5–7's mean flicker.
+fn late_error_and_flicker(outs: &[Output], scenes: &[jem::synth::SynthScene]) -> (f64, f64) {
+    let err = (3..7).map(|k| error(&outs[k], &scenes[k])).sum::<f64>() / 4.0;
+    (err, (4..7).map(|k| flicker(&outs[k], &outs[k - 1], &scenes[k])).sum::<f64>() / 3.0)
+}
+
+#[test]
+fn a_still_camera_under_a_changing_exposure_stays_still_and_settles() {
+    // ±5 % gain each frame and a 10 % step at frame 3: every frame but the first still, the means never restart.
+    let gain = GainChange { jitter: 0.05, step: 0.1, step_at: 3 };
+    let scenes = frames_lit(Motion::Static, 6.0, 7, gain);
+    let (alone, remembered) = (run(&scenes, false), run(&scenes, true));
+    let kinds: Vec<Option<FrameKind>> = remembered.iter().map(|o| o.frame).collect();
+    assert_eq!(kinds[6], Some(FrameKind::Still { frames: 7 }), "{kinds:?}");
+    let step = remembered[3].exposure.expect("the step is compensated");
+    assert!((step.gain - 1.1).abs() < 0.07, "{step:?}");
+    let (err_alone, flicker_alone) = late_error_and_flicker(&alone, &scenes);
+    let (err_kept, flicker_kept) = late_error_and_flicker(&remembered, &scenes);
+    eprintln!(
+        "gain: error {err_alone:.3} alone, {err_kept:.3} remembered; flicker {flicker_alone:.3}, {flicker_kept:.3}"
+    );
+    assert!(err_kept < 0.9 * err_alone, "error {err_kept:.3} against {err_alone:.3}");
+    assert!(flicker_kept < 0.5 * flicker_alone, "flicker {flicker_kept:.3} against {flicker_alone:.3}");
+}
+
+#[test]
+fn a_panning_camera_whose_exposure_steps_is_still_moving_with_the_step_compensated() {
+    let scenes = frames_lit(Motion::Pan, 0.0, 3, GainChange { step: 0.1, step_at: 2, ..Default::default() });
+    let remembered = run(&scenes, true);
+    assert!(matches!(remembered[2].frame, Some(FrameKind::Moving { .. })), "{:?}", remembered[2].frame);
+    let step = remembered[2].exposure.expect("the step is compensated");
+    assert!((step.gain - 1.1).abs() < 0.02 && step.offset.abs() < 2.0, "{step:?}");
+    assert_eq!(remembered[1].exposure, None, "no exposure change, nothing compensated");
+}
+
 #[test]
 fn a_clean_still_camera_gives_the_same_answer_every_frame() {
     let scenes = frames(Motion::Static, 0.0, 4);
@@ -94,7 +134,8 @@ fn a_panning_camera_takes_the_previous_answer_and_stays_as_accurate() {
 
 #[test]
 fn a_remembered_sequence_is_the_same_whatever_the_thread_count() {
-    let scenes = frames(Motion::Object, 4.0, 4);
+    // With an exposure that changes each frame: the fits are the same too.
+    let scenes = frames_lit(Motion::Object, 4.0, 4, GainChange { jitter: 0.05, ..Default::default() });
     let with = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         pool.install(|| run(&scenes, true))
@@ -103,7 +144,9 @@ fn a_remembered_sequence_is_the_same_whatever_the_thread_count() {
     for (a, b) in one.iter().zip(&two) {
         assert_eq!(a.disparity, b.disparity);
         assert_eq!(a.frame, b.frame);
+        assert_eq!(a.exposure, b.exposure);
     }
+    assert!(one.iter().any(|o| o.exposure.is_some()), "an exposure change was compensated");
 }
 
 #[test]

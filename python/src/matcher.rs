@@ -279,6 +279,7 @@ fn info<'py>(py: Python<'py>, out: &Output, check: &PairCheck) -> PyResult<Bound
     info.set_item("frame", frame.map(|f| f.0))?;
     info.set_item("frames_averaged", frame.and_then(|f| f.1))?;
     info.set_item("shift", frame.and_then(|f| f.2))?;
+    info.set_item("exposure", out.exposure.map(|e| (e.gain, e.offset)))?;
     let checks = PyDict::new(py);
     checks.set_item("negative_share", check.negative_share)?;
     checks.set_item("vertical_px", check.vertical_px)?;

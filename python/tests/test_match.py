@@ -109,9 +109,10 @@ def test_confidence_and_info(synth_pair):
     assert np.all((conf >= 0) & (conf <= 1))
     assert np.isfinite(disp).mean() > 0.9 and np.nanmax(disp[np.isfinite(disp)]) < 48
     assert set(info) == {"ndisp", "ndisp_measured", "tiled", "noise", "timings", "seconds", "memory_planned",
-                         "peak_rss", "frame", "frames_averaged", "shift", "checks", "warnings"}
+                         "peak_rss", "frame", "frames_averaged", "shift", "exposure", "checks", "warnings"}
     # jem.match remembers nothing: no frame kind; a good pair raises no warning.
     assert info["frame"] is None and info["frames_averaged"] is None and info["shift"] is None
+    assert info["exposure"] is None
     assert info["warnings"] == [] and set(info["checks"]) >= {"negative_share", "vertical_px", "textured_share"}
     assert len(info["noise"]) == 2 and info["timings"] and all(t >= 0 for t in info["timings"].values())
     assert 0 < info["seconds"] and info["memory_planned"] > 0 and info["peak_rss"] > 0

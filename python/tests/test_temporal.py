@@ -29,6 +29,18 @@ def test_a_temporal_matcher_gives_the_maps_jem_sequence_writes(cli, noisy_sequen
     assert info["frames_averaged"] == 4
 
 
+def test_an_exposure_step_is_compensated_and_reported(cli, tmp_path):
+    seq = tmp_path / "step"
+    cli("synth", seq, "--frames", "3", "--noise", "4", "--width", "128", "--height", "96", "--exposure-step", "2:10")
+    matcher = jem.Matcher(temporal=True, calib_ndisp=48)
+    infos = [matcher.match(jem.read_image(l), jem.read_image(r), return_info=True)[1]
+             for _, l, r in jem.sequence_frames(seq)]
+    assert [i["frame"] for i in infos] == ["first", "still", "still"]
+    assert infos[1]["exposure"] is None
+    gain, offset = infos[2]["exposure"]
+    assert abs(gain - 1.1) < 0.05 and abs(offset) < 3
+
+
 def test_reset_starts_again_and_a_plain_matcher_forgets(noisy_sequence):
     (_, l0, r0), (_, l1, r1) = jem.sequence_frames(noisy_sequence)[:2]
     pairs = [(jem.read_image(l0), jem.read_image(r0)), (jem.read_image(l1), jem.read_image(r1))]

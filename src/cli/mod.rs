@@ -190,7 +190,8 @@ enum Command {
     /// writes a stereo sequence as `jem sequence` reads it, exact ground truth per frame: --motion static, pan (the
     /// camera sideways: near objects move faster than the background), dolly (the camera forward: disparities
     /// grow), object (one object moves, the camera stands), cut (another scene from frame N/2); --noise S adds
-    /// fresh sensor noise to every frame. truth.txt lists each frame's camera position, scene and object shift.
+    /// fresh sensor noise to every frame, --gain-jitter P and --exposure-step K:P change the exposure. truth.txt lists
+    /// each frame's camera position, scene, object shift and gain.
     Synth(SynthArgs),
     /// Write a degraded copy of a scene tree (noise, low light, exposure mismatch, blur, misalignment, JPEG), seeded.
     ///
@@ -234,9 +235,10 @@ enum Command {
     Batch(BatchArgs),
     /// Match every frame of a stereo sequence: `jem sequence DIR -o OUTDIR [--independent]`.
     ///
-    /// DIR holds left/ and right/ with the frames (PNG, PPM/PGM or JPEG), paired by file stem in sorted order,
-    /// and optionally calib.txt (Middlebury keys), gt/<stem>.pfm and mask/<stem>.png (for `jem eval OUTDIR`); or it
-    /// is a KITTI raw drive folder (image_02/data, image_03/data). Unequal counts or unpaired names are refused.
+    /// DIR holds left/ and right/ with the frames (PNG, PPM/PGM, JPEG, BMP, TIFF or WebP), paired by file stem in
+    /// sorted order, and optionally calib.txt (Middlebury keys), gt/<stem>.pfm and mask/<stem>.png (for `jem eval
+    /// OUTDIR`); or it is a KITTI raw drive folder (image_02/data, image_03/data). Unequal counts or unpaired names
+    /// are refused.
     /// Writes OUTDIR/<stem>.pfm (--ext exr|png for the other formats) per frame, times.txt (a line per frame: stem
     /// and seconds from the decoded pair to its map), sequence.txt (what made the folder) and config.toml.
     /// By default each frame is matched with the temporal model: a still camera's frames averaged, a moving

@@ -14,8 +14,8 @@ use super::{GlobalArgs, MemoryArg, ThreadsArg};
 /// Arguments of `jem sequence` (the help text is on [`Command::Sequence`](super::Command::Sequence)).
 #[derive(Args, Debug, Clone)]
 pub(super) struct SequenceArgs {
-    /// The sequence folder: left/ and right/ holding the frames (PNG, PPM/PGM, JPEG), paired by file name, with an
-    /// optional calib.txt; or a KITTI raw drive folder (image_02/data, image_03/data).
+    /// The sequence folder: left/ and right/ holding the frames (PNG, PPM/PGM, JPEG, BMP, TIFF, WebP), paired by
+    /// file name, with an optional calib.txt; or a KITTI raw drive folder (image_02/data, image_03/data).
     #[arg(value_name = "DIR")]
     dir: PathBuf,
     /// Output folder (created if missing): OUTDIR/<frame stem>.EXT per frame, times.txt, sequence.txt, config.toml.
@@ -126,7 +126,9 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
         Event::Finished { index, run } if !quiet => {
             let measured = if run.ndisp_measured { " measured" } else { "" };
             let kind = run.kind.map_or(String::new(), |k| format!(", {}", describe_kind(k)));
-            note!("[{}/{total}] {}: ndisp {}{measured}{kind}, {:.2} s", index + 1, run.stem, run.ndisp, run.seconds);
+            let exposure = run.exposure.map_or(String::new(), |e| format!(", {}", describe_exposure(e)));
+            let (stem, ndisp, seconds) = (&run.stem, run.ndisp, run.seconds);
+            note!("[{}/{total}] {stem}: ndisp {ndisp}{measured}{kind}{exposure}, {seconds:.2} s", index + 1);
             if global.verbose {
                 let stages: Vec<String> = run.stages.iter().map(|(n, s)| format!("{n} {:.0}", s * 1e3)).collect();
                 note!("  stages (ms): {}", stages.join(", "));
@@ -150,6 +152,12 @@ fn describe_kind(kind: jem::FrameKind) -> String {
         jem::FrameKind::Still { frames } => format!("still camera, the mean of up to {frames} frames"),
         jem::FrameKind::Moving { dx, dy } => format!("camera moved ({dx:+}, {dy:+}) px, the previous answer as prior"),
     }
+}
+
+/// The exposure change the temporal model compensated, in words: `exposure ×1.100 −3.0 compensated`.
+fn describe_exposure(e: jem::Exposure) -> String {
+    let offset = if e.offset.abs() >= 0.05 { format!(" {:+.1}", e.offset).replace('-', "−") } else { String::new() };
+    format!("exposure ×{:.3}{offset} compensated", e.gain)
 }
 
 /// `wrote 10 frames to OUT (7 run, 3 already there; 320×240, ndisp 48 from calib.txt, 2.13 s per frame run)`.

@@ -37,15 +37,32 @@ pub(super) struct SynthArgs {
     /// With --frames, Gaussian sensor noise of σ S grey levels, fresh in each frame and view.
     #[arg(long, value_name = "S", default_value_t = 0.0, requires = "frames", help_heading = "Sequences")]
     noise: f64,
+    /// With --frames, each frame's gain drawn within ±P % of 1 (both views alike, seeded): an auto-exposure's
+    /// jitter.
+    #[arg(long, value_name = "P", default_value_t = 0.0, requires = "frames", help_heading = "Sequences")]
+    gain_jitter: f64,
+    /// With --frames, the gain × (1 + P/100) from frame K on: an exposure step.
+    #[arg(long, value_name = "K:P", requires = "frames", value_parser = parse_step, help_heading = "Sequences")]
+    exposure_step: Option<(usize, f64)>,
     #[command(flatten)]
     pub(super) threads: ThreadsArg,
+}
+
+/// `K:P` of `--exposure-step`: a frame index and a percentage.
+fn parse_step(s: &str) -> std::result::Result<(usize, f64), String> {
+    let bad = || format!("{s:?}: expected FRAME:PERCENT, e.g. 4:10");
+    let (k, p) = s.split_once(':').ok_or_else(bad)?;
+    Ok((k.parse().map_err(|_| bad())?, p.parse().map_err(|_| bad())?))
 }
 
 /// Renders and writes one scene.
 pub(super) fn run(args: &SynthArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let params = jem::synth::SynthParams { width: args.width, height: args.height, ndisp: args.ndisp, seed: args.seed };
     if let Some(frames) = args.frames {
-        let seq = jem::synth::SequenceParams { scene: params, frames, motion: args.motion, noise_sigma: args.noise };
+        let (step_at, step) = args.exposure_step.map_or((0, 0.0), |(k, p)| (k, p / 100.0));
+        let gain = jem::synth::GainChange { jitter: args.gain_jitter / 100.0, step, step_at };
+        let seq =
+            jem::synth::SequenceParams { scene: params, frames, motion: args.motion, noise_sigma: args.noise, gain };
         let stems = jem::synth::write_synth_sequence(&args.outdir, &seq)?;
         if !global.quiet {
             let noise = if args.noise > 0.0 { format!(", noise σ {}", args.noise) } else { String::new() };

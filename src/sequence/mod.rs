@@ -6,8 +6,9 @@
 //! | folders | `left/` and `right/` | the images in each, paired by file stem, in sorted order | `calib.txt` (Middlebury keys) at the root, optional |
 //! | KITTI raw | `image_02/data/` and `image_03/data/` (a `*_sync` drive folder) | as above | none read (KITTI keeps `calib_cam_to_cam.txt` one level up, without a search range) |
 //!
-//! Images are PNG, PPM/PGM/PNM or JPEG (by extension, any case); other files and hidden ones (`.name`) are not
-//! frames. A frame's stem (the file name without its extension) names it, and its result (`OUTDIR/<stem>.pfm`).
+//! Images are PNG, PPM/PGM/PNM, JPEG, BMP, TIFF or WebP (by extension, any case: every format `jem match` reads);
+//! other files and hidden ones (`.name`) are not frames. A frame's stem (the file name without its extension)
+//! names it, and its result (`OUTDIR/<stem>.pfm`).
 //! The left and right folders must hold the same stems: unequal counts, a stem without a partner, or two images
 //! of one stem in a folder are refused with one line naming the folder. Frames are in the byte order of their
 //! stems, so stems should be zero-padded (`000009` before `000010`), as the benchmarks' are.
@@ -45,7 +46,7 @@ pub(crate) use write::frame_stem;
 pub use write::{ROOT_FILES, SequenceFrame, write_sequence};
 
 /// The image extensions a frame may have (compared without case).
-pub const IMAGE_EXTENSIONS: [&str; 6] = ["png", "ppm", "pgm", "pnm", "jpg", "jpeg"];
+pub const IMAGE_EXTENSIONS: [&str; 10] = ["png", "ppm", "pgm", "pnm", "jpg", "jpeg", "bmp", "tif", "tiff", "webp"];
 
 /// The folders of the folders layout: left and right views, ground truth, masks.
 pub const FOLDERS: [&str; 4] = ["left", "right", "gt", "mask"];
@@ -133,7 +134,8 @@ impl Sequence {
         };
         let (left, right) = (list_images(&dir.join(l))?, list_images(&dir.join(r))?);
         if left.is_empty() {
-            return Err(Error::Input(format!("{}: no frames (PNG, PPM/PGM or JPEG images)", dir.join(l).display())));
+            let formats = crate::io::png::IMAGE_FORMATS;
+            return Err(Error::Input(format!("{}: no frames ({formats} images)", dir.join(l).display())));
         }
         if left.len() != right.len() {
             return Err(Error::Input(format!(

@@ -88,6 +88,8 @@ pub struct FrameRun {
     pub valid: f64,
     /// How the temporal model matched it (`None` without the model).
     pub kind: Option<crate::temporal::FrameKind>,
+    /// The exposure change the temporal model compensated in it (`None`: none, or without the model).
+    pub exposure: Option<crate::temporal::Exposure>,
     /// The pipeline's stages and their seconds, in order (a stage run more than once, summed).
     pub stages: Vec<(&'static str, f64)>,
 }
@@ -207,6 +209,12 @@ fn run_locked(
     let config = opts.params.to_toml();
     let mut recorded = false;
     let mut times = read_times(&out.join(TIMES_FILE));
+    // Each map is decoded once, here, before any frame runs: the frames written after a frame decide whether it is
+    // replayed, and asking each frame about every later one would decode n²/2 maps.
+    let written = written_frames(seq, out, ext, &times);
+    let last_missing = written.iter().rposition(|w| !w);
+    let order: std::collections::HashMap<&str, usize> =
+        seq.frames.iter().enumerate().map(|(i, f)| (f.stem.as_str(), i)).collect();
     let mut summary = RunSummary::default();
     let mut matcher = Matcher::new(opts.params.clone())?
         .with_max_memory(opts.limit_bytes)
@@ -225,15 +233,10 @@ fn run_locked(
             summary.settled = Some(settled);
             matcher = matcher.with_ndisp(NdispSource::Given(settled.0));
         }
-        let done = |i: usize| {
-            let f = &seq.frames[i];
-            times.iter().any(|(s, _)| *s == f.stem) && is_complete(&out.join(format!("{}.{ext}", f.stem)), &f.left)
-        };
-        if done(index) {
+        if written[index] {
             // The temporal model's state after a frame is not in the folder: a written frame before one still to
             // run is matched again to rebuild it (not written again); once every frame is written, none is.
-            let later_missing = opts.temporal && (index + 1..seq.frames.len()).any(|i| !done(i));
-            if later_missing {
+            if opts.temporal && last_missing.is_some_and(|m| m > index) {
                 on_event(Event::Replayed { index, stem: &frame.stem });
                 match_frame(&mut matcher, opts, frame, &|_| {}).map_err(named)?;
                 summary.replayed.push(frame.stem.clone());
@@ -249,8 +252,7 @@ fn run_locked(
         let (map, run) = match_frame(&mut matcher, opts, frame, &on_stage).map_err(named)?;
         on_event(Event::Stage { index, stage: "writing" });
         times.push((frame.stem.clone(), run.seconds));
-        let order = |stem: &str| seq.frames.iter().position(|f| f.stem == stem);
-        times.sort_by_key(|(s, _)| order(s));
+        times.sort_by_key(|(s, _)| order.get(s.as_str()).copied());
         let bytes = crate::io::encode_disparity(&result, &map).map_err(named)?;
         let times_text: String = times.iter().map(|(s, t)| format!("{s} {t:.6}\n")).collect();
         let (run_file, config_file, times_file) = (out.join(RUN_FILE), out.join(CONFIG_FILE), out.join(TIMES_FILE));
@@ -309,6 +311,7 @@ fn match_frame(
         seconds,
         valid,
         kind: out.frame,
+        exposure: out.exposure,
         stages: stage_seconds(&out.timings),
     };
     Ok((map, run))
@@ -440,8 +443,23 @@ fn read_times(path: &Path) -> Vec<(String, f64)> {
         .collect()
 }
 
+/// Which frames an earlier run finished: a line in the times file and a map that decodes at the frame's size.
+fn written_frames(seq: &Sequence, out: &Path, ext: &str, times: &[(String, f64)]) -> Vec<bool> {
+    let timed: std::collections::HashSet<&str> = times.iter().map(|(s, _)| s.as_str()).collect();
+    let map = |f: &super::Frame| out.join(format!("{}.{ext}", f.stem));
+    seq.frames.iter().map(|f| timed.contains(f.stem.as_str()) && is_complete(&map(f), &f.left)).collect()
+}
+
+#[cfg(test)]
+thread_local! {
+    /// The maps [`is_complete`] read on this thread (a test counts them: a rerun reads each map once).
+    pub(super) static MAPS_READ: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
 /// Whether `result` is a finished frame: a disparity map that decodes, at the size of the frame's left image.
 fn is_complete(result: &Path, left: &Path) -> bool {
+    #[cfg(test)]
+    MAPS_READ.with(|n| n.set(n.get() + 1));
     let Ok(map) = crate::io::read_disparity(result) else { return false };
     crate::io::png::read_header(left).is_ok_and(|h| (h.width, h.height) == map.dims())
 }

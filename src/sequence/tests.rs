@@ -289,7 +289,12 @@ fn each_frame_gets_fresh_noise_and_a_rerun_the_same_bytes() {
 
 /// A three-frame sequence of different synthetic scenes (with calib.txt), and fast parameters.
 fn small_sequence(dir: &Path) -> (Sequence, crate::Params) {
-    let mut scenes = (1..=3).map(|seed| {
+    sequence_of(dir, 3)
+}
+
+/// [`small_sequence`] with `n` frames.
+fn sequence_of(dir: &Path, n: usize) -> (Sequence, crate::Params) {
+    let mut scenes = (1..=n as u64).map(|seed| {
         crate::synth::render_scene(&crate::synth::SynthParams { width: 80, height: 40, ndisp: 16, seed }).unwrap()
     });
     let seq = dir.join("seq");
@@ -297,7 +302,7 @@ fn small_sequence(dir: &Path) -> (Sequence, crate::Params) {
         let s = scenes.next().unwrap();
         Ok(SequenceFrame { left: s.left, right: s.right, gt: Some(s.gt), mask: Some(s.mask) })
     };
-    write_sequence(&seq, 3, &mut frame, &mut || vec![("calib.txt", "ndisp=16\n".into())]).unwrap();
+    write_sequence(&seq, n, &mut frame, &mut || vec![("calib.txt", "ndisp=16\n".into())]).unwrap();
     let mut params = crate::Params { model: crate::Model::Wta, ..Default::default() };
     params.post.sps.enabled = false;
     (Sequence::open(&seq).unwrap(), params)
@@ -382,6 +387,53 @@ fn a_temporal_rerun_replays_the_frames_before_the_missing_one_and_writes_the_sam
     // Everything written: nothing to rebuild, every frame skipped.
     let done = run(&seq, &out, &opts, &|_| {}).unwrap();
     assert_eq!((done.skipped.len(), done.replayed.len(), done.ran.len()), (3, 0, 0));
+}
+
+#[test]
+fn a_temporal_rerun_reads_each_written_map_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (seq, params) = sequence_of(dir.path(), 8);
+    let out = dir.path().join("out");
+    let opts = RunOptions { temporal: true, range: RangeRule::FirstFrame, ..options(&params) };
+    run(&seq, &out, &opts, &|_| {}).unwrap();
+    let last = std::fs::read(out.join("000007.pfm")).unwrap();
+    std::fs::remove_file(out.join("000007.pfm")).unwrap();
+    run::MAPS_READ.with(|n| n.set(0));
+    let again = run(&seq, &out, &opts, &|_| {}).unwrap();
+    assert_eq!(again.replayed.len(), 7);
+    // One look at each frame's map (the missing one included), not one per later frame for each frame.
+    assert_eq!(run::MAPS_READ.with(|n| n.get()), 8);
+    assert_eq!(std::fs::read(out.join("000007.pfm")).unwrap(), last, "the same map as the run without a stop");
+}
+
+#[test]
+fn frames_in_bmp_tiff_and_webp_are_read_as_the_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let (seq, params) = small_sequence(dir.path());
+    let png_out = dir.path().join("png-out");
+    run(&seq, &png_out, &options(&params), &|_| {}).unwrap();
+    // The same frames in the other formats jem match reads, one format per frame.
+    let other = dir.path().join("other");
+    std::fs::create_dir_all(other.join("left")).unwrap();
+    std::fs::create_dir_all(other.join("right")).unwrap();
+    std::fs::copy(seq.root.join("calib.txt"), other.join("calib.txt")).unwrap();
+    let exts = ["bmp", "TIFF", "webp"];
+    for (f, ext) in seq.frames.iter().zip(exts) {
+        for (src, folder) in [(&f.left, "left"), (&f.right, "right")] {
+            let img = image::open(src).unwrap().to_rgb8();
+            let format = image::ImageFormat::from_extension(ext.to_ascii_lowercase()).unwrap();
+            img.save_with_format(other.join(folder).join(format!("{}.{ext}", f.stem)), format).unwrap();
+        }
+    }
+    let converted = Sequence::open(&other).unwrap();
+    let stems: Vec<&str> = converted.frames.iter().map(|f| f.stem.as_str()).collect();
+    assert_eq!(stems, ["000000", "000001", "000002"]);
+    let out = dir.path().join("other-out");
+    assert_eq!(run(&converted, &out, &options(&params), &|_| {}).unwrap().ran.len(), 3);
+    for f in &seq.frames {
+        let name = format!("{}.pfm", f.stem);
+        assert_eq!(std::fs::read(out.join(&name)).unwrap(), std::fs::read(png_out.join(&name)).unwrap(), "{name}");
+    }
 }
 
 #[test]

@@ -53,7 +53,7 @@ mod sequence;
 mod texture;
 
 use scene::Scene;
-pub use sequence::{FrameTruth, Motion, SequenceParams, render_frame, write_synth_sequence};
+pub use sequence::{FrameTruth, GainChange, Motion, SequenceParams, render_frame, write_synth_sequence};
 
 /// Mask value: the pixel is visible in both views.
 pub const MASK_VISIBLE: u8 = 255;

@@ -89,6 +89,48 @@ pub struct SequenceParams {
     pub motion: Motion,
     /// Gaussian sensor noise, σ in grey levels, fresh in each frame and view (0: none).
     pub noise_sigma: f64,
+    /// How the camera's exposure changes from frame to frame (none by default).
+    pub gain: GainChange,
+}
+
+/// A camera's exposure from frame to frame: each frame's views (both alike, as one auto-exposure drives a rig)
+/// are multiplied by a gain before the sensor noise is added, and rounded to 8 bits (clipped at 255). The ground
+/// truth does not change.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GainChange {
+    /// Each frame's gain is 1 + u·`jitter`, u uniform in [−1, 1) and drawn from the seed and the frame (0: none).
+    pub jitter: f64,
+    /// From frame `step_at` on, the gain is also × (1 + `step`) (an exposure step; 0: none).
+    pub step: f64,
+    /// See `step`.
+    pub step_at: usize,
+}
+
+/// Mixed into the seed for the frames' gain jitter.
+const GAIN_SEED_KEY: u64 = 0x6a1e_0e4f_05e0_0001;
+
+impl GainChange {
+    /// The gain of frame `k` of a sequence of seed `seed`.
+    pub fn at(&self, seed: u64, k: usize) -> f64 {
+        let stepped = if self.step != 0.0 && k >= self.step_at { 1.0 + self.step } else { 1.0 };
+        let jitter = if self.jitter > 0.0 {
+            let mut rng = crate::rng::SplitMix64::new(crate::rng::mix64(seed ^ GAIN_SEED_KEY) ^ k as u64);
+            self.jitter * rng.range(-1.0, 1.0)
+        } else {
+            0.0
+        };
+        stepped * (1.0 + jitter)
+    }
+
+    fn validate(&self) -> Result<()> {
+        if !(0.0..=0.5).contains(&self.jitter) {
+            return Err(Error::param("gain jitter", self.jitter, "0..=0.5"));
+        }
+        if !(-0.5..=1.0).contains(&self.step) {
+            return Err(Error::param("exposure step", self.step, "-0.5..=1"));
+        }
+        Ok(())
+    }
 }
 
 /// Sideways camera motion per frame of a pan, in baselines.
@@ -119,7 +161,7 @@ impl SequenceParams {
         if !(0.0..=100.0).contains(&self.noise_sigma) {
             return Err(Error::param("noise", self.noise_sigma, "0..=100 grey levels"));
         }
-        Ok(())
+        self.gain.validate()
     }
 
     /// The camera of frame `k`.
@@ -162,6 +204,7 @@ impl SequenceParams {
             shift = scene.move_front_object(k as f64 * OBJECT_PX_PER_FRAME, [camera.cx, camera.cy]);
         }
         let truth = FrameTruth {
+            gain: self.gain.at(self.scene.seed, k),
             camera_x_baselines: camera.x_baselines,
             forward: camera.forward,
             scene: usize::from(cut),
@@ -171,9 +214,11 @@ impl SequenceParams {
     }
 }
 
-/// What a frame shows: where its camera is and what moved (the lines of `truth.txt`).
+/// What a frame shows: where its camera is, what moved and its exposure (the lines of `truth.txt`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameTruth {
+    /// The gain the frame's views were multiplied by ([`GainChange`]).
+    pub gain: f64,
     /// The camera's sideways position, in baselines.
     pub camera_x_baselines: f64,
     /// Its forward motion F (a disparity d of the first frame is d / (1 − d·F) here).
@@ -215,6 +260,12 @@ pub fn render_frame(params: &SequenceParams, k: usize) -> Result<(SynthScene, Fr
     let cam = params.camera(k);
     let (w, h) = (params.scene.width, params.scene.height);
     let (mut left, mut right) = (render_view(&scene, &cam, w, h), render_view(&scene, &cam.right(), w, h));
+    let gain = params.gain.at(params.scene.seed, k);
+    if gain != 1.0 {
+        for ch in left.channels.iter_mut().chain(right.channels.iter_mut()) {
+            ch.iter_mut().for_each(|v| *v = (*v * gain as f32).round().clamp(0.0, 255.0));
+        }
+    }
     if params.noise_sigma > 0.0 {
         let recipe = Recipe(vec![Degradation::Noise { sigma: params.noise_sigma }]);
         let seed = crate::sequence::frame_seed(params.scene.seed, k);
@@ -278,25 +329,29 @@ pub fn write_synth_sequence(out: &std::path::Path, params: &SequenceParams) -> R
     params.validate()?;
     let range = std::cell::Cell::new((f32::INFINITY, f32::NEG_INFINITY));
     let truth = std::cell::RefCell::new(format!(
-        "# jem synth --frames {} --motion {} --seed {} --noise {}\n# frame camera_x_baselines forward scene \
-         object_dx_px object_dy_px\n",
+        "# jem synth --frames {} --motion {} --seed {} --noise {} --gain-jitter {} --exposure-step {}:{}\n# frame \
+         camera_x_baselines forward scene object_dx_px object_dy_px gain\n",
         params.frames,
         params.motion.name(),
         params.scene.seed,
-        params.noise_sigma
+        params.noise_sigma,
+        params.gain.jitter * 100.0,
+        params.gain.step_at,
+        params.gain.step * 100.0
     ));
     let mut frame = |k: usize| {
         let (s, t) = render_frame(params, k)?;
         let (lo, hi) = range.get();
         range.set((lo.min(s.vmin), hi.max(s.vmax)));
         truth.borrow_mut().push_str(&format!(
-            "{} {:.6} {:.9} {} {:.3} {:.3}\n",
+            "{} {:.6} {:.9} {} {:.3} {:.3} {:.6}\n",
             crate::sequence::frame_stem(k),
             t.camera_x_baselines,
             t.forward,
             t.scene,
             t.object_shift_px[0],
-            t.object_shift_px[1]
+            t.object_shift_px[1],
+            t.gain
         ));
         Ok(crate::sequence::SequenceFrame { left: s.left, right: s.right, gt: Some(s.gt), mask: Some(s.mask) })
     };

@@ -5,7 +5,7 @@ use super::*;
 use crate::synth::render_scene;
 
 fn params(motion: Motion, frames: usize) -> SequenceParams {
-    SequenceParams { scene: SynthParams::default(), frames, motion, noise_sigma: 0.0 }
+    SequenceParams { scene: SynthParams::default(), frames, motion, noise_sigma: 0.0, gain: GainChange::default() }
 }
 
 fn frame(p: &SequenceParams, k: usize) -> SynthScene {
@@ -177,4 +177,26 @@ fn a_written_sequence_opens_with_ground_truth_for_every_frame() {
     assert!(e.contains("already holds"), "{e}");
     assert!("spin".parse::<Motion>().unwrap_err().contains("static, pan, dolly, object or cut"));
     assert!(write_synth_sequence(&dir.path().join("x"), &params(Motion::Pan, 1)).is_err());
+}
+
+/// A gain multiplies both views of a frame alike (rounded, clipped at 255): a step from its frame on, a jitter
+/// that differs between frames within its bounds; the ground truth stays.
+#[test]
+fn a_gain_changes_the_views_of_its_frames_and_not_the_truth() {
+    let gain = GainChange { jitter: 0.05, step: 0.1, step_at: 2 };
+    let (plain, lit) = (params(Motion::Static, 4), SequenceParams { gain, ..params(Motion::Static, 4) });
+    let gains: Vec<f64> = (0..4).map(|k| render_frame(&lit, k).unwrap().1.gain).collect();
+    assert!(gains[..2].iter().all(|g| (0.95..1.05).contains(g)), "{gains:?}");
+    assert!(gains[2..].iter().all(|g| (1.045..1.155).contains(g)), "{gains:?}");
+    assert!(gains[0] != gains[1] && gains[2] != gains[3], "{gains:?}");
+    for k in [0, 3] {
+        let (a, b) = (frame(&plain, k), frame(&lit, k));
+        assert_eq!(a.gt, b.gt);
+        for (va, vb) in [(&a.left, &b.left), (&a.right, &b.right)] {
+            for (p, q) in va.channels.iter().flatten().zip(vb.channels.iter().flatten()) {
+                assert_eq!(*q, (p * gains[k] as f32).round().min(255.0));
+            }
+        }
+    }
+    assert!(SequenceParams { gain: GainChange { jitter: 0.6, ..gain }, ..lit.clone() }.validate().is_err());
 }

@@ -2,6 +2,8 @@
 //! noise of one frame divided by √n, and of the answers, so that what the matcher says about a static pixel
 //! settles instead of flickering. Each pixel keeps its own count and starts again where the scene changed.
 
+use super::exposure::Exposure;
+use super::motion::Shift;
 use crate::image::{DisparityMap, Plane, RgbImage};
 use crate::imgproc::filter::box_mean;
 
@@ -41,6 +43,21 @@ impl ViewMeans {
         let restarted = fold_view(&mut self.left, &mut self.counts[0], left, noise_sigma);
         fold_view(&mut self.right, &mut self.counts[1], right, noise_sigma);
         restarted
+    }
+
+    /// Carries the means to the exposure of a new frame: each view's change against its mean is fitted
+    /// ([`super::exposure::fit`]) and applied to the mean (clipped to 0–255, as the frame is). Returns the left
+    /// view's change (`None`: none to compensate).
+    pub(crate) fn follow_exposure(&mut self, left: &RgbImage, right: &RgbImage) -> Option<Exposure> {
+        let mut changes = [None; 2];
+        for ((mean, frame), change) in [(&mut self.left, left), (&mut self.right, right)].into_iter().zip(&mut changes)
+        {
+            *change = super::exposure::fit(&mean.to_grey(), &frame.to_grey(), Shift { dx: 0, dy: 0, residual: 0.0 });
+            if let Some(e) = *change {
+                e.apply_image(mean);
+            }
+        }
+        changes[0]
     }
 
     /// The frames the left view's mean holds at each pixel.
@@ -160,6 +177,27 @@ mod tests {
         }
         assert_eq!(means.left, a);
         assert_eq!(means.left_counts().data[0], MAX_FRAMES);
+    }
+
+    /// A textured grey image, `w` × `h`, values in 40..200.
+    fn textured(w: usize, h: usize) -> Vec<f32> {
+        (0..w * h).map(|i| 120.0 + 50.0 * ((i % w) as f32 * 0.3).sin() + 30.0 * ((i / w) as f32 * 0.2).cos()).collect()
+    }
+
+    #[test]
+    fn the_means_follow_an_exposure_change_and_do_not_start_again() {
+        let a = grey_image(&textured(64, 48), 64);
+        let mut means = ViewMeans::start(&a, &a);
+        let mut brighter = a.clone();
+        brighter.channels.iter_mut().flatten().for_each(|v| *v = (*v * 1.1).min(255.0));
+        let e = means.follow_exposure(&brighter, &brighter).expect("a 10 % gain");
+        assert!((e.gain - 1.1).abs() < 1e-3 && e.offset.abs() < 0.1, "{e:?}");
+        let restarted = means.fold(&brighter, &brighter, 2.0);
+        assert!(restarted.data.iter().all(|r| !r), "the mean was carried to the new exposure");
+        assert_eq!(means.left_counts().data[0], 2);
+        assert!(means.left.channels[0].iter().zip(&brighter.channels[0]).all(|(m, f)| (m - f).abs() < 0.2));
+        // The same exposure again: nothing to compensate.
+        assert_eq!(means.follow_exposure(&brighter, &brighter), None);
     }
 
     #[test]

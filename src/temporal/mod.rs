@@ -3,7 +3,9 @@
 //!
 //! Each frame is first compared with the previous one, on their left views in grey ([`motion`]): the global
 //! integer shift that best aligns them, and what that shift leaves unexplained beyond the two frames' noise,
-//! relative to the image's contrast. Then it is one of:
+//! relative to the image's contrast. A change of exposure between them (a gain and an offset on every grey value,
+//! [`exposure`]) is fitted first and compensated in the previous view, then the shift searched again: what the
+//! frames' exposure explains is neither motion nor a cut. Then it is one of:
 //!
 //! - **a cut** (the first frame, a new size, or more than half the contrast unexplained: another scene). Every
 //!   memory is dropped and the frame is matched as a first frame, exactly as without the model.
@@ -12,11 +14,14 @@
 //!   pipeline matches the means: n frames of a still camera hold the scene with 1/√n of one frame's noise. The
 //!   answers are folded into a running mean too, weighted by the frames each was matched on
 //!   ([`average::AnswerMean`]), which starts again where the views did: a static pixel's answer settles instead
-//!   of flickering with each frame's noise.
+//!   of flickering with each frame's noise. Each view's exposure change against its running mean is fitted and
+//!   the mean carried to the new exposure (clipped at 0 and 255) before the frame is folded in: the means follow
+//!   the camera's exposure and do not start again.
 //! - **moving** (a shift). The previous answer, moved by the shift, is the prior of the frame in place of the
 //!   coarse chain, which is not run: with the coarse prior's weight rule (λ by the measured noise, at least the
 //!   cost's flatness, times the previous confidence, lowered where its left-right check failed), released where
-//!   the shifted frames disagree (disocclusions, moving objects, the parallax a shift cannot follow). The vertical
+//!   the shifted frames disagree (disocclusions, moving objects, the parallax a shift cannot follow; the previous
+//!   view compared under the new exposure). The vertical
 //!   offset removed from the previous frame's right view is reused instead of measured again, and the frame runs
 //!   one mean-field iteration fewer (the prior has placed each pixel), its right view, which serves the left-right
 //!   check only, one with the local term alone. The running means start again.
@@ -26,6 +31,7 @@
 //! measured once). Measurements: docs/tuning-log.md, "Stereo video".
 
 mod average;
+pub(crate) mod exposure;
 pub(crate) mod motion;
 
 use crate::error::Result;
@@ -33,6 +39,7 @@ use crate::image::{Plane, StereoPair};
 use crate::params::Params;
 use crate::pipeline::{self, FramePrior, FrameViews, PipelineOutput, RunOptions};
 use average::{AnswerMean, ViewMeans};
+pub use exposure::Exposure;
 use motion::Shift;
 
 /// Beyond this share of the image's contrast left unexplained by the shift, the frame shows another scene.
@@ -103,6 +110,7 @@ impl State {
 }
 
 /// Matches `pair` as the next frame of the sequence `state` remembers (see the module doc), and remembers it.
+/// Returns the answer, how the frame was matched and the exposure change compensated in it (`None`: none).
 ///
 /// # Errors
 /// As [`crate::pipeline::run`].
@@ -111,76 +119,103 @@ pub(crate) fn match_frame(
     params: &Params,
     pair: &StereoPair,
     options: &RunOptions<'_>,
-) -> Result<(PipelineOutput, FrameKind)> {
+) -> Result<(PipelineOutput, FrameKind, Option<Exposure>)> {
     let grey = pair.left.to_grey();
     let noise = crate::condition::channel_noise(&pair.left);
     let previous = state.previous.take().filter(|p| p.grey.dims() == grey.dims() && p.ndisp == pair.ndisp);
     let seen = previous.is_some();
-    let shift = previous.as_ref().map(|p| motion::global_shift(&p.grey, &grey));
-    let unexplained = shift.map_or(0.0, |s| motion::unexplained(s, &grey, noise));
+    let compared = previous.as_ref().map(|p| compare(&p.grey, &grey));
+    let unexplained = compared.as_ref().map_or(0.0, |c| motion::unexplained(c.shift, &grey, noise));
     let cut = unexplained > CUT_UNEXPLAINED;
-    let (out, kind) = match (previous, shift) {
-        (Some(_), Some(s)) if !cut && (s.dx, s.dy) == (0, 0) && unexplained < STILL_UNEXPLAINED => {
-            still_frame(state, params, pair, noise, options).map(|(out, frames)| (out, FrameKind::Still { frames }))?
+    let (out, kind, exposure) = match (previous, compared) {
+        (Some(_), Some(c)) if !cut && (c.shift.dx, c.shift.dy) == (0, 0) && unexplained < STILL_UNEXPLAINED => {
+            let (out, frames, exposure) = still_frame(state, params, pair, noise, options)?;
+            (out, FrameKind::Still { frames }, exposure)
         }
-        (Some(prev), Some(s)) if !cut => {
+        (Some(prev), Some(c)) if !cut => {
             state.still = None;
-            let out = moving_frame(params, pair, &prev, &grey, s, noise, options)?;
-            (out, FrameKind::Moving { dx: s.dx as i32, dy: s.dy as i32 })
+            let out = moving_frame(params, pair, &prev, &c, &grey, noise, options)?;
+            (out, FrameKind::Moving { dx: c.shift.dx as i32, dy: c.shift.dy as i32 }, c.exposure)
         }
         _ => {
             state.still = None;
             let out = pipeline::run_with(params, pair, options)?;
             state.still = Some((ViewMeans::start(&pair.left, &pair.right), AnswerMean::start(&out.disparity)));
-            (out, if seen { FrameKind::Cut } else { FrameKind::First })
+            (out, if seen { FrameKind::Cut } else { FrameKind::First }, None)
         }
     };
     state.previous = Some(Previous { grey, answer: out.clone(), ndisp: pair.ndisp });
-    Ok((out, kind))
+    Ok((out, kind, exposure))
 }
 
-/// A still camera's frame: the pipeline on the views' running means, the answer folded into the answers'.
+/// The previous left view (grey) compared with the current one.
+struct Compared {
+    /// The shift between them, under the exposure change.
+    shift: Shift,
+    /// The exposure change from the previous view to the current one.
+    exposure: Option<Exposure>,
+    /// The previous view under that change (`None`: the view as it is).
+    reference: Option<Plane<f32>>,
+}
+
+/// Compares two frames' left views: the shift, the exposure change fitted under it, and with a change the shift
+/// searched again between the compensated previous view and the current one.
+fn compare(prev: &Plane<f32>, cur: &Plane<f32>) -> Compared {
+    let shift = motion::global_shift(prev, cur);
+    match exposure::fit(prev, cur, shift) {
+        None => Compared { shift, exposure: None, reference: None },
+        Some(e) => {
+            let reference = e.apply_plane(prev);
+            Compared { shift: motion::global_shift(&reference, cur), exposure: Some(e), reference: Some(reference) }
+        }
+    }
+}
+
+/// A still camera's frame: the pipeline on the views' running means, the answer folded into the answers'. Returns
+/// the answer, the frames the means hold at most and the left view's exposure change against its mean.
 fn still_frame(
     state: &mut State,
     params: &Params,
     pair: &StereoPair,
     noise: f32,
     options: &RunOptions<'_>,
-) -> Result<(PipelineOutput, u16)> {
-    let (views, answers, out) = match state.still.take() {
+) -> Result<(PipelineOutput, u16, Option<Exposure>)> {
+    let (views, answers, out, exposure) = match state.still.take() {
         Some((mut views, mut answers)) => {
+            let exposure = views.follow_exposure(&pair.left, &pair.right);
             views.fold(&pair.left, &pair.right, noise);
             let means = StereoPair::borrowed(&views.left, &views.right, pair.ndisp)?;
             let mut out = pipeline::run_with(params, &means, options)?;
             answers.fold(&out.disparity, views.left_counts());
             out.disparity = answers.mean.clone();
-            (views, answers, out)
+            (views, answers, out, exposure)
         }
         // The camera has just stopped: this frame starts the means.
         None => {
             let out = pipeline::run_with(params, pair, options)?;
-            (ViewMeans::start(&pair.left, &pair.right), AnswerMean::start(&out.disparity), out)
+            (ViewMeans::start(&pair.left, &pair.right), AnswerMean::start(&out.disparity), out, None)
         }
     };
     let frames = views.left_counts().data.iter().copied().max().unwrap_or(1);
     state.still = Some((views, answers));
-    Ok((out, frames))
+    Ok((out, frames, exposure))
 }
 
-/// A moving camera's frame: the previous answer, moved by `shift`, as the prior (see the module doc).
+/// A moving camera's frame: the previous answer, moved by the shift, as the prior (see the module doc).
 fn moving_frame(
     params: &Params,
     pair: &StereoPair,
     prev: &Previous,
+    compared: &Compared,
     grey: &Plane<f32>,
-    shift: Shift,
     noise: f32,
     options: &RunOptions<'_>,
 ) -> Result<PipelineOutput> {
     let limit = RELEASE_NOISE_MULTIPLE * (motion::GREY_DIFFERENCE_PER_SIGMA as f32 * noise + 0.5);
-    let released = motion::disagreement(&prev.grey, grey, shift, limit);
+    let reference = compared.reference.as_ref().unwrap_or(&prev.grey);
+    let released = motion::disagreement(reference, grey, compared.shift, limit);
     let from = FramePrior {
-        answer: motion::shift_answer(&prev.answer, shift),
+        answer: motion::shift_answer(&prev.answer, compared.shift),
         released: Some(released),
         vertical_offset: prev.answer.vertical_offset,
         weight_scale: 1.0,
