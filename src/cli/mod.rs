@@ -243,7 +243,8 @@ enum Command {
     /// and seconds from the decoded pair to its map), sequence.txt (what made the folder) and config.toml.
     /// By default each frame is matched with the temporal model: a still camera's frames averaged, a moving
     /// camera's previous answer (moved by its shift) as the prior, scene cuts detected; the range is the first
-    /// frame's, held for the sequence. A rerun replays the frames before the first missing one to rebuild its state.
+    /// frame's, held for the sequence. A rerun replays the written frames before the last missing one to rebuild
+    /// its state.
     /// --independent matches each frame alone, byte-identical to `jem LEFT RIGHT -o OUT --ndisp N` on that pair
     /// (N: --ndisp, else calib.txt's ndisp; without either the range is measured on each frame, as `jem match`
     /// measures it; --range-once measures it on the first frame and holds it).
