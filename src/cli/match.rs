@@ -29,6 +29,12 @@ pub(super) struct MatchArgs {
     /// Disparity search range 0..N−1 (default: `ndisp` from calib.txt beside LEFT).
     #[arg(long, value_name = "N")]
     ndisp: Option<usize>,
+    /// Search the disparities D..D+N−1 instead of 0..N−1 (OpenCV SGBM's minDisparity), for a scene that is nowhere
+    /// near infinity; the left view's first D columns, which match nothing there, are written invalid. `calib`:
+    /// D is vmin of calib.txt beside LEFT rounded down, and N its ndisp − D (the top of its range kept); vmin is
+    /// read only when asked (MiddEval3 states it for display and bars algorithms from using it).
+    #[arg(long, value_name = "D|calib")]
+    min_disp: Option<MinDisp>,
     /// Rectify the raw pair first with this stereo calibration, as `jem rectify` does (OpenCV FileStorage YAML/XML
     /// or KITTI calib_cam_to_cam.txt): the outputs are then of the rectified left view, the camera for --depth and
     /// --cloud is the rectified one, and calib.txt beside LEFT is not read.
@@ -86,6 +92,25 @@ pub(super) struct MatchArgs {
     memory: MemoryArg,
 }
 
+/// `--min-disp`: a number of pixels, or `calib` (from calib.txt's vmin).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum MinDisp {
+    /// This many pixels.
+    Px(usize),
+    /// vmin of calib.txt beside LEFT ([`jem::io::calib::Calib::vmin_search`]).
+    Calib,
+}
+
+impl std::str::FromStr for MinDisp {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "calib" => Ok(MinDisp::Calib),
+            _ => s.parse().map(MinDisp::Px).map_err(|_| format!("{s:?} is neither a disparity of 0 or more nor calib")),
+        }
+    }
+}
+
 /// Matches one pair.
 pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let request = Request::check(args)?;
@@ -93,6 +118,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let start = Instant::now();
     let mut matcher = Matcher::new(params.clone())?
         .with_ndisp(NdispSource::resolve(args.ndisp, request.stated_ndisp))
+        .with_min_disp(request.min_disp)
         .with_max_memory(args.memory.memory_limit())
         .with_confidence(args.confidence.is_some() || args.min_confidence.is_some());
     let header = jem::io::read_pair_header(request.left, request.right)?;
@@ -122,6 +148,9 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     for warning in warnings.iter().filter(|_| !global.quiet) {
         note!("warning: {warning}");
     }
+    if let Some(jpeg) = out.measured.as_ref().and_then(jem::Measured::jpeg_note).filter(|_| !global.quiet) {
+        note!("note: {jpeg}");
+    }
     if global.verbose && !global.quiet {
         note!("{:<14} {:>9.1} ms", "load", load_time.as_secs_f64() * 1e3);
         for (name, d) in &out.timings.stages {
@@ -150,6 +179,8 @@ struct Request<'a> {
     right: &'a Path,
     /// The range `calib.txt` beside LEFT states, when no `--ndisp` is given.
     stated_ndisp: Option<usize>,
+    /// The smallest disparity searched (`--min-disp`).
+    min_disp: usize,
     /// For `--depth` and `--cloud`.
     camera: Option<jem::geometry::Camera>,
     /// With `--rectify`: how the pair is rectified before matching.
@@ -191,6 +222,15 @@ impl<'a> Request<'a> {
         // calib.txt, read once when something needs it (the range, or the camera); with --rectify, the rectified
         // pair's (it states no range).
         let wants_camera = args.cloud.is_some() || args.depth.is_some();
+        let from_vmin = args.min_disp == Some(MinDisp::Calib);
+        if from_vmin && args.rectify.is_some() {
+            return Err(Error::Input(
+                "--min-disp calib reads calib.txt beside LEFT, which --rectify replaces; give --min-disp D".into(),
+            ));
+        }
+        if from_vmin && !calib.is_file() {
+            return Err(Error::Input(format!("--min-disp calib: there is no {}", calib.display())));
+        }
         let rectification = match &args.rectify {
             Some(c) => Some(super::rectify::plan(c, left, right, args.memory.memory_limit())?),
             None => None,
@@ -200,7 +240,9 @@ impl<'a> Request<'a> {
                 calib::Calib::parse(&rect.calib_txt())
                     .map_err(|msg| Error::Calib { path: args.rectify.clone().unwrap_or_default(), msg })?,
             ),
-            None if (args.ndisp.is_none() || wants_camera) && calib.is_file() => Some(calib::Calib::load(&calib)?),
+            None if (args.ndisp.is_none() || wants_camera || from_vmin) && calib.is_file() => {
+                Some(calib::Calib::load(&calib)?)
+            }
             None => None,
         };
         let camera = if wants_camera {
@@ -225,6 +267,7 @@ impl<'a> Request<'a> {
             .collect();
         let rectify_calib = args.rectify.as_deref().unwrap_or(&calib);
         jem::io::check_outputs(&[left, right, &calib, rectify_calib], &outputs)?;
+        jem::io::check_output_folders(&outputs)?;
         // The range: --ndisp, else calib.txt's (measured instead when it is missing, the file states none, as
         // `jem rectify` writes it, or it is no real bound: half the width or more).
         let stated_ndisp = match &calib_file {
@@ -233,7 +276,16 @@ impl<'a> Request<'a> {
             }
             _ => None,
         };
-        Ok(Request { left, right, stated_ndisp, camera, rectification })
+        // --min-disp calib: the smallest disparity from vmin, the range's top kept at calib.txt's ndisp − 1.
+        let (min_disp, stated_ndisp) = match (args.min_disp, &calib_file) {
+            (Some(MinDisp::Px(d)), _) => (d, stated_ndisp),
+            (Some(MinDisp::Calib), Some(c)) => {
+                let (d, n) = c.vmin_search().map_err(|msg| Error::Calib { path: calib.clone(), msg })?;
+                (d, n.filter(|_| args.ndisp.is_none()))
+            }
+            _ => (0, stated_ndisp),
+        };
+        Ok(Request { left, right, stated_ndisp, min_disp, camera, rectification })
     }
 }
 
@@ -250,7 +302,8 @@ fn match_with_progress(
         Progress::Planned(plan) if !quiet => {
             if plan.ndisp_measured {
                 let was = stated.map_or("no range given".to_string(), |s| format!("calib.txt says {s}"));
-                note!("ndisp {}, measured on the pair ({was}; --ndisp N sets it)", plan.ndisp);
+                let from = if plan.min_disp > 0 { format!(" from {}", plan.min_disp) } else { String::new() };
+                note!("ndisp {}{from}, measured on the pair ({was}; --ndisp N sets it)", plan.ndisp);
             }
             if plan.working_factor > 1 {
                 let f = plan.working_factor;
@@ -317,12 +370,13 @@ fn wrote_line(
     camera: Option<&jem::geometry::Camera>,
 ) -> String {
     let (ndisp, measured) = (out.plan.ndisp, out.plan.ndisp_measured);
+    let from = if out.plan.min_disp > 0 { format!(" from {}", out.plan.min_disp) } else { String::new() };
     let (w, h) = disparity.dims();
     let valid = disparity.data().iter().filter(|d| d.is_finite()).count();
     let percent = 100.0 * valid as f64 / disparity.data().len().max(1) as f64;
     let measured = if measured { " measured" } else { "" };
     let output = args.output.as_deref().unwrap_or(Path::new("?")).display();
-    let mut line = format!("wrote {output} ({w}×{h}, {percent:.0} % valid, ndisp {ndisp}{measured}, {seconds:.1} s)");
+    let mut line = format!("wrote {output} ({w}×{h}, {percent:.0} % valid, ndisp {ndisp}{from}{measured}, {seconds:.1} s)");
     if let Some(c) = &args.confidence {
         line.push_str(&format!(", confidence {}", c.display()));
     }

@@ -41,6 +41,7 @@ mod report;
 mod sequence;
 mod signals;
 mod synth;
+mod usage;
 mod viz;
 
 use std::process::ExitCode;
@@ -360,10 +361,12 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
-/// Handles what clap could not parse: `--help` and `--version` are printed as clap prints them (exit 0); an
-/// argument error is one line, `error: …`, as every other error (clap's own form adds a tip, the usage and "For
-/// more information, try '--help'." on 3 to 6 more lines), with exit code 2.
-pub fn usage_error(e: clap::Error) -> ExitCode {
+/// Handles what clap could not parse (`args`: the command line it was given): `--help` and `--version` are
+/// printed as clap prints them (exit 0); a bare `jem` gets the usage and the list of commands, a third path after
+/// the two images "did you mean -o PATH?" ([`usage`]); any other argument error is one line, `error: …`, as every
+/// other error (clap's own form adds a tip, the usage and "For more information, try '--help'." on 3 to 6 more
+/// lines). Exit code 2 for all but help and version.
+pub fn usage_error(e: clap::Error, args: &[std::ffi::OsString]) -> ExitCode {
     use clap::error::ErrorKind;
     if matches!(
         e.kind(),
@@ -372,7 +375,12 @@ pub fn usage_error(e: clap::Error) -> ExitCode {
         let _ = e.print();
         return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
     }
-    note!("{}", one_line_usage_error(&e.render().to_string()));
+    let message = match e.kind() {
+        ErrorKind::MissingRequiredArgument if usage::is_bare(args) => usage::usage(),
+        ErrorKind::MissingRequiredArgument => one_line_usage_error(&e.render().to_string()),
+        _ => usage::stray_output(args).unwrap_or_else(|| one_line_usage_error(&e.render().to_string())),
+    };
+    note!("{message}");
     ExitCode::from(2)
 }
 
