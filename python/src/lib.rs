@@ -323,7 +323,9 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 /// and colour may be mixed; they are checked against ``max_memory`` from their shapes before they are copied.
 /// ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair as ``jem`` does without a calib.txt (up
 /// to the width). ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one
-/// (measured instead, up to it, when it is half the width or more); ``ndisp`` wins. ``config``: a TOML file's
+/// (measured instead, up to it, when it is half the width or more); ``ndisp`` wins. ``min_disp``: the smallest
+/// disparity searched (OpenCV SGBM's ``minDisparity``; default 0): the range is min_disp..min_disp+ndisp-1, and the
+/// left view's first ``min_disp`` columns are ``inf``, as ``jem --min-disp``. ``config``: a TOML file's
 /// path, or a mapping in the TOML's shape (``{"meanfield": {"iterations": 5}}``; any ``Mapping``). ``overrides``:
 /// a mapping ``{"section.key": value}``, applied last, as ``--set``. ``threads``: worker threads for this call
 /// (default: one per core; at most 4 per core, at least 16, as ``--threads``); the result is the same for any
@@ -353,7 +355,8 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 #[pyo3(
     name = "match",
     signature = (left, right, ndisp=None, config=None, overrides=None, threads=None, max_memory=None,
-                 confidence=false, return_info=false, calib_ndisp=None, rectify=None, min_confidence=None)
+                 confidence=false, return_info=false, calib_ndisp=None, rectify=None, min_confidence=None,
+                 min_disp=None)
 )]
 #[allow(clippy::too_many_arguments)] // the Python signature the issue asks for
 fn match_pair<'py>(
@@ -370,8 +373,9 @@ fn match_pair<'py>(
     calib_ndisp: Option<i64>,
     rectify: Option<PathBuf>,
     min_confidence: Option<f32>,
+    min_disp: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let options = MatchOptions::new(false, rectify, min_confidence)?;
+    let options = MatchOptions::new(false, rectify, min_confidence)?.with_min_disp(min_disp)?;
     let matcher = PyMatcher::build(ndisp, calib_ndisp, config, overrides, threads, max_memory, options)?;
     matcher.run(py, left, right, confidence, return_info)
 }
