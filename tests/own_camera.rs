@@ -60,3 +60,33 @@ fn min_disp_from_calib_and_its_bounds() {
     assert!(!out.status.success() && err.contains("--min-disp") && err.trim_end().lines().count() == 1, "{err}");
     assert!(!dir.path().join("e.pfm").exists());
 }
+
+/// `--depth z.png` is the float depth rounded to whole units of the baseline (0 where there is none); depths
+/// beyond 65535 are refused with nothing written, and `--max-depth` leaves them out.
+#[test]
+fn a_depth_png_is_the_depth_in_whole_baseline_units() {
+    let dir = tempfile::tempdir().unwrap();
+    // f·B = 320 × 100 = 32000: every depth fits.
+    match_example(dir.path(), "d.pfm", &["--depth", "z.pfm"]);
+    match_example(dir.path(), "e.pfm", &["--depth", "z.png"]);
+    let z = jem::io::read_disparity(&dir.path().join("z.pfm")).unwrap();
+    let png = image::open(dir.path().join("z.png")).unwrap();
+    assert_eq!(png.color(), image::ColorType::L16);
+    let png = png.to_luma16();
+    let mut valid = 0;
+    for (&f, p) in z.data().iter().zip(png.pixels()) {
+        let expected = if f.is_finite() { f.round() as u16 } else { 0 };
+        assert_eq!(p.0[0], expected, "depth {f}");
+        valid += usize::from(expected > 0);
+    }
+    assert!(valid > z.data().len() / 2, "{valid} valid");
+    // A baseline of 10000: depths up to 3.2e6, beyond the format.
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    let far = [&l[..], &r[..], "-o", "f.pfm", "--depth", "f.png", "--baseline", "10000", "--set", "model=wta"];
+    let out = run_in(dir.path(), &far);
+    let err = stderr(&out);
+    assert!(!out.status.success() && err.contains("f.png: depth") && err.contains("65535"), "{err}");
+    assert!(!dir.path().join("f.png").exists() && !dir.path().join("f.pfm").exists());
+    match_example(dir.path(), "g.pfm", &["--depth", "g.png", "--baseline", "10000", "--max-depth", "65535"]);
+    assert!(dir.path().join("g.png").is_file());
+}

@@ -54,7 +54,9 @@ pub(super) struct MatchArgs {
     /// image's colour, valid pixels only. Needs cam0 and baseline (calib.txt beside LEFT, or the flags below).
     #[arg(long, value_name = "OUT.ply")]
     cloud: Option<PathBuf>,
-    /// Also write metric depth Z = f·B / (d + doffs) (.pfm/.exr; inf where there is none).
+    /// Also write metric depth Z = f·B / (d + doffs): .pfm/.exr as floats (inf where there is none), .png as 16 bits
+    /// in the baseline's unit rounded, 0 where there is none (RealSense/ZED: millimetres for a baseline in mm); a
+    /// depth above 65535 is refused there (--max-depth 65535 leaves such points out).
     #[arg(long, value_name = "FILE")]
     depth: Option<PathBuf>,
     /// Focal length in pixels (default: cam0 of calib.txt).
@@ -209,10 +211,8 @@ impl<'a> Request<'a> {
             return Err(Error::Input(format!("{}: the left-right mask is written as .png", m.display())));
         }
         let calib = left.parent().unwrap_or(Path::new(".")).join("calib.txt");
-        if let Some(d) = &args.depth
-            && jem::io::DisparityFormat::from_path(d)? == jem::io::DisparityFormat::Png16
-        {
-            return Err(Error::Input(format!("{}: depth is written as .pfm or .exr (floats)", d.display())));
+        if let Some(d) = &args.depth {
+            jem::io::DisparityFormat::from_path(d)?;
         }
         if let Some(c) = &args.cloud
             && !c.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
@@ -351,7 +351,7 @@ fn write_outputs(
     if let Some(camera) = &request.camera {
         if let Some(d) = &args.depth {
             let depth = jem::geometry::depth_map(disparity, camera);
-            files.push((d.as_path(), jem::io::encode_disparity(d, &depth)?));
+            files.push((d.as_path(), jem::io::encode_depth(d, &depth)?));
         }
         if let Some(c) = &args.cloud {
             files.push((c.as_path(), jem::geometry::encode_ply(disparity, left, camera)));
@@ -376,7 +376,8 @@ fn wrote_line(
     let percent = 100.0 * valid as f64 / disparity.data().len().max(1) as f64;
     let measured = if measured { " measured" } else { "" };
     let output = args.output.as_deref().unwrap_or(Path::new("?")).display();
-    let mut line = format!("wrote {output} ({w}×{h}, {percent:.0} % valid, ndisp {ndisp}{from}{measured}, {seconds:.1} s)");
+    let mut line =
+        format!("wrote {output} ({w}×{h}, {percent:.0} % valid, ndisp {ndisp}{from}{measured}, {seconds:.1} s)");
     if let Some(c) = &args.confidence {
         line.push_str(&format!(", confidence {}", c.display()));
     }

@@ -405,6 +405,19 @@ fn missing_folder(path: &Path) -> Option<Error> {
     Some(Error::Input(format!("{}: cannot write it: the folder {} {why}", path.display(), parent.display())))
 }
 
+/// A depth map encoded in the format given by `path`'s extension: `.pfm` and `.exr` as floats (as
+/// [`encode_disparity`]), `.png` as 16 bits in the baseline's unit rounded, 0 = invalid (nothing is written).
+///
+/// # Errors
+/// An unknown extension, a depth a 16-bit PNG cannot hold (above 65535, or valid but rounding to 0), or an encoder
+/// error, naming the path.
+pub fn encode_depth(path: &Path, depth: &crate::image::Plane<f32>) -> Result<Vec<u8>> {
+    match DisparityFormat::from_path(path)? {
+        DisparityFormat::Png16 => png::encode_depth_png16(path, depth),
+        _ => encode_disparity(path, depth),
+    }
+}
+
 /// Reads a disparity map from a `.pfm`, `.exr` or 16-bit `.png` (×256, 0 = invalid) file.
 ///
 /// # Errors
