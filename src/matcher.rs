@@ -365,7 +365,12 @@ impl Matcher {
         let noise = out.measured.map(|m| (m.stats.sigma(), m.stats.gain[0]));
         let held = CHECK_HELD_BYTES_PER_PX.saturating_mul(left.len() as u64);
         let budget = self.max_memory_bytes.saturating_sub(held);
-        crate::diagnose::check_pair(left, right, &self.params.cost, noise, range_share, budget)
+        let mut check = crate::diagnose::check_pair(left, right, &self.params.cost, noise, range_share, budget);
+        let given = (!out.plan.ndisp_measured).then_some([out.plan.min_disp, out.plan.ndisp]);
+        let limit = crate::setup::range::search_limit(None, left.width());
+        let measure = || crate::setup::range::find_ndisp(left, right, limit, &self.params.cost, budget).ok();
+        crate::diagnose::check_answer(&mut check, left, right, &out.disparity, given, measure);
+        check
     }
 
     /// Runs a planned pair.

@@ -18,7 +18,8 @@ fn a_bare_jem_prints_the_usage_and_the_commands() {
         let err = stderr(&out);
         assert_eq!(out.status.code(), Some(2), "{err}");
         assert!(err.starts_with("usage: jem LEFT RIGHT -o OUT"), "{err}");
-        for command in ["match", "rectify", "sequence", "batch", "eval", "report", "viz", "config", "synth", "degrade"] {
+        for command in ["match", "rectify", "sequence", "batch", "eval", "report", "viz", "config", "synth", "degrade"]
+        {
             assert!(err.contains(&format!("\n  {command} ")), "{command} missing: {err}");
         }
         assert!(!err.contains("required arguments"), "{err}");
@@ -66,4 +67,25 @@ fn jpeg_compressed_views_get_a_note() {
         let notes: Vec<&str> = err.lines().filter(|l| l.starts_with("note: the views are JPEG-compressed")).collect();
         assert_eq!(notes.len(), usize::from(name == "jpeg"), "{name}: {err}");
     }
+}
+
+/// A range the scene reaches beyond (`--ndisp 16` on the example, whose disparities reach 42) is one warning that
+/// says which range fits, the map still written; with `--strict` nothing is written. The range calib.txt states is
+/// no warning.
+#[test]
+fn a_range_that_clips_the_scene_says_which_one_fits() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l, r) = (example("im0.png"), example("im1.png"));
+    let out = run_in(dir.path(), &[&l, &r, "-o", "d.pfm", "--ndisp", "16"]);
+    let err = stderr(&out);
+    assert!(out.status.success() && dir.path().join("d.pfm").is_file(), "{err}");
+    let warnings: Vec<&str> = err.lines().filter(|l| l.starts_with("warning:")).collect();
+    assert_eq!(warnings.len(), 1, "{err}");
+    assert!(warnings[0].contains("beyond the search range 0..15") && warnings[0].contains("would fit)"), "{err}");
+    let out = run_in(dir.path(), &[&l, &r, "-o", "s.pfm", "--ndisp", "16", "--strict"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(!dir.path().join("s.pfm").exists());
+    let out = run_in(dir.path(), &[&l, &r, "-o", "c.pfm"]);
+    let err = stderr(&out);
+    assert!(out.status.success() && !err.contains("warning"), "{err}");
 }

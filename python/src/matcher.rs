@@ -302,6 +302,9 @@ fn info<'py>(py: Python<'py>, out: &Output, check: &PairCheck) -> PyResult<Bound
     checks.set_item("sharpness_ratio", check.sharpness_ratio)?;
     checks.set_item("focus_beyond", check.focus_beyond)?;
     checks.set_item("identical_share", check.identical_share)?;
+    checks.set_item("top_share", check.top_share)?;
+    checks.set_item("measured_ndisp", check.measured_ndisp)?;
+    checks.set_item("offsets_by_third", check.offsets_by_third.to_vec())?;
     info.set_item("checks", checks)?;
     info.set_item("warnings", check.warnings())?;
     Ok(info.into_any())
