@@ -38,7 +38,12 @@ fn rectify_writes_the_pair_and_its_calib_txt() {
     std::fs::write(dir.path().join("rig.yml"), pinhole_rig_yaml(64, 48, 0.25)).unwrap();
     let out = run_in(dir.path(), &["rectify", "rig.yml", "S/im0.png", "S/im1.png", "-o", "R"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert_eq!(files_in(&dir.path().join("R")), ["calib.txt", "im0.png", "im1.png"]);
+    assert_eq!(files_in(&dir.path().join("R")), ["calib.txt", "im0.png", "im1.png", "rectify.yml"]);
+    // The rectification for OpenCV: an ideal rig keeps its cameras; Q's last row is 1 / baseline.
+    let yml = std::fs::read_to_string(dir.path().join("R/rectify.yml")).unwrap();
+    assert!(yml.starts_with("%YAML:1.0\n---\nimage_width: 64\nimage_height: 48\nR1: !!opencv-matrix\n"), "{yml}");
+    assert!(yml.contains("P1: !!opencv-matrix\n   rows: 3\n   cols: 4\n   dt: d\n   data: [ 80.0, 0.0, 31.5, 0.0,"), "{yml}");
+    assert!(yml.contains("Q: !!opencv-matrix\n   rows: 4\n   cols: 4\n") && yml.contains("0.0, 0.0, 4.0, -0.0 ]"), "{yml}");
     // An ideal rig: the rectified views are the views.
     for name in ["im0.png", "im1.png"] {
         let (a, b) = (
