@@ -35,17 +35,38 @@ pub(super) fn top_share(disparity: &DisparityMap, top: usize) -> f32 {
     at_top as f32 / n.max(1) as f32
 }
 
+/// The profile correlation a third's offset needs to count. A third is measured without the whole image's test
+/// (an offset clearly better than none): a rotation puts small offsets of opposite signs in the two thirds.
+const MIN_THIRD_CORRELATION: f64 = 0.5;
+
 /// The right view's vertical offset (px) in the left and the right third of the image and in its top and bottom
-/// third (see the module doc); `None` where a third has no measurable offset.
+/// third (see the module doc); a third whose offset cannot be measured is estimated from the middle third's
+/// ([`or_from_middle`]), and `None` when that cannot be measured either.
 pub(super) fn offsets_by_third(left: &Plane<f32>, right: &Plane<f32>, disparity: &DisparityMap) -> [Option<f32>; 4] {
     let (w, h) = left.dims();
     let (third_w, third_h) = (w / 3, h / 3);
+    let test = super::OffsetTest::Correlation(MIN_THIRD_CORRELATION);
     let columns = |x0: usize| {
         let shift = median_disparity(disparity, x0..x0 + third_w).min(x0);
-        super::vertical_offset(&columns_of(left, x0, third_w), &columns_of(right, x0 - shift, third_w))
+        let (l, r) = (columns_of(left, x0, third_w), columns_of(right, x0 - shift, third_w));
+        super::vertical_offset_within(&l, &r, 0..h, test)
     };
-    let rows = |y0: usize| super::vertical_offset_within(left, right, y0..y0 + third_h);
-    [columns(0), columns(w - third_w), rows(0), rows(h - third_h)]
+    let rows = |y0: usize| super::vertical_offset_within(left, right, y0..y0 + third_h, test);
+    let [l, r] = or_from_middle(columns(0), columns(w - third_w), || columns(third_w));
+    let [t, b] = or_from_middle(rows(0), rows(h - third_h), || rows(third_h));
+    [l, r, t, b]
+}
+
+/// The offsets of two outer thirds, one that was not measured estimated from the other and the middle third's
+/// (measured only then): the offset changes linearly across the image under a rotation or a scale.
+fn or_from_middle(a: Option<f32>, b: Option<f32>, middle: impl FnOnce() -> Option<f32>) -> [Option<f32>; 2] {
+    match (a, b) {
+        (Some(_), Some(_)) | (None, None) => [a, b],
+        _ => {
+            let m = middle();
+            [a.or_else(|| Some(2.0 * m? - b?)), b.or_else(|| Some(2.0 * m? - a?))]
+        }
+    }
 }
 
 /// The columns `x0..x0 + width` of a plane.

@@ -175,7 +175,10 @@ impl PairCheck {
     /// The warnings for a vertical offset that changes across the image (rotation) or down it (scale).
     fn rotation_warnings(&self) -> Vec<String> {
         let spread = |a: Option<f32>, b: Option<f32>| Some(b? - a?).filter(|s| s.abs() > answer::MAX_OFFSET_SPREAD_PX);
+        // A third not measured: its offset from the whole image's, which is that of the middle.
+        let other = |x: Option<f32>, y: Option<f32>| x.or_else(|| Some(2.0 * self.vertical_px? - y?));
         let [l, r, t, b] = self.offsets_by_third;
+        let (l, r, t, b) = (other(l, r), other(r, l), other(t, b), other(b, t));
         let [across, down] = self.thirds_apart_px;
         let mut out = Vec::new();
         if let Some(s) = spread(l, r) {
@@ -275,7 +278,7 @@ pub fn check_pair(
 /// Adds to `check` what the answer tells of the pair ([`answer`]): `given_range` ([smallest disparity, number])
 /// when the range was given rather than measured, and `measure` to measure the range on the pair, called only when
 /// the answers pile up at the top of the given one.
-pub(crate) fn check_answer(
+pub fn check_answer(
     check: &mut PairCheck,
     left: &RgbImage,
     right: &RgbImage,
@@ -313,12 +316,26 @@ fn row_profile(grey: &Plane<f32>) -> Vec<f64> {
 /// The vertical shift (px, sub-pixel) of the right view's row profile against the left's, within ±⅛ of the height;
 /// `None` when its correlation does not beat no shift's by [`PROFILE_MARGIN`] or the image is too small.
 fn vertical_offset(left: &Plane<f32>, right: &Plane<f32>) -> Option<f32> {
-    vertical_offset_within(left, right, 0..left.height())
+    vertical_offset_within(left, right, 0..left.height(), OffsetTest::BeatsNoShift)
+}
+
+/// When a measured vertical offset counts.
+#[derive(Clone, Copy, PartialEq)]
+enum OffsetTest {
+    /// Its correlation beats no shift's by [`PROFILE_MARGIN`] (or it is 0): an offset is there at all.
+    BeatsNoShift,
+    /// Its correlation is at least this: the profiles match well enough to say where (an offset may be small).
+    Correlation(f64),
 }
 
 /// [`vertical_offset`] of the left view's rows `rows` (the right view's rows they are compared with may lie
-/// outside them).
-fn vertical_offset_within(left: &Plane<f32>, right: &Plane<f32>, rows: std::ops::Range<usize>) -> Option<f32> {
+/// outside them), counted as `test` says.
+fn vertical_offset_within(
+    left: &Plane<f32>,
+    right: &Plane<f32>,
+    rows: std::ops::Range<usize>,
+    test: OffsetTest,
+) -> Option<f32> {
     let h = left.height();
     let reach = (h / 8) as i64;
     if reach < 2 {
@@ -340,7 +357,11 @@ fn vertical_offset_within(left: &Plane<f32>, right: &Plane<f32>, rows: std::ops:
     };
     let scores: Vec<(i64, f64)> = (-reach..=reach).map(|dy| (dy, ncc(dy))).collect();
     let &(best, score) = scores.iter().max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.abs().cmp(&a.0.abs())))?;
-    if !(score - ncc(0) >= PROFILE_MARGIN || best == 0) || !score.is_finite() {
+    let counts = match test {
+        OffsetTest::BeatsNoShift => score - ncc(0) >= PROFILE_MARGIN || best == 0,
+        OffsetTest::Correlation(min) => score >= min,
+    };
+    if !counts || !score.is_finite() {
         return None;
     }
     // A parabola through the peak and its neighbours.
