@@ -35,6 +35,7 @@ def match(
     calib_ndisp: Optional[int] = None,
     rectify: Optional[_Path] = None,
     min_confidence: Optional[float] = None,
+    min_disp: Optional[int] = None,
 ) -> _Map: ...
 @overload
 def match(
@@ -51,6 +52,7 @@ def match(
     calib_ndisp: Optional[int] = None,
     rectify: Optional[_Path] = None,
     min_confidence: Optional[float] = None,
+    min_disp: Optional[int] = None,
 ) -> Tuple[_Map, _Map]: ...
 @overload
 def match(
@@ -67,6 +69,7 @@ def match(
     calib_ndisp: Optional[int] = None,
     rectify: Optional[_Path] = None,
     min_confidence: Optional[float] = None,
+    min_disp: Optional[int] = None,
 ) -> Tuple[_Map, dict[str, Any]]: ...
 @overload
 def match(
@@ -83,6 +86,7 @@ def match(
     calib_ndisp: Optional[int] = None,
     rectify: Optional[_Path] = None,
     min_confidence: Optional[float] = None,
+    min_disp: Optional[int] = None,
 ) -> Tuple[_Map, _Map, dict[str, Any]]:
     """The left view's disparity map of a rectified pair: float32 H×W, ``inf`` where invalid, exactly the map
     ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings.
@@ -97,7 +101,8 @@ def match(
     ``return_info=True`` also a dict (ndisp, ndisp_measured, tiled, noise, timings, seconds, memory_planned,
     peak_rss). ``rectify``: a stereo calibration (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt); the raw
     views are rectified first, as ``jem match --rectify``, and the map is of the rectified left view.
-    ``min_confidence``: pixels whose confidence is below it are ``inf``. The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
+    ``min_confidence``: pixels whose confidence is below it are ``inf``. ``min_disp``: the smallest disparity
+    searched (SGBM's ``minDisparity``): min_disp..min_disp+ndisp-1, the first ``min_disp`` columns ``inf``. The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
 
     Raises ValueError (shape, dtype, range, config, threads), MemoryError (fits neither whole nor in tiles, or
     cannot be allocated), OSError.
@@ -165,6 +170,7 @@ class Matcher:
         calib_ndisp: Optional[int] = None,
         rectify: Optional[_Path] = None,
         min_confidence: Optional[float] = None,
+        min_disp: Optional[int] = None,
     ) -> None: ...
     def match(
         self, left: _Image, right: _Image, confidence: bool = False, return_info: bool = False

@@ -122,10 +122,15 @@ pub(crate) fn reuse_storage(mut storage: Vec<f32>, len: usize) -> Vec<f32> {
 
 /// The columns `x0..` of every row of a row-major buffer `width` values wide.
 fn columns_from<T: Copy>(data: &[T], width: usize, x0: usize) -> Vec<T> {
-    assert!(x0 <= width, "column {x0} is beyond the width {width}");
-    let mut out = Vec::with_capacity(data.len() / width.max(1) * (width - x0));
+    columns(data, width, x0..width)
+}
+
+/// The columns `range` of a row-major `width`-wide buffer.
+fn columns<T: Copy>(data: &[T], width: usize, range: std::ops::Range<usize>) -> Vec<T> {
+    assert!(range.start <= range.end && range.end <= width, "columns {range:?} are beyond the width {width}");
+    let mut out = Vec::with_capacity(data.len() / width.max(1) * range.len());
     for row in data.chunks_exact(width.max(1)) {
-        out.extend_from_slice(&row[x0..]);
+        out.extend_from_slice(&row[range.clone()]);
     }
     out
 }
@@ -229,6 +234,15 @@ impl RgbImage {
     pub fn columns_from(&self, x0: usize) -> RgbImage {
         let channels = self.channels.each_ref().map(|c| columns_from(c, self.width, x0));
         RgbImage { width: self.width - x0, height: self.height, channels }
+    }
+
+    /// The columns `..x1` of the image.
+    ///
+    /// # Panics
+    /// If `x1` is beyond the width.
+    pub(crate) fn columns_to(&self, x1: usize) -> RgbImage {
+        let channels = self.channels.each_ref().map(|c| columns(c, self.width, 0..x1));
+        RgbImage { width: x1, height: self.height, channels }
     }
 
     /// The image mirrored left-right. Matching the right view against the left is the left-view problem on

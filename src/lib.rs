@@ -61,6 +61,7 @@ pub mod io;
 mod lattice;
 mod matcher;
 mod meanfield;
+mod min_disp;
 pub mod params;
 mod pipeline;
 mod post;

@@ -7,9 +7,10 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
-    let args = match cli::Cli::try_parse_from(cli::global_flags_after_subcommand(std::env::args_os().collect())) {
+    let raw = cli::global_flags_after_subcommand(std::env::args_os().collect());
+    let args = match cli::Cli::try_parse_from(&raw) {
         Ok(args) => args,
-        Err(e) => return cli::usage_error(e),
+        Err(e) => return cli::usage_error(e, &raw),
     };
     match cli::run(args) {
         Ok(code) => code,

@@ -3,6 +3,7 @@
 //! limit from the headers, before decoding). Every front end (`jem`, `jem batch`, the Python module) matches
 //! through it.
 
+use std::borrow::Cow;
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
@@ -37,13 +38,17 @@ pub struct Matcher {
     temporal: Option<crate::temporal::State>,
     /// Whether each match computes its confidence map (`with_confidence`).
     confidence: bool,
+    /// The smallest disparity searched (`with_min_disp`).
+    min_disp: usize,
 }
 
 /// How a match was set up: its range, whether it went in tiles, the memory it planned for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RunPlan {
-    /// The disparity search range: disparities 0..ndisp−1.
+    /// The number of disparities searched: `min_disp..min_disp + ndisp − 1`.
     pub ndisp: usize,
+    /// The smallest disparity searched ([`Matcher::with_min_disp`]; 0 by default).
+    pub min_disp: usize,
     /// Whether the range was measured on the pair (none given, or the stated one no real bound).
     pub ndisp_measured: bool,
     /// `Some` when the pair did not fit the memory limit in one piece and ran in tiles.
@@ -141,6 +146,7 @@ impl Matcher {
             budget: None,
             temporal: None,
             confidence: true,
+            min_disp: 0,
         })
     }
 
@@ -148,6 +154,22 @@ impl Matcher {
     pub fn with_ndisp(mut self, ndisp: NdispSource) -> Matcher {
         self.ndisp = ndisp;
         self
+    }
+
+    /// Searches the disparities `min_disp..min_disp + ndisp − 1` instead of `0..ndisp − 1` (OpenCV SGBM's
+    /// `minDisparity`; for a scene that starts far from infinity, say a close-range rig): the left view's first
+    /// `min_disp` columns, which match nothing at such disparities, come out invalid; the range source
+    /// ([`Matcher::with_ndisp`]) gives the number of disparities, and a measured range is measured from `min_disp`
+    /// up. 0 (the default) is the ordinary search. A pair narrower than `min_disp + 2` pixels is refused when
+    /// matched. How: `src/min_disp.rs`.
+    pub fn with_min_disp(mut self, min_disp: usize) -> Matcher {
+        self.min_disp = min_disp;
+        self
+    }
+
+    /// The smallest disparity searched.
+    pub fn min_disp(&self) -> usize {
+        self.min_disp
     }
 
     /// The memory limit in bytes: a pair whose run would need more runs in tiles, and one that fits neither way is
@@ -229,8 +251,21 @@ impl Matcher {
         right: &RgbImage,
         on_progress: &dyn Fn(Progress<'_>),
     ) -> Result<Output> {
-        let plan = setup::plan_match(left, right, self.source(), &self.params, self.max_memory_bytes)?;
+        let (left, right) = self.cut(left, right)?;
+        let plan = setup::plan_match(&left, &right, self.source(), &self.params, self.max_memory_bytes)?;
         self.run(&plan, on_progress)
+    }
+
+    /// The pair as the pipeline matches it: as it is, or cut for a search from `min_disp` (`src/min_disp.rs`).
+    fn cut<'p>(&self, left: &'p RgbImage, right: &'p RgbImage) -> Result<(Cow<'p, RgbImage>, Cow<'p, RgbImage>)> {
+        if self.min_disp == 0 {
+            return Ok((Cow::Borrowed(left), Cow::Borrowed(right)));
+        }
+        if left.dims() != right.dims() {
+            return Err(crate::error::Error::SizeMismatch { left: left.dims(), right: right.dims() });
+        }
+        let (l, r) = crate::min_disp::cut_pair(left, right, self.min_disp)?;
+        Ok((Cow::Owned(l), Cow::Owned(r)))
     }
 
     /// The range source of the next pair: a remembered sequence holds its first frame's range.
@@ -262,6 +297,7 @@ impl Matcher {
                 "the images are {w}x{h}; a stereo pair must be at least 2 pixels wide"
             )));
         }
+        crate::min_disp::check(w, self.min_disp)?;
         let header = crate::io::ImageHeader { width: w, height: h, load_bytes: input_bytes };
         setup::check_before_decode(&header, self.ndisp, &self.params, self.max_memory_bytes).map(|_| ())
     }
@@ -272,7 +308,8 @@ impl Matcher {
     /// # Errors
     /// As [`Matcher::match_pair`], for the range.
     pub fn search_range(&self, left: &RgbImage, right: &RgbImage) -> Result<(usize, bool)> {
-        let plan = setup::plan_match(left, right, self.ndisp, &self.params, self.max_memory_bytes)?;
+        let (left, right) = self.cut(left, right)?;
+        let plan = setup::plan_match(&left, &right, self.ndisp, &self.params, self.max_memory_bytes)?;
         Ok((plan.pair.ndisp, plan.ndisp_measured))
     }
 
@@ -303,6 +340,7 @@ impl Matcher {
         let mut held = budget.as_deref().map(|b| wait_for(b, need, on_progress));
         on_progress(Progress::Stage("loading"));
         let (l, r) = crate::io::png::load_rgb_pair_within(left, right, self.max_memory_bytes)?;
+        let (l, r) = self.cut(&l, &r)?;
         let plan = setup::plan_match(&l, &r, self.source(), &self.params, self.max_memory_bytes)?;
         if let Some(budget) = budget.as_deref() {
             let (w, h) = l.dims();
@@ -326,11 +364,16 @@ impl Matcher {
     /// past it.
     pub fn check_pair(&self, left: &RgbImage, right: &RgbImage, out: &Output) -> crate::PairCheck {
         let width = left.width().max(1) as f32;
-        let range_share = out.plan.ndisp_measured.then(|| out.plan.ndisp as f32 / width);
+        let range_share = out.plan.ndisp_measured.then(|| (out.plan.min_disp + out.plan.ndisp) as f32 / width);
         let noise = out.measured.map(|m| (m.stats.sigma(), m.stats.gain[0]));
         let held = CHECK_HELD_BYTES_PER_PX.saturating_mul(left.len() as u64);
         let budget = self.max_memory_bytes.saturating_sub(held);
-        crate::diagnose::check_pair(left, right, &self.params.cost, noise, range_share, budget)
+        let mut check = crate::diagnose::check_pair(left, right, &self.params.cost, noise, range_share, budget);
+        let given = (!out.plan.ndisp_measured).then_some([out.plan.min_disp, out.plan.ndisp]);
+        let limit = crate::setup::range::search_limit(None, left.width());
+        let measure = || crate::setup::range::find_ndisp(left, right, limit, &self.params.cost, budget).ok();
+        crate::diagnose::check_answer(&mut check, left, right, &out.disparity, given, measure);
+        check
     }
 
     /// Runs a planned pair.
@@ -340,6 +383,7 @@ impl Matcher {
         let params = plan.params(&self.params).into_owned();
         let run_plan = RunPlan {
             ndisp: plan.pair.ndisp,
+            min_disp: self.min_disp,
             ndisp_measured: plan.ndisp_measured,
             tiles: match plan.strategy {
                 Strategy::Whole => None,
@@ -374,6 +418,10 @@ impl Matcher {
         };
         let seconds = start.elapsed().as_secs_f64();
         let PipelineOutput { disparity, confidence, consistent, timings, measured, .. } = out;
+        let (disparity, confidence, consistent) = match self.min_disp {
+            0 => (disparity, confidence, consistent),
+            d => crate::min_disp::widen_output(&disparity, confidence.as_ref(), &consistent, d),
+        };
         Ok(Output { disparity, confidence, consistent, timings, measured, plan: run_plan, seconds, frame, exposure })
     }
 }

@@ -323,7 +323,9 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 /// and colour may be mixed; they are checked against ``max_memory`` from their shapes before they are copied.
 /// ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair as ``jem`` does without a calib.txt (up
 /// to the width). ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one
-/// (measured instead, up to it, when it is half the width or more); ``ndisp`` wins. ``config``: a TOML file's
+/// (measured instead, up to it, when it is half the width or more); ``ndisp`` wins. ``min_disp``: the smallest
+/// disparity searched (OpenCV SGBM's ``minDisparity``; default 0): the range is min_disp..min_disp+ndisp-1, and the
+/// left view's first ``min_disp`` columns are ``inf``, as ``jem --min-disp``. ``config``: a TOML file's
 /// path, or a mapping in the TOML's shape (``{"meanfield": {"iterations": 5}}``; any ``Mapping``). ``overrides``:
 /// a mapping ``{"section.key": value}``, applied last, as ``--set``. ``threads``: worker threads for this call
 /// (default: one per core; at most 4 per core, at least 16, as ``--threads``); the result is the same for any
@@ -339,7 +341,8 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 /// (σ of each view, or None with ``condition.enabled = false``), ``timings`` (seconds per stage), ``seconds``
 /// (the run, as jem batch counts it), ``memory_planned`` and ``peak_rss`` (bytes; the whole process's peak),
 /// ``checks`` (the numbers of the pair's checks: ``negative_share``, ``vertical_px``, ``vertical_limit_px``,
-/// ``range_share``, ``textured_share``, ``clipped``, ``sharpness_ratio``, ``focus_beyond``, ``identical_share``)
+/// ``range_share``, ``textured_share``, ``clipped``, ``sharpness_ratio``, ``focus_beyond``, ``identical_share``,
+/// ``top_share``, ``measured_ndisp``, ``offsets_by_third``)
 /// and ``warnings`` (the lines ``jem`` prints for a pair that looks wrong, each also a UserWarning).
 ///
 /// The GIL is released while matching, so pairs can run in Python threads. Ctrl-C (KeyboardInterrupt) is
@@ -353,7 +356,8 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 #[pyo3(
     name = "match",
     signature = (left, right, ndisp=None, config=None, overrides=None, threads=None, max_memory=None,
-                 confidence=false, return_info=false, calib_ndisp=None, rectify=None, min_confidence=None)
+                 confidence=false, return_info=false, calib_ndisp=None, rectify=None, min_confidence=None,
+                 min_disp=None)
 )]
 #[allow(clippy::too_many_arguments)] // the Python signature the issue asks for
 fn match_pair<'py>(
@@ -370,8 +374,9 @@ fn match_pair<'py>(
     calib_ndisp: Option<i64>,
     rectify: Option<PathBuf>,
     min_confidence: Option<f32>,
+    min_disp: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let options = MatchOptions::new(false, rectify, min_confidence)?;
+    let options = MatchOptions::new(false, rectify, min_confidence)?.with_min_disp(min_disp)?;
     let matcher = PyMatcher::build(ndisp, calib_ndisp, config, overrides, threads, max_memory, options)?;
     matcher.run(py, left, right, confidence, return_info)
 }

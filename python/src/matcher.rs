@@ -17,8 +17,8 @@ use super::{ImageArray, check_memory, guarded, load_params, positive, to_numpy, 
 /// averaged and its answers settle; a moving camera's previous answer, moved by the camera's shift, is the prior;
 /// a scene cut is detected and forgets the past). ``reset()`` starts a new sequence.
 ///
-/// The arguments are those of ``jem.match``: ``ndisp``, ``calib_ndisp``, ``config``, ``overrides``, ``threads``,
-/// ``max_memory``; with ``temporal=True`` the range of the first frame is held for the sequence.
+/// The arguments are those of ``jem.match``: ``ndisp``, ``calib_ndisp``, ``min_disp``, ``config``, ``overrides``,
+/// ``threads``, ``max_memory``; with ``temporal=True`` the range of the first frame is held for the sequence.
 /// ``match(left, right, confidence=False, return_info=False)`` returns what ``jem.match`` returns (the info dict
 /// also has ``frame``: how the frame was matched, e.g. ``"still"``, ``"moving"``, ``"cut"``).
 ///
@@ -46,10 +46,13 @@ pub(crate) struct MatchOptions {
     /// The stereo calibration, and its rectification for the last size seen.
     calibration: Option<(StereoCalibration, Option<Rectification>)>,
     min_confidence: Option<f32>,
+    /// The smallest disparity searched (``min_disp``).
+    min_disp: usize,
 }
 
 impl MatchOptions {
-    /// From the ``temporal``, ``rectify`` and ``min_confidence`` arguments, checked.
+    /// From the ``temporal``, ``rectify`` and ``min_confidence`` arguments, checked (``min_disp``: 0 until
+    /// [`MatchOptions::with_min_disp`]).
     pub(crate) fn new(temporal: bool, rectify: Option<PathBuf>, min_confidence: Option<f32>) -> PyResult<MatchOptions> {
         if let Some(c) = min_confidence
             && !(0.0..=1.0).contains(&c)
@@ -60,7 +63,15 @@ impl MatchOptions {
             Some(path) => Some((StereoCalibration::load(&path).map_err(|e| to_py(&e))?, None)),
             None => None,
         };
-        Ok(MatchOptions { temporal, calibration, min_confidence })
+        Ok(MatchOptions { temporal, calibration, min_confidence, min_disp: 0 })
+    }
+
+    /// With the ``min_disp`` argument: a disparity of 0 or more (``None``: 0).
+    pub(crate) fn with_min_disp(mut self, min_disp: Option<i64>) -> PyResult<MatchOptions> {
+        let d = min_disp.unwrap_or(0);
+        let d = usize::try_from(d).map_err(|_| to_py(&Error::param("min_disp", d, "a disparity of 0 or more")))?;
+        self.min_disp = d;
+        Ok(self)
     }
 
     /// The rectification for views of `size`, computed once per size.
@@ -108,6 +119,7 @@ impl PyMatcher {
         let limit = positive("max_memory", max_memory)?.unwrap_or_else(jem::default_memory_limit);
         let matcher = jem::Matcher::new(params.clone()).map_err(|e| to_py(&e))?;
         let matcher = matcher.with_ndisp(source).with_max_memory(limit).with_temporal(options.temporal);
+        let matcher = matcher.with_min_disp(options.min_disp);
         Ok(PyMatcher { state: Mutex::new(State { matcher, params, threads, options }) })
     }
 
@@ -170,7 +182,7 @@ impl State {
 impl PyMatcher {
     #[new]
     #[pyo3(signature = (ndisp=None, config=None, overrides=None, threads=None, max_memory=None, temporal=false,
-                        calib_ndisp=None, rectify=None, min_confidence=None))]
+                        calib_ndisp=None, rectify=None, min_confidence=None, min_disp=None))]
     #[allow(clippy::too_many_arguments)] // the Python signature, as jem.match's
     fn new(
         ndisp: Option<i64>,
@@ -182,8 +194,9 @@ impl PyMatcher {
         calib_ndisp: Option<i64>,
         rectify: Option<PathBuf>,
         min_confidence: Option<f32>,
+        min_disp: Option<i64>,
     ) -> PyResult<PyMatcher> {
-        let options = MatchOptions::new(temporal, rectify, min_confidence)?;
+        let options = MatchOptions::new(temporal, rectify, min_confidence)?.with_min_disp(min_disp)?;
         PyMatcher::build(ndisp, calib_ndisp, config, overrides, threads, max_memory, options)
     }
 
@@ -290,6 +303,9 @@ fn info<'py>(py: Python<'py>, out: &Output, check: &PairCheck) -> PyResult<Bound
     checks.set_item("sharpness_ratio", check.sharpness_ratio)?;
     checks.set_item("focus_beyond", check.focus_beyond)?;
     checks.set_item("identical_share", check.identical_share)?;
+    checks.set_item("top_share", check.top_share)?;
+    checks.set_item("measured_ndisp", check.measured_ndisp)?;
+    checks.set_item("offsets_by_third", check.offsets_by_third.to_vec())?;
     info.set_item("checks", checks)?;
     info.set_item("warnings", check.warnings())?;
     Ok(info.into_any())

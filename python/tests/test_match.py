@@ -143,3 +143,12 @@ def test_min_confidence_matches_the_cli(tmp_path, cli, synth_pair):
     assert 0 < np.isinf(disp).sum() < disp.size
     with pytest.raises(ValueError, match="min_confidence"):
         jem.match(*synth_pair, ndisp=48, min_confidence=2.0)
+
+
+def test_min_disp_matches_the_cli(tmp_path, cli, synth_pair):
+    cli(SYNTH / "im0.png", SYNTH / "im1.png", "-o", tmp_path / "cli.pfm", "--ndisp", "40", "--min-disp", "8")
+    disp = jem.match(*synth_pair, ndisp=40, min_disp=8)
+    assert pfm_bytes(tmp_path, disp) == (tmp_path / "cli.pfm").read_bytes()
+    assert np.isinf(disp[:, :8]).all() and np.nanmin(np.where(np.isinf(disp), np.nan, disp)) >= 7.5
+    with pytest.raises(ValueError, match="min_disp"):
+        jem.match(*synth_pair, ndisp=40, min_disp=-1)

@@ -29,6 +29,12 @@ pub(super) struct MatchArgs {
     /// Disparity search range 0..N−1 (default: `ndisp` from calib.txt beside LEFT).
     #[arg(long, value_name = "N")]
     ndisp: Option<usize>,
+    /// Search the disparities D..D+N−1 instead of 0..N−1 (OpenCV SGBM's minDisparity), for a scene that is nowhere
+    /// near infinity; the left view's first D columns, which match nothing there, are written invalid. `calib`:
+    /// D is vmin of calib.txt beside LEFT rounded down, and N its ndisp − D (the top of its range kept); vmin is
+    /// read only when asked (MiddEval3 states it for display and bars algorithms from using it).
+    #[arg(long, value_name = "D|calib")]
+    min_disp: Option<MinDisp>,
     /// Rectify the raw pair first with this stereo calibration, as `jem rectify` does (OpenCV FileStorage YAML/XML
     /// or KITTI calib_cam_to_cam.txt): the outputs are then of the rectified left view, the camera for --depth and
     /// --cloud is the rectified one, and calib.txt beside LEFT is not read.
@@ -48,7 +54,9 @@ pub(super) struct MatchArgs {
     /// image's colour, valid pixels only. Needs cam0 and baseline (calib.txt beside LEFT, or the flags below).
     #[arg(long, value_name = "OUT.ply")]
     cloud: Option<PathBuf>,
-    /// Also write metric depth Z = f·B / (d + doffs) (.pfm/.exr; inf where there is none).
+    /// Also write metric depth Z = f·B / (d + doffs): .pfm/.exr as floats (inf where there is none), .png as 16 bits
+    /// in the baseline's unit rounded, 0 where there is none (RealSense/ZED: millimetres for a baseline in mm); a
+    /// depth above 65535 is refused there (--max-depth 65535 leaves such points out).
     #[arg(long, value_name = "FILE")]
     depth: Option<PathBuf>,
     /// Focal length in pixels (default: cam0 of calib.txt).
@@ -86,6 +94,25 @@ pub(super) struct MatchArgs {
     memory: MemoryArg,
 }
 
+/// `--min-disp`: a number of pixels, or `calib` (from calib.txt's vmin).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum MinDisp {
+    /// This many pixels.
+    Px(usize),
+    /// vmin of calib.txt beside LEFT ([`jem::io::calib::Calib::vmin_search`]).
+    Calib,
+}
+
+impl std::str::FromStr for MinDisp {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "calib" => Ok(MinDisp::Calib),
+            _ => s.parse().map(MinDisp::Px).map_err(|_| format!("{s:?} is neither a disparity of 0 or more nor calib")),
+        }
+    }
+}
+
 /// Matches one pair.
 pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let request = Request::check(args)?;
@@ -93,6 +120,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let start = Instant::now();
     let mut matcher = Matcher::new(params.clone())?
         .with_ndisp(NdispSource::resolve(args.ndisp, request.stated_ndisp))
+        .with_min_disp(request.min_disp)
         .with_max_memory(args.memory.memory_limit())
         .with_confidence(args.confidence.is_some() || args.min_confidence.is_some());
     let header = jem::io::read_pair_header(request.left, request.right)?;
@@ -110,6 +138,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let check = matcher.check_pair(&l, &r, &out);
     let mut warnings = check.warnings();
     if let (Some(rect), Some(calib)) = (&request.rectification, &args.rectify) {
+        warnings = warnings.into_iter().map(|w| after_rectify(w, calib)).collect();
         warnings.extend(rect.warnings().into_iter().map(|w| format!("{}: {w}", calib.display())));
     }
     if args.strict && !warnings.is_empty() {
@@ -121,6 +150,9 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     write_outputs(args, &request, &out, disparity, &l)?;
     for warning in warnings.iter().filter(|_| !global.quiet) {
         note!("warning: {warning}");
+    }
+    if let Some(jpeg) = out.measured.as_ref().and_then(jem::Measured::jpeg_note).filter(|_| !global.quiet) {
+        note!("note: {jpeg}");
     }
     if global.verbose && !global.quiet {
         note!("{:<14} {:>9.1} ms", "load", load_time.as_secs_f64() * 1e3);
@@ -150,6 +182,8 @@ struct Request<'a> {
     right: &'a Path,
     /// The range `calib.txt` beside LEFT states, when no `--ndisp` is given.
     stated_ndisp: Option<usize>,
+    /// The smallest disparity searched (`--min-disp`).
+    min_disp: usize,
     /// For `--depth` and `--cloud`.
     camera: Option<jem::geometry::Camera>,
     /// With `--rectify`: how the pair is rectified before matching.
@@ -178,10 +212,8 @@ impl<'a> Request<'a> {
             return Err(Error::Input(format!("{}: the left-right mask is written as .png", m.display())));
         }
         let calib = left.parent().unwrap_or(Path::new(".")).join("calib.txt");
-        if let Some(d) = &args.depth
-            && jem::io::DisparityFormat::from_path(d)? == jem::io::DisparityFormat::Png16
-        {
-            return Err(Error::Input(format!("{}: depth is written as .pfm or .exr (floats)", d.display())));
+        if let Some(d) = &args.depth {
+            jem::io::DisparityFormat::from_path(d)?;
         }
         if let Some(c) = &args.cloud
             && !c.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
@@ -191,6 +223,15 @@ impl<'a> Request<'a> {
         // calib.txt, read once when something needs it (the range, or the camera); with --rectify, the rectified
         // pair's (it states no range).
         let wants_camera = args.cloud.is_some() || args.depth.is_some();
+        let from_vmin = args.min_disp == Some(MinDisp::Calib);
+        if from_vmin && args.rectify.is_some() {
+            return Err(Error::Input(
+                "--min-disp calib reads calib.txt beside LEFT, which --rectify replaces; give --min-disp D".into(),
+            ));
+        }
+        if from_vmin && !calib.is_file() {
+            return Err(Error::Input(format!("--min-disp calib: there is no {}", calib.display())));
+        }
         let rectification = match &args.rectify {
             Some(c) => Some(super::rectify::plan(c, left, right, args.memory.memory_limit())?),
             None => None,
@@ -200,7 +241,9 @@ impl<'a> Request<'a> {
                 calib::Calib::parse(&rect.calib_txt())
                     .map_err(|msg| Error::Calib { path: args.rectify.clone().unwrap_or_default(), msg })?,
             ),
-            None if (args.ndisp.is_none() || wants_camera) && calib.is_file() => Some(calib::Calib::load(&calib)?),
+            None if (args.ndisp.is_none() || wants_camera || from_vmin) && calib.is_file() => {
+                Some(calib::Calib::load(&calib)?)
+            }
             None => None,
         };
         let camera = if wants_camera {
@@ -225,6 +268,7 @@ impl<'a> Request<'a> {
             .collect();
         let rectify_calib = args.rectify.as_deref().unwrap_or(&calib);
         jem::io::check_outputs(&[left, right, &calib, rectify_calib], &outputs)?;
+        jem::io::check_output_folders(&outputs)?;
         // The range: --ndisp, else calib.txt's (measured instead when it is missing, the file states none, as
         // `jem rectify` writes it, or it is no real bound: half the width or more).
         let stated_ndisp = match &calib_file {
@@ -233,7 +277,16 @@ impl<'a> Request<'a> {
             }
             _ => None,
         };
-        Ok(Request { left, right, stated_ndisp, camera, rectification })
+        // --min-disp calib: the smallest disparity from vmin, the range's top kept at calib.txt's ndisp − 1.
+        let (min_disp, stated_ndisp) = match (args.min_disp, &calib_file) {
+            (Some(MinDisp::Px(d)), _) => (d, stated_ndisp),
+            (Some(MinDisp::Calib), Some(c)) => {
+                let (d, n) = c.vmin_search().map_err(|msg| Error::Calib { path: calib.clone(), msg })?;
+                (d, n.filter(|_| args.ndisp.is_none()))
+            }
+            _ => (0, stated_ndisp),
+        };
+        Ok(Request { left, right, stated_ndisp, min_disp, camera, rectification })
     }
 }
 
@@ -250,7 +303,8 @@ fn match_with_progress(
         Progress::Planned(plan) if !quiet => {
             if plan.ndisp_measured {
                 let was = stated.map_or("no range given".to_string(), |s| format!("calib.txt says {s}"));
-                note!("ndisp {}, measured on the pair ({was}; --ndisp N sets it)", plan.ndisp);
+                let from = if plan.min_disp > 0 { format!(" from {}", plan.min_disp) } else { String::new() };
+                note!("ndisp {}{from}, measured on the pair ({was}; --ndisp N sets it)", plan.ndisp);
             }
             if plan.working_factor > 1 {
                 let f = plan.working_factor;
@@ -298,7 +352,7 @@ fn write_outputs(
     if let Some(camera) = &request.camera {
         if let Some(d) = &args.depth {
             let depth = jem::geometry::depth_map(disparity, camera);
-            files.push((d.as_path(), jem::io::encode_disparity(d, &depth)?));
+            files.push((d.as_path(), jem::io::encode_depth(d, &depth)?));
         }
         if let Some(c) = &args.cloud {
             files.push((c.as_path(), jem::geometry::encode_ply(disparity, left, camera)));
@@ -317,12 +371,14 @@ fn wrote_line(
     camera: Option<&jem::geometry::Camera>,
 ) -> String {
     let (ndisp, measured) = (out.plan.ndisp, out.plan.ndisp_measured);
+    let from = if out.plan.min_disp > 0 { format!(" from {}", out.plan.min_disp) } else { String::new() };
     let (w, h) = disparity.dims();
     let valid = disparity.data().iter().filter(|d| d.is_finite()).count();
     let percent = 100.0 * valid as f64 / disparity.data().len().max(1) as f64;
     let measured = if measured { " measured" } else { "" };
     let output = args.output.as_deref().unwrap_or(Path::new("?")).display();
-    let mut line = format!("wrote {output} ({w}×{h}, {percent:.0} % valid, ndisp {ndisp}{measured}, {seconds:.1} s)");
+    let mut line =
+        format!("wrote {output} ({w}×{h}, {percent:.0} % valid, ndisp {ndisp}{from}{measured}, {seconds:.1} s)");
     if let Some(c) = &args.confidence {
         line.push_str(&format!(", confidence {}", c.display()));
     }
@@ -354,4 +410,37 @@ fn stage_spinner(quiet: bool) -> Option<indicatif::ProgressBar> {
     let bar = indicatif::ProgressBar::new_spinner();
     bar.enable_steady_tick(std::time::Duration::from_millis(100));
     Some(bar)
+}
+
+/// A pair check's warning about a pair that is not rectified, for a pair rectified with `calib` (`--rectify`): the
+/// advice to rectify it would be given to one who did; the calibration, or the order of the views, is in doubt.
+fn after_rectify(warning: String, calib: &Path) -> String {
+    let advice =
+        format!("after --rectify {}: is it this rig's calibration, and LEFT the left camera's view?", calib.display());
+    warning
+        .replace(
+            "the pair is not rectified (rectify it with --rectify CALIB)",
+            &format!("the pair is not rectified {advice}"),
+        )
+        .replace("(the pair is not rectified)", &format!("(the pair is not rectified {advice})"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// With --rectify given, a warning that the pair is not rectified does not tell to rectify it; other warnings
+    /// are as they were.
+    #[test]
+    fn a_pair_rectified_with_a_calibration_is_not_told_to_rectify_it() {
+        let calib = Path::new("stereo.yml");
+        let vertical = "the right view is 6.0 px lower: the pair is not rectified (rectify it with --rectify CALIB)";
+        let said = after_rectify(vertical.to_string(), calib);
+        let advice = "after --rectify stereo.yml: is it this rig's calibration, and LEFT the left camera's view?";
+        assert_eq!(said, format!("the right view is 6.0 px lower: the pair is not rectified {advice}"));
+        let rotated = after_rectify("rotated by about 1.0° (the pair is not rectified)".to_string(), calib);
+        assert_eq!(rotated, format!("rotated by about 1.0° (the pair is not rectified {advice})"));
+        let other = "the views look swapped: 90 % of the reliable matches are at negative disparity".to_string();
+        assert_eq!(after_rectify(other.clone(), calib), other);
+    }
 }

@@ -41,6 +41,7 @@ mod report;
 mod sequence;
 mod signals;
 mod synth;
+mod usage;
 mod viz;
 
 use std::process::ExitCode;
@@ -167,6 +168,8 @@ fn parse_size(text: &str) -> std::result::Result<u64, String> {
 }
 
 #[derive(Subcommand, Debug)]
+// Parsed once per run: the size of its largest variant (a match's arguments) costs nothing.
+#[allow(clippy::large_enum_variant)]
 enum Command {
     /// Match one pair (the same as `jem LEFT RIGHT -o OUT`).
     Match(MatchArgs),
@@ -174,8 +177,9 @@ enum Command {
     ///
     /// `jem rectify CALIB LEFT RIGHT -o DIR` writes DIR/im0.png, DIR/im1.png (the rectified views, 8-bit) and
     /// DIR/calib.txt (Middlebury keys cam0, cam1, doffs, baseline, width, height; the baseline in the calibration's
-    /// unit), ready for `jem DIR/im0.png DIR/im1.png -o disp.pfm --depth depth.pfm`. `jem match --rectify CALIB`
-    /// does the same before matching.
+    /// unit), ready for `jem DIR/im0.png DIR/im1.png -o disp.pfm --depth depth.pfm`, and DIR/rectify.yml (R1, R2,
+    /// P1, P2, Q and the size, as cv2.FileStorage writes cv2.stereoRectify's results: for
+    /// cv2.reprojectImageTo3D). `jem match --rectify CALIB` does the same before matching.
     /// CALIB: OpenCV FileStorage YAML or XML as cv2.FileStorage writes it (K1 or M1, D1 with 4, 5 or 8
     /// coefficients, K2/M2, D2, R, T; image_width/image_height or a size node; R1, R2, P1, P2 are used when
     /// present), or KITTI's calib_cam_to_cam.txt (cameras 02 and 03; images of KITTI's rectified size S_rect_02 are
@@ -363,10 +367,12 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
-/// Handles what clap could not parse: `--help` and `--version` are printed as clap prints them (exit 0); an
-/// argument error is one line, `error: …`, as every other error (clap's own form adds a tip, the usage and "For
-/// more information, try '--help'." on 3 to 6 more lines), with exit code 2.
-pub fn usage_error(e: clap::Error) -> ExitCode {
+/// Handles what clap could not parse (`args`: the command line it was given): `--help` and `--version` are
+/// printed as clap prints them (exit 0); a bare `jem` gets the usage and the list of commands, a third path after
+/// the two images "did you mean -o PATH?" ([`usage`]); any other argument error is one line, `error: …`, as every
+/// other error (clap's own form adds a tip, the usage and "For more information, try '--help'." on 3 to 6 more
+/// lines). Exit code 2 for all but help and version.
+pub fn usage_error(e: clap::Error, args: &[std::ffi::OsString]) -> ExitCode {
     use clap::error::ErrorKind;
     if matches!(
         e.kind(),
@@ -375,7 +381,12 @@ pub fn usage_error(e: clap::Error) -> ExitCode {
         let _ = e.print();
         return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
     }
-    note!("{}", one_line_usage_error(&e.render().to_string()));
+    let message = match e.kind() {
+        ErrorKind::MissingRequiredArgument if usage::is_bare(args) => usage::usage(),
+        ErrorKind::MissingRequiredArgument => one_line_usage_error(&e.render().to_string()),
+        _ => usage::stray_output(args).unwrap_or_else(|| one_line_usage_error(&e.render().to_string())),
+    };
+    note!("{message}");
     ExitCode::from(2)
 }
 

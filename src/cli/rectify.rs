@@ -21,7 +21,8 @@ pub(super) struct RectifyArgs {
     left: PathBuf,
     /// The right camera's image, the same size.
     right: PathBuf,
-    /// Output folder (created if missing; one that holds a scene already is refused): im0.png, im1.png, calib.txt.
+    /// Output folder (created if missing; one that holds a scene already is refused): im0.png, im1.png, calib.txt,
+    /// rectify.yml.
     #[arg(long, short, value_name = "DIR")]
     output: PathBuf,
     /// Also write the maps (for each rectified pixel, where in the original image it comes from) as
@@ -63,7 +64,7 @@ pub(super) fn warn(rectification: &Rectification, calib: &Path, quiet: bool) {
 
 /// Rectifies one pair.
 pub(super) fn run(args: &RectifyArgs, global: &GlobalArgs) -> Result<ExitCode> {
-    let names = ["im0.png", "im1.png", "calib.txt"];
+    let names = ["im0.png", "im1.png", "calib.txt", "rectify.yml"];
     let mut outputs: Vec<PathBuf> = names.iter().map(|n| args.output.join(n)).collect();
     if args.maps {
         outputs.extend(["map0x.pfm", "map0y.pfm", "map1x.pfm", "map1y.pfm"].map(|n| args.output.join(n)));
@@ -87,6 +88,7 @@ pub(super) fn run(args: &RectifyArgs, global: &GlobalArgs) -> Result<ExitCode> {
         jem::io::encode_png(&outputs[0], &left)?,
         jem::io::encode_png(&outputs[1], &right)?,
         rectification.calib_txt().into_bytes(),
+        rectification.rectify_yml().into_bytes(),
     ];
     if args.maps {
         for view in [View::Left, View::Right] {

@@ -105,6 +105,14 @@ impl SequenceReport {
         mean_finite(self.frames.iter().filter_map(|f| f.change.map(|c| c.change_err)))
     }
 
+    /// The mean number of static and of moving pixels per frame-to-frame change (`None`: no change was scored).
+    pub fn mean_pixels(&self) -> [Option<f64>; 2] {
+        let changes: Vec<Change> = self.frames.iter().filter_map(|f| f.change).collect();
+        let n = changes.len() as f64;
+        let mean = |count: fn(&Change) -> u64| (n > 0.0).then(|| changes.iter().map(count).sum::<u64>() as f64 / n);
+        [mean(|c| c.static_pixels), mean(|c| c.moving_pixels)]
+    }
+
     /// The mean run time over the frames with one.
     pub fn mean_seconds(&self) -> Option<f64> {
         mean_finite(self.frames.iter().filter_map(|f| f.seconds))
@@ -271,7 +279,6 @@ fn read_times(path: &Path) -> Vec<(String, f64)> {
 /// Prints a report: a table per frame with the means (text or Markdown), JSON or CSV (see `jem eval --help`).
 pub fn render_sequence(report: &SequenceReport, format: super::Format) -> String {
     let cols = ["avgerr", "bad2", "invalid"];
-    let change = |f: &FrameScore| f.change.map(|c| (c.flicker, c.change_err));
     match format {
         super::Format::Json => {
             let frames: Vec<String> = report
@@ -347,8 +354,12 @@ pub fn render_sequence(report: &SequenceReport, format: super::Format) -> String
         }
         super::Format::Table | super::Format::Markdown => {
             let mut rows = vec![
-                ["frame", "avgErr", "bad2", "invalid", "flicker", "change err", "time s"].map(String::from).to_vec(),
+                ["frame", "avgErr", "bad2", "invalid", "flicker", "static px", "change err", "moving px", "time s"]
+                    .map(String::from)
+                    .to_vec(),
             ];
+            // A figure over no pixels (NaN) reads "-", as in the mean row.
+            let shown = |v: Option<f64>| fixed(v.filter(|v| v.is_finite()));
             for f in &report.frames {
                 let mut row = vec![f.stem.clone()];
                 match &f.metrics {
@@ -360,24 +371,32 @@ pub fn render_sequence(report: &SequenceReport, format: super::Format) -> String
                         continue;
                     }
                 }
-                let c = change(f);
-                row.push(fixed(c.map(|c| c.0)));
-                row.push(fixed(c.map(|c| c.1)));
+                let count = |n: Option<u64>| n.map_or("-".to_string(), |n| n.to_string());
+                row.push(shown(f.change.map(|c| c.flicker)));
+                row.push(count(f.change.map(|c| c.static_pixels)));
+                row.push(shown(f.change.map(|c| c.change_err)));
+                row.push(count(f.change.map(|c| c.moving_pixels)));
                 row.push(fixed(f.seconds));
                 rows.push(row);
             }
             let mean = report.mean();
             let mut last = vec!["mean".to_string()];
             last.extend(cols.iter().map(|k| fixed(mean.map(|m| m.get(k)))));
-            last.extend([fixed(report.flicker()), fixed(report.change_err()), fixed(report.mean_seconds())]);
+            let [static_px, moving_px] = report.mean_pixels().map(|n| n.map_or("-".to_string(), |n| format!("{n:.0}")));
+            last.extend([shown(report.flicker()), static_px, shown(report.change_err()), moving_px]);
+            last.push(fixed(report.mean_seconds()));
             rows.push(last);
-            let table = Table { rows, right_aligned: vec![false, true, true, true, true, true, true] };
+            let mut right_aligned = vec![true; rows[0].len()];
+            right_aligned[0] = false;
+            let table = Table { rows, right_aligned };
             let body = if format == super::Format::Markdown { table.markdown() } else { table.text() };
             let units =
                 if report.scale == 1 { "px".to_string() } else { format!("full-resolution px (×{})", report.scale) };
             format!(
-                "{} against {} ({}, errors in {units}; flicker: mean |d_t − d_t−1| where the truth did not move; change \
-                 err: mean |Δd − Δg| where it did)\n{body}",
+                "{} against {} ({}, errors in {units}; flicker: mean |d_t − d_t−1| over the static px, where the truth \
+                 moved less than {STATIC_CHANGE_PX} px of its own resolution; change err: mean |Δd − Δg| over the \
+                 moving px, where it moved more; both over pixels valid in both frames, - where there are none; the \
+                 mean row: the means over the frames)\n{body}",
                 report.results.display(),
                 report.sequence.display(),
                 report.mask.name()
@@ -459,6 +478,17 @@ mod tests {
         assert_eq!(report.mean_seconds(), Some(2.0));
         let text = render_sequence(&report, crate::eval::Format::Table);
         assert!(text.contains("errors in full-resolution px (×2)") && text.lines().last().unwrap().starts_with("mean"));
+        // The table names the threshold and the pixels each figure covers; a figure over no pixels reads "-" per
+        // frame as in the mean row (frame 1 has no moving pixel).
+        assert!(text.contains("moved less than 0.5 px") && text.contains("static px") && text.contains("moving px"));
+        let cells = |stem: &str| -> Vec<String> {
+            let line = text.lines().find(|l| l.starts_with(stem)).unwrap();
+            line.split_whitespace().map(String::from).collect()
+        };
+        assert_eq!(cells("000001")[4..8], ["2.00", "8", "-", "0"], "{text}");
+        assert_eq!(cells("000002")[4..8], ["2.00", "4", "2.00", "4"], "{text}");
+        assert_eq!(cells("mean")[4..8], ["2.00", "6", "2.00", "2"], "{text}");
+        assert!(!text.contains("nan"), "{text}");
         let json = render_sequence(&report, crate::eval::Format::Json);
         assert!(json.contains("\"flicker\": 2, \"change_err\": 2") && json.contains("\"scale\": 2"), "{json}");
         // A missing result is listed, and the changes into and out of it are not scored.

@@ -77,6 +77,29 @@ impl Calib {
         }
     }
 
+    /// The search `jem --min-disp calib` takes from the file: the smallest disparity, `vmin` rounded down, and,
+    /// when the file states `ndisp` (the range 0..ndisp−1), the number of disparities that keeps its top:
+    /// `ndisp − min_disp` (`None`: no ndisp, the range is measured from `min_disp` up).
+    ///
+    /// Safe as a lower bound: MiddEval3's `vmin` lies below every true disparity of its scenes (by 1–5 px on
+    /// trainingQ), and the top stays the file's conservative `ndisp`, so the range only narrows from below. Only on
+    /// request: MiddEval3 states `vmin` for colour maps and bars algorithms from using it, so a benchmark run (and
+    /// every default) ignores it.
+    ///
+    /// # Errors
+    /// A message when `vmin` is missing, not a number of 0 or more, or not below `ndisp`.
+    pub fn vmin_search(&self) -> std::result::Result<(usize, Option<usize>), String> {
+        let raw = self.get("vmin").ok_or("states no vmin (--min-disp calib takes the smallest disparity from it)")?;
+        let vmin = raw.parse::<f64>().ok().filter(|v| v.is_finite() && *v >= 0.0 && *v < 1e9);
+        let vmin = vmin.ok_or_else(|| format!("vmin = {:?} is not a disparity of 0 or more", truncate(raw)))?;
+        let min_disp = vmin.floor() as usize;
+        match self.stated_ndisp()? {
+            Some(n) if min_disp >= n => Err(format!("vmin = {raw} is not below ndisp = {n}: no range is left")),
+            Some(n) => Ok((min_disp, Some(n - min_disp))),
+            None => Ok((min_disp, None)),
+        }
+    }
+
     /// A finite float value of `key`, if present and parseable.
     pub fn float(&self, key: &str) -> Option<f32> {
         self.get(key).and_then(|v| v.parse::<f32>().ok()).filter(|v| v.is_finite())
@@ -110,6 +133,24 @@ mod tests {
         assert_eq!(c.float("vmin"), Some(13.0));
         assert_eq!(c.float("baseline"), Some(178.089));
         assert_eq!(c.get("cam0"), Some("[1746.24 0 14.88; 0 1746.24 65.5; 0 0 1]"));
+    }
+
+    /// `--min-disp calib`: vmin rounded down, the top of the range kept at ndisp − 1.
+    #[test]
+    fn the_search_from_vmin_keeps_the_top_of_the_range() {
+        assert_eq!(Calib::parse(TEDDY).unwrap().vmin_search(), Ok((13, Some(51))));
+        assert_eq!(Calib::parse("vmin=7.9\nndisp=70").unwrap().vmin_search(), Ok((7, Some(63))));
+        assert_eq!(Calib::parse("vmin=0\nwidth=3").unwrap().vmin_search(), Ok((0, None)));
+        for (bad, why) in [
+            ("ndisp=64", "states no vmin"),
+            ("vmin=-2\nndisp=64", "not a disparity"),
+            ("vmin=nan\nndisp=64", "not a disparity"),
+            ("vmin=64\nndisp=64", "not below ndisp"),
+            ("vmin=3\nndisp=x", "not a positive integer"),
+        ] {
+            let e = Calib::parse(bad).unwrap().vmin_search().unwrap_err();
+            assert!(e.contains(why), "{bad}: {e}");
+        }
     }
 
     #[test]

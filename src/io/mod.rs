@@ -386,6 +386,38 @@ pub fn check_outputs(inputs: &[&Path], outputs: &[&Path]) -> Result<()> {
     Ok(())
 }
 
+/// Checks, before any work, that each output's folder exists (jem makes no folder for a file it is told to write;
+/// the commands that write into a folder of their own make it).
+///
+/// # Errors
+/// [`Error::Input`] naming the output and the folder that is missing, or the file in its place.
+pub fn check_output_folders(outputs: &[&Path]) -> Result<()> {
+    outputs.iter().find_map(|out| missing_folder(out)).map_or(Ok(()), Err)
+}
+
+/// The error for an output whose folder is missing or is not a folder (`None` when it is there).
+fn missing_folder(path: &Path) -> Option<Error> {
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty())?;
+    if parent.is_dir() {
+        return None;
+    }
+    let why = if parent.exists() { "is not a folder" } else { "does not exist (make it first)" };
+    Some(Error::Input(format!("{}: cannot write it: the folder {} {why}", path.display(), parent.display())))
+}
+
+/// A depth map encoded in the format given by `path`'s extension: `.pfm` and `.exr` as floats (as
+/// [`encode_disparity`]), `.png` as 16 bits in the baseline's unit rounded, 0 = invalid (nothing is written).
+///
+/// # Errors
+/// An unknown extension, a depth a 16-bit PNG cannot hold (above 65535, or valid but rounding to 0), or an encoder
+/// error, naming the path.
+pub fn encode_depth(path: &Path, depth: &crate::image::Plane<f32>) -> Result<Vec<u8>> {
+    match DisparityFormat::from_path(path)? {
+        DisparityFormat::Png16 => png::encode_depth_png16(path, depth),
+        _ => encode_disparity(path, depth),
+    }
+}
+
 /// Reads a disparity map from a `.pfm`, `.exr` or 16-bit `.png` (×256, 0 = invalid) file.
 ///
 /// # Errors
@@ -551,7 +583,7 @@ fn stage(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> R
     // Registered before it exists: a signal removes it (after a signal, this waits until the process ends).
     crate::cleanup::hold().add_file(&tmp, None);
     let written = (|| {
-        let mut file = std::fs::File::create(&tmp).map_err(|e| Error::io(path, e))?;
+        let mut file = std::fs::File::create(&tmp).map_err(|e| missing_folder(path).unwrap_or(Error::io(path, e)))?;
         write(&mut file)?;
         file.sync_all().map_err(|e| Error::io(path, e))
     })();
@@ -795,5 +827,21 @@ mod tests {
         let r = write_atomic_with(&p, |_| Err(Error::Input("boom".into())));
         assert!(r.is_err());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    }
+
+    /// An output into a folder that is not there names that folder, before any work and when written.
+    #[test]
+    fn an_output_in_a_missing_folder_names_the_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("nodir").join("disp.pfm");
+        let expected = format!("the folder {} does not exist", dir.path().join("nodir").display());
+        let early = check_output_folders(&[&dir.path().join("fine.pfm"), &out]).unwrap_err().to_string();
+        assert!(early.contains(&expected), "{early}");
+        let late = write_atomic(&out, b"x").unwrap_err().to_string();
+        assert!(late.contains(&expected), "{late}");
+        std::fs::write(dir.path().join("file"), b"").unwrap();
+        let under_a_file = check_output_folders(&[&dir.path().join("file").join("d.pfm")]).unwrap_err().to_string();
+        assert!(under_a_file.contains("is not a folder"), "{under_a_file}");
+        assert!(check_output_folders(&[Path::new("d.pfm"), &dir.path().join("d.pfm")]).is_ok());
     }
 }

@@ -283,17 +283,45 @@ pub(crate) fn encode_disparity_png16(path: &Path, map: &DisparityMap) -> Result<
             PNG16_MAX_DISPARITY
         )));
     }
+    let value = |d: f32| if d.is_finite() && d >= 0.0 { (d * 256.0).round().clamp(1.0, 65535.0) as u16 } else { 0 };
+    encode_grey16_png(path, map, value)
+}
+
+/// `map` as a 16-bit grey PNG, each value `value(v)`.
+fn encode_grey16_png(path: &Path, map: &Plane<f32>, value: impl Fn(f32) -> u16) -> Result<Vec<u8>> {
     // The encoder takes 16-bit samples in native byte order (it writes them big-endian itself).
-    let mut samples = Vec::with_capacity(map.data.len() * 2);
-    for &d in &map.data {
-        let v: u16 = if d.is_finite() && d >= 0.0 { (d * 256.0).round().clamp(1.0, 65535.0) as u16 } else { 0 };
-        samples.extend_from_slice(&v.to_ne_bytes());
-    }
+    let samples: Vec<u8> = map.data.iter().flat_map(|&v| value(v).to_ne_bytes()).collect();
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new(&mut bytes)
         .write_image(&samples, map.width as u32, map.height as u32, image::ExtendedColorType::L16)
         .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
     Ok(bytes)
+}
+
+/// A depth map encoded as a 16-bit grey PNG, the depth in the baseline's unit rounded to a whole unit, 0 = invalid
+/// (the RealSense and ZED convention: millimetres for a baseline in millimetres). `inf`, NaN and depths of 0 or
+/// less are invalid.
+///
+/// # Errors
+/// [`Error::Input`] naming the path, nothing written, when a depth rounds above 65535 (the format cannot hold it;
+/// the message says how far the depths go) or a valid depth rounds to 0 (it would read as invalid: the unit is too
+/// coarse); [`Error::Image`] naming the path.
+pub(crate) fn encode_depth_png16(path: &Path, depth: &Plane<f32>) -> Result<Vec<u8>> {
+    let valid = || depth.data.iter().copied().filter(|z| z.is_finite() && *z > 0.0);
+    let refuse = |why: String| Err(Error::Input(format!("{}: {why}", path.display())));
+    if let Some(max) = valid().reduce(f32::max).filter(|&z| z.round() > 65535.0) {
+        return refuse(format!(
+            "depth {max:.0} (the baseline's unit) does not fit a 16-bit PNG (at most 65535): leave the farther \
+             points out (--max-depth 65535), give the baseline in a larger unit, or write .pfm or .exr"
+        ));
+    }
+    if let Some(min) = valid().reduce(f32::min).filter(|&z| z.round() < 1.0) {
+        return refuse(format!(
+            "depth {min} (the baseline's unit) rounds to 0, which a depth PNG reads as invalid: give the baseline in \
+             a smaller unit (millimetres), or write .pfm or .exr"
+        ));
+    }
+    encode_grey16_png(path, depth, |z| if z.is_finite() && z > 0.0 { z.round() as u16 } else { 0 })
 }
 
 /// Reads a 16-bit disparity PNG (value / 256, 0 = invalid → inf).
@@ -332,6 +360,24 @@ pub(crate) fn load_grey8(path: &Path) -> Result<Plane<u8>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A depth PNG holds the depth rounded to a whole unit, 0 where there is none; a depth above 65535 or one that
+    /// would round to 0 is refused, naming the file.
+    #[test]
+    fn a_depth_png_holds_whole_units_and_refuses_what_it_cannot() {
+        let (inf, nan) = (f32::INFINITY, f32::NAN);
+        let depth = Plane::from_parts(3, 2, vec![1.0, 1234.4, 65535.4, inf, nan, -3.0]);
+        let bytes = encode_depth_png16(Path::new("z.png"), &depth).unwrap();
+        let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).unwrap();
+        assert_eq!(img.color(), image::ColorType::L16);
+        assert_eq!(img.to_luma16().into_raw(), [1, 1234, 65535, 0, 0, 0]);
+        let too_far = Plane::from_parts(2, 1, vec![100.0, 65535.6]);
+        let e = encode_depth_png16(Path::new("far.png"), &too_far).unwrap_err().to_string();
+        assert!(e.starts_with("far.png: depth 65536") && e.contains("--max-depth 65535"), "{e}");
+        let too_near = Plane::from_parts(2, 1, vec![0.4, 3.0]);
+        let e = encode_depth_png16(Path::new("near.png"), &too_near).unwrap_err().to_string();
+        assert!(e.starts_with("near.png: depth 0.4") && e.contains("rounds to 0"), "{e}");
+    }
 
     #[test]
     fn loads_all_pixel_layouts_to_the_same_rgb() {

@@ -112,6 +112,27 @@ impl std::fmt::Display for Measured {
     }
 }
 
+/// The JPEG compression error σ (grey levels, either view) from which a match says so without `-v`
+/// ([`Measured::jpeg_note`]). The measurement reads 0 on uncompressed views and on JPEG above quality 92 or so,
+/// whose steps it cannot tell from texture; at quality 90 it reads 1.6–3.1 on trainingQ, and there the weighted
+/// avgErr is 1.37× the uncompressed views' (docs/RESULTS.md, robustness): every compression it sees matters.
+const JPEG_NOTE_SIGMA: f32 = 1.0;
+
+impl Measured {
+    /// One line when the views were measured as JPEG-compressed with an error σ of 1 grey level or more
+    /// (`None` otherwise; see `JPEG_NOTE_SIGMA`): compression costs accuracy that no setting gives back.
+    pub fn jpeg_note(&self) -> Option<String> {
+        let [l, r] = self.stats.jpeg;
+        (l.max(r) >= JPEG_NOTE_SIGMA).then(|| {
+            format!(
+                "the views are JPEG-compressed (compression error σ {l:.1} / {r:.1} grey levels, left / right): at \
+                 quality 90 the error on MiddEval3 is 1.37× that of the same views saved losslessly; give PNG views \
+                 where the camera can write them"
+            )
+        })
+    }
+}
+
 /// The right view's residual vertical offset as measured (`crate::condition::vertical::estimate`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VerticalMeasured {

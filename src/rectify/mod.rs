@@ -23,6 +23,7 @@ mod formats;
 mod linalg;
 mod maps;
 mod stereo;
+mod yml;
 
 use std::path::{Path, PathBuf};
 

@@ -4,7 +4,7 @@
 use super::linalg::{inverse, mul, mul_vec, rotation_from_vector};
 use super::*;
 
-fn rig() -> StereoCalibration {
+pub(super) fn rig() -> StereoCalibration {
     StereoCalibration {
         path: PathBuf::from("rig.yml"),
         cameras: [

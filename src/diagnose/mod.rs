@@ -18,6 +18,8 @@
 //! - **The same image twice**: nearly every pixel equal in both views (the same file given twice, say): a
 //!   disparity of 0 everywhere, "100 % valid", says nothing about the scene.
 
+mod answer;
+
 use crate::image::{Plane, RgbImage};
 use crate::imgproc::filter::{central_differences, gaussian_blur_plane};
 use crate::params::{CostParams, VerticalParams};
@@ -71,6 +73,17 @@ pub struct PairCheck {
     pub focus_beyond: bool,
     /// The share of pixels whose colour is the same in both views, within half a grey level.
     pub identical_share: f32,
+    /// A given range (not measured): its smallest disparity and its number of disparities.
+    pub given_range: Option<[usize; 2]>,
+    /// With a given range: the share of the valid answers within 4 px of its top ([`answer`]).
+    pub top_share: Option<f32>,
+    /// The range measured on the pair (0..N−1) when the answers pile up at the top of a given range.
+    pub measured_ndisp: Option<usize>,
+    /// The right view's vertical offset in the image's left and right third, then in its top and bottom third
+    /// (px; `None` where not measured), and how far apart the thirds' centres are across and down (px).
+    pub offsets_by_third: [Option<f32>; 4],
+    /// How far apart the centres of the left and right thirds, and of the top and bottom ones, are (px).
+    pub thirds_apart_px: [f32; 2],
 }
 
 impl PairCheck {
@@ -113,6 +126,8 @@ impl PairCheck {
                 100.0 * r
             ));
         }
+        out.extend(self.range_warning());
+        out.extend(self.rotation_warnings());
         if self.textured_share < MIN_TEXTURED_SHARE {
             out.push(format!(
                 "almost no texture: {:.1} % of the pixels stand above the noise; the disparities are guesses \
@@ -140,6 +155,54 @@ impl PairCheck {
     }
 }
 
+impl PairCheck {
+    /// The warning for a given range the scene reaches beyond: the answers pile up at its top and the pair
+    /// measures a larger one.
+    fn range_warning(&self) -> Option<String> {
+        let ([d0, n], share) = (self.given_range?, self.top_share?);
+        let beyond = |m: usize| m >= d0 + n + answer::MEASURE_MARGIN_PX;
+        let fits = self.measured_ndisp.filter(|&m| share > answer::MAX_TOP_SHARE && beyond(m))?;
+        let flag = if d0 > 0 { format!("--min-disp {d0} --ndisp {}", fits - d0) } else { format!("--ndisp {fits}") };
+        Some(format!(
+            "the scene reaches beyond the search range {d0}..{}: {:.0} % of the answers are within 4 px of its top, \
+             and the pair measures a range of 0..{} ({flag} would fit)",
+            d0 + n - 1,
+            100.0 * share,
+            fits - 1
+        ))
+    }
+
+    /// The warnings for a vertical offset that changes across the image (rotation) or down it (scale).
+    fn rotation_warnings(&self) -> Vec<String> {
+        let spread = |a: Option<f32>, b: Option<f32>| Some(b? - a?).filter(|s| s.abs() > answer::MAX_OFFSET_SPREAD_PX);
+        // A third not measured: its offset from the whole image's, which is that of the middle.
+        let other = |x: Option<f32>, y: Option<f32>| x.or_else(|| Some(2.0 * self.vertical_px? - y?));
+        let [l, r, t, b] = self.offsets_by_third;
+        let (l, r, t, b) = (other(l, r), other(r, l), other(t, b), other(b, t));
+        let [across, down] = self.thirds_apart_px;
+        let mut out = Vec::new();
+        if let Some(s) = spread(l, r) {
+            out.push(format!(
+                "the vertical offset between the views goes from {:+.1} px at the left to {:+.1} px at the right: the \
+                 right view is rotated by about {:.1}° against the left (the pair is not rectified)",
+                l.unwrap_or(0.0),
+                r.unwrap_or(0.0),
+                (s / across.max(1.0)).atan().to_degrees()
+            ));
+        }
+        if let Some(s) = spread(t, b) {
+            out.push(format!(
+                "the vertical offset between the views goes from {:+.1} px at the top to {:+.1} px at the bottom: the \
+                 right view is scaled by about {:+.1} % against the left (the pair is not rectified)",
+                t.unwrap_or(0.0),
+                b.unwrap_or(0.0),
+                100.0 * s / down.max(1.0)
+            ));
+        }
+        out
+    }
+}
+
 impl std::fmt::Display for PairCheck {
     /// One line of the numbers (what `jem -v` prints).
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -148,7 +211,8 @@ impl std::fmt::Display for PairCheck {
         write!(
             f,
             "checked: negative-disparity share {}, vertical offset {} (alignment up to {} px), range {} of the width, \
-             textured {:.1} %, clipped {:.1} / {:.1} %, sharpness ratio {:.2}, identical {:.1} %",
+             textured {:.1} %, clipped {:.1} / {:.1} %, sharpness ratio {:.2}, identical {:.1} %, at the range's top \
+             {}, measured range {}, vertical offset by third (left right top bottom) {}",
             opt(self.negative_share, 100.0, " %"),
             opt(self.vertical_px, 1.0, " px"),
             self.vertical_limit_px,
@@ -157,7 +221,10 @@ impl std::fmt::Display for PairCheck {
             100.0 * self.clipped[0],
             100.0 * self.clipped[1],
             self.sharpness_ratio,
-            100.0 * self.identical_share
+            100.0 * self.identical_share,
+            opt(self.top_share, 100.0, " %"),
+            self.measured_ndisp.map_or("-".to_string(), |n| n.to_string()),
+            self.offsets_by_third.map(|v| opt(v, 1.0, "")).join(" ")
         )
     }
 }
@@ -200,7 +267,31 @@ pub fn check_pair(
         sharpness_ratio,
         focus_beyond,
         identical_share: identical_share(left, right),
+        given_range: None,
+        top_share: None,
+        measured_ndisp: None,
+        offsets_by_third: [None; 4],
+        thirds_apart_px: [2.0 * (w / 3) as f32, 2.0 * (h / 3) as f32],
     }
+}
+
+/// Adds to `check` what the answer tells of the pair ([`answer`]): `given_range` ([smallest disparity, number])
+/// when the range was given rather than measured, and `measure` to measure the range on the pair, called only when
+/// the answers pile up at the top of the given one.
+pub fn check_answer(
+    check: &mut PairCheck,
+    left: &RgbImage,
+    right: &RgbImage,
+    disparity: &crate::image::DisparityMap,
+    given_range: Option<[usize; 2]>,
+    measure: impl FnOnce() -> Option<usize>,
+) {
+    check.given_range = given_range;
+    check.top_share = given_range.map(|[d0, n]| answer::top_share(disparity, d0 + n - 1));
+    if check.top_share.is_some_and(|s| s > answer::MAX_TOP_SHARE) {
+        check.measured_ndisp = measure();
+    }
+    check.offsets_by_third = answer::offsets_by_third(&left.to_grey(), &right.to_grey(), disparity);
 }
 
 /// The share of pixels whose three channels differ by at most half a grey level between the views.
@@ -225,6 +316,26 @@ fn row_profile(grey: &Plane<f32>) -> Vec<f64> {
 /// The vertical shift (px, sub-pixel) of the right view's row profile against the left's, within ±⅛ of the height;
 /// `None` when its correlation does not beat no shift's by [`PROFILE_MARGIN`] or the image is too small.
 fn vertical_offset(left: &Plane<f32>, right: &Plane<f32>) -> Option<f32> {
+    vertical_offset_within(left, right, 0..left.height(), OffsetTest::BeatsNoShift)
+}
+
+/// When a measured vertical offset counts.
+#[derive(Clone, Copy, PartialEq)]
+enum OffsetTest {
+    /// Its correlation beats no shift's by [`PROFILE_MARGIN`] (or it is 0): an offset is there at all.
+    BeatsNoShift,
+    /// Its correlation is at least this: the profiles match well enough to say where (an offset may be small).
+    Correlation(f64),
+}
+
+/// [`vertical_offset`] of the left view's rows `rows` (the right view's rows they are compared with may lie
+/// outside them), counted as `test` says.
+fn vertical_offset_within(
+    left: &Plane<f32>,
+    right: &Plane<f32>,
+    rows: std::ops::Range<usize>,
+    test: OffsetTest,
+) -> Option<f32> {
     let h = left.height();
     let reach = (h / 8) as i64;
     if reach < 2 {
@@ -232,7 +343,7 @@ fn vertical_offset(left: &Plane<f32>, right: &Plane<f32>) -> Option<f32> {
     }
     let (pl, pr) = (row_profile(left), row_profile(right));
     let ncc = |dy: i64| -> f64 {
-        let pairs = (0..h as i64).filter_map(|y| {
+        let pairs = (rows.start as i64..rows.end as i64).filter_map(|y| {
             let yr = y + dy;
             (yr >= 0 && yr < h as i64).then(|| (pl[y as usize], pr[yr as usize]))
         });
@@ -246,7 +357,11 @@ fn vertical_offset(left: &Plane<f32>, right: &Plane<f32>) -> Option<f32> {
     };
     let scores: Vec<(i64, f64)> = (-reach..=reach).map(|dy| (dy, ncc(dy))).collect();
     let &(best, score) = scores.iter().max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.abs().cmp(&a.0.abs())))?;
-    if !(score - ncc(0) >= PROFILE_MARGIN || best == 0) || !score.is_finite() {
+    let counts = match test {
+        OffsetTest::BeatsNoShift => score - ncc(0) >= PROFILE_MARGIN || best == 0,
+        OffsetTest::Correlation(min) => score >= min,
+    };
+    if !counts || !score.is_finite() {
         return None;
     }
     // A parabola through the peak and its neighbours.
@@ -358,6 +473,68 @@ mod tests {
             warnings.iter().any(|w| w.contains(" px lower than the left") && w.contains("--rectify")),
             "{warnings:?}"
         );
+    }
+
+    /// The image resampled at `(x, y) → at(x, y)` (bilinear, clamped at the borders).
+    fn warped(img: &RgbImage, at: impl Fn(f64, f64) -> (f64, f64)) -> RgbImage {
+        let (w, h) = img.dims();
+        let channel = |c: usize| {
+            let src = img.channel(c);
+            let sample = |i: usize| {
+                let (x, y) = at((i % w) as f64, (i / w) as f64);
+                crate::imgproc::sample::sample_bilinear(src, w, h, x, y) as f32
+            };
+            (0..w * h).map(sample).collect()
+        };
+        RgbImage::from_channels(w, h, [0, 1, 2].map(channel)).unwrap()
+    }
+
+    /// The checks of a scene's pair with its true disparities as the answer and `given` as the range.
+    fn checked_with_answer(right: impl Fn(&RgbImage) -> RgbImage, given: Option<[usize; 2]>, fits: usize) -> PairCheck {
+        let s = crate::synth::render_scene(&SynthParams { width: 240, height: 180, ndisp: 32, seed: 5 }).unwrap();
+        let right = right(&s.right);
+        let mut c = check(&s.left, &right);
+        check_answer(&mut c, &s.left, &right, &s.gt, given, || Some(fits));
+        c
+    }
+
+    /// A right view rotated by 1.5° or scaled by 3 % is said to be, with about its angle and scale; the pair as
+    /// rendered is not (the vertical offset is the same in every third).
+    #[test]
+    fn a_rotated_or_scaled_right_view_is_said_to_be() {
+        let (cx, cy) = (119.5, 89.5);
+        let (sin, cos) = 1.5f64.to_radians().sin_cos();
+        let rotate = |r: &RgbImage| {
+            warped(r, |x, y| (cx + cos * (x - cx) + sin * (y - cy), cy - sin * (x - cx) + cos * (y - cy)))
+        };
+        let c = checked_with_answer(rotate, None, 0);
+        let rotated = c.warnings().into_iter().find(|w| w.contains("rotated by about")).expect("rotation");
+        assert!(rotated.contains("1.") || rotated.contains("2."), "{rotated}: {c}");
+        let scale = |r: &RgbImage| warped(r, |x, y| (cx + (x - cx) / 1.03, cy + (y - cy) / 1.03));
+        let c = checked_with_answer(scale, None, 0);
+        assert!(c.warnings().iter().any(|w| w.contains("scaled by about +")), "{c}: {:?}", c.warnings());
+        let c = checked_with_answer(RgbImage::clone, None, 0);
+        assert!(c.warnings().is_empty(), "{c}: {:?}", c.warnings());
+        let [l, r, t, b] = c.offsets_by_third.map(Option::unwrap);
+        assert!((l - r).abs() < 0.5 && (t - b).abs() < 0.5, "{c}");
+    }
+
+    /// A given range the scene reaches beyond (answers piled up at its top, a larger range measured) is said to
+    /// be, with the range that fits; the same answers under a range that holds them, or a measurement that finds
+    /// nothing beyond the margin, are not.
+    #[test]
+    fn a_range_that_clips_the_scene_is_said_to_be_with_one_that_fits() {
+        let clipped = |r: &RgbImage| r.clone();
+        // The scene's disparities reach 31 or so: a range of 16 leaves many beyond it (the true map is the answer,
+        // so "piled up" is read as "at or beyond the top").
+        let c = checked_with_answer(clipped, Some([0, 16]), 48);
+        let w = c.warnings().into_iter().find(|w| w.starts_with("the scene reaches beyond")).expect("clipping");
+        assert!(w.contains("range 0..15") && w.contains("--ndisp 48 would fit"), "{w}");
+        let c = checked_with_answer(clipped, Some([4, 12]), 48);
+        assert!(c.warnings().iter().any(|w| w.contains("--min-disp 4 --ndisp 44 would fit")), "{:?}", c.warnings());
+        assert!(checked_with_answer(clipped, Some([0, 16]), 31).warnings().is_empty());
+        let c = checked_with_answer(clipped, Some([0, 64]), 80);
+        assert!(c.top_share == Some(0.0) && c.measured_ndisp.is_none() && c.warnings().is_empty(), "{c}");
     }
 
     #[test]
