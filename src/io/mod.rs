@@ -390,7 +390,8 @@ pub fn check_outputs(inputs: &[&Path], outputs: &[&Path]) -> Result<()> {
 /// the commands that write into a folder of their own make it).
 ///
 /// # Errors
-/// [`Error::Input`] naming the output and the folder that is missing, or the file in its place.
+/// [`Error::Io`] (not found, or not a folder) naming the output and the folder that is missing, or the file in its
+/// place.
 pub fn check_output_folders(outputs: &[&Path]) -> Result<()> {
     outputs.iter().find_map(|out| missing_folder(out)).map_or(Ok(()), Err)
 }
@@ -401,8 +402,13 @@ fn missing_folder(path: &Path) -> Option<Error> {
     if parent.is_dir() {
         return None;
     }
-    let why = if parent.exists() { "is not a folder" } else { "does not exist (make it first)" };
-    Some(Error::Input(format!("{}: cannot write it: the folder {} {why}", path.display(), parent.display())))
+    let (kind, why) = if parent.exists() {
+        (std::io::ErrorKind::NotADirectory, "is not a folder")
+    } else {
+        (std::io::ErrorKind::NotFound, "does not exist (make it first)")
+    };
+    let reason = format!("cannot write it: the folder {} {why}", parent.display());
+    Some(Error::io(path, std::io::Error::new(kind, reason)))
 }
 
 /// A depth map encoded in the format given by `path`'s extension: `.pfm` and `.exr` as floats (as
@@ -835,7 +841,13 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("nodir").join("disp.pfm");
         let expected = format!("the folder {} does not exist", dir.path().join("nodir").display());
-        let early = check_output_folders(&[&dir.path().join("fine.pfm"), &out]).unwrap_err().to_string();
+        let early = check_output_folders(&[&dir.path().join("fine.pfm"), &out]).unwrap_err();
+        // An I/O error of its kind: Python raises FileNotFoundError for it.
+        assert!(
+            matches!(&early, Error::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound),
+            "{early:?}"
+        );
+        let early = early.to_string();
         assert!(early.contains(&expected), "{early}");
         let late = write_atomic(&out, b"x").unwrap_err().to_string();
         assert!(late.contains(&expected), "{late}");
