@@ -731,7 +731,7 @@ fn all_outputs_or_none() {
     assert!(!dir.path().join("d.pfm").exists());
 }
 
-/// Issue 19, items 7 and 12: inputs are read with a size cap, and only from regular files (a config from /dev/zero
+/// Inputs are read with a size cap, and only from regular files (a config from /dev/zero
 /// was read until the kernel killed the process); a calib.txt with a UTF-8 byte-order mark is read; a --set value
 /// with a newline is refused (the part after it was dropped silently).
 #[test]
@@ -1193,7 +1193,7 @@ fn a_max_memory_below_one_byte_is_refused() {
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
-/// Issue 41, item 7: absurd but finite camera values. A focal length times baseline beyond 32-bit floats is
+/// Absurd but finite camera values. A focal length times baseline beyond 32-bit floats is
 /// refused before any work (1ea02dd: exit 0, a depth map of `inf` and a PLY of points at ±inf; with 1e30 × 1e30,
 /// finite in 64 bits, later an all-`inf` depth map and an empty cloud); values whose product fits but put some
 /// points beyond `f32` give no such point, and `inf` depth exactly where there is no point. A flag's own bad
