@@ -75,7 +75,7 @@ pub struct PairCheck {
     pub identical_share: f32,
     /// A given range (not measured): its smallest disparity and its number of disparities.
     pub given_range: Option<[usize; 2]>,
-    /// With a given range: the share of the valid answers within 4 px of its top ([`answer`]).
+    /// With a given range: the share of the valid answers within 4 px of its top (the answer checks).
     pub top_share: Option<f32>,
     /// The range measured on the pair (0..N−1) when the answers pile up at the top of a given range.
     pub measured_ndisp: Option<usize>,
@@ -275,7 +275,7 @@ pub fn check_pair(
     }
 }
 
-/// Adds to `check` what the answer tells of the pair ([`answer`]): `given_range` ([smallest disparity, number])
+/// Adds to `check` what the answer tells of the pair (the answer checks): `given_range` ([smallest disparity, number])
 /// when the range was given rather than measured, and `measure` to measure the range on the pair, called only when
 /// the answers pile up at the top of the given one.
 pub fn check_answer(
