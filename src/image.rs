@@ -101,6 +101,14 @@ impl<T: Copy> Plane<T> {
     pub fn columns_from(&self, x0: usize) -> Self {
         Plane::from_parts(self.width - x0, self.height, columns_from(&self.data, self.width, x0))
     }
+
+    /// The columns `range` of the plane.
+    ///
+    /// # Panics
+    /// If `range` reaches beyond the width.
+    pub(crate) fn columns(&self, range: std::ops::Range<usize>) -> Self {
+        Plane::from_parts(range.len(), self.height, columns(&self.data, self.width, range))
+    }
 }
 
 /// `storage` resized to `len` values, for a buffer whose every value is written before it is read: a fresh

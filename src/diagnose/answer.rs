@@ -48,7 +48,7 @@ pub(super) fn offsets_by_third(left: &Plane<f32>, right: &Plane<f32>, disparity:
     let test = super::OffsetTest::Correlation(MIN_THIRD_CORRELATION);
     let columns = |x0: usize| {
         let shift = median_disparity(disparity, x0..x0 + third_w).min(x0);
-        let (l, r) = (columns_of(left, x0, third_w), columns_of(right, x0 - shift, third_w));
+        let (l, r) = (left.columns(x0..x0 + third_w), right.columns(x0 - shift..x0 - shift + third_w));
         super::vertical_offset_within(&l, &r, 0..h, test)
     };
     let rows = |y0: usize| super::vertical_offset_within(left, right, y0..y0 + third_h, test);
@@ -69,13 +69,6 @@ fn or_from_middle(a: Option<f32>, b: Option<f32>, middle: impl FnOnce() -> Optio
     }
 }
 
-/// The columns `x0..x0 + width` of a plane.
-fn columns_of(plane: &Plane<f32>, x0: usize, width: usize) -> Plane<f32> {
-    let h = plane.height();
-    let data = (0..h).flat_map(|y| plane.row(y)[x0..x0 + width].iter().copied()).collect();
-    Plane::from_parts(width, h, data)
-}
-
 /// The median of the valid disparities in the columns `cols` (0 when there is none), rounded to a pixel.
 fn median_disparity(disparity: &DisparityMap, cols: std::ops::Range<usize>) -> usize {
     let (w, h) = disparity.dims();
@@ -87,7 +80,5 @@ fn median_disparity(disparity: &DisparityMap, cols: std::ops::Range<usize>) -> u
     if values.is_empty() {
         return 0;
     }
-    let mid = values.len() / 2;
-    values.select_nth_unstable_by(mid, f32::total_cmp);
-    values[mid].round() as usize
+    crate::imgproc::stats::rank_value(&mut values, 0.5).round() as usize
 }

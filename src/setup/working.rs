@@ -66,8 +66,12 @@ fn detail_energy(grey: &Plane<f32>, sigma: f32) -> Option<f64> {
 /// detail beyond its noise (nothing to compare with).
 pub(crate) fn detail_ratio(grey: &Plane<f32>, sigma: f32) -> Option<f64> {
     let fine = detail_energy(grey, sigma)?;
-    let coarse = detail_energy(&scale::downsample_plane(grey, 2), sigma / 2.0).filter(|&e| e > 0.0)?;
-    Some(fine.max(0.0) / coarse)
+    ratio(fine, detail_energy(&scale::downsample_plane(grey, 2), sigma / 2.0))
+}
+
+/// r from an octave's detail energy and the next one's (`None` when the next holds none beyond its noise).
+fn ratio(fine: f64, coarse: Option<f64>) -> Option<f64> {
+    Some(fine.max(0.0) / coarse.filter(|&e| e > 0.0)?)
 }
 
 /// The working resolution's reduction for a pair whose left view is `left` and whose search range is `ndisp`: 2ᵏ,
@@ -89,15 +93,19 @@ pub(crate) fn working_factor(left: &RgbImage, ndisp: usize, params: &Params) -> 
 /// own (the octaves above it carry only an upsampling's interpolation and noise) or the halved image would hold
 /// fewer than `min_pixels`. `sigma` is the image's noise.
 pub(crate) fn empty_octaves(grey: &Plane<f32>, sigma: f32, max_octaves: u32, min_pixels: usize) -> u32 {
-    let mut image = grey.clone();
+    // Each octave's image and detail energy serve as the next octave's fine one: each is computed once.
+    let mut image = std::borrow::Cow::Borrowed(grey);
     let mut sigma = sigma;
+    let mut fine = detail_energy(&image, sigma);
     for k in 0..max_octaves {
         let halved = (image.width / 2) * (image.height / 2);
-        if halved < min_pixels || !detail_ratio(&image, sigma).is_some_and(|r| r < DETAIL_RATIO) {
+        let Some(fine_energy) = fine.filter(|_| halved >= min_pixels) else { return k };
+        let coarse_image = scale::downsample_plane(&image, 2);
+        let coarse = detail_energy(&coarse_image, sigma / 2.0);
+        if !ratio(fine_energy, coarse).is_some_and(|r| r < DETAIL_RATIO) {
             return k;
         }
-        image = scale::downsample_plane(&image, 2);
-        sigma /= 2.0;
+        (image, sigma, fine) = (std::borrow::Cow::Owned(coarse_image), sigma / 2.0, coarse);
     }
     max_octaves
 }
