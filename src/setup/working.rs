@@ -61,14 +61,6 @@ fn detail_energy(grey: &Plane<f32>, sigma: f32) -> Option<f64> {
     Some(sum / ((w - 4) * (h - 4)) as f64 - NOISE_SHARE * f64::from(sigma).powi(2))
 }
 
-/// r of the grey image's finest octave with white noise of `sigma` grey levels (see the module doc): 0 when the
-/// noise explains all of its detail energy; `None` when either image is too small or the reduced one holds no
-/// detail beyond its noise (nothing to compare with).
-pub(crate) fn detail_ratio(grey: &Plane<f32>, sigma: f32) -> Option<f64> {
-    let fine = detail_energy(grey, sigma)?;
-    ratio(fine, detail_energy(&scale::downsample_plane(grey, 2), sigma / 2.0))
-}
-
 /// r from an octave's detail energy and the next one's (`None` when the next holds none beyond its noise).
 fn ratio(fine: f64, coarse: Option<f64>) -> Option<f64> {
     Some(fine.max(0.0) / coarse.filter(|&e| e > 0.0)?)
@@ -113,6 +105,14 @@ pub(crate) fn empty_octaves(grey: &Plane<f32>, sigma: f32, max_octaves: u32, min
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// r of the grey image's finest octave with white noise of `sigma` grey levels (see the module doc): 0 when the
+    /// noise explains all of its detail energy; `None` when either image is too small or the reduced one holds no
+    /// detail beyond its noise (nothing to compare with).
+    fn detail_ratio(grey: &Plane<f32>, sigma: f32) -> Option<f64> {
+        let fine = detail_energy(grey, sigma)?;
+        ratio(fine, detail_energy(&scale::downsample_plane(grey, 2), sigma / 2.0))
+    }
 
     /// The left view of a rendered scene (textures with detail at every scale, r 0.54), in grey.
     fn scene(seed: u64) -> Plane<f32> {
