@@ -1,5 +1,5 @@
-//! Makes the "full-size" test scenes of issue 16 from quarter-size ones: every MiddEval3 scene under SRC is
-//! written to OUT/<scene> enlarged K times — images bicubic (Catmull-Rom), ground truth and mask by pixel
+//! Makes "full-size" test scenes (enlargements without new detail) from quarter-size ones: every MiddEval3 scene
+//! under SRC is written to OUT/<scene> enlarged K times — images bicubic (Catmull-Rom), ground truth and mask by pixel
 //! replication with the disparities × K, and calib.txt's `ndisp`, `width`, `height`, `doffs`, `vmin`, `vmax` × K
 //! (cam0/cam1 focal lengths and principal points too). OUT must not exist.
 //!

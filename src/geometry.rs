@@ -323,7 +323,7 @@ mod tests {
         assert!(Camera::resolve(None, path, &bad, true).is_err());
     }
 
-    /// Issue 41, item 7: a focal length times baseline that overflows is refused; absurd values whose products
+    /// A focal length times baseline that overflows is refused; absurd values whose products
     /// stay finite give no non-finite point, and `inf` depth exactly where there is no point.
     #[test]
     fn overflowing_geometry_writes_no_infinite_point() {

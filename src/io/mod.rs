@@ -702,7 +702,7 @@ mod tests {
         assert_eq!((std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap()), (b"new".to_vec(), b"b".to_vec()));
     }
 
-    /// Issue 41, item 3: a rename that fails (the last destination is a folder) undoes the ones before it: a new
+    /// A rename that fails (the last destination is a folder) undoes the ones before it: a new
     /// file is removed, a replaced one gets its old content back, and no hidden file is left.
     #[test]
     fn all_or_none_undoes_the_renames_when_one_fails() {
