@@ -173,7 +173,7 @@ mod tests {
         assert_eq!(search_limit(None, 2), 1);
     }
 
-    /// Issue 41, item 11: the limit is a range the pair takes, so a measurement that falls back to it (too few
+    /// The limit is a range the pair takes, so a measurement that falls back to it (too few
     /// consistent matches) or reaches it runs: a 3 × 2 pair with no range gave "invalid ndisp = 3".
     #[test]
     fn the_search_limit_is_a_valid_range() {
@@ -192,7 +192,7 @@ mod tests {
         assert!(!needs_search(Some(49), 100));
     }
 
-    /// Issue 41, item 1: the measurement stays within the memory limit. A limit just below what 1/4 resolution
+    /// The measurement stays within the memory limit. A limit just below what 1/4 resolution
     /// needs measures coarser (and still covers the scene); a limit nothing fits is refused before allocating.
     #[test]
     fn the_measurement_stays_within_the_limit() {
