@@ -98,7 +98,12 @@ fn a_still_camera_under_a_changing_exposure_stays_still_and_settles() {
 fn a_panning_camera_whose_exposure_steps_is_still_moving_with_the_step_compensated() {
     let scenes = frames_lit(Motion::Pan, 0.0, 3, GainChange { step: 0.1, step_at: 2, ..Default::default() });
     let remembered = run(&scenes, true);
-    assert!(matches!(remembered[2].frame, Some(FrameKind::Moving { .. })), "{:?}", remembered[2].frame);
+    // The sideways motion has parallax: carried by its shift or by its 3D motion, it is a moving camera.
+    assert!(
+        matches!(remembered[2].frame, Some(FrameKind::Moving { .. } | FrameKind::Travelling { .. })),
+        "{:?}",
+        remembered[2].frame
+    );
     let step = remembered[2].exposure.expect("the step is compensated");
     assert!((step.gain - 1.1).abs() < 0.02 && step.offset.abs() < 2.0, "{step:?}");
     assert_eq!(remembered[1].exposure, None, "no exposure change, nothing compensated");
@@ -126,7 +131,8 @@ fn a_scene_cut_forgets_the_past_and_the_frame_after_it_is_matched_alone() {
 fn a_panning_camera_takes_the_previous_answer_and_stays_as_accurate() {
     let scenes = frames(Motion::Pan, 0.0, 5);
     let (alone, remembered) = (run(&scenes, false), run(&scenes, true));
-    assert!(remembered[1..].iter().any(|o| matches!(o.frame, Some(FrameKind::Moving { .. }))), "a shift is found");
+    let moving = |o: &Output| matches!(o.frame, Some(FrameKind::Moving { .. } | FrameKind::Travelling { .. }));
+    assert!(remembered[1..].iter().all(moving), "a moving camera is found");
     let mean = |outs: &[Output]| (1..5).map(|k| error(&outs[k], &scenes[k])).sum::<f64>() / 4.0;
     let (a, r) = (mean(&alone), mean(&remembered));
     assert!(r < 1.1 * a + 0.02, "panning: {r:.3} remembered against {a:.3} alone");
@@ -159,4 +165,19 @@ fn reset_starts_a_new_sequence() {
     matcher.reset();
     let again = matcher.match_pair(&scenes[0].left, &scenes[0].right).unwrap();
     assert_eq!((again.frame, &again.disparity), (Some(FrameKind::First), &first.disparity));
+}
+
+/// A camera driving forward: the scene expands from the focus of expansion, near things faster than far ones, and no
+/// global shift explains it. The previous answer is carried by the camera's 3D motion (fitted to tracked points),
+/// and the frames are at least as accurate as matched alone.
+#[test]
+fn a_camera_driving_forward_is_carried_by_its_motion() {
+    let scenes = frames(Motion::Dolly, 0.0, 4);
+    let (alone, remembered) = (run(&scenes, false), run(&scenes, true));
+    let kinds: Vec<_> = remembered.iter().map(|o| o.frame).collect();
+    assert!(kinds[1..].iter().all(|k| matches!(k, Some(FrameKind::Travelling { .. }))), "{kinds:?}");
+    let mean = |outs: &[Output]| (1..4).map(|k| error(&outs[k], &scenes[k])).sum::<f64>() / 3.0;
+    let (a, r) = (mean(&alone), mean(&remembered));
+    eprintln!("dolly: {r:.4} remembered against {a:.4} alone");
+    assert!(r <= 1.02 * a, "dolly: {r:.4} remembered against {a:.4} alone");
 }

@@ -151,6 +151,9 @@ fn describe_kind(kind: jem::FrameKind) -> String {
         jem::FrameKind::Cut => "scene cut: matched as a first frame".into(),
         jem::FrameKind::Still { frames } => format!("still camera, the mean of up to {frames} frames"),
         jem::FrameKind::Moving { dx, dy } => format!("camera moved ({dx:+}, {dy:+}) px, the previous answer as prior"),
+        jem::FrameKind::Travelling { tracks } => {
+            format!("camera moved in depth or turned ({tracks} tracked points), the previous answer carried as prior")
+        }
     }
 }
 
