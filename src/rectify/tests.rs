@@ -1,7 +1,7 @@
 //! The rectification end to end: a rig made here (two cameras with lens distortion, the right one turned and
 //! shifted), points of a scene projected through it, found again in the rectified views.
 
-use super::linalg::{inverse, mul, mul_vec, rotation_from_vector};
+use super::linalg::{Vec3, inverse, mul, mul_vec, rotation_from_vector};
 use super::*;
 
 pub(super) fn rig() -> StereoCalibration {
