@@ -209,3 +209,11 @@ def rectify(
     """The rectified views (uint8, what ``jem rectify`` writes: H×W when both views are grey H×W arrays, else
     H×W×3) and the rectified pair's Middlebury calib.txt text. ``alpha`` as ``rectify_maps``; ``max_memory`` as
     ``depth``, checked from the shapes."""
+
+def config_record(
+    command: str,
+    config: _Config = None,
+    overrides: Optional[Mapping[str, Any]] = None,
+) -> str:
+    """The configuration `jem batch` records beside each result (configNAME.toml): every parameter, as TOML that
+    `jem --config` reads back, after comment lines naming jem's version and ``command``."""

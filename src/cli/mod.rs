@@ -173,13 +173,15 @@ fn parse_size(text: &str) -> std::result::Result<u64, String> {
 enum Command {
     /// Match one pair (the same as `jem LEFT RIGHT -o OUT`).
     Match(MatchArgs),
-    /// Rectify a raw pair with its stereo calibration, as OpenCV's stereoRectify (alpha 0) and remap do.
+    /// Rectify a raw pair with its stereo calibration, as OpenCV's stereoRectify and remap do.
     ///
-    /// `jem rectify CALIB LEFT RIGHT -o DIR` writes DIR/im0.png, DIR/im1.png (the rectified views, 8-bit) and
-    /// DIR/calib.txt (Middlebury keys cam0, cam1, doffs, baseline, width, height; the baseline in the calibration's
-    /// unit), ready for `jem DIR/im0.png DIR/im1.png -o disp.pfm --depth depth.pfm`, and DIR/rectify.yml (R1, R2,
-    /// P1, P2, Q and the size, as cv2.FileStorage writes cv2.stereoRectify's results: for
-    /// cv2.reprojectImageTo3D). `jem match --rectify CALIB` does the same before matching.
+    /// `jem rectify CALIB LEFT RIGHT -o DIR` writes DIR/im0.png, DIR/im1.png (the rectified views, 8-bit; grey when
+    /// both raw views are grey) and DIR/calib.txt (Middlebury keys cam0, cam1, doffs, baseline, width, height; the
+    /// baseline in the calibration's unit), ready for `jem DIR/im0.png DIR/im1.png -o disp.pfm --depth depth.pfm`,
+    /// and DIR/rectify.yml (R1, R2, P1, P2, Q, the size and each view's rectangle of valid pixels validPixROI1/2,
+    /// as cv2.FileStorage writes cv2.stereoRectify's results: for cv2.reprojectImageTo3D). --alpha is
+    /// stereoRectify's free scaling (default 0: valid pixels only). `jem match --rectify CALIB` does the same
+    /// (with alpha 0) before matching.
     /// CALIB: OpenCV FileStorage YAML or XML as cv2.FileStorage writes it (K1 or M1, D1 with 4, 5 or 8
     /// coefficients, K2/M2, D2, R, T; image_width/image_height or a size node; R1, R2, P1, P2 are used when
     /// present), or KITTI's calib_cam_to_cam.txt (cameras 02 and 03; images of KITTI's rectified size S_rect_02 are
