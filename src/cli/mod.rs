@@ -327,8 +327,8 @@ enum Command {
     /// the run time in seconds (as each run recorded it; not ranked, runs under other loads being not
     /// comparable), and the paper's avgErr beside an --alg given a --paper column; KITTI D1 and avgErr; ETH3D
     /// bad-1 and avgErr. The last row is the weighted (MiddEval3) or plain mean; the best score of a row is bold.
-    /// Click a score's header to sort the rows. A colour bar and the error map's key head the page; the command, each algorithm's configuration
-    /// (as jem batch recorded it beside the results) and the machine are at its foot.
+    /// Click a score's header to sort the rows. A colour bar and the error map's key head the page; the command,
+    /// each algorithm's configuration (as jem batch recorded it beside the results) and the machine are at its foot.
     /// The page and its pictures are written all or none; an output that is one of the inputs is refused.
     #[command(verbatim_doc_comment)]
     Report(ReportArgs),

@@ -1,8 +1,9 @@
 //! Rectification of a calibrated pair: a stereo calibration read from OpenCV's `FileStorage` files (YAML or XML,
 //! as `cv2.stereoCalibrate` results are saved) or KITTI's `calib_cam_to_cam.txt`, the rectifying transforms of
-//! OpenCV's `stereoRectify` (zero disparity at infinity; its free scaling `alpha`, 0 by default), the maps of `initUndistortRectifyMap` and a
-//! bilinear `remap`: the views come out as OpenCV rectifies them, ready to match, with the Middlebury `calib.txt`
-//! of the rectified pair (focal length, principal points, baseline) for depth.
+//! OpenCV's `stereoRectify` (zero disparity at infinity; its free scaling `alpha`, 0 by default), the maps of
+//! `initUndistortRectifyMap` and a bilinear `remap`: the views come out as OpenCV rectifies them, ready to match,
+//! with the Middlebury `calib.txt` of the rectified pair (focal length, principal points, baseline) for depth, and
+//! OpenCV's own description of it (`rectify.yml`: R1, R2, P1, P2, Q, the valid-pixel rectangles).
 //!
 //! ```
 //! # let dir = tempfile::tempdir()?;
