@@ -379,6 +379,10 @@ impl Rectification {
 /// A rectangle (x0, y0, x1, y1) in rectified coordinates as OpenCV rounds a valid-pixel ROI, (⌈x0⌉, ⌈y0⌉,
 /// ⌊x1 − x0⌋, ⌊y1 − y0⌋), intersected with the image of `size` (OpenCV's `Rect &`: all zero when they do not meet).
 fn pixel_rectangle(r: [f64; 4], (width, height): (usize, usize)) -> (usize, usize, usize, usize) {
+    if !r.iter().all(|v| v.is_finite()) {
+        // A lens model that sends the outline nowhere: `max`/`min` below would pass a NaN over as the image edge.
+        return (0, 0, 0, 0);
+    }
     let (x, y) = (r[0].ceil(), r[1].ceil());
     let (right, bottom) = (x + (r[2] - r[0]).floor(), y + (r[3] - r[1]).floor());
     let (x0, y0) = (x.max(0.0), y.max(0.0));

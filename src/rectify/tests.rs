@@ -199,3 +199,12 @@ fn an_alpha_out_of_range_or_for_a_given_rectification_is_refused() {
     assert!(e.starts_with("rig.yml: the file holds its own rectification"), "{e}");
     assert!(saved.rectification_with_alpha((640, 480), None).is_ok());
 }
+
+#[test]
+fn a_valid_rectangle_is_rounded_inwards_and_held_to_the_image_as_opencv_does() {
+    // (⌈x0⌉, ⌈y0⌉, ⌊x1 − x0⌋, ⌊y1 − y0⌋), then cut to the image: x 1..640, y 0..470.
+    assert_eq!(pixel_rectangle([0.2, -3.0, 639.9, 470.5], (640, 480)), (1, 0, 639, 470));
+    assert_eq!(pixel_rectangle([10.0, 20.0, 30.5, 40.0], (640, 480)), (10, 20, 20, 20));
+    assert_eq!(pixel_rectangle([700.0, 20.0, 800.0, 40.0], (640, 480)), (0, 0, 0, 0), "outside the image");
+    assert_eq!(pixel_rectangle([f64::NAN, 0.0, 10.0, 10.0], (640, 480)), (0, 0, 0, 0), "no valid pixel left");
+}
