@@ -186,16 +186,34 @@ def sequence_frames(dir: _Path) -> list[Tuple[str, str, str]]:
     ``(stem, left_path, right_path)``."""
 
 def rectify_maps(
-    calib: _Path, size: Optional[Tuple[int, int]] = None, max_memory: Optional[int] = None
+    calib: _Path,
+    size: Optional[Tuple[int, int]] = None,
+    max_memory: Optional[int] = None,
+    alpha: Optional[float] = None,
 ) -> dict[str, Any]:
     """The rectification of a stereo calibration (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt) for views
-    of ``size`` (width, height; default: the size the file states), as ``cv2.stereoRectify(alpha=0)`` and
+    of ``size`` (width, height; default: the size the file states), as ``cv2.stereoRectify`` and
     ``cv2.initUndistortRectifyMap`` give it: ``map1x``, ``map1y``, ``map2x``, ``map2y`` (float32 H×W, cv2.remap's
-    maps), ``R1``, ``R2``, ``P1``, ``P2``, ``Q`` (nested lists), ``focal``, ``baseline``, ``doffs``, ``size``.
-    ``max_memory`` as ``depth``; a view that would come out mostly black is a UserWarning."""
+    maps), ``R1``, ``R2``, ``P1``, ``P2``, ``Q`` (nested lists), ``roi1``, ``roi2`` (each view's valid pixels,
+    ``(x, y, w, h)``: validPixROI1/2), ``focal``, ``baseline``, ``doffs``, ``size``. ``alpha``: stereoRectify's free
+    scaling, 0..1 (0, the default: valid pixels only; 1: every raw pixel kept). ``max_memory`` as ``depth``; a view
+    that would come out mostly black is a UserWarning."""
 
 def rectify(
-    calib: _Path, left: _Image, right: _Image, max_memory: Optional[int] = None
+    calib: _Path,
+    left: _Image,
+    right: _Image,
+    max_memory: Optional[int] = None,
+    alpha: Optional[float] = None,
 ) -> Tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8], str]:
-    """The rectified views (uint8 H×W×3, what ``jem rectify`` writes) and the rectified pair's Middlebury
-    calib.txt text. ``max_memory`` as ``depth``, checked from the shapes."""
+    """The rectified views (uint8, what ``jem rectify`` writes: H×W when both views are grey H×W arrays, else
+    H×W×3) and the rectified pair's Middlebury calib.txt text. ``alpha`` as ``rectify_maps``; ``max_memory`` as
+    ``depth``, checked from the shapes."""
+
+def config_record(
+    command: str,
+    config: _Config = None,
+    overrides: Optional[Mapping[str, Any]] = None,
+) -> str:
+    """The configuration `jem batch` records beside each result (configNAME.toml): every parameter, as TOML that
+    `jem --config` reads back, after comment lines naming jem's version and ``command``."""

@@ -446,3 +446,71 @@ fn rectify_refuses_a_folder_that_holds_a_scene() {
     let out = run_in(dir.path(), &["rectify", "rig.yml", "S/im0.png", "S/im1.png", "-o", "afile"]);
     assert!(stderr(&out).contains("afile: exists and is not a folder; give -o"), "{}", stderr(&out));
 }
+
+/// Grey views come out of `jem rectify` as 8-bit grey PNGs, the same samples as the colour rectification of the
+/// same views; a colour pair stays colour, and so does a pair with one grey view (its colour would be lost).
+#[test]
+fn a_grey_pair_stays_grey() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    std::fs::write(dir.path().join("rig.yml"), pinhole_rig_yaml(64, 48, 0.25)).unwrap();
+    for name in ["im0", "im1"] {
+        let rgb = image::open(dir.path().join(format!("S/{name}.png"))).unwrap();
+        rgb.to_luma8().save(dir.path().join(format!("{name}-grey.png"))).unwrap();
+        image::DynamicImage::ImageLuma8(rgb.to_luma8())
+            .to_rgb8()
+            .save(dir.path().join(format!("{name}-rgb.png")))
+            .unwrap();
+    }
+    let colour = |folder: &str| image::open(dir.path().join(folder).join("im0.png")).unwrap().color();
+    for (left, right, folder, expected) in [
+        ("im0-grey.png", "im1-grey.png", "G", image::ColorType::L8),
+        ("im0-rgb.png", "im1-rgb.png", "C", image::ColorType::Rgb8),
+        ("im0-grey.png", "im1-rgb.png", "M", image::ColorType::Rgb8),
+    ] {
+        let out = run_in(dir.path(), &["rectify", "rig.yml", left, right, "-o", folder]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert_eq!(colour(folder), expected, "{left} {right}");
+    }
+    for name in ["im0.png", "im1.png"] {
+        let (grey, rgb) = (dir.path().join("G").join(name), dir.path().join("C").join(name));
+        assert_eq!(jem::io::read_image(&grey).unwrap(), jem::io::read_image(&rgb).unwrap(), "{name}");
+    }
+}
+
+/// `--alpha` is OpenCV's free scaling: 1 keeps every raw pixel (a smaller focal length, black corners and a valid
+/// rectangle inside the view in rectify.yml); out of 0..1 it is refused and nothing is written.
+#[test]
+fn rectify_alpha_scales_the_views_and_states_the_valid_rectangle() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_scene(dir.path(), "S");
+    let barrel =
+        pinhole_rig_yaml(64, 48, 0.25).replace("data: [ 0., 0., 0., 0., 0. ]", "data: [ -0.3, 0., 0., 0., 0. ]");
+    std::fs::write(dir.path().join("rig.yml"), barrel).unwrap();
+    let roi = |folder: &str| {
+        let yml = std::fs::read_to_string(dir.path().join(folder).join("rectify.yml")).unwrap();
+        let line = yml.lines().find(|l| l.starts_with("validPixROI1: [ ")).unwrap_or_else(|| panic!("{yml}"));
+        let inner = line.trim_start_matches("validPixROI1: [ ").trim_end_matches(" ]");
+        inner.split(", ").map(|v| v.parse::<usize>().unwrap()).collect::<Vec<_>>()
+    };
+    for (alpha, folder) in [("0", "A0"), ("1", "A1")] {
+        let out = run_in(dir.path(), &["rectify", "rig.yml", "S/im0.png", "S/im1.png", "-o", folder, "--alpha", alpha]);
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    let out = run_in(dir.path(), &["rectify", "rig.yml", "S/im0.png", "S/im1.png", "-o", "D"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for f in ["im0.png", "im1.png", "calib.txt", "rectify.yml"] {
+        let read = |folder: &str| std::fs::read(dir.path().join(folder).join(f)).unwrap();
+        assert_eq!(read("A0"), read("D"), "--alpha 0 is the default: {f}");
+    }
+    let (cropped, kept) = (roi("A0"), roi("A1"));
+    assert!(cropped[2] >= 62 && cropped[3] >= 46, "{cropped:?}");
+    assert!(kept[0] > 0 && kept[1] > 0 && kept[2] < cropped[2] && kept[3] < cropped[3], "{kept:?} {cropped:?}");
+    for bad in ["1.5", "-0.2"] {
+        let out = run_in(dir.path(), &["rectify", "rig.yml", "S/im0.png", "S/im1.png", "-o", "X", "--alpha", bad]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains("alpha") && err.contains("0..=1") && err.lines().count() == 1, "{err}");
+        assert!(!dir.path().join("X").exists());
+    }
+}

@@ -103,6 +103,7 @@ fn kitti2015_batch_and_eval() {
     assert_eq!(snapshot(&tree), before, "the data set is untouched");
     assert_eq!(common::files_in(&results.join("disp_0")), ["000000_10.png", "000001_10.png"], "only _10 frames");
     assert_eq!(common::files_in(&results.join("time")), ["000000_10.txt", "000001_10.txt"]);
+    assert_eq!(common::files_in(&results.join("config")), ["000000_10.toml", "000001_10.toml"]);
     let d = jem::io::read_disparity(&results.join("disp_0").join("000000_10.png")).unwrap();
     assert_eq!(d.dims(), (320, 240));
     // KITTI's default range, 192, is at least half of this 320-pixel width, so it is measured on the pair
@@ -430,7 +431,7 @@ fn each_split_its_own_results_folder_and_a_lock() {
         assert!(folder.join("disp_0/000000_10.png").is_file(), "{split}");
         let source = std::fs::read_to_string(folder.join("source.txt")).unwrap();
         assert!(source.contains(&format!("root ../../../{split}\n")), "{source}");
-        assert_eq!(common::files_in(&folder), ["disp_0", "source.txt", "time"], "no lock left behind");
+        assert_eq!(common::files_in(&folder), ["config", "disp_0", "source.txt", "time"], "no lock left behind");
     }
     let out = run_in(dir.path(), &["eval", "k/training", "--alg", "A"]);
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), stderr(&out));

@@ -228,3 +228,14 @@ fn viz_scale_is_asked_for_when_the_path_does_not_tell() {
     assert!(out.status.success(), "{}", stderr(&out));
     assert_ne!(pixel(&d.join("o.png"), 6, 0).1, [230, 30, 30]);
 }
+
+/// The library's example in docs/library.md is `examples/library.rs` as it is (which CI compiles), so the page
+/// cannot drift from a program that builds; and it needs no file of jem's checkout, as a user's program has none.
+#[test]
+fn the_library_page_shows_the_compiled_example() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let read = |p: &str| std::fs::read_to_string(root.join(p)).unwrap_or_else(|e| panic!("{p}: {e}"));
+    let (page, example) = (read("docs/library.md"), read("examples/library.rs"));
+    assert!(page.contains(&format!("```rust\n{example}```\n")), "docs/library.md does not show examples/library.rs");
+    assert!(example.contains("fn main()") && !example.contains("configs/"), "{example}");
+}

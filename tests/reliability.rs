@@ -484,7 +484,7 @@ fn a_moved_data_set_is_named_in_its_results_source_file() {
     let out = batch("MV2/training");
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(d.join("R/A/training/disp_0/000001_10.png").is_file());
-    assert_eq!(files_in(&d.join("R/A/training")), ["disp_0", "source.txt", "time"]);
+    assert_eq!(files_in(&d.join("R/A/training")), ["config", "disp_0", "source.txt", "time"]);
 }
 
 /// An argument error is one `error:` line, as every other error (not clap's 3 to 6: a tip, the usage, "For more

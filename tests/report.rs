@@ -71,6 +71,10 @@ fn report_is_a_self_contained_page_with_its_pictures_beside_it() {
     }
     assert!(page.contains("weighted mean") && page.contains("jem report trainingQ --alg A,B -o r.html"));
     assert!(page.contains("not recorded") && page.contains(&format!("jem {}", env!("CARGO_PKG_VERSION"))));
+    // The time column says its unit and ranks nothing: S1's 1.1 s of A against 1.3 s of B is not marked best
+    // (runs timed under different loads), while A's avgErr there is.
+    assert!(page.contains(">time (s)</th>") && page.contains("<td class=\"num\" data-v=\"1.1\">1.10</td>"), "{page}");
+    assert!(!page.contains("<td class=\"num best\" data-v=\"1.1\">") && page.contains("num best"), "{page}");
     // The same command gives the same page and pictures.
     let read_all = || -> Vec<Vec<u8>> {
         let files = tmp.path().join("r_files");
@@ -83,6 +87,37 @@ fn report_is_a_self_contained_page_with_its_pictures_beside_it() {
     assert!(read_all() == pictures, "the pictures are byte-identical");
     let quiet = report(tmp.path(), &["trainingQ", "--alg", "A,B", "-o", "r.html", "-q"]);
     assert!(quiet.status.success() && quiet.stderr.is_empty(), "{}", stderr(&quiet));
+}
+
+/// `jem batch` records beside each result the configuration it ran with (every parameter, the command and jem's
+/// version, as TOML that `--config` reads back), and the report shows it; results without one say so.
+#[test]
+fn batch_records_its_configuration_and_the_report_shows_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let set = scenes(tmp.path());
+    let run = |args: &[&str]| {
+        let out = jem().current_dir(tmp.path()).args(args).output().expect("cannot start jem");
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+    };
+    run(&["batch", "trainingQ", "--alg", "J", "--set", "meanfield.iterations=1", "-q"]);
+    let config = |scene: &str| std::fs::read_to_string(set.join(scene).join("configJ.toml")).unwrap();
+    let text = config("S1");
+    assert!(text.starts_with("# The configuration this result was made with"), "{text}");
+    assert!(text.contains(&format!("# jem {}\n", env!("CARGO_PKG_VERSION"))), "{text}");
+    assert!(text.contains("# command: jem batch trainingQ --alg J --set meanfield.iterations=1 -q\n"), "{text}");
+    let params = jem::Params::load(Some(&set.join("S1").join("configJ.toml")), &[]).unwrap();
+    assert_eq!(params.to_toml(), jem::Params::load(None, &["meanfield.iterations=1".into()]).unwrap().to_toml());
+    assert_eq!(config("S2"), text, "one run, one configuration");
+    assert!(files_in(&set.join("S1")).iter().all(|f| !f.starts_with('.')), "no temporary file left");
+
+    let out = report(tmp.path(), &["trainingQ", "--alg", "J,A", "-o", "r.html"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let page = std::fs::read_to_string(tmp.path().join("r.html")).unwrap();
+    let (j, a) = (page.find("<dt>configuration of J</dt>").unwrap(), page.find("<dt>configuration of A</dt>").unwrap());
+    let (of_j, of_a) = (&page[j..a], &page[a..page[a..].find("</dd>").unwrap() + a]);
+    assert!(of_j.contains("recorded beside all 3 results") && of_j.contains("# command: jem batch"), "{of_j}");
+    assert!(of_j.contains("iterations = 1"), "{of_j}");
+    assert!(of_a.contains("not recorded"), "{of_a}");
 }
 
 #[test]

@@ -388,11 +388,11 @@ fn batch_runs_good_scenes_and_reports_each_bad_one() {
     for bad in ["a/BadImage", "b/BadCalib", "b/Sizes"] {
         assert!(!root.join(bad).join("disp0T.pfm").exists(), "{bad}");
     }
-    // Nothing but the two outputs was added (atomic writes leave no temporary files).
+    // Nothing but the result, its time and its configuration was added (atomic writes leave no temporary files).
     let mut names: Vec<String> =
         std::fs::read_dir(&good).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     names.sort();
-    assert_eq!(names, ["calib.txt", "disp0T.pfm", "im0.png", "im1.png", "timeT.txt"]);
+    assert_eq!(names, ["calib.txt", "configT.toml", "disp0T.pfm", "im0.png", "im1.png", "timeT.txt"]);
 
     // --quiet keeps the failures (stderr) and drops the rest.
     let o = run(jem().arg("batch").arg(&root).args(["--alg", "T", "-q", "--config"]).arg(&cfg));

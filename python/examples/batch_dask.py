@@ -5,8 +5,9 @@
 
 Every folder under DIR... holding im0.png, im1.png and calib.txt is a scene; each runs as one Dask task that calls
 jem.match and writes what `jem batch DIR --alg NAME` writes for it, in the scene folder: disp0NAME.pfm (the same
-bytes) and timeNAME.txt (the seconds spent matching, "%.6f"). Both files are written to hidden temporary names
-first and renamed into place, so a killed worker leaves no truncated result. As with `jem batch`, a failing scene
+bytes), timeNAME.txt (the seconds spent matching, "%.6f") and configNAME.toml (every parameter, jem's version and
+this command: jem.config_record). The files are written to hidden temporary names first and renamed into place,
+so a killed worker leaves no truncated result. As with `jem batch`, a failing scene
 is reported and the others still run; the exit code is 2 if any failed.
 
 Each worker is a process running one scene at a time on T threads (jem releases the GIL; the result does not
@@ -85,7 +86,7 @@ def write_all_or_none(files):
                 tmp.unlink()
 
 
-def run_scene(scene, alg, ndisp, config, overrides, threads, max_memory):
+def run_scene(scene, alg, ndisp, config, overrides, threads, max_memory, record):
     """Matches one scene and writes its result files; returns (scene, seconds, ndisp). Runs on a worker."""
     scene = Path(scene)
     left, right = jem.read_image(scene / "im0.png"), jem.read_image(scene / "im1.png")
@@ -105,6 +106,7 @@ def run_scene(scene, alg, ndisp, config, overrides, threads, max_memory):
         [
             (scene / f"disp0{alg}.pfm", lambda p: jem.write_pfm(p, disp)),
             (scene / f"time{alg}.txt", lambda p: p.write_text(f"{seconds:.6f}\n")),
+            (scene / f"config{alg}.toml", lambda p: p.write_text(record)),
         ]
     )
     return str(scene), seconds, info["ndisp"]
@@ -136,6 +138,12 @@ def main(argv=None):
 
     scenes = find_scenes(args.dirs)
     overrides = dict(s.split("=", 1) for s in args.set)
+    command = " ".join(["batch_dask.py", *(argv if argv is not None else sys.argv[1:])])
+    try:
+        record = jem.config_record(command, config=args.config, overrides=overrides)
+    except (ValueError, OSError) as e:  # a bad config or override fails every scene alike: said once
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     failed = 0
     start = time.perf_counter()
     cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True)
@@ -149,6 +157,7 @@ def main(argv=None):
             overrides=overrides,
             threads=args.threads,
             max_memory=args.max_memory,
+            record=record,
             pure=False,
         )
         scene_of = {f.key: scene for f, scene in zip(futures, scenes)}

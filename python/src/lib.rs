@@ -256,6 +256,19 @@ fn flatten(mapping: &Bound<'_, PyMapping>, prefix: &str, out: &mut Vec<String>) 
     Ok(())
 }
 
+/// The configuration ``jem batch`` records beside each result (configNAME.toml): every parameter that ``config``
+/// and ``overrides`` give (as for ``match``), defaults included, as TOML that ``jem --config`` reads back, after
+/// comment lines naming jem's version and ``command`` (what ran it). Raises ValueError for a bad config or override.
+#[pyfunction]
+#[pyo3(signature = (command, config=None, overrides=None))]
+fn config_record(
+    command: &str,
+    config: Option<&Bound<'_, PyAny>>,
+    overrides: Option<&Bound<'_, PyAny>>,
+) -> PyResult<String> {
+    Ok(jem::batch::config_record(&load_params(config, overrides)?, command))
+}
+
 /// The parameters of a call: the defaults, then `config` (a TOML file, or a mapping applied key by key as `--set`
 /// items), then `overrides` (a mapping, as `--set`: a string value is taken as the command line would, `"fcm"` or
 /// `"3"`).
@@ -429,6 +442,7 @@ fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rectify::rectify_maps, m)?)?;
     m.add_function(wrap_pyfunction!(rectify::rectify, m)?)?;
     m.add_function(wrap_pyfunction!(matcher::sequence_frames, m)?)?;
+    m.add_function(wrap_pyfunction!(config_record, m)?)?;
     m.add_class::<PyMatcher>()?;
     // maturin's package __init__ re-exports `*` of the native module: `__all__` makes that include __version__.
     let all = [
@@ -444,6 +458,7 @@ fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
         "read_image",
         "rectify_maps",
         "rectify",
+        "config_record",
     ];
     m.add("__all__", all)?;
     Ok(())

@@ -36,9 +36,13 @@ def test_dask_example_writes_jem_batch_s_files(tmp_path, cli, training_q):
     for scene in SCENES:
         written = sorted(p.name for p in (by_dask / scene).iterdir())
         assert written == sorted(p.name for p in (by_cli / scene).iterdir())
-        assert written == ["calib.txt", "disp0PY.pfm", "im0.png", "im1.png", "timePY.txt"]
+        assert written == ["calib.txt", "configPY.toml", "disp0PY.pfm", "im0.png", "im1.png", "timePY.txt"]
         assert (by_dask / scene / "disp0PY.pfm").read_bytes() == (by_cli / scene / "disp0PY.pfm").read_bytes()
         assert re.fullmatch(r"\d+\.\d{6}\n", (by_dask / scene / "timePY.txt").read_text())
+        # The same configuration, recorded under each command's own line.
+        drop_command = lambda p: re.sub(r"(?m)^# command: .*\n", "", p.read_text())  # noqa: E731
+        assert drop_command(by_dask / scene / "configPY.toml") == drop_command(by_cli / scene / "configPY.toml")
+        assert "# command: batch_dask.py " in (by_dask / scene / "configPY.toml").read_text()
     after = {s: sorted(p.name for p in (training_q / s).iterdir()) for s in SCENES}
     assert after == before, "nothing is written into the data set"
 

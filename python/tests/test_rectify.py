@@ -1,4 +1,4 @@
-"""Rectification against OpenCV: jem's maps and rectified views against cv2.stereoRectify(alpha=0) +
+"""Rectification against OpenCV: jem's maps and rectified views against cv2.stereoRectify (alpha 0, 0.5, 1) +
 initUndistortRectifyMap + remap, on a rig made here (known cameras with lens distortion looking at a textured
 scene), its calibration saved by cv2.FileStorage as YAML and XML, and as KITTI's calib_cam_to_cam.txt."""
 
@@ -28,8 +28,12 @@ def save_calibration(path, size=SIZE):
     return path
 
 
+def opencv_rectify(size=SIZE, alpha=0):
+    return cv2.stereoRectify(K1, D1, K2, D2, size, R, T, flags=cv2.CALIB_ZERO_DISPARITY, alpha=alpha)
+
+
 def opencv_maps(size=SIZE):
-    R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(K1, D1, K2, D2, size, R, T, flags=cv2.CALIB_ZERO_DISPARITY, alpha=0)
+    R1, R2, P1, P2, Q, _, _ = opencv_rectify(size)
     left = cv2.initUndistortRectifyMap(K1, D1, R1, P1, size, cv2.CV_32FC1)
     right = cv2.initUndistortRectifyMap(K2, D2, R2, P2, size, cv2.CV_32FC1)
     return left, right, (R1, R2, P1, P2, Q)
@@ -75,6 +79,48 @@ def test_maps_and_transforms_match_opencv(tmp_path, ext):
     print(f"largest map difference from OpenCV: {worst:.2e} px")
     assert worst <= 0.01
     assert maps["baseline"] == pytest.approx(float(np.linalg.norm(T)), rel=1e-9)
+
+
+@pytest.mark.parametrize("alpha", [0, 0.5, 1])
+def test_alpha_and_valid_rectangles_match_opencv(tmp_path, cli, raw_pair, alpha):
+    calib = save_calibration(tmp_path / "stereo.yml")
+    maps = jem.rectify_maps(calib, alpha=alpha)
+    R1, R2, P1, P2, Q, roi1, roi2 = opencv_rectify(alpha=alpha)
+    for ours, theirs in ((maps["R1"], R1), (maps["R2"], R2)):
+        np.testing.assert_allclose(np.array(ours), theirs, atol=1e-9)
+    for ours, theirs in ((maps["P1"], P1), (maps["P2"], P2), (maps["Q"], Q)):
+        np.testing.assert_allclose(np.array(ours), theirs, rtol=1e-6, atol=1e-6)
+    print(f"alpha {alpha}: ROI {maps['roi1']} {maps['roi2']}, OpenCV's {roi1} {roi2}")
+    for ours, theirs in ((maps["roi1"], roi1), (maps["roi2"], roi2)):
+        assert np.abs(np.subtract(ours, theirs)).max() <= 1, (ours, theirs)
+    # The CLI writes the same rectification, which cv2.FileStorage reads: matrices and the valid rectangles.
+    for name, view in zip(("left.png", "right.png"), raw_pair):
+        cv2.imwrite(str(tmp_path / name), view[..., ::-1])
+    cli("rectify", calib, tmp_path / "left.png", tmp_path / "right.png", "-o", tmp_path / "out", "--alpha", str(alpha))
+    fs = cv2.FileStorage(str(tmp_path / "out" / "rectify.yml"), cv2.FILE_STORAGE_READ)
+    for name, theirs in (("P1", P1), ("P2", P2), ("Q", Q), ("R1", R1), ("R2", R2)):
+        np.testing.assert_allclose(fs.getNode(name).mat(), theirs, rtol=1e-6, atol=1e-6)
+    for name, ours in (("validPixROI1", maps["roi1"]), ("validPixROI2", maps["roi2"])):
+        node = fs.getNode(name)
+        assert [int(node.at(i).real()) for i in range(node.size())] == list(ours)
+    fs.release()
+
+
+def test_alpha_is_refused_out_of_range(tmp_path):
+    calib = save_calibration(tmp_path / "stereo.yml")
+    with pytest.raises(ValueError, match=r"alpha"):
+        jem.rectify_maps(calib, alpha=1.5)
+
+
+def test_grey_views_stay_grey(tmp_path, raw_pair):
+    calib = save_calibration(tmp_path / "stereo.yml")
+    grey = [cv2.cvtColor(view, cv2.COLOR_RGB2GRAY) for view in raw_pair]
+    left, right, _ = jem.rectify(calib, *grey)
+    assert left.shape == right.shape == (SIZE[1], SIZE[0])
+    # The grey rectified view is the colour rectification of the grey view, channel for channel.
+    rgb_left, _, _ = jem.rectify(calib, np.dstack([grey[0]] * 3), np.dstack([grey[1]] * 3))
+    assert rgb_left.shape == (SIZE[1], SIZE[0], 3)
+    np.testing.assert_array_equal(left, rgb_left[..., 0])
 
 
 def test_kitti_calibration_gives_opencvs_maps(tmp_path):

@@ -7,8 +7,10 @@
 //! writes, all or none, the disparity map and the run time (the seconds spent in the pipeline for that pair —
 //! image loading and file writing are not counted) where the layout's submission form puts them
 //! ([`crate::dataset::Pair::result_files`]: MiddEval3 `disp0<ALG>.pfm` and `time<ALG>.txt` in the scene folder;
-//! KITTI and ETH3D in a results folder beside the data set), and with [`BatchOptions::lr_mask`] where the left-right
-//! check rejected each pixel ([`crate::dataset::Pair::lr_mask_file`], [`crate::io::encode_lr_mask`]).
+//! KITTI and ETH3D in a results folder beside the data set), the configuration it ran with ([`config_record`]:
+//! every parameter, the command and jem's version; [`crate::dataset::ResultFiles::config`]), so a result says how
+//! it was made, and with [`BatchOptions::lr_mask`] where the left-right check rejected each pixel
+//! ([`crate::dataset::Pair::lr_mask_file`], [`crate::io::encode_lr_mask`]).
 //!
 //! [`run_batch`] runs a list of pairs, `jobs` at a time (each pipeline is itself multi-threaded on the global
 //! rayon pool). A failing pair — unreadable image, malformed calib, unequal sizes, or even a panic inside the
@@ -172,6 +174,19 @@ pub struct BatchOptions {
     /// Memory limit of the whole batch (see `crate::check_memory`): concurrent scenes share it, a scene
     /// waits while the ones running hold too much of it, and one that needs more than all of it fails.
     pub max_memory_bytes: u64,
+    /// The command that ran the batch, recorded with the configuration beside each result ([`config_record`]).
+    pub command: String,
+}
+
+/// The configuration recorded beside each result: jem's version and the command as comments, then every
+/// parameter (defaults included) as TOML, which `jem --config` reads back to run the same again.
+pub fn config_record(params: &Params, command: &str) -> String {
+    format!(
+        "# The configuration this result was made with (jem --config reads it back).\n# jem {}\n# command: {}\n{}",
+        env!("CARGO_PKG_VERSION"),
+        one_line(command),
+        params.to_toml()
+    )
 }
 
 /// The display name of a scene folder.
@@ -198,11 +213,11 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
         [Some(pair.left.as_path()), Some(pair.right.as_path()), pair.calib.as_deref()].into_iter().flatten().collect();
     let lr_mask = opts.lr_mask.then(|| pair.lr_mask_file(&opts.alg, opts.results.as_deref()));
     let confidence_file = opts.confidence.then_some(files.confidence.as_path());
-    let outputs: Vec<&Path> =
-        [Some(files.disparity.as_path()), Some(files.time.as_path()), lr_mask.as_deref(), confidence_file]
-            .into_iter()
-            .flatten()
-            .collect();
+    let (disparity, time, config) = (files.disparity.as_path(), files.time.as_path(), files.config.as_path());
+    let outputs: Vec<&Path> = [Some(disparity), Some(time), Some(config), lr_mask.as_deref(), confidence_file]
+        .into_iter()
+        .flatten()
+        .collect();
     crate::io::check_outputs(&inputs, &outputs)?;
     let stated = match &pair.calib {
         Some(c) => Some(calib::read_ndisp(c)?),
@@ -226,6 +241,8 @@ fn run_pair_with(pair: &Pair, matcher: &Matcher, opts: &BatchOptions, on_stage: 
     let mut written: Vec<(&Path, &[u8])> = vec![(&files.disparity, &disparity)];
     let time = pair.time_text(out.seconds);
     written.push((&files.time, time.as_bytes()));
+    let config = config_record(matcher.params(), &opts.command);
+    written.push((&files.config, config.as_bytes()));
     if let Some((path, bytes)) = &mask {
         written.push((path, bytes));
     }

@@ -207,6 +207,7 @@ pub(super) fn run(args: &BatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         lr_mask: args.lr_mask,
         confidence: args.confidence,
         max_memory_bytes: args.memory.memory_limit(),
+        command: super::command_line(),
     };
     let display = BatchDisplay::new(scenes.len(), args.jobs, global.quiet, params.clone());
     // Panics inside the pipeline are caught and reported per scene; keep the default hook's message and

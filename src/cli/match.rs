@@ -233,7 +233,7 @@ impl<'a> Request<'a> {
             return Err(Error::Input(format!("--min-disp calib: there is no {}", calib.display())));
         }
         let rectification = match &args.rectify {
-            Some(c) => Some(super::rectify::plan(c, left, right, args.memory.memory_limit())?),
+            Some(c) => Some(super::rectify::plan(c, (left, right), None, args.memory.memory_limit())?),
             None => None,
         };
         let calib_file = match &rectification {

@@ -173,13 +173,15 @@ fn parse_size(text: &str) -> std::result::Result<u64, String> {
 enum Command {
     /// Match one pair (the same as `jem LEFT RIGHT -o OUT`).
     Match(MatchArgs),
-    /// Rectify a raw pair with its stereo calibration, as OpenCV's stereoRectify (alpha 0) and remap do.
+    /// Rectify a raw pair with its stereo calibration, as OpenCV's stereoRectify and remap do.
     ///
-    /// `jem rectify CALIB LEFT RIGHT -o DIR` writes DIR/im0.png, DIR/im1.png (the rectified views, 8-bit) and
-    /// DIR/calib.txt (Middlebury keys cam0, cam1, doffs, baseline, width, height; the baseline in the calibration's
-    /// unit), ready for `jem DIR/im0.png DIR/im1.png -o disp.pfm --depth depth.pfm`, and DIR/rectify.yml (R1, R2,
-    /// P1, P2, Q and the size, as cv2.FileStorage writes cv2.stereoRectify's results: for
-    /// cv2.reprojectImageTo3D). `jem match --rectify CALIB` does the same before matching.
+    /// `jem rectify CALIB LEFT RIGHT -o DIR` writes DIR/im0.png, DIR/im1.png (the rectified views, 8-bit; grey when
+    /// both raw views are grey) and DIR/calib.txt (Middlebury keys cam0, cam1, doffs, baseline, width, height; the
+    /// baseline in the calibration's unit), ready for `jem DIR/im0.png DIR/im1.png -o disp.pfm --depth depth.pfm`,
+    /// and DIR/rectify.yml (R1, R2, P1, P2, Q, the size and each view's rectangle of valid pixels validPixROI1/2,
+    /// as cv2.FileStorage writes cv2.stereoRectify's results: for cv2.reprojectImageTo3D). --alpha is
+    /// stereoRectify's free scaling (default 0: valid pixels only). `jem match --rectify CALIB` does the same
+    /// (with alpha 0) before matching.
     /// CALIB: OpenCV FileStorage YAML or XML as cv2.FileStorage writes it (K1 or M1, D1 with 4, 5 or 8
     /// coefficients, K2/M2, D2, R, T; image_width/image_height or a size node; R1, R2, P1, P2 are used when
     /// present), or KITTI's calib_cam_to_cam.txt (cameras 02 and 03; images of KITTI's rectified size S_rect_02 are
@@ -231,8 +233,10 @@ enum Command {
     /// data set's results (source.txt) is refused, and one a batch is writing is locked against a second batch.
     /// ndisp: --ndisp, else calib.txt, else 192 for KITTI; a missing range, or one of half the width or more (ETH3D
     /// states the width), is measured on the pair. Run times (seconds in the pipeline, loading and writing
-    /// excluded) go beside each result (KITTI: RES/NAME/SPLIT/time/FRAME.txt). Each pair's files are written all or
-    /// none.
+    /// excluded) go beside each result (KITTI: RES/NAME/SPLIT/time/FRAME.txt), and so does the configuration it
+    /// ran with (every parameter, the command line and jem's version, as TOML that --config reads back; what
+    /// `jem report` shows): MiddEval3 configNAME.toml, KITTI and ETH3D RES/NAME/SPLIT/config/FRAME.toml. Each
+    /// pair's files are written all or none.
     /// Pairs run in path order; a failing pair is reported and the others still run; the exit code is 2 if any
     /// failed.
     #[command(verbatim_doc_comment)]
@@ -320,10 +324,11 @@ enum Command {
     /// folder <stem>_files/ beside it. Per scene or frame a row: the left image and, for each --alg, its disparity
     /// in colour and its error map under the benchmark's rule (as jem viz draws them; click for the full size),
     /// and its scores as jem eval computes them: MiddEval3 avgErr, bad-2 (invalid pixels counted as bad), invalid,
-    /// the run time, and the paper's avgErr beside an --alg given a --paper column; KITTI D1 and avgErr; ETH3D
-    /// bad-1 and avgErr. The last row is the weighted (MiddEval3) or plain mean. Click a score's header to sort
-    /// the rows. A colour bar and the error map's key head the page; the command, each algorithm's configuration
-    /// (where the run recorded it) and the machine are at its foot.
+    /// the run time in seconds (as each run recorded it; not ranked, runs under other loads being not
+    /// comparable), and the paper's avgErr beside an --alg given a --paper column; KITTI D1 and avgErr; ETH3D
+    /// bad-1 and avgErr. The last row is the weighted (MiddEval3) or plain mean; the best score of a row is bold.
+    /// Click a score's header to sort the rows. A colour bar and the error map's key head the page; the command,
+    /// each algorithm's configuration (as jem batch recorded it beside the results) and the machine are at its foot.
     /// The page and its pictures are written all or none; an output that is one of the inputs is refused.
     #[command(verbatim_doc_comment)]
     Report(ReportArgs),
@@ -420,4 +425,18 @@ pub fn print_error(err: &Error) {
         source = s.source();
     }
     note!("{msg}");
+}
+
+/// The command line as typed, each argument quoted for a POSIX shell where it needs it.
+pub(super) fn command_line() -> String {
+    let quote = |a: String| {
+        let plain = !a.is_empty() && a.chars().all(|c| c.is_ascii_alphanumeric() || "-_./=,:+@%".contains(c));
+        if plain { a } else { format!("'{}'", a.replace('\'', "'\\''")) }
+    };
+    let mut args = std::env::args_os().map(|a| a.to_string_lossy().into_owned());
+    let program = args.next().map(|p| {
+        let name = std::path::Path::new(&p).file_name().map(|n| n.to_string_lossy().into_owned());
+        name.unwrap_or(p)
+    });
+    program.into_iter().chain(args).map(quote).collect::<Vec<_>>().join(" ")
 }

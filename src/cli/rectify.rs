@@ -29,18 +29,29 @@ pub(super) struct RectifyArgs {
     /// DIR/map0x.pfm, map0y.pfm (left) and map1x.pfm, map1y.pfm (right).
     #[arg(long)]
     maps: bool,
+    /// OpenCV's free scaling (stereoRectify's alpha), 0..1: 0 crops the views to valid pixels only (the default),
+    /// 1 keeps every pixel of the raw views (black corners come in), values between interpolate. rectify.yml gives
+    /// each view's rectangle of valid pixels (validPixROI1, validPixROI2).
+    #[arg(long, value_name = "A", allow_negative_numbers = true)]
+    alpha: Option<f64>,
     #[command(flatten)]
     pub(super) threads: ThreadsArg,
     #[command(flatten)]
     memory: MemoryArg,
 }
 
-/// Reads a calibration and the pair's headers, and makes the rectification for the pair's size, before any image
-/// is decoded; refuses a pair whose rectification would need more than `max_memory` bytes.
-pub(super) fn plan(calib: &Path, left: &Path, right: &Path, max_memory: u64) -> Result<Rectification> {
+/// Reads a calibration and the pair's headers, and makes the rectification for the pair's size (with OpenCV's
+/// `alpha` when given), before any image is decoded; refuses a pair whose rectification would need more than
+/// `max_memory` bytes.
+pub(super) fn plan(
+    calib: &Path,
+    (left, right): (&Path, &Path),
+    alpha: Option<f64>,
+    max_memory: u64,
+) -> Result<Rectification> {
     let calibration = StereoCalibration::load(calib)?;
     let header = jem::io::read_pair_header(left, right)?;
-    let rectification = calibration.rectification((header.width, header.height))?;
+    let rectification = calibration.rectification_with_alpha((header.width, header.height), alpha)?;
     let need = header
         .load_bytes
         .saturating_add(jem::rectify::RECTIFY_BYTES_PER_PX.saturating_mul((header.width * header.height) as u64));
@@ -78,15 +89,19 @@ pub(super) fn run(args: &RectifyArgs, global: &GlobalArgs) -> Result<ExitCode> {
     // A folder holding a scene (im0.png, im1.png, calib.txt, ground truth, results) would get a new pair beside
     // results and ground truth of the old one, as `jem synth` refuses.
     jem::synth::check_scene_folder(&args.output)?;
-    let rectification = plan(&args.calib, &args.left, &args.right, args.memory.memory_limit())?;
+    let pair = (args.left.as_path(), args.right.as_path());
+    let rectification = plan(&args.calib, pair, args.alpha, args.memory.memory_limit())?;
     warn(&rectification, &args.calib, global.quiet);
     let output_refs: Vec<&Path> = outputs.iter().map(PathBuf::as_path).collect();
     jem::io::check_outputs(&[&args.calib, &args.left, &args.right], &output_refs)?;
     let (left, right) = jem::io::read_image_pair(&args.left, &args.right)?;
     let (left, right) = rectification.rectify_pair(&left, &right)?;
+    // Grey views stay grey: a grey file's three channels are equal, and so are those of its rectified view.
+    let grey = jem::io::image_is_grey(&args.left)? && jem::io::image_is_grey(&args.right)?;
+    let encode = if grey { jem::io::encode_grey_png } else { jem::io::encode_png };
     let mut files = vec![
-        jem::io::encode_png(&outputs[0], &left)?,
-        jem::io::encode_png(&outputs[1], &right)?,
+        encode(&outputs[0], &left)?,
+        encode(&outputs[1], &right)?,
         rectification.calib_txt().into_bytes(),
         rectification.rectify_yml().into_bytes(),
     ];

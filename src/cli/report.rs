@@ -55,20 +55,6 @@ pub(super) struct ReportArgs {
     pub(super) threads: ThreadsArg,
 }
 
-/// The command line as typed, each argument quoted for a POSIX shell where it needs it.
-fn command_line() -> String {
-    let quote = |a: String| {
-        let plain = !a.is_empty() && a.chars().all(|c| c.is_ascii_alphanumeric() || "-_./=,:+@%".contains(c));
-        if plain { a } else { format!("'{}'", a.replace('\'', "'\\''")) }
-    };
-    let mut args = std::env::args_os().map(|a| a.to_string_lossy().into_owned());
-    let program = args.next().map(|p| {
-        let name = std::path::Path::new(&p).file_name().map(|n| n.to_string_lossy().into_owned());
-        name.unwrap_or(p)
-    });
-    program.into_iter().chain(args).map(quote).collect::<Vec<_>>().join(" ")
-}
-
 /// Writes the report and says what it wrote.
 pub(super) fn run(args: &ReportArgs, global: &super::GlobalArgs) -> Result<ExitCode> {
     let papers = if args.paper.is_empty() {
@@ -106,7 +92,7 @@ pub(super) fn run(args: &ReportArgs, global: &super::GlobalArgs) -> Result<ExitC
         gt: args.gt.clone(),
         results: args.results.clone(),
         thumb_width: args.thumb_width,
-        command: command_line(),
+        command: super::command_line(),
     };
     let summary = jem::report::write_report(&args.dir, &args.output, &opts)?;
     for n in &summary.not_drawn {

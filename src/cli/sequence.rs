@@ -60,7 +60,7 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
     let total = seq.frames.len();
     // Planned on the first frame's headers (every frame of a sequence has its size), before any image is decoded.
     let rectification = match (&args.rectify, seq.frames.first()) {
-        (Some(c), Some(f)) => Some(super::rectify::plan(c, &f.left, &f.right, args.memory.memory_limit())?),
+        (Some(c), Some(f)) => Some(super::rectify::plan(c, (&f.left, &f.right), None, args.memory.memory_limit())?),
         _ => None,
     };
     if let (Some(rect), Some(calib)) = (&rectification, &args.rectify) {

@@ -125,6 +125,10 @@ pub struct ResultFiles {
     /// The confidence map, when one is written (`jem batch --confidence`; `jem eval` scores it when it is there):
     /// MiddEval3 `conf0NAME.pfm` beside the result, KITTI `conf_0/FRAME.pfm`, ETH3D `confidence/SCENE.pfm`.
     pub confidence: PathBuf,
+    /// The configuration the run recorded beside the result (`jem batch`: every parameter, the command and jem's
+    /// version, as TOML that `--config` reads back): MiddEval3 `configNAME.toml` in the scene folder, KITTI
+    /// `config/FRAME.toml` and ETH3D `config/SCENE.toml` beside the submission folder (outside it).
+    pub config: PathBuf,
 }
 
 impl Pair {
@@ -176,16 +180,19 @@ impl Pair {
                 disparity: self.root.join(format!("disp0{alg}.pfm")),
                 time: self.root.join(format!("time{alg}.txt")),
                 confidence: self.root.join(format!("conf0{alg}.pfm")),
+                config: self.root.join(format!("config{alg}.toml")),
             },
             Some(dir) if self.layout == Layout::Eth3d => ResultFiles {
                 disparity: dir.join("low_res_two_view").join(format!("{}.pfm", self.name)),
                 time: dir.join("low_res_two_view").join(format!("{}.txt", self.name)),
                 confidence: dir.join("confidence").join(format!("{}.pfm", self.name)),
+                config: dir.join("config").join(format!("{}.toml", self.name)),
             },
             Some(dir) => ResultFiles {
                 disparity: dir.join("disp_0").join(format!("{}.png", self.name)),
                 time: dir.join("time").join(format!("{}.txt", self.name)),
                 confidence: dir.join("conf_0").join(format!("{}.pfm", self.name)),
+                config: dir.join("config").join(format!("{}.toml", self.name)),
             },
         }
     }

@@ -98,6 +98,26 @@ pub fn encode_png(path: &Path, image: &RgbImage) -> Result<Vec<u8>> {
     png::encode_rgb8_png(path, w, h, &rgb)
 }
 
+/// An image as an 8-bit grey PNG file's bytes: its first channel (of a grey image, all three are equal), rounded
+/// and held to 0..=255; nothing is written, `path` names the file in an error.
+///
+/// # Errors
+/// [`Error::Image`] naming the path.
+pub fn encode_grey_png(path: &Path, image: &RgbImage) -> Result<Vec<u8>> {
+    let (w, h) = image.dims();
+    let grey: Vec<u8> = image.channel(0).iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect();
+    png::encode_grey8_png(path, w, h, &grey)
+}
+
+/// Whether an image file holds grey samples (grey or grey + alpha, 8 or 16 bit), from its header (the image is
+/// not decoded).
+///
+/// # Errors
+/// As [`read_image_header`].
+pub fn image_is_grey(path: &Path) -> Result<bool> {
+    png::is_grey(path)
+}
+
 /// The value [`encode_lr_mask`] writes where the left-right check rejected a pixel (0 where it passed).
 pub const LR_REJECTED: u8 = 255;
 

@@ -60,14 +60,30 @@ pub(crate) fn read_header(path: &Path) -> Result<ImageHeader> {
 /// depth and channels), from the header.
 fn header_parts(path: &Path) -> Result<(usize, usize, u64, u64)> {
     use image::ImageDecoder;
+    let (decoder, file_bytes) = header_decoder(path)?;
+    let (w, h) = decoder.dimensions();
+    Ok((w as usize, h as usize, file_bytes, decoder.total_bytes()))
+}
+
+/// Whether an image file holds grey samples (grey or grey + alpha, at any depth), from its header.
+///
+/// # Errors
+/// As [`read_header`].
+pub(crate) fn is_grey(path: &Path) -> Result<bool> {
+    use image::ImageDecoder;
+    let color = header_decoder(path)?.0.color_type();
+    Ok(matches!(color, image::ColorType::L8 | image::ColorType::La8 | image::ColorType::L16 | image::ColorType::La16))
+}
+
+/// An image file's decoder, its header read (not the image), and the file's length in bytes.
+fn header_decoder(path: &Path) -> Result<(impl image::ImageDecoder, u64)> {
     let file = super::open_regular(path)?;
     let file_bytes = file.metadata().map_err(|e| Error::io(path, e))?.len();
     let reader = ImageReader::new(std::io::BufReader::new(file));
     let reader = reader.with_guessed_format().map_err(|e| Error::io(path, e))?;
     check_format(path, &reader)?;
     let decoder = reader.into_decoder().map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
-    let (w, h) = decoder.dimensions();
-    Ok((w as usize, h as usize, file_bytes, decoder.total_bytes()))
+    Ok((decoder, file_bytes))
 }
 
 /// [`decode`] within `max_bytes`: from the header, the file, its decoded samples and a converted copy of them

@@ -1,8 +1,9 @@
 //! Rectification of a calibrated pair: a stereo calibration read from OpenCV's `FileStorage` files (YAML or XML,
 //! as `cv2.stereoCalibrate` results are saved) or KITTI's `calib_cam_to_cam.txt`, the rectifying transforms of
-//! OpenCV's `stereoRectify` (`alpha = 0`, zero disparity at infinity), the maps of `initUndistortRectifyMap` and a
-//! bilinear `remap`: the views come out as OpenCV rectifies them, ready to match, with the Middlebury `calib.txt`
-//! of the rectified pair (focal length, principal points, baseline) for depth.
+//! OpenCV's `stereoRectify` (zero disparity at infinity; its free scaling `alpha`, 0 by default), the maps of
+//! `initUndistortRectifyMap` and a bilinear `remap`: the views come out as OpenCV rectifies them, ready to match,
+//! with the Middlebury `calib.txt` of the rectified pair (focal length, principal points, baseline) for depth, and
+//! OpenCV's own description of it (`rectify.yml`: R1, R2, P1, P2, Q, the valid-pixel rectangles).
 //!
 //! ```
 //! # let dir = tempfile::tempdir()?;
@@ -21,6 +22,7 @@ mod camera;
 mod checks;
 mod formats;
 mod linalg;
+mod load;
 mod maps;
 mod stereo;
 mod yml;
@@ -32,8 +34,8 @@ pub use stereo::RectifyingTransforms;
 
 use crate::error::{Error, Result};
 use crate::image::{Plane, RgbImage};
-use formats::{Format, Node, Nodes};
-use linalg::{Mat3, Vec3};
+use formats::Format;
+use linalg::Mat3;
 
 /// The largest calibration file read (a stereo calibration is a few kilobytes).
 const MAX_CALIBRATION_BYTES: u64 = 1 << 20;
@@ -111,9 +113,9 @@ impl StereoCalibration {
     pub fn parse(text: &str, path: &Path) -> Result<StereoCalibration> {
         let err = |msg: String| calib_error(path, msg);
         match formats::sniff(text) {
-            Some(Format::OpenCvYaml) => from_opencv(&formats::parse_yaml(text).map_err(err)?, path),
-            Some(Format::OpenCvXml) => from_opencv(&formats::parse_xml(text).map_err(err)?, path),
-            Some(Format::Kitti) => from_kitti(&formats::parse_kitti(text).map_err(err)?, path),
+            Some(Format::OpenCvYaml) => load::from_opencv(&formats::parse_yaml(text).map_err(err)?, path),
+            Some(Format::OpenCvXml) => load::from_opencv(&formats::parse_xml(text).map_err(err)?, path),
+            Some(Format::Kitti) => load::from_kitti(&formats::parse_kitti(text).map_err(err)?, path),
             None => {
                 Err(err("neither an OpenCV FileStorage file (YAML or XML) nor a KITTI calib_cam_to_cam.txt".into()))
             }
@@ -121,17 +123,41 @@ impl StereoCalibration {
     }
 
     /// The rectification of views of `size` (width, height): the file's R1/R2/P1/P2 when it has them, else
-    /// OpenCV's `stereoRectify` with `alpha = 0`.
+    /// OpenCV's `stereoRectify` with `alpha = 0` ([`StereoCalibration::rectification_with_alpha`] with `None`).
     ///
     /// # Errors
-    /// [`Error::Calib`] when the file states another image size, the cameras share their centre, are one above the
-    /// other, or the right camera is to the left of the left one, or the distortion leaves no valid view.
+    /// As [`StereoCalibration::rectification_with_alpha`].
     pub fn rectification(&self, size: (usize, usize)) -> Result<Rectification> {
+        self.rectification_with_alpha(size, None)
+    }
+
+    /// The rectification of views of `size` (width, height) with OpenCV's free scaling `alpha` (`stereoRectify`'s):
+    /// 0 keeps only valid pixels (the views are cropped to them), 1 keeps every pixel of the source views (black
+    /// corners come in), values between interpolate the scale. `None`: the file's R1/R2/P1/P2 when it has them,
+    /// else `alpha = 0`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParam`] for an `alpha` outside 0..=1; [`Error::Calib`] when `alpha` is given for a file that
+    /// holds its own rectification (R1/R2/P1/P2, or views KITTI rectified), when the file states another image size,
+    /// the cameras share their centre, are one above the other, or the right camera is to the left of the left one,
+    /// or the distortion leaves no valid view.
+    pub fn rectification_with_alpha(&self, size: (usize, usize), alpha: Option<f64>) -> Result<Rectification> {
         let err = |msg: String| calib_error(&self.path, msg);
+        if let Some(a) = alpha
+            && !(0.0..=1.0).contains(&a)
+        {
+            return Err(Error::param("alpha", a, "0..=1 (0: only valid pixels, 1: every source pixel)"));
+        }
+        let own = |what: &str| {
+            err(format!("{what}: alpha applies only to a rectification jem computes from K1, D1, K2, D2, R and T"))
+        };
         if let Some(pre) = self.prerectified
             && pre.size == size
             && self.image_size != Some(size)
         {
+            if alpha.is_some() {
+                return Err(own("these views are already rectified (the size of S_rect_02)"));
+            }
             // Already rectified: each view's camera is its projection's, without distortion, and the maps are the
             // identity.
             let pinhole = |p: &[[f64; 4]; 3]| Intrinsics {
@@ -150,10 +176,12 @@ impl StereoCalibration {
                 stated.0, stated.1, size.0, size.1
             )));
         }
-        let transforms = match self.given {
-            Some(t) => t,
-            None => {
-                stereo::stereo_rectify([&self.cameras[0], &self.cameras[1]], size, &self.rotation, &self.translation)
+        let transforms = match (self.given, alpha) {
+            (Some(_), Some(_)) => return Err(own("the file holds its own rectification (R1, R2, P1, P2)")),
+            (Some(t), None) => t,
+            (None, alpha) => {
+                let cams = [&self.cameras[0], &self.cameras[1]];
+                stereo::stereo_rectify(cams, size, &self.rotation, &self.translation, alpha.unwrap_or(0.0))
                     .ok_or_else(|| err("T is zero: the two cameras are at the same place".into()))?
             }
         };
@@ -204,6 +232,19 @@ impl Rectification {
     /// The rotations and projections (OpenCV's R1, R2, P1, P2).
     pub fn transforms(&self) -> &RectifyingTransforms {
         &self.transforms
+    }
+
+    /// The rectangle of valid pixels of each rectified view (left, right), as `stereoRectify` gives them
+    /// (`validPixROI1`, `validPixROI2`): (x, y, width, height), within the image; from the inscribed rectangle of
+    /// the view's undistorted outline, so with `alpha = 0` it is (nearly) the whole image and with `alpha = 1` the
+    /// part that is not black. Empty (all zero) when no valid pixel is left.
+    pub fn valid_rois(&self) -> [(usize, usize, usize, usize); 2] {
+        let t = &self.transforms;
+        let left3 = |p: &[[f64; 4]; 3]| -> Mat3 { [0, 1, 2].map(|i| [p[i][0], p[i][1], p[i][2]]) };
+        [(&self.cameras[0], &t.r1, &t.p1), (&self.cameras[1], &t.r2, &t.p2)].map(|(camera, r, p)| {
+            let (inner, _) = camera::undistorted_rectangles(camera, r, &left3(p), self.size);
+            pixel_rectangle(inner, self.size)
+        })
     }
 
     /// One line per rectified view that comes out mostly black (more than half of its pixels from outside the raw
@@ -335,6 +376,23 @@ impl Rectification {
     }
 }
 
+/// A rectangle (x0, y0, x1, y1) in rectified coordinates as OpenCV rounds a valid-pixel ROI, (⌈x0⌉, ⌈y0⌉,
+/// ⌊x1 − x0⌋, ⌊y1 − y0⌋), intersected with the image of `size` (OpenCV's `Rect &`: all zero when they do not meet).
+fn pixel_rectangle(r: [f64; 4], (width, height): (usize, usize)) -> (usize, usize, usize, usize) {
+    if !r.iter().all(|v| v.is_finite()) {
+        // A lens model that sends the outline nowhere: `max`/`min` below would pass a NaN over as the image edge.
+        return (0, 0, 0, 0);
+    }
+    let (x, y) = (r[0].ceil(), r[1].ceil());
+    let (right, bottom) = (x + (r[2] - r[0]).floor(), y + (r[3] - r[1]).floor());
+    let (x0, y0) = (x.max(0.0), y.max(0.0));
+    let (x1, y1) = (right.min(width as f64), bottom.min(height as f64));
+    if !(x1 > x0 && y1 > y0) {
+        return (0, 0, 0, 0);
+    }
+    (x0 as usize, y0 as usize, (x1 - x0) as usize, (y1 - y0) as usize)
+}
+
 /// A number for calib.txt: 9 significant digits, no trailing zeros.
 fn num(v: f64) -> String {
     let digits = (8 - v.abs().log10().floor().max(0.0) as i32).max(0) as usize;
@@ -345,221 +403,6 @@ fn num(v: f64) -> String {
 
 fn calib_error(path: &Path, msg: String) -> Error {
     Error::Calib { path: path.to_path_buf(), msg }
-}
-
-/// Looks up nodes by their accepted names and gathers everything missing, so one message lists it all.
-struct Lookup<'a> {
-    nodes: &'a Nodes,
-    missing: Vec<String>,
-    bad: Vec<String>,
-}
-
-impl<'a> Lookup<'a> {
-    fn new(nodes: &'a Nodes) -> Self {
-        Lookup { nodes, missing: Vec::new(), bad: Vec::new() }
-    }
-
-    fn find(&self, names: &[&str]) -> Option<(&'a str, &'a Node)> {
-        names.iter().find_map(|n| self.nodes.get_key_value(*n).map(|(k, v)| (k.as_str(), v)))
-    }
-
-    /// A required node; recorded as missing (under all its names) when absent.
-    fn required(&mut self, names: &[&str]) -> Option<(&'a str, &'a Node)> {
-        let found = self.find(names);
-        if found.is_none() {
-            self.missing.push(names.join("/"));
-        }
-        found
-    }
-
-    fn mat3(&mut self, names: &[&str]) -> Option<Mat3> {
-        let (name, node) = self.required(names)?;
-        if node.data.len() != 9 {
-            self.bad.push(format!("{name} has {} values (a 3×3 matrix has 9)", node.data.len()));
-            return None;
-        }
-        Some([0, 1, 2].map(|i| [0, 1, 2].map(|j| node.data[3 * i + j])))
-    }
-
-    /// A required rotation matrix ([`checks::not_a_rotation`]).
-    fn rotation(&mut self, names: &[&str]) -> Option<Mat3> {
-        let m = self.mat3(names)?;
-        self.checked(checks::not_a_rotation(self.find(names)?.0, &m), m)
-    }
-
-    /// A required translation ([`checks::not_a_translation`]).
-    fn translation(&mut self, names: &[&str]) -> Option<Vec3> {
-        let t = self.vec3(names)?;
-        self.checked(checks::not_a_translation(self.find(names)?.0, &t), t)
-    }
-
-    /// `value`, or `None` with `why` recorded.
-    fn checked<T>(&mut self, why: Option<String>, value: T) -> Option<T> {
-        match why {
-            Some(why) => {
-                self.bad.push(why);
-                None
-            }
-            None => Some(value),
-        }
-    }
-
-    /// A projection whose values are finite, when the file has one.
-    fn finite_proj(&mut self, names: &[&str]) -> Option<[[f64; 4]; 3]> {
-        let p = self.proj(names)?;
-        self.checked(checks::not_finite(self.find(names)?.0, p.as_flattened()), p)
-    }
-
-    fn vec3(&mut self, names: &[&str]) -> Option<Vec3> {
-        let (name, node) = self.required(names)?;
-        if node.data.len() != 3 {
-            self.bad.push(format!("{name} has {} values (expected 3)", node.data.len()));
-            return None;
-        }
-        Some([node.data[0], node.data[1], node.data[2]])
-    }
-
-    fn proj(&mut self, names: &[&str]) -> Option<[[f64; 4]; 3]> {
-        let (name, node) = self.find(names)?;
-        if node.data.len() != 12 {
-            self.bad.push(format!("{name} has {} values (a 3×4 projection has 12)", node.data.len()));
-            return None;
-        }
-        Some([0, 1, 2].map(|i| [0, 1, 2, 3].map(|j| node.data[4 * i + j])))
-    }
-
-    /// A camera: its matrix and distortion (4, 5, 8 coefficients; 12 or 14 when the thin-prism and tilt terms
-    /// are zero, as this model has none).
-    fn camera(&mut self, matrix: &[&str], distortion: &[&str]) -> Option<Intrinsics> {
-        let k = self.mat3(matrix);
-        let d = self.required(distortion);
-        let (k, (dname, d)) = (k?, d?);
-        let n = d.data.len();
-        if ![4, 5, 8, 12, 14].contains(&n) || d.data.iter().skip(8).any(|&v| v != 0.0) {
-            self.bad.push(format!(
-                "{dname} has {n} coefficients{}: k1 k2 p1 p2 [k3 [k4 k5 k6]] are supported",
-                if n > 8 { " with thin-prism or tilt terms" } else { "" }
-            ));
-            return None;
-        }
-        if !(k[0][0] > 0.0 && k[1][1] > 0.0 && k.iter().flatten().all(|v| v.is_finite())) {
-            self.bad.push(format!("{} must have positive focal lengths", matrix[0]));
-            return None;
-        }
-        if let Some(why) = checks::not_finite(dname, &d.data) {
-            self.bad.push(why);
-            return None;
-        }
-        let mut distortion = [0.0; 8];
-        distortion[..n.min(8)].copy_from_slice(&d.data[..n.min(8)]);
-        Some(Intrinsics { matrix: k, distortion })
-    }
-
-    fn finish(self, path: &Path, what: &str) -> Result<()> {
-        let mut problems = Vec::new();
-        if !self.missing.is_empty() {
-            problems.push(format!("missing {}", self.missing.join(", ")));
-        }
-        problems.extend(self.bad);
-        if problems.is_empty() {
-            return Ok(());
-        }
-        Err(calib_error(path, format!("{} ({what})", problems.join("; "))))
-    }
-}
-
-/// An image size from `image_width`/`image_height`, or a `[w, h]` node ([`checks::image_size`]); a stated size
-/// that is no size is recorded in `look` and gives `None`.
-fn stated_size(look: &mut Lookup<'_>, names: &[&str]) -> Option<(usize, usize)> {
-    let scalar = |n: &str| look.nodes.get(n).and_then(|v| v.data.first().copied());
-    let size = if let (Some(w), Some(h)) = (scalar("image_width"), scalar("image_height")) {
-        checks::image_size("image_width/image_height", w, h)
-    } else {
-        let (name, node) = names.iter().find_map(|n| look.nodes.get_key_value(*n))?;
-        if node.data.len() != 2 {
-            look.bad.push(format!("{name} has {} values (an image size has 2: width, height)", node.data.len()));
-            return None;
-        }
-        checks::image_size(name, node.data[0], node.data[1])
-    };
-    size.map_err(|why| look.bad.push(why)).ok()
-}
-
-fn from_opencv(nodes: &Nodes, path: &Path) -> Result<StereoCalibration> {
-    let mut look = Lookup::new(nodes);
-    let left = look.camera(&["K1", "M1", "cameraMatrix1"], &["D1", "distCoeffs1"]);
-    let right = look.camera(&["K2", "M2", "cameraMatrix2"], &["D2", "distCoeffs2"]);
-    let rotation = match look.find(&["R"]) {
-        Some((name, node)) if node.data.len() == 3 => {
-            let v = [node.data[0], node.data[1], node.data[2]];
-            look.checked(checks::not_finite(name, &v), linalg::rotation_from_vector(&v))
-        }
-        _ => look.rotation(&["R"]),
-    };
-    let translation = look.translation(&["T"]);
-    let given = match (look.find(&["R1"]), look.find(&["R2"])) {
-        (Some(_), Some(_)) => {
-            let (r1, r2) = (look.rotation(&["R1"]), look.rotation(&["R2"]));
-            let (p1, p2) = (look.finite_proj(&["P1"]), look.finite_proj(&["P2"]));
-            match (r1, r2, p1, p2) {
-                (Some(r1), Some(r2), Some(p1), Some(p2)) => Some(RectifyingTransforms { r1, r2, p1, p2 }),
-                _ => None,
-            }
-        }
-        _ => None,
-    };
-    let image_size = stated_size(&mut look, &["image_size", "imageSize", "size"]);
-    look.finish(path, "an OpenCV stereo calibration has K1/M1, D1, K2/M2, D2, R and T")?;
-    let (Some(left), Some(right), Some(rotation), Some(translation)) = (left, right, rotation, translation) else {
-        unreachable!("every missing value was reported")
-    };
-    Ok(StereoCalibration {
-        path: path.to_path_buf(),
-        cameras: [left, right],
-        rotation,
-        translation,
-        image_size,
-        given,
-        prerectified: None,
-    })
-}
-
-/// KITTI's cameras 02 (left colour) and 03 (right colour). Raw images (of size S_02) are rectified from K, D, R, T
-/// of both; images already rectified by KITTI (of size S_rect_02) are taken as they are, with P_rect_02 and
-/// P_rect_03 as their projections.
-fn from_kitti(nodes: &Nodes, path: &Path) -> Result<StereoCalibration> {
-    let mut look = Lookup::new(nodes);
-    let left = look.camera(&["K_02"], &["D_02"]);
-    let right = look.camera(&["K_03"], &["D_03"]);
-    let (r02, r03) = (look.rotation(&["R_02"]), look.rotation(&["R_03"]));
-    let (t02, t03) = (look.vec3(&["T_02"]), look.vec3(&["T_03"]));
-    let (p02, p03) = (look.finite_proj(&["P_rect_02"]), look.finite_proj(&["P_rect_03"]));
-    let (raw_size, rect_size) = (stated_size(&mut look, &["S_02"]), stated_size(&mut look, &["S_rect_02"]));
-    look.finish(path, "KITTI's calib_cam_to_cam.txt has K_02, D_02, R_02, T_02 and the same for 03")?;
-    let (Some(left), Some(right), Some(r02), Some(r03), Some(t02), Some(t03)) = (left, right, r02, r03, t02, t03)
-    else {
-        unreachable!("every missing value was reported")
-    };
-    // The pose of camera 03 in camera 02's frame, from both poses in camera 00's.
-    let rotation = linalg::mul(&r03, &linalg::transpose(&r02));
-    let rt = linalg::mul_vec(&rotation, &t02);
-    let translation = [t03[0] - rt[0], t03[1] - rt[1], t03[2] - rt[2]];
-    if let Some(why) = checks::not_a_translation("T_03 − R·T_02 (camera 03 seen from camera 02)", &translation) {
-        return Err(calib_error(path, why));
-    }
-    let prerectified = match (p02, p03, rect_size) {
-        (Some(p1), Some(p2), Some(size)) => Some(Prerectified { size, p1, p2 }),
-        _ => None,
-    };
-    Ok(StereoCalibration {
-        path: path.to_path_buf(),
-        cameras: [left, right],
-        rotation,
-        translation,
-        image_size: raw_size,
-        given: None,
-        prerectified,
-    })
 }
 
 #[cfg(test)]

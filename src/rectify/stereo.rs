@@ -1,11 +1,13 @@
 //! The rectifying rotations and projections of a calibrated pair, as OpenCV's `stereoRectify` computes them with
-//! `alpha = 0` (only valid pixels in the rectified views) and zero disparity at infinity (both views share the
-//! principal point).
+//! zero disparity at infinity (both views share the principal point) and its free scaling `alpha` (0: only valid
+//! pixels in the rectified views; 1: every source pixel kept).
 //!
 //! The right camera's rotation R is halved between the views (each turns by −½ of its rotation vector), then one
 //! more rotation turns the baseline onto the x axis; the new focal length is the mean of the vertical ones, the new
-//! principal point centres the undistorted corners of both views; finally both are scaled about it until the
-//! inscribed rectangle of each undistorted view fills the image (OpenCV's `alpha = 0`).
+//! principal point centres the undistorted corners of both views; finally both are scaled about it: by s0, the
+//! scale at which the inscribed rectangle of each undistorted view fills the image (`alpha = 0`), or by s1, the
+//! scale at which the circumscribed rectangle of each fits inside it (`alpha = 1`), or by s0·(1 − alpha) + s1·alpha
+//! between them, as OpenCV interpolates.
 
 use super::camera::{Intrinsics, undistorted_rectangles};
 use super::linalg::{Mat3, Vec3, cross, mul, mul_vec, norm, rotation_from_vector, transpose, vector_from_rotation};
@@ -24,13 +26,14 @@ pub struct RectifyingTransforms {
     pub p2: [[f64; 4]; 3],
 }
 
-/// `stereoRectify(K1, D1, K2, D2, size, R, T, alpha = 0, CALIB_ZERO_DISPARITY)`; `None` when the cameras share
-/// their centre (T = 0).
+/// `stereoRectify(K1, D1, K2, D2, size, R, T, alpha, CALIB_ZERO_DISPARITY)` for `alpha` in 0..=1; `None` when the
+/// cameras share their centre (T = 0).
 pub(crate) fn stereo_rectify(
     cams: [&Intrinsics; 2],
     size: (usize, usize),
     rotation: &Mat3,
     translation: &Vec3,
+    alpha: f64,
 ) -> Option<RectifyingTransforms> {
     let (nx, ny) = (size.0 as f64, size.1 as f64);
     let om = vector_from_rotation(rotation).map(|v| -0.5 * v);
@@ -81,19 +84,23 @@ pub(crate) fn stereo_rectify(
     let p1 = projection(fc, shared, 0.0);
     let p2 = projection(fc, shared, t[idx] * fc);
     let left3 = |p: &[[f64; 4]; 3]| -> Mat3 { [0, 1, 2].map(|i| [p[i][0], p[i][1], p[i][2]]) };
-    let (inner1, _) = undistorted_rectangles(cams[0], &r1, &left3(&p1), size);
-    let (inner2, _) = undistorted_rectangles(cams[1], &r2, &left3(&p2), size);
+    let (inner1, outer1) = undistorted_rectangles(cams[0], &r1, &left3(&p1), size);
+    let (inner2, outer2) = undistorted_rectangles(cams[1], &r2, &left3(&p2), size);
 
-    // alpha = 0: the smallest scale about the principal point that makes each view's inscribed rectangle cover
-    // the whole image.
+    // The scale about the principal point at which a rectangle's left, top, right and bottom edges reach the
+    // image's: the largest of the four covers the image with it, the smallest fits it inside.
     let (cx, cy) = (shared[0], shared[1]);
-    let cover = |inner: &[f64; 4]| {
-        (cx / (cx - inner[0]))
-            .max(cy / (cy - inner[1]))
-            .max((nx - 1.0 - cx) / (inner[2] - cx))
-            .max((ny - 1.0 - cy) / (inner[3] - cy))
+    let reach = |r: &[f64; 4]| {
+        [cx / (cx - r[0]), cy / (cy - r[1]), (nx - 1.0 - cx) / (r[2] - cx), (ny - 1.0 - cy) / (r[3] - cy)]
     };
-    let s = cover(&inner1).max(cover(&inner2));
+    let largest = |r: &[f64; 4]| reach(r).into_iter().fold(f64::MIN, f64::max);
+    let smallest = |r: &[f64; 4]| reach(r).into_iter().fold(f64::MAX, f64::min);
+    // alpha = 0: each view's inscribed rectangle covers the whole image (only valid pixels are seen).
+    let s0 = largest(&inner1).max(largest(&inner2));
+    // alpha = 1: each view's circumscribed rectangle fits inside the image (no source pixel is lost).
+    let s1 = smallest(&outer1).min(smallest(&outer2));
+    // The default alpha = 0 takes s0 as it is, whatever s1 is (not finite for a lens model that folds over).
+    let s = if alpha == 0.0 { s0 } else { s0 * (1.0 - alpha) + s1 * alpha };
     fc *= s;
     let p1 = projection(fc, shared, 0.0);
     let p2 = projection(fc, shared, t[idx] * fc);
@@ -116,7 +123,7 @@ mod tests {
         let (a, b) = (cam(700.0, 318.0, 242.0, -0.1), cam(710.0, 325.0, 236.0, -0.08));
         let rotation = rotation_from_vector(&[0.01, -0.03, 0.008]);
         let translation = [-120.0, 2.5, -1.5];
-        let rect = stereo_rectify([&a, &b], (640, 480), &rotation, &translation).unwrap();
+        let rect = stereo_rectify([&a, &b], (640, 480), &rotation, &translation, 0.0).unwrap();
         // The right camera's centre, in the left rectified frame, lies on the x axis.
         let centre = mul_vec(&transpose(&rotation), &translation.map(|v| -v));
         let in_rect = mul_vec(&rect.r1, &centre);
@@ -136,6 +143,6 @@ mod tests {
     #[test]
     fn cameras_at_the_same_place_have_no_rectification() {
         let a = cam(700.0, 320.0, 240.0, 0.0);
-        assert!(stereo_rectify([&a, &a], (640, 480), &super::super::linalg::IDENTITY, &[0.0; 3]).is_none());
+        assert!(stereo_rectify([&a, &a], (640, 480), &super::super::linalg::IDENTITY, &[0.0; 3], 0.0).is_none());
     }
 }

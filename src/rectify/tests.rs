@@ -1,7 +1,7 @@
 //! The rectification end to end: a rig made here (two cameras with lens distortion, the right one turned and
 //! shifted), points of a scene projected through it, found again in the rectified views.
 
-use super::linalg::{inverse, mul, mul_vec, rotation_from_vector};
+use super::linalg::{Vec3, inverse, mul, mul_vec, rotation_from_vector};
 use super::*;
 
 pub(super) fn rig() -> StereoCalibration {
@@ -153,4 +153,58 @@ fn calibration_files_name_every_missing_value_at_once() {
     assert!(msg.contains(", R, T"), "{msg}");
     let e = StereoCalibration::parse("width=3\n", Path::new("calib.txt")).unwrap_err().to_string();
     assert!(e.contains("neither an OpenCV FileStorage"), "{e}");
+}
+
+/// The raw image's outline (a 9 × 9 grid's border), each point's rectified position in `view`.
+fn rectified_outline(rect: &Rectification, view: View) -> Vec<(f64, f64)> {
+    let steps = (0..=8).map(|k| f64::from(k) / 8.0);
+    let border: Vec<(f64, f64)> = steps
+        .clone()
+        .flat_map(|t| [(t * 639.0, 0.0), (t * 639.0, 479.0), (0.0, t * 479.0), (639.0, t * 479.0)])
+        .collect();
+    border.into_iter().map(|p| rectified_position(rect, view, p)).collect()
+}
+
+#[test]
+fn alpha_one_keeps_every_source_pixel_and_alpha_zero_only_valid_ones() {
+    let calib = rig();
+    let keep_all = calib.rectification_with_alpha((640, 480), Some(1.0)).unwrap();
+    let crop = calib.rectification_with_alpha((640, 480), Some(0.0)).unwrap();
+    assert_eq!(crop, calib.rectification((640, 480)).unwrap(), "alpha 0 is the default rectification");
+    let inside = |&(x, y): &(f64, f64)| (-0.5..639.5).contains(&x) && (-0.5..479.5).contains(&y);
+    for view in [View::Left, View::Right] {
+        // alpha = 1: the whole raw outline lands in the rectified image; alpha = 0: parts of it lie outside.
+        let outline = rectified_outline(&keep_all, view);
+        assert!(outline.iter().all(inside), "{view:?}: {outline:?}");
+        assert!(!rectified_outline(&crop, view).iter().all(inside), "{view:?}");
+    }
+    let half = calib.rectification_with_alpha((640, 480), Some(0.5)).unwrap();
+    assert!(keep_all.focal_px() < half.focal_px() && half.focal_px() < crop.focal_px());
+    // The valid pixels fill the cropped views, and only part of those that keep everything.
+    for (c, k) in crop.valid_rois().into_iter().zip(keep_all.valid_rois()) {
+        assert!(c.2 >= 636 && c.3 >= 476, "{c:?}");
+        assert!(k.0 > 0 && k.1 > 0 && k.2 < 620 && k.3 < 460 && k.2 > 400 && k.3 > 300, "{k:?}");
+    }
+}
+
+#[test]
+fn an_alpha_out_of_range_or_for_a_given_rectification_is_refused() {
+    for alpha in [-0.1, 1.5, f64::NAN] {
+        let e = rig().rectification_with_alpha((640, 480), Some(alpha)).unwrap_err().to_string();
+        assert!(e.contains("alpha") && e.contains("0..=1"), "{e}");
+    }
+    let mut saved = rig();
+    saved.given = Some(*saved.rectification((640, 480)).unwrap().transforms());
+    let e = saved.rectification_with_alpha((640, 480), Some(0.5)).unwrap_err().to_string();
+    assert!(e.starts_with("rig.yml: the file holds its own rectification"), "{e}");
+    assert!(saved.rectification_with_alpha((640, 480), None).is_ok());
+}
+
+#[test]
+fn a_valid_rectangle_is_rounded_inwards_and_held_to_the_image_as_opencv_does() {
+    // (⌈x0⌉, ⌈y0⌉, ⌊x1 − x0⌋, ⌊y1 − y0⌋), then cut to the image: x 1..640, y 0..470.
+    assert_eq!(pixel_rectangle([0.2, -3.0, 639.9, 470.5], (640, 480)), (1, 0, 639, 470));
+    assert_eq!(pixel_rectangle([10.0, 20.0, 30.5, 40.0], (640, 480)), (10, 20, 20, 20));
+    assert_eq!(pixel_rectangle([700.0, 20.0, 800.0, 40.0], (640, 480)), (0, 0, 0, 0), "outside the image");
+    assert_eq!(pixel_rectangle([f64::NAN, 0.0, 10.0, 10.0], (640, 480)), (0, 0, 0, 0), "no valid pixel left");
 }

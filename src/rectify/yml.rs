@@ -1,6 +1,7 @@
 //! `rectify.yml`: the rectification in OpenCV's `FileStorage` YAML, as `cv2.FileStorage` writes the results of
-//! `cv2.stereoRectify`: R1, R2 (3 × 3), P1, P2 (3 × 4), Q (4 × 4) and the image size, for
-//! `cv2.reprojectImageTo3D` and code of one's own (`fs.getNode("Q").mat()`).
+//! `cv2.stereoRectify`: R1, R2 (3 × 3), P1, P2 (3 × 4), Q (4 × 4), the image size and each view's rectangle of
+//! valid pixels (`validPixROI1`, `validPixROI2`: `[ x, y, width, height ]`, the sequence `FileStorage` writes for a
+//! `cv::Rect`), for `cv2.reprojectImageTo3D` and code of one's own (`fs.getNode("Q").mat()`).
 
 use super::Rectification;
 
@@ -26,6 +27,9 @@ impl Rectification {
         out.push_str(&matrix("P1", &t.p1.each_ref().map(|r| &r[..])));
         out.push_str(&matrix("P2", &t.p2.each_ref().map(|r| &r[..])));
         out.push_str(&matrix("Q", &q.each_ref().map(|r| &r[..])));
+        for (name, (x, y, w, h)) in ["validPixROI1", "validPixROI2"].into_iter().zip(self.valid_rois()) {
+            out.push_str(&format!("{name}: [ {x}, {y}, {w}, {h} ]\n"));
+        }
         out
     }
 }
@@ -53,6 +57,9 @@ mod tests {
             assert_eq!((node.rows, node.cols, &node.data), (rows, cols, &data), "{name}");
         }
         assert_eq!((nodes["image_width"].data[0], nodes["image_height"].data[0]), (640.0, 480.0));
+        for (name, roi) in ["validPixROI1", "validPixROI2"].into_iter().zip(rect.valid_rois()) {
+            assert_eq!(nodes[name].data, [roi.0, roi.1, roi.2, roi.3].map(|v| v as f64), "{name}");
+        }
         // Q takes a pixel and its disparity to the point the rectified left camera sees there.
         let (x, y, d) = (100.0, 50.0, 20.0);
         let p: Vec<f64> = q.iter().map(|r| r[0] * x + r[1] * y + r[2] * d + r[3]).collect();

@@ -164,6 +164,11 @@ fn legend(h: &mut String) {
     );
 }
 
+/// What the time columns hold, and why no time is marked best: each run times itself on whatever machine and
+/// load it had, so times of different runs are not a ranking.
+const TIME_HELP: &str = "seconds in the pipeline per pair, as each run recorded them; not ranked: runs made on \
+                         other machines or under other loads are not comparable";
+
 /// The score columns of one algorithm, with the time and the paper's avgErr when it has a column.
 fn alg_columns(m: &Model, a: usize) -> (Vec<Column>, bool) {
     let cols = if m.rule.is_some() { columns(m.layout) } else { Vec::new() };
@@ -193,7 +198,7 @@ fn table(h: &mut String, m: &Model, folder: &str) {
         for c in &cols {
             sortable(c.title, c.help);
         }
-        sortable("time", "seconds in the pipeline for the pair, as the run recorded them");
+        sortable("time (s)", TIME_HELP);
         if let Some(p) = m.papers[a].as_ref() {
             sortable("paper", &format!("the paper's avgErr for this scene ({}, paper-results.tsv)", p.name));
         }
@@ -253,7 +258,8 @@ fn body_row(h: &mut String, m: &Model, row: &Row, folder: &str) {
     h.push_str("</tr>\n");
 }
 
-/// A row's score cells for algorithm `a`: each score (the row's best bold), the time, the paper's avgErr.
+/// A row's score cells for algorithm `a`: each score (the row's best bold), the time (never bold: [`TIME_HELP`]),
+/// the paper's avgErr.
 fn score_cells(h: &mut String, m: &Model, a: usize, cell: &AlgCell, best: &[Option<f64>]) {
     let (cols, paper) = alg_columns(m, a);
     let why = match &cell.metrics {
@@ -267,25 +273,20 @@ fn score_cells(h: &mut String, m: &Model, a: usize, cell: &AlgCell, best: &[Opti
         let class = if v.is_some() && v == best[k] { "best" } else { "" };
         h.push_str(&value_cell(v, c.digits, class, why));
     }
-    let t = cell.seconds;
-    let class = if t.is_some() && t == best[cols.len()] { "best" } else { "" };
-    h.push_str(&value_cell(t, 2, class, None));
+    h.push_str(&value_cell(cell.seconds, 2, "", None));
     if paper {
         h.push_str(&value_cell(cell.paper, 2, "paper", None));
     }
 }
 
-/// The lowest value of each score and of the time in a row, among the algorithms that have one (`None` with
-/// fewer than two, or when two share it: nothing stands out).
+/// The lowest value of each score in a row, among the algorithms that have one (`None` with fewer than two, or
+/// when two share it: nothing stands out). Times are not compared ([`TIME_HELP`]).
 fn best_values(m: &Model, row: &Row) -> Vec<Option<f64>> {
     let cols = if m.rule.is_some() { columns(m.layout) } else { Vec::new() };
     let metrics = |c: &AlgCell| c.metrics.as_ref().and_then(|r| r.as_ref().ok()).copied();
-    let mut best: Vec<Option<f64>> = cols
-        .iter()
+    cols.iter()
         .map(|c| lowest(&row.cells.iter().filter_map(metrics).map(|x| (c.value)(&x)).collect::<Vec<_>>(), c.digits))
-        .collect();
-    best.push(lowest(&row.cells.iter().filter_map(|c| c.seconds).collect::<Vec<_>>(), 2));
-    best
+        .collect()
 }
 
 /// The lowest finite value, when there are two or more and no other shows the same to the digits displayed (a tie
@@ -317,8 +318,7 @@ fn summary_row(h: &mut String, m: &Model) {
         .collect();
     let times: Vec<Option<f64>> =
         m.evals.iter().map(|e| e.as_ref().and_then(|e| e.mean_seconds()).map(|(s, _)| s)).collect();
-    // The best of each column bold, as in the rows above.
-    let best_times = lowest(&times.iter().flatten().copied().collect::<Vec<_>>(), 2);
+    // The best of each score column bold, as in the rows above; the times are not ranked.
     for (a, avg) in avgs.iter().enumerate() {
         let (cols, paper) = alg_columns(m, a);
         h.push_str("<td></td><td></td>");
@@ -328,8 +328,7 @@ fn summary_row(h: &mut String, m: &Model) {
             let class = if v.is_some() && v == lowest(&all, c.digits) { "best" } else { "" };
             h.push_str(&value_cell(v, c.digits, class, None));
         }
-        let t = times[a];
-        h.push_str(&value_cell(t, 2, if t.is_some() && t == best_times { "best" } else { "" }, None));
+        h.push_str(&value_cell(times[a], 2, "", None));
         if paper {
             let w = m.papers[a].as_ref().and_then(|p| p.weighted);
             h.push_str(&value_cell(w, 2, "paper", None));
@@ -349,7 +348,7 @@ fn summary_table(h: &mut String, m: &Model) {
     for c in &cols {
         let _ = write!(h, "<th title=\"{}\">{}</th>", escape(c.help), escape(c.title));
     }
-    h.push_str("<th title=\"seconds in the pipeline per pair, as the runs recorded them\">time</th>");
+    let _ = write!(h, "<th title=\"{}\">time (s)</th>", escape(TIME_HELP));
     let any_paper = m.papers.iter().any(Option::is_some);
     if any_paper {
         h.push_str("<th title=\"the paper's avgErr (paper-results.tsv)\">paper avgErr</th>");
@@ -374,12 +373,32 @@ fn summary_table(h: &mut String, m: &Model) {
     h.push_str("</tbody>\n</table>\n");
 }
 
+/// An algorithm's recorded configurations: each in a fold that says which of its `results` it made (all of them,
+/// when there is one), or that none was recorded.
+pub(super) fn configurations(configs: &[super::Recorded], results: usize) -> String {
+    if configs.is_empty() {
+        return "not recorded (no configuration beside these results: they were written by another program, or by a \
+                jem batch older than the record)"
+            .into();
+    }
+    let mut out = String::new();
+    for c in configs {
+        let whose = if c.scenes.len() == results {
+            format!("recorded beside all {results} results")
+        } else {
+            format!("recorded beside {} of {results} results: {}", c.scenes.len(), c.scenes.join(", "))
+        };
+        let _ = write!(out, "<details><summary>{}</summary><pre>{}</pre></details>", escape(&whose), escape(&c.text));
+    }
+    out
+}
+
 /// How the report was made: the command, the configurations, the machine.
 fn footer(h: &mut String, m: &Model) {
     h.push_str("<footer>\n<h2>How this was made</h2>\n<dl>\n");
     let _ = writeln!(h, "<dt>command</dt><dd><code>{}</code></dd>", escape(&m.command));
-    for (alg, config) in m.algs.iter().zip(&m.configs) {
-        let _ = writeln!(h, "<dt>configuration of {}</dt><dd>{}</dd>", escape(alg), escape(config));
+    for (alg, (configs, results)) in m.algs.iter().zip(&m.configs) {
+        let _ = writeln!(h, "<dt>configuration of {}</dt><dd>{}</dd>", escape(alg), configurations(configs, *results));
     }
     for (alg, paper) in m.algs.iter().zip(&m.papers) {
         if let Some(p) = paper {

@@ -185,7 +185,8 @@ struct Model {
     papers: Vec<Option<PaperColumn>>,
     evals: Vec<Option<AlgReport>>,
     rows: Vec<Row>,
-    configs: Vec<String>,
+    /// Each algorithm's configurations as its runs recorded them, and how many results it has.
+    configs: Vec<(Vec<Recorded>, usize)>,
     command: String,
     machine: String,
 }
@@ -280,7 +281,7 @@ pub fn write_report(dir: &Path, out: &Path, opts: &ReportOptions) -> Result<Repo
             papers: if opts.papers.is_empty() { vec![None; opts.algs.len()] } else { opts.papers.clone() },
             evals: evals.clone(),
             rows,
-            configs: vec![CONFIG_NOT_RECORDED.to_string(); opts.algs.len()],
+            configs: per_alg.iter().map(|rows| (recorded_configs(rows), rows.len())).collect(),
             command: opts.command.clone(),
             machine: machine(),
         };
@@ -469,10 +470,27 @@ fn draw_rows(
     Ok((count, not_drawn))
 }
 
-/// What the foot says of an algorithm's configuration: no run records it beside its results (`jem batch` writes
-/// the benchmark's submission files only, the disparity maps and run times), so the page says so rather than guess.
-const CONFIG_NOT_RECORDED: &str =
-    "not recorded (jem batch keeps only the benchmark's submission files: disparity maps and run times)";
+/// A configuration recorded beside results (`jem batch`, [`crate::batch::config_record`]), and the scenes whose
+/// results it made.
+#[derive(Clone, Debug, PartialEq)]
+struct Recorded {
+    text: String,
+    scenes: Vec<String>,
+}
+
+/// The configurations recorded beside an algorithm's results, each with its scenes, in the rows' order; results
+/// with none recorded (written by another program) are in none of them.
+fn recorded_configs(rows: &[SheetRow]) -> Vec<Recorded> {
+    let mut found: Vec<Recorded> = Vec::new();
+    for row in rows {
+        let Some(text) = crate::io::read_small_text(&row.config, crate::io::MAX_CONFIG_BYTES) else { continue };
+        match found.iter_mut().find(|r| r.text == text) {
+            Some(r) => r.scenes.push(row.name.clone()),
+            None => found.push(Recorded { text, scenes: vec![row.name.clone()] }),
+        }
+    }
+    found
+}
 
 /// The machine the report was made on: its CPU, its cores and jem's version.
 fn machine() -> String {

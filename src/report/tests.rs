@@ -12,6 +12,7 @@ fn sheet_row(name: &str) -> SheetRow {
         calib: None,
         rule: ErrorRule::Middlebury { scale: 4 },
         resolution: None,
+        config: dir.join("configA.toml"),
     }
 }
 
@@ -106,4 +107,29 @@ fn each_layout_shows_its_benchmarks_scores() {
     assert_eq!(values(Layout::Middlebury), [1.5, 8.0, 1.0]);
     assert_eq!(values(Layout::Kitti2015), [4.0, 1.5]);
     assert_eq!(values(Layout::Eth3d), [4.0, 1.5], "bad-1 counts the invalid pixels");
+}
+
+/// Rows that ran with one configuration share a fold; another configuration gets its own, naming its scenes;
+/// a result without a record is in none, and an algorithm without any says it was not recorded.
+#[test]
+fn recorded_configurations_are_grouped_by_their_text() {
+    let dir = tempfile::tempdir().unwrap();
+    let row = |name: &str, config: Option<&str>| {
+        let mut r = sheet_row(name);
+        r.config = dir.path().join(format!("{name}.toml"));
+        if let Some(text) = config {
+            std::fs::write(&r.config, text).unwrap();
+        }
+        r
+    };
+    let rows = [row("S1", Some("a = 1\n")), row("S2", Some("a = 2\n")), row("S3", Some("a = 1\n")), row("S4", None)];
+    let found = recorded_configs(&rows);
+    let groups: Vec<(&str, Vec<&str>)> =
+        found.iter().map(|r| (r.text.as_str(), r.scenes.iter().map(String::as_str).collect())).collect();
+    assert_eq!(groups, [("a = 1\n", vec!["S1", "S3"]), ("a = 2\n", vec!["S2"])]);
+    let html = html::configurations(&found, rows.len());
+    assert!(html.contains("recorded beside 2 of 4 results: S1, S3") && html.contains("<pre>a = 2\n</pre>"), "{html}");
+    let all = html::configurations(&found[..1], 2);
+    assert!(all.contains("recorded beside all 2 results"), "{all}");
+    assert!(html::configurations(&[], 4).starts_with("not recorded"));
 }

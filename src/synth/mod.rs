@@ -228,6 +228,7 @@ fn is_scene_file(name: &str) -> bool {
         || result("disp0", ".pfm")
         || result("disp1", ".pfm")
         || result("time", ".txt")
+        || result("config", ".toml")
 }
 
 /// A mask encoded as an 8-bit grey PNG (`path` names it in errors).

@@ -78,6 +78,9 @@ pub struct SheetRow {
     pub rule: ErrorRule,
     /// How a MiddEval3 row's resolution was found, when no `--scale` gave it.
     pub resolution: Option<Resolution>,
+    /// Where the run's configuration is recorded beside the result
+    /// ([`crate::dataset::ResultFiles::config`]; absent when no `jem batch` recorded it).
+    pub config: PathBuf,
 }
 
 impl SheetRow {
@@ -245,8 +248,8 @@ pub fn sheet_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<Shee
     let rows: Vec<SheetRow> = pairs
         .iter()
         .filter_map(|pair| {
-            let result = pair.result_files(alg, opts.results.as_deref()).disparity;
-            result.is_file().then(|| pair_row(pair, result, opts))
+            let files = pair.result_files(alg, opts.results.as_deref());
+            files.disparity.is_file().then(|| pair_row(pair, files.disparity, files.config, opts))
         })
         .collect();
     if rows.is_empty() {
@@ -268,7 +271,7 @@ pub fn sheet_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<Shee
 }
 
 /// A KITTI or ETH3D pair's row.
-fn pair_row(pair: &Pair, result: PathBuf, opts: &SheetOptions) -> SheetRow {
+fn pair_row(pair: &Pair, result: PathBuf, config: PathBuf, opts: &SheetOptions) -> SheetRow {
     let truth = if pair.layout.is_kitti() {
         kitti_truth(pair.truth(true, None).disparity, pair.truth(false, None).disparity)
     } else {
@@ -288,6 +291,7 @@ fn pair_row(pair: &Pair, result: PathBuf, opts: &SheetOptions) -> SheetRow {
         calib,
         rule: ErrorRule::for_layout(pair.layout, 1),
         resolution: None,
+        config,
     }
 }
 
@@ -322,6 +326,7 @@ fn middlebury_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<She
                 calib: Some(s.join("calib.txt")),
                 rule,
                 resolution,
+                config: s.join(format!("config{alg}.toml")),
             })
         })
         .collect()
