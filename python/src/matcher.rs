@@ -288,6 +288,7 @@ fn info<'py>(py: Python<'py>, out: &Output, check: &PairCheck) -> PyResult<Bound
         FrameKind::Cut => ("cut", None, None),
         FrameKind::Still { frames } => ("still", Some(i64::from(frames)), None),
         FrameKind::Moving { dx, dy } => ("moving", None, Some((dx, dy))),
+        FrameKind::Travelling { .. } => ("moving", None, None),
     });
     info.set_item("frame", frame.map(|f| f.0))?;
     info.set_item("frames_averaged", frame.and_then(|f| f.1))?;
