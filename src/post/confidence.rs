@@ -70,6 +70,43 @@ pub(crate) struct ConfidenceInputs<'a> {
     pub coarse: Option<(&'a DisparityMap, usize)>,
     /// The guidance image of the left view.
     pub guide: &'a RgbImage,
+    /// The lowest local minima of each pixel's matching cost, before the prior ([`cost_minima_row`]).
+    pub minima: Option<&'a Plane<CostMinima>>,
+}
+
+/// How many of a cost curve's lowest local minima are kept per pixel.
+pub(crate) const MINIMA: usize = 3;
+
+/// A pixel's lowest local minima of the matching cost over the disparities, lowest first: [cost, disparity] each;
+/// a curve with fewer minima repeats its last one.
+pub(crate) type CostMinima = [[f32; 2]; MINIMA];
+
+/// The [`CostMinima`] of each pixel of a cost volume's row (`data[x · ndisp + d]`). A local minimum is no higher than
+/// its left neighbour and lower than its right one (the first of a flat bottom); the ends count against their one
+/// neighbour. Ties: the lower disparity first.
+pub(crate) fn cost_minima_row(row: &[f32], ndisp: usize) -> Vec<CostMinima> {
+    row.chunks_exact(ndisp.max(1))
+        .map(|c| {
+            let mut best = [[f32::INFINITY, 0.0]; MINIMA];
+            for d in 0..c.len() {
+                let left_ok = d == 0 || c[d] <= c[d - 1];
+                let right_ok = d + 1 == c.len() || c[d] < c[d + 1];
+                if !(left_ok && right_ok) {
+                    continue;
+                }
+                if let Some(k) = best.iter().position(|b| c[d] < b[0]) {
+                    best.copy_within(k..MINIMA - 1, k + 1);
+                    best[k] = [c[d], d as f32];
+                }
+            }
+            for k in 1..MINIMA {
+                if !best[k][0].is_finite() {
+                    best[k] = best[k - 1];
+                }
+            }
+            best
+        })
+        .collect()
 }
 
 /// The per-pixel measures before they are pooled.
@@ -85,6 +122,8 @@ struct Pixelwise {
 /// # Panics
 /// If the maps differ in size.
 pub(crate) fn confidence_map(inputs: &ConfidenceInputs<'_>) -> Plane<f32> {
+    #[cfg(feature = "confidence-dump")]
+    dump::write(inputs);
     let m = pixelwise(inputs);
     let mean = filter::box_mean_separable;
     let ln_mean = |r| {
@@ -128,7 +167,7 @@ pub(crate) fn confidence_map(inputs: &ConfidenceInputs<'_>) -> Plane<f32> {
 
 /// Agreement, texture, depth edge and the left-right rejection around each pixel (see the module doc).
 fn pixelwise(inputs: &ConfidenceInputs<'_>) -> Pixelwise {
-    let ConfidenceInputs { max_marginal, decoded, right, final_map, consistent, coarse, guide } = *inputs;
+    let ConfidenceInputs { max_marginal, decoded, right, final_map, consistent, coarse, guide, .. } = *inputs;
     let (w, h) = final_map.dims();
     assert_eq!(decoded.dims(), (w, h), "decoded and final maps differ in size");
     assert_eq!(max_marginal.dims(), (w, h), "max-marginal and final map differ in size");
@@ -171,6 +210,109 @@ fn pixelwise(inputs: &ConfidenceInputs<'_>) -> Pixelwise {
     Pixelwise { agreement, texture, edge, rejected }
 }
 
+/// The distance (px, 3-4 chamfer) from each pixel to the nearest one that failed the left-right check, capped at
+/// `cap`; two raster passes, one thread.
+pub(crate) fn distance_to_rejected(consistent: &Plane<bool>, cap: f32) -> Plane<f32> {
+    let (w, h) = consistent.dims();
+    let mut d: Vec<f32> = consistent.data.iter().map(|&ok| if ok { cap } else { 0.0 }).collect();
+    let (side, diagonal) = (1.0f32, 4.0 / 3.0);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let mut v = d[i];
+            if x > 0 {
+                v = v.min(d[i - 1] + side);
+            }
+            if y > 0 {
+                v = v.min(d[i - w] + side);
+                if x > 0 {
+                    v = v.min(d[i - w - 1] + diagonal);
+                }
+                if x + 1 < w {
+                    v = v.min(d[i - w + 1] + diagonal);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    for y in (0..h).rev() {
+        for x in (0..w).rev() {
+            let i = y * w + x;
+            let mut v = d[i];
+            if x + 1 < w {
+                v = v.min(d[i + 1] + side);
+            }
+            if y + 1 < h {
+                v = v.min(d[i + w] + side);
+                if x + 1 < w {
+                    v = v.min(d[i + w + 1] + diagonal);
+                }
+                if x > 0 {
+                    v = v.min(d[i + w - 1] + diagonal);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    Plane::from_parts(w, h, d)
+}
+
+/// Writes the per-pixel inputs of the confidence to `$JEM_CONFIDENCE_DUMP/NNN.bin` (a fitting aid, the
+/// `confidence-dump` feature; `scripts/fit-confidence.py` reads them).
+#[cfg(feature = "confidence-dump")]
+mod dump {
+    use std::io::Write;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    use super::*;
+
+    static COUNT: AtomicUsize = AtomicUsize::new(0);
+
+    pub(super) fn write(inputs: &ConfidenceInputs<'_>) {
+        let Some(dir) = std::env::var_os("JEM_CONFIDENCE_DUMP") else { return };
+        let ConfidenceInputs { max_marginal, decoded, right, final_map, consistent, coarse, guide, minima } = *inputs;
+        let (w, h) = final_map.dims();
+        let n = w * h;
+        let mut planes: Vec<(&str, Vec<f32>)> = Vec::new();
+        planes.push(("max_marginal", max_marginal.data.clone()));
+        planes.push(("decoded", decoded.data.clone()));
+        planes.push(("final", final_map.data.clone()));
+        let at_right = (0..n).map(|i| {
+            let (x, y) = (i % w, i / w);
+            right.map_or(f32::NAN, |(r, from)| {
+                let d = decoded.data[i];
+                let xr = (x + from) as f32 - d.round();
+                if d.is_finite() && xr >= 0.0 && xr < r.width as f32 { r.row(y)[xr as usize] } else { f32::INFINITY }
+            })
+        });
+        planes.push(("right", at_right.collect()));
+        planes.push((
+            "coarse",
+            (0..n).map(|i| coarse.map_or(f32::NAN, |(c, from)| c.row(i / w)[i % w + from])).collect(),
+        ));
+        planes.push(("consistent", consistent.data.iter().map(|&b| f32::from(u8::from(b))).collect()));
+        planes.push(("grey", guide.to_grey().data));
+        planes.push(("dist_rejected", distance_to_rejected(consistent, 64.0).data));
+        for k in 0..MINIMA {
+            for (j, name) in ["cost", "disp"].iter().enumerate() {
+                let v = minima.map_or(vec![f32::NAN; n], |m| m.data.iter().map(|c| c[k][j]).collect());
+                planes.push((if j == 0 { ["c0", "c1", "c2"][k] } else { ["d0", "d1", "d2"][k] }, v));
+                let _ = name;
+            }
+        }
+        let k = COUNT.fetch_add(1, Ordering::SeqCst);
+        let path = std::path::Path::new(&dir).join(format!("{k:03}.bin"));
+        let mut f = std::io::BufWriter::new(std::fs::File::create(path).expect("dump file"));
+        let names: Vec<&str> = planes.iter().map(|p| p.0).collect();
+        writeln!(f, "{w} {h} {}", names.join(" ")).expect("dump");
+        for (_, v) in &planes {
+            for x in v {
+                f.write_all(&x.to_le_bytes()).expect("dump");
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -198,6 +340,7 @@ mod tests {
             consistent: &consistent,
             coarse: Some((&coarse, 0)),
             guide: &guide,
+            minima: None,
         });
         assert_eq!(c.data[w + 2], 0.0);
         let (mut lo_left, mut hi_right) = (f32::INFINITY, 0.0f32);
