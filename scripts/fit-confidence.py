@@ -232,20 +232,32 @@ def main():
     ap.add_argument('--interactions', default='', help='pairs a*b, comma separated')
     ap.add_argument('--scale', type=float, default=1.0, help='bad threshold in matched px')
     ap.add_argument('--mlp', type=int, default=0, help='hidden units: a small network instead of the logistic')
+    ap.add_argument('--test', nargs=2, action='append', default=[], metavar=('DUMP', 'MIRROR'),
+                    help='also score the model fitted on all scenes on these (degraded copies; never fitted on)')
     ap.add_argument('--within', action='store_true', help='one intercept per scene while fitting (weights from the '
                     'variation within scenes; the mean intercept kept)')
     ap.add_argument('--stage2', default='', help='radii: a second logistic over the first one\'s log-odds pooled')
     args = ap.parse_args()
-    import cv2
     scenes = sorted(s for s in os.listdir(args.mirror) if os.path.exists(os.path.join(args.mirror, s, 'im0.png')))
     names = args.features.split(',')
     inter = [p.split('*') for p in args.interactions.split(',') if p]
     rng = np.random.default_rng(0)
     data = {}
+    radii = [int(r) for r in args.stage2.split(',') if r]
+    load(args, args.dump, args.mirror, scenes, names, inter, rng, data, '')
+    tests = []
+    for i, (dump, mirror) in enumerate(args.test):
+        load(args, dump, mirror, scenes, names, inter, rng, data, f'#{i}')
+        tests.append((dump, [s + f'#{i}' for s in scenes]))
+    run(args, scenes, names, inter, data, radii, tests)
+
+
+def load(args, dump, mirror, scenes, names, inter, rng, data, tag):
+    import cv2
     for k, scene in enumerate(scenes):
-        m = read_dump(os.path.join(args.dump, f'{k:03d}.bin'))
-        gt = read_pfm(os.path.join(args.mirror, scene, 'disp0GT.pfm'))
-        mask = cv2.imread(os.path.join(args.mirror, scene, 'mask0nocc.png'), cv2.IMREAD_GRAYSCALE)
+        m = read_dump(os.path.join(dump, f'{k:03d}.bin'))
+        gt = read_pfm(os.path.join(mirror, scene, 'disp0GT.pfm'))
+        mask = cv2.imread(os.path.join(mirror, scene, 'mask0nocc.png'), cv2.IMREAD_GRAYSCALE)
         assert gt.shape == m['final'].shape, (scene, gt.shape, m['final'].shape)
         meas = measures(m)
         cols = [meas[n] for n in names] + [meas[a] * meas[b] for a, b in inter]
@@ -256,8 +268,10 @@ def main():
         x = planes[:, sel].T.astype(np.float64)
         invalid = ~np.isfinite(f[sel])
         sub = rng.choice(len(x), min(PER_SCENE, len(x)), replace=False)
-        data[scene] = (x, bad[sel].astype(float), invalid, sub, planes if args.stage2 else None, sel)
-    radii = [int(r) for r in args.stage2.split(',') if r]
+        data[scene + tag] = (x, bad[sel].astype(float), invalid, sub, planes if args.stage2 else None, sel)
+
+
+def run(args, scenes, names, inter, data, radii, tests):
 
     def score(model, scene):
         x, bad, invalid = data[scene][:3]
@@ -310,6 +324,9 @@ def main():
     print(f'mean         fitted {arr[:, 0].mean():.4f} held {arr[:, 1].mean():.4f} optimum {arr[:, 2].mean():.4f}')
     for i, fold in enumerate(FOLDS):
         print(f'fold {"ABC"[i]} held {np.mean([held[s][0] for s in fold]):.4f}')
+    for dump, group in tests:
+        print(f'{dump}: fitted on all {np.mean([score(model, s)[0] for s in group]):.4f} optimum '
+              f'{np.mean([score(model, s)[1] for s in group]):.4f}')
     labels = names + [f'{a}*{b}' for a, b in inter]
     if linear is None:
         return

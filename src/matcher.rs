@@ -375,7 +375,7 @@ impl Matcher {
         let measure = || crate::setup::range::find_ndisp(left, right, limit, &self.params.cost, budget).ok();
         crate::diagnose::check_answer(&mut check, left, right, &out.disparity, given, measure);
         if let Some(confidence) = &out.confidence {
-            crate::diagnose::check_repetition(&mut check, left, confidence, out.plan.ndisp);
+            crate::diagnose::check_repetition(&mut check, left, &out.disparity, confidence, out.plan.ndisp);
         }
         check
     }

@@ -88,8 +88,8 @@ pub struct PairCheck {
     pub offsets_by_third: [Option<f32>; 4],
     /// How far apart the centres of the left and right thirds, and of the top and bottom ones, are (px).
     pub thirds_apart_px: [f32; 2],
-    /// The largest region of texture that repeats itself within the search range and whose answer is doubtful (the
-    /// answer checks, with a confidence map).
+    /// The largest region of texture that repeats itself within the search range and whose answer is doubtful or a
+    /// period off a neighbouring part's (the answer checks, with a confidence map).
     pub repetition: Option<Repetition>,
 }
 
@@ -186,8 +186,9 @@ impl PairCheck {
         let [x0, y0, x1, y1] = r.bounds;
         Some(format!(
             "{:.0} % of the image (x {x0}..{x1}, y {y0}..{y1}) is texture that repeats every {:.0} px along the row, \
-             within the search range, and its answers are doubtful: they may be one period off; a range that \
-             holds less than one period there (--min-disp, --ndisp) avoids it",
+             within the search range, and its answers are doubtful or a period off their neighbours': they may \
+             be matched one period off; a range that holds less than one period there (--min-disp, --ndisp) \
+             avoids it",
             100.0 * r.share,
             r.period_px
         ))
@@ -233,7 +234,7 @@ impl std::fmt::Display for PairCheck {
             f,
             "checked: negative-disparity share {}, vertical offset {} (alignment up to {} px), range {} of the width, \
              textured {:.1} %, clipped {:.1} / {:.1} %, sharpness ratio {:.2}, identical {:.1} %, at the range's top \
-             {}, measured range {}, vertical offset by third (left right top bottom) {}, repetitive and doubtful {}",
+             {}, measured range {}, vertical offset by third (left right top bottom) {}, repetitive and suspect {}",
             opt(self.negative_share, 100.0, " %"),
             opt(self.vertical_px, 1.0, " px"),
             self.vertical_limit_px,
@@ -322,12 +323,19 @@ pub fn check_answer(
 }
 
 /// Adds to `check` the largest region of the left view whose texture repeats itself within `range_px` (the search
-/// range's width) and whose answer `confidence` doubts ([`Repetition`]).
+/// range's width) and whose answer `disparity` its `confidence` doubts or is a period off a neighbouring part's
+/// ([`Repetition`]).
 ///
 /// # Panics
-/// If the view and the confidence differ in size.
-pub fn check_repetition(check: &mut PairCheck, left: &RgbImage, confidence: &Plane<f32>, range_px: usize) {
-    check.repetition = repetitive::repetitive_region(left, confidence, range_px);
+/// If the view, the answer and the confidence differ in size.
+pub fn check_repetition(
+    check: &mut PairCheck,
+    left: &RgbImage,
+    disparity: &crate::image::DisparityMap,
+    confidence: &Plane<f32>,
+    range_px: usize,
+) {
+    check.repetition = repetitive::repetitive_region(left, disparity, confidence, range_px);
 }
 
 /// The share of pixels whose three channels differ by at most half a grey level between the views.
