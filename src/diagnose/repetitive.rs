@@ -52,7 +52,7 @@ const SAME_PX: f32 = 1.0;
 const MIN_PERIOD: usize = 4;
 
 /// A repetitive, doubtful region larger than this share of the image is reported.
-pub(super) const MIN_SHARE: f32 = 0.03;
+pub(super) const MIN_SHARE: f32 = 0.05;
 
 /// The largest connected region of repetitive texture whose answer is doubtful.
 #[derive(Clone, Copy, Debug, PartialEq)]

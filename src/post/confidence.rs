@@ -108,28 +108,29 @@ pub(crate) type CostMinima = [[f32; 2]; MINIMA];
 /// its left neighbour and lower than its right one (the last of a flat bottom); the ends count against their one
 /// neighbour. Ties: the lower disparity first.
 pub(crate) fn cost_minima_row(row: &[f32], ndisp: usize) -> Vec<CostMinima> {
-    row.chunks_exact(ndisp.max(1))
-        .map(|c| {
-            let mut best = [[f32::INFINITY, 0.0]; MINIMA];
-            for d in 0..c.len() {
-                let left_ok = d == 0 || c[d] <= c[d - 1];
-                let right_ok = d + 1 == c.len() || c[d] < c[d + 1];
-                if !(left_ok && right_ok) {
-                    continue;
-                }
-                if let Some(k) = best.iter().position(|b| c[d] < b[0]) {
-                    best.copy_within(k..MINIMA - 1, k + 1);
-                    best[k] = [c[d], d as f32];
-                }
-            }
-            for k in 1..MINIMA {
-                if !best[k][0].is_finite() {
-                    best[k] = best[k - 1];
-                }
-            }
-            best
-        })
-        .collect()
+    row.chunks_exact(ndisp.max(1)).map(curve_minima).collect()
+}
+
+/// [`cost_minima_row`] of one pixel's curve: one pass, a value above the third lowest minimum so far rejected by one
+/// comparison first (most are).
+fn curve_minima(c: &[f32]) -> CostMinima {
+    let mut best = [[f32::INFINITY, 0.0]; MINIMA];
+    let mut prev = f32::INFINITY;
+    let next = c.iter().skip(1).chain(std::iter::once(&f32::INFINITY));
+    for (d, (&cur, &next)) in c.iter().zip(next).enumerate() {
+        if cur < best[MINIMA - 1][0] && cur <= prev && cur < next {
+            let k = best.iter().position(|b| cur < b[0]).unwrap_or(MINIMA - 1);
+            best.copy_within(k..MINIMA - 1, k + 1);
+            best[k] = [cur, d as f32];
+        }
+        prev = cur;
+    }
+    for k in 1..MINIMA {
+        if !best[k][0].is_finite() {
+            best[k] = best[k - 1];
+        }
+    }
+    best
 }
 
 /// The per-pixel measures before they are pooled.
