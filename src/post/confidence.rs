@@ -111,20 +111,35 @@ pub(crate) fn cost_minima_row(row: &[f32], ndisp: usize) -> Vec<CostMinima> {
     row.chunks_exact(ndisp.max(1)).map(curve_minima).collect()
 }
 
-/// [`cost_minima_row`] of one pixel's curve: one pass, a value above the third lowest minimum so far rejected by one
-/// comparison first (most are).
+/// [`cost_minima_row`] of one pixel's curve: one pass, branch-free (a value that is no local minimum enters as
+/// `inf`; the kept minima are updated by selects, which the compiler makes conditional moves: a cost curve's local
+/// minima come at random, and a branch on them mispredicts).
 fn curve_minima(c: &[f32]) -> CostMinima {
-    let mut best = [[f32::INFINITY, 0.0]; MINIMA];
+    let (mut b0, mut b1, mut b2) = ([f32::INFINITY, 0.0], [f32::INFINITY, 0.0], [f32::INFINITY, 0.0]);
     let mut prev = f32::INFINITY;
     let next = c.iter().skip(1).chain(std::iter::once(&f32::INFINITY));
     for (d, (&cur, &next)) in c.iter().zip(next).enumerate() {
-        if cur < best[MINIMA - 1][0] && cur <= prev && cur < next {
-            let k = best.iter().position(|b| cur < b[0]).unwrap_or(MINIMA - 1);
-            best.copy_within(k..MINIMA - 1, k + 1);
-            best[k] = [cur, d as f32];
-        }
+        let v = if cur <= prev && cur < next { cur } else { f32::INFINITY };
+        let new = [v, d as f32];
+        let (lt0, lt1, lt2) = (v < b0[0], v < b1[0], v < b2[0]);
+        b2 = if lt1 {
+            b1
+        } else if lt2 {
+            new
+        } else {
+            b2
+        };
+        b1 = if lt0 {
+            b0
+        } else if lt1 {
+            new
+        } else {
+            b1
+        };
+        b0 = if lt0 { new } else { b0 };
         prev = cur;
     }
+    let mut best = [b0, b1, b2];
     for k in 1..MINIMA {
         if !best[k][0].is_finite() {
             best[k] = best[k - 1];
@@ -361,11 +376,9 @@ mod dump {
         planes.push(("consistent", consistent.data.iter().map(|&b| f32::from(u8::from(b))).collect()));
         planes.push(("grey", guide.to_grey().data));
         planes.push(("dist_rejected", distance_to_rejected(consistent, 64.0).data));
-        for k in 0..MINIMA {
-            for (j, name) in ["cost", "disp"].iter().enumerate() {
-                let v = minima.map_or(vec![f32::NAN; n], |m| m.data.iter().map(|c| c[k][j]).collect());
-                planes.push((if j == 0 { ["c0", "c1", "c2"][k] } else { ["d0", "d1", "d2"][k] }, v));
-                let _ = name;
+        for (k, [cost, disp]) in [["c0", "d0"], ["c1", "d1"], ["c2", "d2"]].into_iter().enumerate() {
+            for (j, name) in [(0, cost), (1, disp)] {
+                planes.push((name, minima.map_or(vec![f32::NAN; n], |m| m.data.iter().map(|c| c[k][j]).collect())));
             }
         }
         let k = COUNT.fetch_add(1, Ordering::SeqCst);
@@ -447,7 +460,7 @@ mod tests {
     #[test]
     fn the_distance_to_the_rejections_is_the_chamfer_distance() {
         let mut consistent = Plane::new(5, 3, true);
-        consistent.data[1 * 5 + 1] = false;
+        consistent.data[6] = false; // (1, 1)
         let d = distance_to_rejected(&consistent, 64.0);
         let k = 4.0 / 3.0;
         let want = [k, 1.0, k, 1.0 + k, 2.0 + k, 1.0, 0.0, 1.0, 2.0, 3.0, k, 1.0, k, 1.0 + k, 2.0 + k];
