@@ -451,7 +451,7 @@ fn rectify_refuses_a_folder_that_holds_a_scene() {
 /// with its confidence, as `jem match` runs) has no region of texture repeating within the range whose answers are
 /// doubtful or a period off each other. The unit tests of `diagnose::repetitive` hold the cases that must warn.
 #[test]
-#[ignore = "slow: every trainingQ scene matched (about 3 min on 2 cores); run it with `cargo test --release -- --include-ignored`, as .ci/run does"]
+#[ignore = "slow: every trainingQ scene matched (about 1 min on 2 cores in release); run it with `cargo test --release -- --include-ignored`, as .ci/run does"]
 fn no_trainingq_pair_is_said_to_be_matched_a_period_off() {
     let Some(data) = common::data_dir() else { return };
     for scene in common::training_scenes(&data) {
