@@ -35,5 +35,5 @@ pub mod vertical {
 
 /// The checks of a pair that no map could make right.
 pub mod diagnose {
-    pub use crate::diagnose::{check_answer, check_pair};
+    pub use crate::diagnose::{check_answer, check_pair, check_repetition};
 }

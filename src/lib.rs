@@ -78,7 +78,7 @@ mod temporal;
 pub mod threads;
 pub mod viz;
 
-pub use diagnose::PairCheck;
+pub use diagnose::{PairCheck, Repetition};
 pub use error::{Error, Result};
 pub use image::{DisparityMap, Plane, RgbImage};
 pub use matcher::{Exposure, FrameKind, Matcher, Output, Progress, RunPlan, Tiles, default_memory_limit};

@@ -357,7 +357,8 @@ impl Matcher {
 
     /// Checks a matched pair for what would make any disparity map of it wrong ([`crate::PairCheck`]: swapped
     /// views, a vertical offset beyond the alignment, a range over half the width, no texture, an exposure or focus
-    /// difference beyond the front end); `out` is the match's output (its measured range and noise).
+    /// difference beyond the front end; with its confidence map, a large region of repetitive texture whose answer
+    /// is doubtful); `out` is the match's output (its measured range and noise).
     ///
     /// The swap check runs within what the memory limit leaves beside what the caller holds by then (the pair, the
     /// output maps and the check's grey views: 41 bytes a pixel): given the whole limit, it took a downscaled run
@@ -373,6 +374,9 @@ impl Matcher {
         let limit = crate::setup::range::search_limit(None, left.width());
         let measure = || crate::setup::range::find_ndisp(left, right, limit, &self.params.cost, budget).ok();
         crate::diagnose::check_answer(&mut check, left, right, &out.disparity, given, measure);
+        if let Some(confidence) = &out.confidence {
+            crate::diagnose::check_repetition(&mut check, left, &out.disparity, confidence, out.plan.ndisp);
+        }
         check
     }
 

@@ -512,5 +512,24 @@ fn rectify_alpha_scales_the_views_and_states_the_valid_rectangle() {
         assert_eq!(out.status.code(), Some(2), "{err}");
         assert!(err.contains("alpha") && err.contains("0..=1") && err.lines().count() == 1, "{err}");
         assert!(!dir.path().join("X").exists());
+/// No repetitive-texture false alarm: every trainingQ pair matched at its stated range (the default configuration,
+/// with its confidence, as `jem match` runs) has no region of texture repeating within the range whose answers are
+/// doubtful or a period off each other. The unit tests of `diagnose::repetitive` hold the cases that must warn.
+#[test]
+#[ignore = "slow: every trainingQ scene matched (about 1 min on 2 cores in release); run it with `cargo test --release -- --include-ignored`, as .ci/run does"]
+fn no_trainingq_pair_is_said_to_be_matched_a_period_off() {
+    let Some(data) = common::data_dir() else { return };
+    for scene in common::training_scenes(&data) {
+        let (l, r) = jem::io::read_image_pair(&scene.join("im0.png"), &scene.join("im1.png")).unwrap();
+        let calib = jem::io::calib::Calib::load(&scene.join("calib.txt")).unwrap();
+        let ndisp = calib.stated_ndisp().unwrap().unwrap();
+        let mut matcher = jem::Matcher::new(jem::Params::default())
+            .unwrap()
+            .with_ndisp(jem::NdispSource::Given(ndisp))
+            .with_confidence(true);
+        let out = matcher.match_pair(&l, &r).unwrap();
+        let check = matcher.check_pair(&l, &r, &out);
+        let said = check.warnings().into_iter().filter(|w| w.contains("period")).collect::<Vec<_>>();
+        assert!(said.is_empty(), "{}: {check}: {said:?}", scene.display());
     }
 }

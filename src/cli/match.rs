@@ -122,7 +122,8 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         .with_ndisp(NdispSource::resolve(args.ndisp, request.stated_ndisp))
         .with_min_disp(request.min_disp)
         .with_max_memory(args.memory.memory_limit())
-        .with_confidence(args.confidence.is_some() || args.min_confidence.is_some());
+        // Always: the pair checks read it (a region of repetitive texture matched doubtfully).
+        .with_confidence(true);
     let header = jem::io::read_pair_header(request.left, request.right)?;
     for warning in params.image_warnings(header.width, header.height).iter().filter(|_| !global.quiet) {
         note!("warning: {warning}");

@@ -17,8 +17,12 @@
 //! - **Focus**: the views' sharpness ratio beyond the largest blur the front end gives the sharper view.
 //! - **The same image twice**: nearly every pixel equal in both views (the same file given twice, say): a
 //!   disparity of 0 everywhere, "100 % valid", says nothing about the scene.
+//! - **Repetitive texture matched a period off** (with the answer's confidence): [`repetitive`].
 
 mod answer;
+mod repetitive;
+
+pub use repetitive::Repetition;
 
 use crate::image::{Plane, RgbImage};
 use crate::imgproc::filter::{central_differences, gaussian_blur_plane};
@@ -84,6 +88,9 @@ pub struct PairCheck {
     pub offsets_by_third: [Option<f32>; 4],
     /// How far apart the centres of the left and right thirds, and of the top and bottom ones, are (px).
     pub thirds_apart_px: [f32; 2],
+    /// The largest region of texture that repeats itself within the search range and whose answer is doubtful or a
+    /// period off a neighbouring part's (the answer checks, with a confidence map).
+    pub repetition: Option<Repetition>,
 }
 
 impl PairCheck {
@@ -128,6 +135,7 @@ impl PairCheck {
         }
         out.extend(self.range_warning());
         out.extend(self.rotation_warnings());
+        out.extend(self.repetition_warning());
         if self.textured_share < MIN_TEXTURED_SHARE {
             out.push(format!(
                 "almost no texture: {:.1} % of the pixels stand above the noise; the disparities are guesses \
@@ -172,6 +180,20 @@ impl PairCheck {
         ))
     }
 
+    /// The warning for a large region of repetitive texture whose answer is doubtful: likely a period off.
+    fn repetition_warning(&self) -> Option<String> {
+        let r = self.repetition.filter(|r| r.share > repetitive::MIN_SHARE)?;
+        let [x0, y0, x1, y1] = r.bounds;
+        Some(format!(
+            "{:.0} % of the image (x {x0}..{x1}, y {y0}..{y1}) is texture that repeats every {:.0} px along the row, \
+             within the search range, and its answers are doubtful or a period off their neighbours': they may \
+             be matched one period off; a range that holds less than one period there (--min-disp, --ndisp) \
+             avoids it",
+            100.0 * r.share,
+            r.period_px
+        ))
+    }
+
     /// The warnings for a vertical offset that changes across the image (rotation) or down it (scale).
     fn rotation_warnings(&self) -> Vec<String> {
         let spread = |a: Option<f32>, b: Option<f32>| Some(b? - a?).filter(|s| s.abs() > answer::MAX_OFFSET_SPREAD_PX);
@@ -212,7 +234,7 @@ impl std::fmt::Display for PairCheck {
             f,
             "checked: negative-disparity share {}, vertical offset {} (alignment up to {} px), range {} of the width, \
              textured {:.1} %, clipped {:.1} / {:.1} %, sharpness ratio {:.2}, identical {:.1} %, at the range's top \
-             {}, measured range {}, vertical offset by third (left right top bottom) {}",
+             {}, measured range {}, vertical offset by third (left right top bottom) {}, repetitive and suspect {}",
             opt(self.negative_share, 100.0, " %"),
             opt(self.vertical_px, 1.0, " px"),
             self.vertical_limit_px,
@@ -224,7 +246,12 @@ impl std::fmt::Display for PairCheck {
             100.0 * self.identical_share,
             opt(self.top_share, 100.0, " %"),
             self.measured_ndisp.map_or("-".to_string(), |n| n.to_string()),
-            self.offsets_by_third.map(|v| opt(v, 1.0, "")).join(" ")
+            self.offsets_by_third.map(|v| opt(v, 1.0, "")).join(" "),
+            self.repetition.map_or("-".to_string(), |r| format!(
+                "{:.1} % (period {} px)",
+                100.0 * r.share,
+                r.period_px
+            ))
         )
     }
 }
@@ -272,6 +299,7 @@ pub fn check_pair(
         measured_ndisp: None,
         offsets_by_third: [None; 4],
         thirds_apart_px: [2.0 * (w / 3) as f32, 2.0 * (h / 3) as f32],
+        repetition: None,
     }
 }
 
@@ -292,6 +320,22 @@ pub fn check_answer(
         check.measured_ndisp = measure();
     }
     check.offsets_by_third = answer::offsets_by_third(&left.to_grey(), &right.to_grey(), disparity);
+}
+
+/// Adds to `check` the largest region of the left view whose texture repeats itself within `range_px` (the search
+/// range's width) and whose answer `disparity` its `confidence` doubts or is a period off a neighbouring part's
+/// ([`Repetition`]).
+///
+/// # Panics
+/// If the view, the answer and the confidence differ in size.
+pub fn check_repetition(
+    check: &mut PairCheck,
+    left: &RgbImage,
+    disparity: &crate::image::DisparityMap,
+    confidence: &Plane<f32>,
+    range_px: usize,
+) {
+    check.repetition = repetitive::repetitive_region(left, disparity, confidence, range_px);
 }
 
 /// The share of pixels whose three channels differ by at most half a grey level between the views.

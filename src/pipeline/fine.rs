@@ -69,13 +69,14 @@ pub(crate) fn fine_pass(
 ) -> Result<PipelineOutput> {
     let pass = Pass { params, input: *input, prior_bands: input.prior.filter(|p| p.in_bands) };
     on_stage("cost volume");
-    let volume = pass.left_volume(buffers, &mut t);
+    let mut volume = pass.left_volume(buffers, &mut t);
     on_stage("inference (left)");
     let guide = pass.input.guide;
     let guide_left = match pass.input.left_from {
         0 => Cow::Borrowed(guide.left.as_ref()),
         from => Cow::Owned(guide.left.columns_from(from)),
     };
+    let minima = volume.minima.take();
     let (left, right) = pass.infer_views(volume, &guide_left, buffers, on_stage, &mut t);
     on_stage("post-processing");
     // The decoded map before post-processing, for the confidence only.
@@ -91,6 +92,7 @@ pub(crate) fn fine_pass(
                 consistent: &trusted,
                 coarse: pass.input.prior.map(|p| (&p.disparity, pass.input.left_from)),
                 guide: &guide_left,
+                minima: minima.as_ref(),
             })
         })
     });
@@ -116,6 +118,8 @@ struct Pass<'a> {
 struct LeftVolume {
     cost: CostVolume,
     bands: Option<meanfield::LabelBands>,
+    /// The lowest minima of each pixel's cost before the prior, for the confidence.
+    minima: Option<Plane<post::confidence::CostMinima>>,
 }
 
 impl Pass<'_> {
@@ -135,15 +139,22 @@ impl Pass<'_> {
         let storage = buffers.take(w * h * pair.ndisp);
         let prior_bands = self.prior_bands;
         let row_prior = prior.filter(|p| !p.needs_flatness());
-        let (mut cost, own_rows) = t.time("cost", || {
+        let minima = self.input.confidence;
+        let (mut cost, rows) = t.time("cost", || {
             let (left, right) = (&cost_pair.left, &cost_pair.right);
             cost::build_cost_volume_then(left, right, pair.ndisp, cost_params, grad_norm_mean, storage, |y, row| {
                 let own = prior_bands.map(|_| cost::row_argmins(row, pair.ndisp));
+                let minima = minima.then(|| post::confidence::cost_minima_row(row, pair.ndisp));
                 if let Some(prior) = row_prior {
                     prior.add_to_row(y, w, row, c);
                 }
-                own
+                (own, minima)
             })
+        });
+        let (own_rows, minima_rows): (Vec<_>, Vec<_>) = rows.into_iter().unzip();
+        let minima = minima.then(|| {
+            let all = Plane::from_parts(w, h, minima_rows.into_iter().flatten().flatten().collect());
+            if left_from > 0 { all.columns_from(left_from) } else { all }
         });
         let own_best = self.best_of_rows(own_rows);
         if let Some(prior) = prior.filter(|p| p.needs_flatness()) {
@@ -155,7 +166,7 @@ impl Pass<'_> {
                 if left_from > 0 { bands.columns_from(left_from) } else { bands }
             })
         });
-        LeftVolume { cost, bands }
+        LeftVolume { cost, bands, minima }
     }
 
     /// The right view's cost volume derived from the left one, with (tiles) its pixels' own best labels taken row by
@@ -197,7 +208,7 @@ impl Pass<'_> {
         let (params, left_from) = (self.params, self.input.left_from);
         let need_right = params.post.lrc.mode != LrcMode::Off;
         let iterations = self.input.views.map_or([params.meanfield.iterations; 2], |v| v.iterations);
-        let LeftVolume { cost: cost_left, bands: left_bands } = volume;
+        let LeftVolume { cost: cost_left, bands: left_bands, .. } = volume;
         let (left, cost_right) = if left_from > 0 {
             let cost_right = need_right.then(|| self.right_volume(&cost_left, buffers, t));
             let kept = t.time("cost", || cost_left.into_columns_from(left_from));

@@ -13,20 +13,31 @@
 //!   is missing (out of view, invalid) counting as the cap and a check that did not run as agreement.
 //! - *texture* tᵢ = ln(1 + the mean gradient magnitude of the grey guide over 5 × 5).
 //! - *depth edge* eᵢ = ln(1 + the final map's range over 3 × 3, capped at 16 px).
-//! - *rejection* uᵢ = the share of the 7 × 7 window that failed the left-right check.
+//! - *rejection* uᵢ = the share of the 7 × 7 window that failed the left-right check, and the distance to the
+//!   nearest pixel that failed it, ln(1 + px), capped at [`DISTANCE_CAP_PX`].
+//! - *the cost curve* (the matching cost over the disparities, before the coarse prior is added; its three lowest
+//!   local minima are kept per pixel while the volume is built, [`cost_minima_row`]): the peak ratio
+//!   (c₁ − c₀)/(c₁ + c₀) of its two lowest minima (how distinct the best one is) and the margin of the minimum the
+//!   final answer sits on over the lowest one elsewhere, same form, negative when the answer is not on the best
+//!   ([`cost_margins`]). An answer that the propagation, the planes or the prior moved off what the cost prefers,
+//!   where the cost prefers it clearly, is suspect; one on a repetition the cost cannot tell apart is too.
+//! - *spread* = ln(1 + the final map's variance over 15 × 15).
 //!
 //! Errors come in regions (a wall matched to the wrong repetition, a textureless patch that slid), so the measures
 //! enter as local means at a few scales (box means, borders replicated): ln of the mean agreement over 3 × 3,
-//! 25 × 25 and 51 × 51 windows, the texture's 15 × 15 mean, the edge, the rejection and its 15 × 15 mean.
-//! A logistic model of those seven values gives P(error > 1 px); the confidence is 1 − P, so a threshold on it
+//! 25 × 25 and 51 × 51 windows, the texture's 15 × 15 mean, the edge and its 7 × 7 mean, the rejection and its
+//! 15 × 15 mean, the distance, the margin's and the peak ratio's 15 × 15 means, the spread.
+//! A logistic model of those twelve values gives P(error > 1 px); the confidence is 1 − P, so a threshold on it
 //! (`--min-confidence`) is a bound on the expected error rate of what is kept. The weights were fitted on MiddEval3
 //! trainingQ and checked on the scenes each fold did not see (docs/tuning-log.md, "Confidence").
 //!
 //! An invalid pixel (`inf` in the final map) has confidence 0: it sorts last.
 //!
 //! # Cost
-//! O(pixels): six box means of radius up to 25 in O(r) per pixel each, one 3 × 3 min/max, rows in parallel, each
-//! row summed by one thread in a fixed order (the map does not depend on the thread count).
+//! O(pixels): a dozen box means in O(1) per pixel each (running sums), one 3 × 3 min/max, a two-pass distance
+//! transform (one thread), rows in parallel, each row summed by one thread in a fixed order (the map does not depend
+//! on the thread count); the cost minima are one pass over each pixel's cost curve while it is in cache, and 24
+//! bytes a pixel until the confidence is made.
 
 use rayon::prelude::*;
 
@@ -45,12 +56,24 @@ const CAP_PX: f32 = 8.0;
 /// of one pixel in 25 × 25 that agrees).
 const LN_FLOOR: f32 = 1e-3;
 
-/// The logistic model's weights on the pooled measures, in the module doc's order (agreement at three scales,
-/// texture, edge, rejection at two): their log-odds of an error.
-/// Fitted on trainingQ's 15 scenes (docs/tuning-log.md, "Confidence").
-const WEIGHTS: [f32; 7] = [-0.2299, -0.3099, -0.5103, -0.4188, 0.8911, 1.0662, 0.2715];
+/// Added to the sum of two costs in a ratio of them, so that two zero costs (a perfect match twice) give 0.
+const RATIO_FLOOR: f32 = 1e-3;
+
+/// The margin of an answer that sits on none of the cost curve's kept minima: about the margin of a pixel whose
+/// answer the cost curve clearly places elsewhere.
+const OFF_THE_MINIMA: f32 = -0.5;
+
+/// Distances to the left-right rejections beyond this are all far (px; ln(1 + 64) ≈ 4.2).
+const DISTANCE_CAP_PX: f32 = 64.0;
+
+/// The logistic model's weights on the pooled measures, in the module doc's order: their log-odds of an error.
+/// Fitted on trainingQ's 15 scenes by `scripts/fit-confidence.py` (docs/tuning-log.md, "Confidence"). Some pairs
+/// of measures move together (the margin and the peak ratio, the rejection's two scales), so their weights are
+/// read as pairs: a margin below the peak ratio (an answer off the cost's best minimum) raises the log-odds.
+const WEIGHTS: [f32; 12] =
+    [-0.1301, -0.2969, -0.4633, -0.1540, 0.3413, 0.3298, -2.0229, -7.5798, 8.3278, -0.4771, -0.2753, 1.7259];
 /// The log-odds of an error where every measure is 0.
-const BIAS: f32 = -4.1519;
+const BIAS: f32 = -5.7723;
 
 /// What the confidence of a fine pass is made from.
 pub(crate) struct ConfidenceInputs<'a> {
@@ -70,6 +93,59 @@ pub(crate) struct ConfidenceInputs<'a> {
     pub coarse: Option<(&'a DisparityMap, usize)>,
     /// The guidance image of the left view.
     pub guide: &'a RgbImage,
+    /// The lowest local minima of each pixel's matching cost, before the prior ([`cost_minima_row`]).
+    pub minima: Option<&'a Plane<CostMinima>>,
+}
+
+/// How many of a cost curve's lowest local minima are kept per pixel.
+pub(crate) const MINIMA: usize = 3;
+
+/// A pixel's lowest local minima of the matching cost over the disparities, lowest first: [cost, disparity] each;
+/// a curve with fewer minima repeats its last one.
+pub(crate) type CostMinima = [[f32; 2]; MINIMA];
+
+/// The [`CostMinima`] of each pixel of a cost volume's row (`data[x · ndisp + d]`). A local minimum is no higher than
+/// its left neighbour and lower than its right one (the last of a flat bottom); the ends count against their one
+/// neighbour. Ties: the lower disparity first.
+pub(crate) fn cost_minima_row(row: &[f32], ndisp: usize) -> Vec<CostMinima> {
+    row.chunks_exact(ndisp.max(1)).map(curve_minima).collect()
+}
+
+/// [`cost_minima_row`] of one pixel's curve: one pass, branch-free (a value that is no local minimum enters as
+/// `inf`; the kept minima are updated by selects, which the compiler makes conditional moves: a cost curve's local
+/// minima come at random, and a branch on them mispredicts).
+fn curve_minima(c: &[f32]) -> CostMinima {
+    let (mut b0, mut b1, mut b2) = ([f32::INFINITY, 0.0], [f32::INFINITY, 0.0], [f32::INFINITY, 0.0]);
+    let mut prev = f32::INFINITY;
+    let next = c.iter().skip(1).chain(std::iter::once(&f32::INFINITY));
+    for (d, (&cur, &next)) in c.iter().zip(next).enumerate() {
+        let v = if cur <= prev && cur < next { cur } else { f32::INFINITY };
+        let new = [v, d as f32];
+        let (lt0, lt1, lt2) = (v < b0[0], v < b1[0], v < b2[0]);
+        b2 = if lt1 {
+            b1
+        } else if lt2 {
+            new
+        } else {
+            b2
+        };
+        b1 = if lt0 {
+            b0
+        } else if lt1 {
+            new
+        } else {
+            b1
+        };
+        b0 = if lt0 { new } else { b0 };
+        prev = cur;
+    }
+    let mut best = [b0, b1, b2];
+    for k in 1..MINIMA {
+        if !best[k][0].is_finite() {
+            best[k] = best[k - 1];
+        }
+    }
+    best
 }
 
 /// The per-pixel measures before they are pooled.
@@ -78,6 +154,9 @@ struct Pixelwise {
     texture: Plane<f32>,
     edge: Plane<f32>,
     rejected: Plane<f32>,
+    /// The cost curve's peak ratio and the margin of the answer's minimum ([`cost_margins`]).
+    peak: Plane<f32>,
+    margin: Plane<f32>,
 }
 
 /// The confidence of each pixel of the final map, 0..1 (see the module doc).
@@ -85,6 +164,8 @@ struct Pixelwise {
 /// # Panics
 /// If the maps differ in size.
 pub(crate) fn confidence_map(inputs: &ConfidenceInputs<'_>) -> Plane<f32> {
+    #[cfg(feature = "confidence-dump")]
+    dump::write(inputs);
     let m = pixelwise(inputs);
     let mean = filter::box_mean_separable;
     let ln_mean = |r| {
@@ -92,7 +173,7 @@ pub(crate) fn confidence_map(inputs: &ConfidenceInputs<'_>) -> Plane<f32> {
         p.data.iter_mut().for_each(|v| *v = (*v + LN_FLOOR).ln());
         p
     };
-    // The log-odds summed one measure at a time, in the order of `WEIGHTS`, so that at most one pooled plane is
+    // The log-odds summed one measure at a time, in the order of `WEIGHTS`, so that at most two pooled planes are
     // alive beside the per-pixel ones (a tile's memory).
     let (w, h) = inputs.final_map.dims();
     let mut logit = Plane::new(w, h, BIAS);
@@ -108,6 +189,13 @@ pub(crate) fn confidence_map(inputs: &ConfidenceInputs<'_>) -> Plane<f32> {
     add(&mut logit, &m.edge, WEIGHTS[4]);
     add(&mut logit, &m.rejected, WEIGHTS[5]);
     add(&mut logit, &mean(&m.rejected, 7), WEIGHTS[6]);
+    add(&mut logit, &mean(&m.margin, 7), WEIGHTS[7]);
+    add(&mut logit, &mean(&m.peak, 7), WEIGHTS[8]);
+    let mut near = distance_to_rejected(inputs.consistent, DISTANCE_CAP_PX);
+    near.data.iter_mut().for_each(|d| *d = d.ln_1p());
+    add(&mut logit, &near, WEIGHTS[9]);
+    add(&mut logit, &local_spread(inputs.final_map, 7), WEIGHTS[10]);
+    add(&mut logit, &mean(&m.edge, 3), WEIGHTS[11]);
     drop(m);
     logit.data.par_chunks_mut(w.max(1)).zip(inputs.final_map.data.par_chunks(w.max(1))).for_each(|(row, d)| {
         for (c, d) in row.iter_mut().zip(d) {
@@ -126,9 +214,33 @@ pub(crate) fn confidence_map(inputs: &ConfidenceInputs<'_>) -> Plane<f32> {
     logit
 }
 
+/// ln(1 + the variance of the final map's finite values over (2r + 1)² windows), an invalid pixel counting as 0.
+fn local_spread(map: &DisparityMap, r: usize) -> Plane<f32> {
+    let (w, h) = map.dims();
+    let finite = |f: &f32| if f.is_finite() { *f } else { 0.0 };
+    let values = Plane::from_parts(w, h, map.data.iter().map(finite).collect());
+    let squares = Plane::from_parts(w, h, values.data.iter().map(|v| v * v).collect());
+    let (mean, mut spread) = (filter::box_mean_separable(&values, r), filter::box_mean_separable(&squares, r));
+    spread.data.iter_mut().zip(&mean.data).for_each(|(s, m)| *s = (*s - m * m).max(0.0).ln_1p());
+    spread
+}
+
+/// The cost curve's evidence on the answer `f` from its lowest minima (before the prior): the peak ratio
+/// (c₁ − c₀)/(c₁ + c₀) of the two lowest, and the margin (c_other − c_at)/(c_other + c_at) of the minimum the answer
+/// sits on (within 1 px) over the lowest one elsewhere, −½ when it sits on none of them (the cost curve chose
+/// otherwise). Both are free of the cost's scale.
+fn cost_margins(minima: &CostMinima, f: f32) -> (f32, f32) {
+    let ratio = |a: f32, b: f32| (a - b) / (a + b + RATIO_FLOOR);
+    let [[c0, _], [c1, _], _] = *minima;
+    let near = |k: usize| f.is_finite() && (f - minima[k][1]).abs() <= 1.0;
+    let at = (0..MINIMA).find(|&k| near(k)).map(|k| minima[k][0]);
+    let other = (0..MINIMA).find(|&k| !near(k)).map_or(minima[MINIMA - 1][0], |k| minima[k][0]);
+    (ratio(c1, c0), at.map_or(OFF_THE_MINIMA, |at| ratio(other, at)))
+}
+
 /// Agreement, texture, depth edge and the left-right rejection around each pixel (see the module doc).
 fn pixelwise(inputs: &ConfidenceInputs<'_>) -> Pixelwise {
-    let ConfidenceInputs { max_marginal, decoded, right, final_map, consistent, coarse, guide } = *inputs;
+    let ConfidenceInputs { max_marginal, decoded, right, final_map, consistent, coarse, guide, minima } = *inputs;
     let (w, h) = final_map.dims();
     assert_eq!(decoded.dims(), (w, h), "decoded and final maps differ in size");
     assert_eq!(max_marginal.dims(), (w, h), "max-marginal and final map differ in size");
@@ -168,7 +280,118 @@ fn pixelwise(inputs: &ConfidenceInputs<'_>) -> Pixelwise {
     };
     let failed = Plane::from_parts(w, h, consistent.data.iter().map(|&ok| if ok { 0.0 } else { 1.0 }).collect());
     let rejected = filter::box_mean_separable(&failed, 3);
-    Pixelwise { agreement, texture, edge, rejected }
+    let (peak, margin) = match minima {
+        Some(minima) => {
+            assert_eq!(minima.dims(), (w, h), "cost minima and final map differ in size");
+            let pairs: Vec<(f32, f32)> =
+                minima.data.par_iter().zip(&final_map.data).map(|(m, &f)| cost_margins(m, f)).collect();
+            let (peak, margin) = pairs.into_iter().unzip();
+            (Plane::from_parts(w, h, peak), Plane::from_parts(w, h, margin))
+        }
+        None => (Plane::new(w, h, 0.0), Plane::new(w, h, 0.0)),
+    };
+    Pixelwise { agreement, texture, edge, rejected, peak, margin }
+}
+
+/// The distance (px, 3-4 chamfer) from each pixel to the nearest one that failed the left-right check, capped at
+/// `cap`; two raster passes, one thread.
+pub(crate) fn distance_to_rejected(consistent: &Plane<bool>, cap: f32) -> Plane<f32> {
+    let (w, h) = consistent.dims();
+    let mut d: Vec<f32> = consistent.data.iter().map(|&ok| if ok { cap } else { 0.0 }).collect();
+    let (side, diagonal) = (1.0f32, 4.0 / 3.0);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let mut v = d[i];
+            if x > 0 {
+                v = v.min(d[i - 1] + side);
+            }
+            if y > 0 {
+                v = v.min(d[i - w] + side);
+                if x > 0 {
+                    v = v.min(d[i - w - 1] + diagonal);
+                }
+                if x + 1 < w {
+                    v = v.min(d[i - w + 1] + diagonal);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    for y in (0..h).rev() {
+        for x in (0..w).rev() {
+            let i = y * w + x;
+            let mut v = d[i];
+            if x + 1 < w {
+                v = v.min(d[i + 1] + side);
+            }
+            if y + 1 < h {
+                v = v.min(d[i + w] + side);
+                if x + 1 < w {
+                    v = v.min(d[i + w + 1] + diagonal);
+                }
+                if x > 0 {
+                    v = v.min(d[i + w - 1] + diagonal);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    Plane::from_parts(w, h, d)
+}
+
+/// Writes the per-pixel inputs of the confidence to `$JEM_CONFIDENCE_DUMP/NNN.bin` (a fitting aid, the
+/// `confidence-dump` feature; `scripts/fit-confidence.py` reads them).
+#[cfg(feature = "confidence-dump")]
+mod dump {
+    use std::io::Write;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    use super::*;
+
+    static COUNT: AtomicUsize = AtomicUsize::new(0);
+
+    pub(super) fn write(inputs: &ConfidenceInputs<'_>) {
+        let Some(dir) = std::env::var_os("JEM_CONFIDENCE_DUMP") else { return };
+        let ConfidenceInputs { max_marginal, decoded, right, final_map, consistent, coarse, guide, minima } = *inputs;
+        let (w, h) = final_map.dims();
+        let n = w * h;
+        let mut planes: Vec<(&str, Vec<f32>)> = Vec::new();
+        planes.push(("max_marginal", max_marginal.data.clone()));
+        planes.push(("decoded", decoded.data.clone()));
+        planes.push(("final", final_map.data.clone()));
+        let at_right = (0..n).map(|i| {
+            let (x, y) = (i % w, i / w);
+            right.map_or(f32::NAN, |(r, from)| {
+                let d = decoded.data[i];
+                let xr = (x + from) as f32 - d.round();
+                if d.is_finite() && xr >= 0.0 && xr < r.width as f32 { r.row(y)[xr as usize] } else { f32::INFINITY }
+            })
+        });
+        planes.push(("right", at_right.collect()));
+        planes.push((
+            "coarse",
+            (0..n).map(|i| coarse.map_or(f32::NAN, |(c, from)| c.row(i / w)[i % w + from])).collect(),
+        ));
+        planes.push(("consistent", consistent.data.iter().map(|&b| f32::from(u8::from(b))).collect()));
+        planes.push(("grey", guide.to_grey().data));
+        planes.push(("dist_rejected", distance_to_rejected(consistent, 64.0).data));
+        for (k, [cost, disp]) in [["c0", "d0"], ["c1", "d1"], ["c2", "d2"]].into_iter().enumerate() {
+            for (j, name) in [(0, cost), (1, disp)] {
+                planes.push((name, minima.map_or(vec![f32::NAN; n], |m| m.data.iter().map(|c| c[k][j]).collect())));
+            }
+        }
+        let k = COUNT.fetch_add(1, Ordering::SeqCst);
+        let path = std::path::Path::new(&dir).join(format!("{k:03}.bin"));
+        let mut f = std::io::BufWriter::new(std::fs::File::create(path).expect("dump file"));
+        let names: Vec<&str> = planes.iter().map(|p| p.0).collect();
+        writeln!(f, "{w} {h} {}", names.join(" ")).expect("dump");
+        for (_, v) in &planes {
+            for x in v {
+                f.write_all(&x.to_le_bytes()).expect("dump");
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -198,6 +421,7 @@ mod tests {
             consistent: &consistent,
             coarse: Some((&coarse, 0)),
             guide: &guide,
+            minima: None,
         });
         assert_eq!(c.data[w + 2], 0.0);
         let (mut lo_left, mut hi_right) = (f32::INFINITY, 0.0f32);
@@ -206,5 +430,43 @@ mod tests {
             if right_half(i) { hi_right = hi_right.max(v) } else { lo_left = lo_left.min(v) }
         }
         assert!(lo_left > hi_right, "left half from {lo_left}, right half up to {hi_right}");
+    }
+
+    /// The lowest local minima of a curve, lowest first, the last of a flat bottom; a curve with one minimum
+    /// repeats it.
+    #[test]
+    fn cost_minima_are_the_lowest_local_minima_lowest_first() {
+        let row = [
+            5.0, 3.0, 4.0, 1.0, 1.0, 6.0, 2.0, 7.0, 0.5, /* second pixel */ 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0,
+            8.0, 9.0,
+        ];
+        let m = cost_minima_row(&row, 9);
+        assert_eq!(m[0], [[0.5, 8.0], [1.0, 4.0], [2.0, 6.0]]);
+        assert_eq!(m[1], [[1.0, 0.0]; MINIMA]);
+    }
+
+    /// On the best minimum, the margin is the peak ratio; on the second, its opposite; on none, the fixed margin.
+    #[test]
+    fn the_margin_says_whether_the_answer_sits_on_the_best_minimum() {
+        let minima = [[1.0, 10.0], [3.0, 20.0], [4.0, 30.0]];
+        let peak = 2.0 / (4.0 + RATIO_FLOOR);
+        assert_eq!(cost_margins(&minima, 10.5), (peak, peak));
+        assert_eq!(cost_margins(&minima, 19.0), (peak, -peak));
+        assert_eq!(cost_margins(&minima, 15.0), (peak, OFF_THE_MINIMA));
+        assert_eq!(cost_margins(&minima, f32::INFINITY).1, OFF_THE_MINIMA);
+    }
+
+    /// The 3-4 chamfer distance to the one rejected pixel of a 5 × 3 map, and the cap where none is rejected.
+    #[test]
+    fn the_distance_to_the_rejections_is_the_chamfer_distance() {
+        let mut consistent = Plane::new(5, 3, true);
+        consistent.data[6] = false; // (1, 1)
+        let d = distance_to_rejected(&consistent, 64.0);
+        let k = 4.0 / 3.0;
+        let want = [k, 1.0, k, 1.0 + k, 2.0 + k, 1.0, 0.0, 1.0, 2.0, 3.0, k, 1.0, k, 1.0 + k, 2.0 + k];
+        for (got, want) in d.data.iter().zip(want) {
+            assert!((got - want).abs() < 1e-6, "{:?}", d.data);
+        }
+        assert!(distance_to_rejected(&Plane::new(4, 2, true), 64.0).data.iter().all(|&v| v == 64.0));
     }
 }
