@@ -512,6 +512,9 @@ fn rectify_alpha_scales_the_views_and_states_the_valid_rectangle() {
         assert_eq!(out.status.code(), Some(2), "{err}");
         assert!(err.contains("alpha") && err.contains("0..=1") && err.lines().count() == 1, "{err}");
         assert!(!dir.path().join("X").exists());
+    }
+}
+
 /// No repetitive-texture false alarm: every trainingQ pair matched at its stated range (the default configuration,
 /// with its confidence, as `jem match` runs) has no region of texture repeating within the range whose answers are
 /// doubtful or a period off each other. The unit tests of `diagnose::repetitive` hold the cases that must warn.
