@@ -45,6 +45,8 @@ pub(crate) struct MatchOptions {
     temporal: bool,
     /// The stereo calibration, and its rectification for the last size seen.
     calibration: Option<(StereoCalibration, Option<Rectification>)>,
+    /// The calibration's file, which a warning that the pair is not rectified names.
+    calibration_path: Option<PathBuf>,
     min_confidence: Option<f32>,
     /// The smallest disparity searched (``min_disp``).
     min_disp: usize,
@@ -59,11 +61,11 @@ impl MatchOptions {
         {
             return Err(to_py(&Error::param("min_confidence", c, "a confidence from 0 to 1")));
         }
-        let calibration = match rectify {
-            Some(path) => Some((StereoCalibration::load(&path).map_err(|e| to_py(&e))?, None)),
+        let calibration = match &rectify {
+            Some(path) => Some((StereoCalibration::load(path).map_err(|e| to_py(&e))?, None)),
             None => None,
         };
-        Ok(MatchOptions { temporal, calibration, min_confidence, min_disp: 0 })
+        Ok(MatchOptions { temporal, calibration, calibration_path: rectify, min_confidence, min_disp: 0 })
     }
 
     /// With the ``min_disp`` argument: a disparity of 0 or more (``None``: 0).
@@ -173,7 +175,12 @@ impl State {
                 Ok((out, check))
             })
         })?;
-        let shown = Shown { confidence, return_info, min_confidence: self.options.min_confidence };
+        let shown = Shown {
+            confidence,
+            return_info,
+            min_confidence: self.options.min_confidence,
+            rectified_with: self.options.calibration_path.clone(),
+        };
         results(py, out, &check, &self.params, shown)
     }
 }
@@ -226,6 +233,18 @@ struct Shown {
     confidence: bool,
     return_info: bool,
     min_confidence: Option<f32>,
+    /// The calibration the pair was rectified with (``rectify=``).
+    rectified_with: Option<PathBuf>,
+}
+
+impl Shown {
+    /// The pair check's warnings, for a pair rectified with a calibration worded as `jem match --rectify` words them.
+    fn warnings(&self, check: &PairCheck) -> Vec<String> {
+        match &self.rectified_with {
+            Some(calib) => check.warnings().into_iter().map(|w| PairCheck::after_rectify(w, calib)).collect(),
+            None => check.warnings(),
+        }
+    }
 }
 
 /// What `match` returns for `out`: the map (the reliable pixels only with ``min_confidence``), then the confidence
@@ -239,9 +258,10 @@ fn results<'py>(
     shown: Shown,
 ) -> PyResult<Bound<'py, PyAny>> {
     let (w, h) = out.disparity.dims();
-    let warnings: Vec<String> = params.image_warnings(w, h).into_iter().chain(check.warnings()).collect();
+    let said = shown.warnings(check);
+    let warnings: Vec<String> = params.image_warnings(w, h).into_iter().chain(said.iter().cloned()).collect();
     warn_all(py, &warnings)?;
-    let info = if shown.return_info { Some(info(py, &out, check)?) } else { None };
+    let info = if shown.return_info { Some(info(py, &out, check, said)?) } else { None };
     let reliable = shown.min_confidence.map(|c| out.reliable_disparity(c)).transpose().map_err(|e| to_py(&e))?;
     if shown.confidence {
         out.confidence_map().map_err(|e| to_py(&e))?;
@@ -268,7 +288,7 @@ pub(crate) fn warn_all(py: Python<'_>, lines: &[String]) -> PyResult<()> {
 }
 
 /// The info dict of a match (see `jem.match`).
-fn info<'py>(py: Python<'py>, out: &Output, check: &PairCheck) -> PyResult<Bound<'py, PyAny>> {
+fn info<'py>(py: Python<'py>, out: &Output, check: &PairCheck, warnings: Vec<String>) -> PyResult<Bound<'py, PyAny>> {
     let info = PyDict::new(py);
     info.set_item("ndisp", out.plan.ndisp)?;
     info.set_item("ndisp_measured", out.plan.ndisp_measured)?;
@@ -308,7 +328,7 @@ fn info<'py>(py: Python<'py>, out: &Output, check: &PairCheck) -> PyResult<Bound
     checks.set_item("measured_ndisp", check.measured_ndisp)?;
     checks.set_item("offsets_by_third", check.offsets_by_third.to_vec())?;
     info.set_item("checks", checks)?;
-    info.set_item("warnings", check.warnings())?;
+    info.set_item("warnings", warnings)?;
     Ok(info.into_any())
 }
 

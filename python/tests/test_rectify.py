@@ -2,6 +2,8 @@
 initUndistortRectifyMap + remap, on a rig made here (known cameras with lens distortion looking at a textured
 scene), its calibration saved by cv2.FileStorage as YAML and XML, and as KITTI's calib_cam_to_cam.txt."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -176,8 +178,20 @@ def test_match_with_rectify_is_matching_the_rectified_pair(tmp_path, cli):
     cli("match", tmp_path / "left.png", tmp_path / "right.png", "--rectify", calib, "-o", tmp_path / "one-step.pfm",
         "--ndisp", "32")
     assert (tmp_path / "one-step.pfm").read_bytes() == (tmp_path / "two-steps.pfm").read_bytes()
-    disp = jem.match(left, right, ndisp=32, rectify=calib, overrides={})
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        disp = jem.match(left, right, ndisp=32, rectify=calib, overrides={})
     np.testing.assert_array_equal(disp, jem.read_pfm(tmp_path / "one-step.pfm"))
+    # A pair rectified with rectify= is never told to rectify it (as `jem match --rectify` words it).
+    assert not [w for w in said if "--rectify CALIB" in str(w.message)], [str(w.message) for w in said]
+    # Raw views given in the wrong order: rectified with the calibration, the pair still looks unrectified, and the
+    # warning asks about the calibration and the order of the views.
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        jem.match(right, left, ndisp=32, rectify=calib, overrides={})
+    messages = [str(w.message) for w in said]
+    assert any("after --rectify" in m and "small.yml" in m for m in messages), messages
+    assert not any("--rectify CALIB" in m for m in messages), messages
 
 
 def test_a_calibration_missing_values_names_them_all(tmp_path):

@@ -139,7 +139,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let check = matcher.check_pair(&l, &r, &out);
     let mut warnings = check.warnings();
     if let (Some(rect), Some(calib)) = (&request.rectification, &args.rectify) {
-        warnings = warnings.into_iter().map(|w| after_rectify(w, calib)).collect();
+        warnings = warnings.into_iter().map(|w| jem::PairCheck::after_rectify(w, calib)).collect();
         warnings.extend(rect.warnings().into_iter().map(|w| format!("{}: {w}", calib.display())));
     }
     if args.strict && !warnings.is_empty() {
@@ -413,19 +413,6 @@ fn stage_spinner(quiet: bool) -> Option<indicatif::ProgressBar> {
     Some(bar)
 }
 
-/// A pair check's warning about a pair that is not rectified, for a pair rectified with `calib` (`--rectify`): the
-/// advice to rectify it would be given to one who did; the calibration, or the order of the views, is in doubt.
-fn after_rectify(warning: String, calib: &Path) -> String {
-    let advice =
-        format!("after --rectify {}: is it this rig's calibration, and LEFT the left camera's view?", calib.display());
-    warning
-        .replace(
-            "the pair is not rectified (rectify it with --rectify CALIB)",
-            &format!("the pair is not rectified {advice}"),
-        )
-        .replace("(the pair is not rectified)", &format!("(the pair is not rectified {advice})"))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -436,12 +423,13 @@ mod tests {
     fn a_pair_rectified_with_a_calibration_is_not_told_to_rectify_it() {
         let calib = Path::new("stereo.yml");
         let vertical = "the right view is 6.0 px lower: the pair is not rectified (rectify it with --rectify CALIB)";
-        let said = after_rectify(vertical.to_string(), calib);
+        let said = jem::PairCheck::after_rectify(vertical.to_string(), calib);
         let advice = "after --rectify stereo.yml: is it this rig's calibration, and LEFT the left camera's view?";
         assert_eq!(said, format!("the right view is 6.0 px lower: the pair is not rectified {advice}"));
-        let rotated = after_rectify("rotated by about 1.0° (the pair is not rectified)".to_string(), calib);
+        let rotated =
+            jem::PairCheck::after_rectify("rotated by about 1.0° (the pair is not rectified)".to_string(), calib);
         assert_eq!(rotated, format!("rotated by about 1.0° (the pair is not rectified {advice})"));
         let other = "the views look swapped: 90 % of the reliable matches are at negative disparity".to_string();
-        assert_eq!(after_rectify(other.clone(), calib), other);
+        assert_eq!(jem::PairCheck::after_rectify(other.clone(), calib), other);
     }
 }

@@ -94,6 +94,22 @@ pub struct PairCheck {
 }
 
 impl PairCheck {
+    /// A warning about a pair that is not rectified, for a pair already rectified with `calib` (`jem match
+    /// --rectify`, Python `rectify=`): the advice to rectify it would be given to one who did; the calibration, or the
+    /// order of the views, is in doubt. Other warnings are returned as they are.
+    pub fn after_rectify(warning: String, calib: &std::path::Path) -> String {
+        let advice = format!(
+            "after --rectify {}: is it this rig's calibration, and LEFT the left camera's view?",
+            calib.display()
+        );
+        warning
+            .replace(
+                "the pair is not rectified (rectify it with --rectify CALIB)",
+                &format!("the pair is not rectified {advice}"),
+            )
+            .replace("(the pair is not rectified)", &format!("(the pair is not rectified {advice})"))
+    }
+
     /// One line per problem found (no line for a pair that looks right).
     pub fn warnings(&self) -> Vec<String> {
         let mut out = Vec::new();
