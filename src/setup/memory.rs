@@ -20,7 +20,8 @@ use crate::scale;
 /// - coarse-to-fine (`meanfield.pyramid_levels` = L > 1): each coarse level k < L adds its volume and marginals
 ///   (and next Q with Jacobi) at 4^−k of the size, at most 2/3 (1) of a volume more;
 /// - WTA: one volume, two with the left-right check (both views' cost volumes);
-/// - plus ~300 bytes per pixel: the images, the lattice's per-pixel tables, the maps of the post-processing;
+/// - plus ~300 bytes per pixel: the images, the lattice's per-pixel tables, the maps of the post-processing; and
+///   [`COST_MINIMA_BYTES_PER_PX`], the cost's lowest minima kept for the confidence while the volume is built;
 /// - plus the process itself, [`PROCESS_BYTES`].
 ///
 /// With a downscale factor > 1, what is held at the input's own size is added ([`DOWNSCALED_FULL_SIZE_BYTES_PER_PX`]
@@ -44,6 +45,9 @@ pub(crate) fn coarse_level_bytes(width: usize, height: usize, ndisp: usize, para
         + COARSE_FULL_SIZE_BYTES_PER_PX * width as u64 * height as u64
 }
 
+/// Bytes per pixel of the cost's three lowest minima (value and label, `f32` each) that the confidence reads.
+pub(crate) const COST_MINIMA_BYTES_PER_PX: u64 = 24;
+
 /// Bytes per input pixel the coarse level of a tiled run holds at the full size ([`coarse_level_bytes`]).
 const COARSE_FULL_SIZE_BYTES_PER_PX: u64 = 32;
 
@@ -65,7 +69,7 @@ fn reduced_run_bytes(width: usize, height: usize, ndisp: usize, params: &Params,
         Model::Wta => 0,
         _ => (1..params.meanfield.pyramid_levels as u32).map(|k| (2 + next_q) * volume.div_ceil(4u64.pow(k))).sum(),
     };
-    volumes * volume + pyramid + 300 * n + PROCESS_BYTES
+    volumes * volume + pyramid + (300 + COST_MINIMA_BYTES_PER_PX) * n + PROCESS_BYTES
 }
 
 /// Bytes per input pixel a downscaled run holds at the input's size, at the most: the pair (24), the maps brought
@@ -201,9 +205,9 @@ mod tests {
     #[test]
     fn memory_estimate_scales_with_pixels_and_labels() {
         let p = Params::default();
-        // Vintage at quarter resolution: 720x480 (about), ndisp 190: 4 volumes of 263 MB plus 300 B/px = 1.15 GB.
+        // Vintage at quarter resolution: 720x480 (about), ndisp 190: 4 volumes of 263 MB plus 324 B/px = 1.16 GB.
         let vintage = estimate_memory_bytes(720, 480, 190, &p);
-        assert_eq!(vintage, 4 * 4 * 720 * 480 * 190 + 300 * 720 * 480 + PROCESS_BYTES);
+        assert_eq!(vintage, 4 * 4 * 720 * 480 * 190 + 324 * 720 * 480 + PROCESS_BYTES);
         assert!(vintage > 1 << 30 && vintage < 2 << 30, "{vintage}");
         let data = |w, h| estimate_memory_bytes(w, h, 10, &p) - PROCESS_BYTES;
         assert_eq!(data(200, 100) * 4, data(400, 200));
@@ -232,7 +236,7 @@ mod tests {
         // 722x480 at 1/2: 361x240 with 95 labels, plus what is held at the input's size (70 B per input pixel).
         let n = 361 * 240;
         let at_full_size = DOWNSCALED_FULL_SIZE_BYTES_PER_PX * 722 * 480;
-        assert_eq!(estimate_memory_bytes(722, 480, 190, &p), 4 * 4 * n * 95 + 300 * n + at_full_size + PROCESS_BYTES);
+        assert_eq!(estimate_memory_bytes(722, 480, 190, &p), 4 * 4 * n * 95 + 324 * n + at_full_size + PROCESS_BYTES);
         let full = estimate_memory_bytes(722, 480, 190, &Params::default());
         assert!(estimate_memory_bytes(722, 480, 190, &p) * 5 < full, "about 1/6 of the memory");
     }
