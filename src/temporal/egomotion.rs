@@ -20,6 +20,7 @@
 
 use crate::image::Plane;
 use crate::imgproc::filter::box_mean;
+use crate::imgproc::sample::sample_bilinear;
 use crate::internals::SplitMix64;
 use crate::pipeline::PipelineOutput;
 
@@ -58,20 +59,25 @@ impl Motion {
         (w > 1e-6).then(|| (dot(&self.rows[0]) / w, dot(&self.rows[1]) / w, d / w))
     }
 
-    /// Where the new frame's (x', y') with disparity d' was in the previous frame (the inverse motion).
-    pub(crate) fn invert(&self, x: f64, y: f64, d: f64) -> Option<(f64, f64)> {
+    /// The inverse motion, from the new frame back to the previous one: H = [[M, t], [0, 1]] has the inverse
+    /// [[M⁻¹, −M⁻¹·t], [0, 1]], of the same form (and its block's determinant is 1 too). `None` when M is singular.
+    pub(crate) fn inverse(&self) -> Option<Motion> {
         let m = |i: usize, j: usize| self.rows[i][j];
-        // H = [[M, t], [0, 1]] → H⁻¹ = [[M⁻¹, −M⁻¹·t], [0, 1]]; only the first three rows matter.
         let det = det3(&self.rows);
+        if !det.is_finite() || det.abs() < 1e-12 {
+            return None;
+        }
         let cof = |a: usize, b: usize| {
             let (r0, r1) = ((a + 1) % 3, (a + 2) % 3);
             let (c0, c1) = ((b + 1) % 3, (b + 2) % 3);
             m(r0, c0) * m(r1, c1) - m(r0, c1) * m(r1, c0)
         };
-        let inv = |i: usize, j: usize| cof(j, i) / det;
-        let q = [x - m(0, 3) * d, y - m(1, 3) * d, 1.0 - m(2, 3) * d];
-        let p: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| inv(i, j) * q[j]).sum());
-        (p[2] > 1e-9).then(|| (p[0] / p[2], p[1] / p[2]))
+        let inv: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| cof(j, i) / det));
+        let rows = std::array::from_fn(|i| {
+            let t = -(0..3).map(|j| inv[i][j] * m(j, 3)).sum::<f64>();
+            [inv[i][0], inv[i][1], inv[i][2], t]
+        });
+        Some(Motion { rows, inliers: self.inliers })
     }
 
     /// How far from where it was found the motion puts a track, in pixels.
@@ -273,15 +279,7 @@ pub(crate) fn carry(answer: &PipelineOutput, grey: &Plane<f32>, motion: &Motion)
     };
     let consistent =
         Plane::from_parts(w, h, source.iter().map(|&s| s != usize::MAX && answer.consistent.data[s]).collect());
-    let out = PipelineOutput {
-        disparity: moved,
-        confidence: answer.confidence.as_ref().map(|c| take(c, 0.0)),
-        max_marginal: take(&answer.max_marginal, 0.0),
-        consistent,
-        timings: Default::default(),
-        measured: None,
-        vertical_offset: answer.vertical_offset,
-    };
+    let out = super::motion::carried(answer, moved, consistent, take);
     let seen = sample_back(grey, &out.disparity, motion);
     (out, seen)
 }
@@ -290,15 +288,16 @@ pub(crate) fn carry(answer: &PipelineOutput, grey: &Plane<f32>, motion: &Motion)
 /// inverse motion puts it (bilinear; `inf` outside the view or where nothing was carried).
 fn sample_back(grey: &Plane<f32>, carried: &Plane<f32>, motion: &Motion) -> Plane<f32> {
     let (w, h) = carried.dims();
+    let Some(back) = motion.inverse() else { return Plane::new(w, h, f32::INFINITY) };
     let data = (0..w * h)
         .map(|i| {
             let d = carried.data[i];
             if !d.is_finite() {
                 return f32::INFINITY;
             }
-            match motion.invert((i % w) as f64, (i / w) as f64, f64::from(d)) {
-                Some((x, y)) if x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64 => {
-                    bilinear(grey, x, y)
+            match back.apply((i % w) as f64, (i / w) as f64, f64::from(d)) {
+                Some((x, y, _)) if x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64 => {
+                    sample_bilinear(&grey.data, w, h, x, y) as f32
                 }
                 _ => f32::INFINITY,
             }
@@ -307,21 +306,13 @@ fn sample_back(grey: &Plane<f32>, carried: &Plane<f32>, motion: &Motion) -> Plan
     Plane::from_parts(w, h, data)
 }
 
-fn bilinear(p: &Plane<f32>, x: f64, y: f64) -> f32 {
-    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-    let (x1, y1) = ((x0 + 1).min(p.width - 1), (y0 + 1).min(p.height - 1));
-    let (ax, ay) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
-    let at = |xx: usize, yy: usize| p.data[yy * p.width + xx];
-    let top = at(x0, y0) * (1.0 - ax) + at(x1, y0) * ax;
-    let bottom = at(x0, y1) * (1.0 - ax) + at(x1, y1) * ax;
-    top * (1.0 - ay) + bottom * ay
-}
-
 /// Where the previous view seen from the new frame disagrees with the current view (the 5 × 5 mean absolute
 /// grey difference above `limit`, a pixel with nothing carried counting as far off), allowing beside the noise's
 /// `limit` what a position off by [`POSITION_SLACK_PX`] changes at the current view's local gradient: the motion
 /// places a point only to within its inliers' error.
 pub(crate) fn disagreement(moved: &Plane<f32>, cur: &Plane<f32>, limit: f32) -> Plane<bool> {
+    // |gx| + |gy| of central differences, halved at the borders as well (imgproc's `central_differences` is
+    // one-sided there, which gives the border rows more slack and changes the maps the slack was chosen with).
     let (w, h) = cur.dims();
     let at = |x: usize, y: usize| cur.data[y * w + x];
     let gradient = Plane::from_parts(
@@ -336,17 +327,8 @@ pub(crate) fn disagreement(moved: &Plane<f32>, cur: &Plane<f32>, limit: f32) -> 
             })
             .collect(),
     );
-    let diff = Plane::from_parts(
-        w,
-        h,
-        moved.data.iter().zip(&cur.data).map(|(p, c)| if p.is_finite() { (p - c).abs() } else { 1e6 }).collect(),
-    );
-    let (diff, slack) = (box_mean(&diff, 2), box_mean(&gradient, 2));
-    Plane::from_parts(
-        w,
-        h,
-        diff.data.iter().zip(&slack.data).map(|(d, g)| *d > limit + POSITION_SLACK_PX * g).collect(),
-    )
+    let slack = box_mean(&gradient, 2);
+    super::motion::disagreement_beyond(moved, cur, |i| limit + POSITION_SLACK_PX * slack.data[i])
 }
 
 #[cfg(test)]

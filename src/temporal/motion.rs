@@ -120,10 +120,21 @@ pub(crate) fn shift_answer(answer: &PipelineOutput, shift: Shift) -> PipelineOut
         let as_f32 = Plane::from_parts(w, h, answer.consistent.data.iter().map(|&c| f32::from(u8::from(c))).collect());
         moved(&as_f32, 0.0).data.iter().map(|&v| v > 0.5).collect()
     });
+    carried(answer, moved(&answer.disparity, f32::INFINITY), consistent, moved)
+}
+
+/// The previous frame's answer carried into the current frame: its `disparity` and `consistent` as carried, its
+/// confidence and max-marginal carried by `take` (0 where nothing lands), its vertical offset as it was.
+pub(crate) fn carried(
+    answer: &PipelineOutput,
+    disparity: Plane<f32>,
+    consistent: Plane<bool>,
+    take: impl Fn(&Plane<f32>, f32) -> Plane<f32>,
+) -> PipelineOutput {
     PipelineOutput {
-        disparity: moved(&answer.disparity, f32::INFINITY),
-        confidence: answer.confidence.as_ref().map(|c| moved(c, 0.0)),
-        max_marginal: moved(&answer.max_marginal, 0.0),
+        disparity,
+        confidence: answer.confidence.as_ref().map(|c| take(c, 0.0)),
+        max_marginal: take(&answer.max_marginal, 0.0),
         consistent,
         timings: Default::default(),
         measured: None,
@@ -154,14 +165,20 @@ pub(crate) fn shift_plane(p: &Plane<f32>, shift: Shift, fill: f32) -> Plane<f32>
 /// Where the frames disagree after the shift: the 5 × 5 mean absolute grey difference exceeds `limit` (and where
 /// the previous frame does not reach).
 pub(crate) fn disagreement(prev: &Plane<f32>, cur: &Plane<f32>, shift: Shift, limit: f32) -> Plane<bool> {
-    let moved = shift_plane(prev, shift, f32::INFINITY);
+    disagreement_beyond(&shift_plane(prev, shift, f32::INFINITY), cur, |_| limit)
+}
+
+/// Where the previous view, already moved into the current frame (`inf` where nothing lands), disagrees with the
+/// current one: the 5 × 5 mean absolute grey difference exceeds `limit(i)` at pixel i, a pixel with nothing counting
+/// as far off.
+pub(crate) fn disagreement_beyond(moved: &Plane<f32>, cur: &Plane<f32>, limit: impl Fn(usize) -> f32) -> Plane<bool> {
     let diff = Plane::from_parts(
         cur.width,
         cur.height,
         moved.data.iter().zip(&cur.data).map(|(p, c)| if p.is_finite() { (p - c).abs() } else { 1e6 }).collect(),
     );
     let local = box_mean(&diff, 2);
-    Plane::from_parts(cur.width, cur.height, local.data.iter().map(|&d| d > limit).collect())
+    Plane::from_parts(cur.width, cur.height, local.data.iter().enumerate().map(|(i, &d)| d > limit(i)).collect())
 }
 
 #[cfg(test)]

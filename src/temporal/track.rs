@@ -12,7 +12,7 @@
 use rayon::prelude::*;
 
 use crate::image::Plane;
-use crate::imgproc::filter::{box_mean, box_reduce};
+use crate::imgproc::filter::{box_mean, box_reduce, central_differences};
 
 #[cfg(test)]
 use super::motion::Shift;
@@ -165,24 +165,15 @@ fn flat_disparity(d: &Plane<f32>, x: usize, y: usize) -> bool {
     hi - lo <= 1.0
 }
 
-/// The smaller eigenvalue of each pixel's structure tensor over the 7 × 7 window (central differences, borders
-/// replicated).
+/// The smaller eigenvalue of each pixel's structure tensor over the 7 × 7 window (central differences, one-sided at
+/// the borders).
 fn min_eigenvalue(grey: &Plane<f32>) -> Plane<f32> {
     let (w, h) = grey.dims();
-    let at =
-        |x: isize, y: isize| grey.data[(y.clamp(0, h as isize - 1) as usize) * w + x.clamp(0, w as isize - 1) as usize];
-    let mut gxx = Plane::new(w, h, 0.0f32);
-    let mut gyy = gxx.clone();
-    let mut gxy = gxx.clone();
-    for y in 0..h {
-        for x in 0..w {
-            let (xi, yi) = (x as isize, y as isize);
-            let gx = 0.5 * (at(xi + 1, yi) - at(xi - 1, yi));
-            let gy = 0.5 * (at(xi, yi + 1) - at(xi, yi - 1));
-            let i = y * w + x;
-            (gxx.data[i], gyy.data[i], gxy.data[i]) = (gx * gx, gy * gy, gx * gy);
-        }
-    }
+    let (gx, gy) = central_differences(grey);
+    let products = |f: fn(f32, f32) -> f32| {
+        Plane::from_parts(w, h, gx.data.iter().zip(&gy.data).map(|(&a, &b)| f(a, b)).collect())
+    };
+    let (gxx, gyy, gxy) = (products(|a, _| a * a), products(|_, b| b * b), products(|a, b| a * b));
     let (a, b, c) = (box_mean(&gxx, RADIUS as usize), box_mean(&gyy, RADIUS as usize), box_mean(&gxy, RADIUS as usize));
     let data = (0..w * h)
         .map(|i| {
@@ -297,21 +288,13 @@ mod tests {
         Plane::from_parts(w, h, data)
     }
 
-    /// `p` sampled at `map(x, y)` (bilinear, borders replicated).
+    /// `p` sampled at `map(x, y)` (bilinear, clamped to the image).
     pub(crate) fn resample(p: &Plane<f32>, map: impl Fn(f64, f64) -> (f64, f64)) -> Plane<f32> {
         let (w, h) = p.dims();
-        let at = |x: isize, y: isize| {
-            f64::from(p.data[(y.clamp(0, h as isize - 1) as usize) * w + x.clamp(0, w as isize - 1) as usize])
-        };
         let data = (0..w * h)
             .map(|i| {
                 let (sx, sy) = map((i % w) as f64, (i / w) as f64);
-                let (x0, y0) = (sx.floor(), sy.floor());
-                let (ax, ay) = (sx - x0, sy - y0);
-                let (x0, y0) = (x0 as isize, y0 as isize);
-                let top = at(x0, y0) * (1.0 - ax) + at(x0 + 1, y0) * ax;
-                let bottom = at(x0, y0 + 1) * (1.0 - ax) + at(x0 + 1, y0 + 1) * ax;
-                (top * (1.0 - ay) + bottom * ay) as f32
+                crate::imgproc::sample::sample_bilinear(&p.data, w, h, sx, sy) as f32
             })
             .collect();
         Plane::from_parts(w, h, data)
