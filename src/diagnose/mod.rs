@@ -5,12 +5,13 @@
 //!
 //! - **Swapped views**: the reliable matches (left-right consistent, distinct, coherent: the range measurement's,
 //!   `crate::setup::range`) at 1/4 resolution, searched at positive disparities on the pair and on the pair
-//!   mirrored left to right (whose positive disparities are the pair's negative ones). Most of them at negative
-//!   disparity: the views look swapped.
+//!   mirrored left to right (whose positive disparities are the pair's negative ones). Clearly most of them at
+//!   negative disparity ([`SWAPPED_SHARE`]): the views look swapped.
 //! - **Vertical offset**: the views' row profiles (each row's mean grey level, less its local mean over
 //!   [`PROFILE_DETREND`] rows) are correlated over vertical shifts; a horizontal disparity moves content along a
 //!   row and leaves the profile nearly as it is, a vertical offset shifts it. Beyond what the alignment
-//!   corrects ([`VerticalParams::MAX_OFFSET_PX`]) and clearly better correlated than no shift, it is a warning.
+//!   corrects ([`VerticalParams::MAX_OFFSET_PX`]) and clearly better correlated than no shift, it is a warning;
+//!   rows that repeat down the image (a rival correlation peak) leave it unmeasured.
 //! - **Texture**: the share of pixels whose gradient stands above the noise.
 //! - **Exposure**: the share of pixels clipped to black or white in one view and not the other (detail lost
 //!   there cannot be matched; a gain or an offset the front end stretches away).
@@ -36,6 +37,15 @@ const PROFILE_DETREND: usize = 15;
 /// pair without horizontal structure both are noise.
 const PROFILE_MARGIN: f64 = 0.2;
 
+/// Another correlation peak within this of the best one makes a vertical offset ambiguous ([`has_rival_peak`]).
+/// Half of [`PROFILE_MARGIN`]: a repetitive pattern's rival peaks come within a few hundredths of the best.
+const RIVAL_PEAK_MARGIN: f64 = 0.1;
+
+/// More of the reliable matches than this share at negative disparity: the views look swapped. Swapped trainingQ
+/// pairs put 70–87 % there; a share near one half says the matches go both ways, as on a texture that repeats
+/// along the row (a chessboard over the whole frame: 52 %), and tells nothing of the order.
+const SWAPPED_SHARE: f32 = 0.6;
+
 /// A pixel is textured when its gradient magnitude exceeds this many times the noise σ (and 2 grey levels).
 const TEXTURE_SIGMAS: f32 = 3.0;
 
@@ -58,7 +68,7 @@ const MAX_IDENTICAL_SHARE: f32 = 0.99;
 /// What was checked on a pair (see the module doc); `None` where it could not be measured.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PairCheck {
-    /// The share of the reliable matches at negative disparity (0..1; over ½: swapped).
+    /// The share of the reliable matches at negative disparity (0..1; over [`SWAPPED_SHARE`]: swapped).
     pub negative_share: Option<f32>,
     /// The right view's vertical offset measured from the row profiles (px; + = the right view's content lower).
     pub vertical_px: Option<f32>,
@@ -121,7 +131,7 @@ impl PairCheck {
             ));
         }
         if let Some(share) = self.negative_share
-            && share > 0.5
+            && share > SWAPPED_SHARE
         {
             out.push(format!(
                 "the views look swapped: {:.0} % of the reliable matches are at negative disparity (give the left \
@@ -421,7 +431,7 @@ fn vertical_offset_within(
         OffsetTest::BeatsNoShift => score - ncc(0) >= PROFILE_MARGIN || best == 0,
         OffsetTest::Correlation(min) => score >= min,
     };
-    if !counts || !score.is_finite() {
+    if !counts || !score.is_finite() || has_rival_peak(&scores, best, score) {
         return None;
     }
     // A parabola through the peak and its neighbours.
@@ -431,6 +441,17 @@ fn vertical_offset_within(
         _ => 0.0,
     };
     Some((best as f64 + sub) as f32)
+}
+
+/// Whether the correlation over vertical shifts `scores` ((shift, correlation) by shift) has another peak, away
+/// from the best shift `best` (beyond its own flanks), within [`RIVAL_PEAK_MARGIN`] of its `score`: rows that
+/// repeat themselves down the image (a chessboard, blinds, shelving) match a period off as well as at the true
+/// offset, and which of the two is the offset the profiles cannot tell.
+fn has_rival_peak(scores: &[(i64, f64)], best: i64, score: f64) -> bool {
+    scores.windows(3).any(|w| {
+        let (dy, v) = w[1];
+        (dy - best).abs() > 2 && v >= w[0].1 && v >= w[2].1 && v >= score - RIVAL_PEAK_MARGIN
+    })
 }
 
 /// The share of the view's pixels with texture above the noise, at [`TEXTURE_FACTOR`] × reduced resolution (where
@@ -577,6 +598,31 @@ mod tests {
         assert!(c.warnings().is_empty(), "{c}: {:?}", c.warnings());
         let [l, r, t, b] = c.offsets_by_third.map(Option::unwrap);
         assert!((l - r).abs() < 0.5 && (t - b).abs() < 0.5, "{c}");
+    }
+
+    /// A chessboard over the whole frame repeats its rows every period: the right view a period lower matches as
+    /// well as one in line, so no offset is measured and nothing is said of rotation or scale.
+    #[test]
+    fn rows_that_repeat_give_no_vertical_offset() {
+        let (w, h, period) = (240usize, 180usize, 12usize);
+        let board = |dx: f64, dy: f64| {
+            let cell = |x: f64, y: f64| ((x / 6.0).floor() + (y / 6.0).floor()).rem_euclid(2.0) as f32;
+            let grey: Vec<f32> =
+                (0..w * h).map(|i| 40.0 + 170.0 * cell((i % w) as f64 + dx, (i / w) as f64 - dy)).collect();
+            RgbImage::from_channels(w, h, [grey.clone(), grey.clone(), grey]).unwrap()
+        };
+        let (l, r) = (board(0.0, 0.0), board(8.0, period as f64 * 2.0));
+        let c = check(&l, &r);
+        assert_eq!(c.vertical_px, None, "{c}");
+        let gt = Plane::new(w, h, 8.0);
+        let mut c = check(&l, &r);
+        check_answer(&mut c, &l, &r, &gt, None, || None);
+        assert!(c.offsets_by_third.iter().all(Option::is_none), "{c}");
+        assert!(c.warnings().iter().all(|w| !w.contains("vertical offset")), "{:?}", c.warnings());
+        let scores: Vec<(i64, f64)> = (-20..=20).map(|dy| (dy, (dy as f64 * 0.5).cos())).collect();
+        assert!(has_rival_peak(&scores, 0, 1.0), "a cosine peaks every 4π px");
+        let single: Vec<(i64, f64)> = (-20..=20).map(|dy| (dy, -(dy as f64).abs() / 20.0)).collect();
+        assert!(!has_rival_peak(&single, 0, 0.0));
     }
 
     /// A given range the scene reaches beyond (answers piled up at its top, a larger range measured) is said to
