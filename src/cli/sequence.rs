@@ -33,6 +33,10 @@ pub(super) struct SequenceArgs {
     /// frame as `jem match` measures it).
     #[arg(long, value_name = "N")]
     ndisp: Option<usize>,
+    /// Search the disparities D…D+N−1 in every frame instead of 0…N−1 (as `jem match --min-disp`; N from
+    /// --ndisp, calib.txt or measured from D up). The left views' first D columns come out invalid.
+    #[arg(long, value_name = "D", default_value_t = 0)]
+    min_disp: usize,
     /// Settle the range once, on the first frame, and hold it for the whole sequence (instead of per frame).
     #[arg(long)]
     range_once: bool,
@@ -74,6 +78,7 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
         limit_bytes: args.memory.memory_limit(),
         range: if args.range_once || !args.independent { RangeRule::FirstFrame } else { RangeRule::PerFrame },
         temporal: !args.independent,
+        min_disp: args.min_disp,
     };
     let quiet = global.quiet;
     // Said once the output folder is taken, with the first frame, so that a refusal is the only line.
@@ -187,6 +192,10 @@ fn closing_line(seq: &Sequence, args: &SequenceArgs, summary: &jem::sequence::Ru
         (None, None, _) if measured => format!("ndisp {lo}–{hi} measured per frame"),
         (None, None, Some(_)) => format!("ndisp {lo} from calib.txt"),
         (None, None, None) => format!("ndisp {lo}"),
+    };
+    let range = match args.min_disp {
+        0 => range,
+        d => format!("{range}, searched from {d}"),
     };
     let mean = summary.ran.iter().map(|r| r.seconds).sum::<f64>() / ran as f64;
     format!(

@@ -69,6 +69,8 @@ pub struct RunOptions<'a> {
     pub temporal: bool,
     /// Rectify every frame with this before matching (`jem sequence --rectify`, as `jem match --rectify`).
     pub rectification: Option<&'a crate::rectify::Rectification>,
+    /// The smallest disparity searched in every frame ([`Matcher::with_min_disp`]; 0: from 0).
+    pub min_disp: usize,
 }
 
 /// One frame matched.
@@ -220,6 +222,7 @@ fn run_locked(
         .with_max_memory(opts.limit_bytes)
         .with_ndisp(source)
         .with_temporal(opts.temporal)
+        .with_min_disp(opts.min_disp)
         .with_confidence(false);
     for (index, frame) in seq.frames.iter().enumerate() {
         let named = |e: Error| Error::Frame { stem: frame.stem.clone(), source: Box::new(e) };
@@ -352,6 +355,11 @@ fn record_text(seq: &Sequence, opts: &RunOptions<'_>, source: NdispSource) -> St
     // What the rectification does (its cameras, rotations and projections), not only the file it came from: a
     // calibration file changed in place rectifies the frames differently.
     let rectify = opts.rectification.map_or("none".to_string(), |r| format!("{:016x}", r.fingerprint()));
+    // Only when set: the records of runs from 0 (every run before the option existed) stay as they were.
+    let range = match opts.min_disp {
+        0 => range,
+        d => format!("{range}, from {d}"),
+    };
     format!(
         "source={}\nmode={}\nformat={}\nrange={range}\nconfig={fingerprint:016x}\nrectify={rectify}\njem={}\n",
         root.display(),

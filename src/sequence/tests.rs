@@ -317,6 +317,7 @@ fn options(params: &crate::Params) -> RunOptions<'_> {
         range: RangeRule::PerFrame,
         temporal: false,
         rectification: None,
+        min_disp: 0,
     }
 }
 
@@ -473,4 +474,37 @@ fn the_range_held_from_the_first_frame_is_given_to_every_frame() {
     let per_frame = run(&seq, &dir.path().join("each"), &options(&params), &|_| {}).unwrap();
     assert!(per_frame.ran.iter().all(|r| r.ndisp_measured));
     assert_eq!(per_frame.ran[0].ndisp, n, "the first frame is measured the same way");
+}
+
+/// With a smallest disparity, each frame is the map a matcher with that smallest disparity makes (the first
+/// columns invalid), alone and through the temporal model; the folder's record holds it, so a rerun from another
+/// smallest disparity is refused.
+#[test]
+fn a_sequence_searched_from_a_smallest_disparity_is_matched_as_jem_match_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let (seq, params) = small_sequence(dir.path());
+    let from = |d| RunOptions { min_disp: d, ..options(&params) };
+    let out = dir.path().join("out");
+    run(&seq, &out, &from(4), &|_| {}).unwrap();
+    for f in &seq.frames {
+        let (l, r) = crate::io::png::load_rgb_pair(&f.left, &f.right).unwrap();
+        let matcher = crate::matcher::Matcher::new(params.clone()).unwrap().with_max_memory(u64::MAX);
+        let expected =
+            matcher.with_ndisp(NdispSource::Stated(16)).with_min_disp(4).match_pair(&l, &r).unwrap().disparity;
+        assert!((0..expected.height()).all(|y| expected.row(y)[..4].iter().all(|d| d.is_infinite())));
+        let written = std::fs::read(out.join(format!("{}.pfm", f.stem))).unwrap();
+        assert_eq!(written, crate::io::pfm::encode_pfm(&expected), "frame {}", f.stem);
+    }
+    let e = run(&seq, &out, &from(2), &|_| {}).unwrap_err().to_string();
+    assert!(e.contains("another run"), "{e}");
+    let temporal = RunOptions { temporal: true, range: RangeRule::FirstFrame, ..from(4) };
+    let summary = run(&seq, &dir.path().join("temporal"), &temporal, &|_| {}).unwrap();
+    assert_eq!(summary.ran.len(), 3);
+    for f in &seq.frames {
+        let map = crate::io::read_disparity(&dir.path().join("temporal").join(format!("{}.pfm", f.stem))).unwrap();
+        let (w, h) = map.dims();
+        assert_eq!((w, h), (80, 40));
+        assert!((0..h).all(|y| map.row(y)[..4].iter().all(|d| d.is_infinite())), "frame {}", f.stem);
+        assert!(map.data().iter().filter(|d| d.is_finite()).all(|&d| d >= 3.5), "frame {}", f.stem);
+    }
 }
