@@ -84,7 +84,7 @@ mod tests {
     /// A preset gives the parameters its file gives, with and without overrides.
     #[test]
     fn a_preset_is_its_file() {
-        let set = ["meanfield.iterations=1".to_string(), "model=wta".to_string()];
+        let set = ["model=lcm".to_string(), "post.fill=false".to_string()];
         for name in Params::preset_names() {
             let path = configs_dir().join(format!("{name}.toml"));
             let (file, preset) = (Params::load(Some(&path), &[]).unwrap(), Params::preset(name).unwrap());
