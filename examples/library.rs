@@ -11,7 +11,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let [left, right, output] = &args[..] else {
         return Err("usage: library LEFT RIGHT OUTPUT.pfm".into());
     };
-    // The built-in defaults, with `key=value` overrides as `jem --set` takes them (or `Params::from_toml_str`).
+    // The built-in defaults, with `key=value` overrides as `jem --set` takes them (or a shipped config by name,
+    // `Params::preset("fast")`, or `Params::from_toml_str`).
     let params = Params::load(None, &["meanfield.iterations=2".into()])?;
     let mut matcher = Matcher::new(params)?.with_ndisp(NdispSource::Given(64)).with_max_memory(4 << 30);
     let (left, right) = jem::io::read_image_pair(left.as_ref(), right.as_ref())?;

@@ -9,17 +9,82 @@ calibration as OpenCV does.
 """
 
 import os
-from typing import Any, Literal, Mapping, Optional, Tuple, Union, overload
+from pathlib import Path
+from typing import Any, Literal, Mapping, Optional, Tuple, TypedDict, Union, final, overload, type_check_only
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
+__all__ = [
+    "__version__",
+    "match",
+    "Matcher",
+    "sequence_frames",
+    "depth",
+    "cloud",
+    "colorize",
+    "read_pfm",
+    "write_pfm",
+    "read_image",
+    "rectify_maps",
+    "rectify",
+    "config_record",
+    "preset_names",
+]
 
 _Image = Union[npt.NDArray[np.uint8], npt.NDArray[np.uint16]]
 _Map = npt.NDArray[np.float32]
 _Path = Union[str, "os.PathLike[str]"]
+# A preset's name (``preset_names()``) is a str, as a path is.
 _Config = Union[_Path, Mapping[str, Any], None]
+
+@type_check_only
+class PairChecks(TypedDict):
+    """The numbers of a pair's checks (``MatchInfo["checks"]``), those behind ``warnings``; None where a check
+    could not be made on the pair."""
+
+    negative_share: Optional[float]
+    vertical_px: Optional[float]
+    vertical_limit_px: float
+    range_share: Optional[float]
+    textured_share: float
+    clipped: Tuple[float, float]
+    sharpness_ratio: float
+    focus_beyond: bool
+    identical_share: float
+    top_share: Optional[float]
+    measured_ndisp: Optional[int]
+    offsets_by_third: list[Optional[float]]
+
+@type_check_only
+class MatchInfo(TypedDict):
+    """The info dict ``match(..., return_info=True)`` returns (a plain dict at run time; this type exists for type
+    checkers only: import it under ``typing.TYPE_CHECKING``). Every key is always present."""
+
+    ndisp: int
+    ndisp_measured: bool
+    tiled: bool
+    # Each view's noise σ; None with ``condition.enabled = false``.
+    noise: Optional[Tuple[float, float]]
+    # Seconds per stage.
+    timings: dict[str, float]
+    seconds: float
+    memory_planned: int
+    # The whole process's peak resident memory in bytes; None where the system does not tell it.
+    peak_rss: Optional[int]
+    # How a temporal matcher matched the frame; None for ``jem.match`` and a matcher without ``temporal=True``.
+    frame: Optional[Literal["first", "still", "moving", "cut"]]
+    frames_averaged: Optional[int]
+    # The camera's shift (dx, dy) in pixels, for a moving frame it could measure.
+    shift: Optional[Tuple[int, int]]
+    # The (gain, offset) compensated in the frame.
+    exposure: Optional[Tuple[float, float]]
+    checks: PairChecks
+    warnings: list[str]
+
+# What ``match`` returns for flags that are not literals.
+_MatchResult = Union[_Map, Tuple[_Map, _Map], Tuple[_Map, MatchInfo], Tuple[_Map, _Map, MatchInfo]]
 
 @overload
 def match(
@@ -70,7 +135,7 @@ def match(
     rectify: Optional[_Path] = None,
     min_confidence: Optional[float] = None,
     min_disp: Optional[int] = None,
-) -> Tuple[_Map, dict[str, Any]]: ...
+) -> Tuple[_Map, MatchInfo]: ...
 @overload
 def match(
     left: _Image,
@@ -87,22 +152,40 @@ def match(
     rectify: Optional[_Path] = None,
     min_confidence: Optional[float] = None,
     min_disp: Optional[int] = None,
-) -> Tuple[_Map, _Map, dict[str, Any]]:
+) -> Tuple[_Map, _Map, MatchInfo]: ...
+@overload
+def match(
+    left: _Image,
+    right: _Image,
+    ndisp: Optional[int] = None,
+    config: _Config = None,
+    overrides: Optional[Mapping[str, Any]] = None,
+    threads: Optional[int] = None,
+    max_memory: Optional[int] = None,
+    confidence: bool = False,
+    return_info: bool = False,
+    calib_ndisp: Optional[int] = None,
+    rectify: Optional[_Path] = None,
+    min_confidence: Optional[float] = None,
+    min_disp: Optional[int] = None,
+) -> _MatchResult:
     """The left view's disparity map of a rectified pair: float32 H×W, ``inf`` where invalid, exactly the map
     ``jem LEFT RIGHT -o OUT.pfm`` writes for the same images and settings.
 
     ``left``, ``right``: H×W (grey), H×W×3 (RGB order; OpenCV loads BGR) or H×W×4 (RGBA, alpha dropped), uint8 or
-    uint16 (either byte order),
-    any strides; checked against ``max_memory`` from their shapes before they are copied.
-    ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair, as ``jem`` does without calib.txt.
-    ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one. ``config``: a TOML path or a mapping in
-    the TOML's shape. ``overrides``: ``{"section.key": value}`` as ``--set``. ``threads``: workers for this call
-    (at most 4 per core, at least 16). ``max_memory``: bytes; larger runs go in tiles. With ``confidence=True`` also the confidence map, with
-    ``return_info=True`` also a dict (ndisp, ndisp_measured, tiled, noise, timings, seconds, memory_planned,
-    peak_rss). ``rectify``: a stereo calibration (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt); the raw
-    views are rectified first, as ``jem match --rectify``, and the map is of the rectified left view.
-    ``min_confidence``: pixels whose confidence is below it are ``inf``. ``min_disp``: the smallest disparity
-    searched (SGBM's ``minDisparity``): min_disp..min_disp+ndisp-1, the first ``min_disp`` columns ``inf``. The GIL is released while matching; KeyboardInterrupt is honoured only when the call returns.
+    uint16 (either byte order), any strides; checked against ``max_memory`` from their shapes before they are
+    copied. ``ndisp``: the search range 0..ndisp-1; ``None`` measures it on the pair, as ``jem`` does without
+    calib.txt. ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one. ``config``: a preset's name
+    (``"fast"``; ``preset_names()``), a TOML path or a mapping in the TOML's shape. ``overrides``:
+    ``{"section.key": value}`` as ``--set``. ``threads``: workers for this call (at most 4 per core, at least 16).
+    ``max_memory``: bytes; larger runs go in tiles. With ``confidence=True`` also the confidence map, with
+    ``return_info=True`` also a dict (``MatchInfo``: ndisp, ndisp_measured, tiled, noise, timings, seconds,
+    memory_planned, peak_rss, frame, frames_averaged, shift, exposure, checks, warnings). ``rectify``: a stereo
+    calibration (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt); the raw views are rectified first, as
+    ``jem match --rectify``, and the map is of the rectified left view. ``min_confidence``: pixels whose confidence
+    is below it are ``inf``. ``min_disp``: the smallest disparity searched (SGBM's ``minDisparity``):
+    min_disp..min_disp+ndisp-1, the first ``min_disp`` columns ``inf``. The GIL is released while matching;
+    KeyboardInterrupt is honoured only when the call returns.
 
     Raises ValueError (shape, dtype, range, config, threads), MemoryError (fits neither whole nor in tiles, or
     cannot be allocated), OSError.
@@ -152,6 +235,7 @@ def read_image(path: _Path, max_memory: Optional[int] = None) -> _Image:
     The header is checked first: a decoding beyond ``max_memory`` (as ``depth``) raises MemoryError, a path that is
     not a regular file (a FIFO, ``/dev/zero``) ValueError, before anything is read."""
 
+@final
 class Matcher:
     """Matches pairs with one configuration; with ``temporal=True`` the pairs are the frames of one stereo
     sequence, in order, each matched with what the frames before it showed (a still camera's frames averaged and
@@ -159,8 +243,8 @@ class Matcher:
     Arguments as ``match``. OpenCV users: like ``cv2.StereoSGBM_create(...)`` then ``.compute(L, R)``. Calls on one
     matcher from several threads take turns (each waits, the GIL released, for the one in progress)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         ndisp: Optional[int] = None,
         config: _Config = None,
         overrides: Optional[Mapping[str, Any]] = None,
@@ -171,17 +255,55 @@ class Matcher:
         rectify: Optional[_Path] = None,
         min_confidence: Optional[float] = None,
         min_disp: Optional[int] = None,
-    ) -> None: ...
+    ) -> "Matcher": ...
+    @overload
     def match(
-        self, left: _Image, right: _Image, confidence: bool = False, return_info: bool = False
-    ) -> Union[_Map, Tuple[_Map, _Map], Tuple[_Map, dict[str, Any]], Tuple[_Map, _Map, dict[str, Any]]]:
+        self,
+        left: _Image,
+        right: _Image,
+        confidence: Literal[False] = False,
+        return_info: Literal[False] = False,
+    ) -> _Map: ...
+    @overload
+    def match(
+        self,
+        left: _Image,
+        right: _Image,
+        confidence: Literal[True],
+        return_info: Literal[False] = False,
+    ) -> Tuple[_Map, _Map]: ...
+    @overload
+    def match(
+        self,
+        left: _Image,
+        right: _Image,
+        *,
+        confidence: Literal[False] = False,
+        return_info: Literal[True],
+    ) -> Tuple[_Map, MatchInfo]: ...
+    @overload
+    def match(
+        self,
+        left: _Image,
+        right: _Image,
+        confidence: Literal[True],
+        return_info: Literal[True],
+    ) -> Tuple[_Map, _Map, MatchInfo]: ...
+    @overload
+    def match(
+        self,
+        left: _Image,
+        right: _Image,
+        confidence: bool = False,
+        return_info: bool = False,
+    ) -> _MatchResult:
         """As ``jem.match``; a temporal matcher remembers the pair as the next frame (the info dict's ``frame``:
         ``"first"``, ``"still"``, ``"moving"`` or ``"cut"``; ``frames_averaged``; ``shift``; ``exposure``: the
         (gain, offset) compensated in the frame, or None)."""
     def reset(self) -> None:
         """Forgets the frames matched so far: the next pair starts a new sequence."""
 
-def sequence_frames(dir: _Path) -> list[Tuple[str, str, str]]:
+def sequence_frames(dir: _Path) -> list[Tuple[str, Path, Path]]:
     """The frames of a sequence folder (``left/`` + ``right/`` paired by name, or a KITTI raw drive), in order:
     ``(stem, left_path, right_path)``."""
 
@@ -217,3 +339,7 @@ def config_record(
 ) -> str:
     """The configuration `jem batch` records beside each result (configNAME.toml): every parameter, as TOML that
     `jem --config` reads back, after comment lines naming jem's version and ``command``."""
+
+def preset_names() -> list[str]:
+    """The names ``config=`` takes as presets (``"fast"``, ``"balanced"``, ...): the shipped ``configs/*.toml`` built
+    in, each giving exactly what its file gives. A file of that name in the working directory is read instead."""

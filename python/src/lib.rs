@@ -43,19 +43,16 @@ fn to_py(err: &Error) -> PyErr {
     }
 }
 
-/// Runs `work` with a pool of `threads` workers (`None`: the global pool, one per core), catching a panic: a
-/// bug in jem becomes a `RuntimeError` instead of tearing down the interpreter's thread.
-fn guarded<T: Send>(threads: Option<usize>, work: impl FnOnce() -> jem::Result<T> + Send) -> PyResult<T> {
-    let pool = match threads {
-        None => None,
-        Some(n) => Some(
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
-                .map_err(|e| PyRuntimeError::new_err(format!("cannot start {n} threads: {e}")))?,
-        ),
-    };
-    let run = AssertUnwindSafe(|| match &pool {
+/// A pool of `n` worker threads.
+fn thread_pool(n: usize) -> PyResult<rayon::ThreadPool> {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build();
+    pool.map_err(|e| PyRuntimeError::new_err(format!("cannot start {n} threads: {e}")))
+}
+
+/// Runs `work` in `pool` (`None`: the global pool, one worker per core), catching a panic: a bug in jem becomes a
+/// `RuntimeError` instead of tearing down the interpreter's thread.
+fn guarded<T: Send>(pool: Option<&rayon::ThreadPool>, work: impl FnOnce() -> jem::Result<T> + Send) -> PyResult<T> {
+    let run = AssertUnwindSafe(|| match pool {
         Some(pool) => pool.install(work),
         None => work(),
     });
@@ -269,21 +266,25 @@ fn config_record(
     Ok(jem::batch::config_record(&load_params(config, overrides)?, command))
 }
 
-/// The parameters of a call: the defaults, then `config` (a TOML file, or a mapping applied key by key as `--set`
-/// items), then `overrides` (a mapping, as `--set`: a string value is taken as the command line would, `"fcm"` or
-/// `"3"`).
+/// The parameters of a call: the defaults, then `config` (a preset's name, a TOML file, or a mapping applied key by
+/// key as `--set` items), then `overrides` (a mapping, as `--set`: a string value is taken as the command line
+/// would, `"fcm"` or `"3"`).
 fn load_params(config: Option<&Bound<'_, PyAny>>, overrides: Option<&Bound<'_, PyAny>>) -> PyResult<Params> {
     let mut items = Vec::new();
-    let mut path = None;
+    let mut file = None;
+    let mut preset = None;
     match config {
         None => {}
         Some(c) => match c.cast::<PyMapping>() {
             Ok(mapping) => flatten(mapping, "", &mut items)?,
-            Err(_) => {
-                path = Some(c.extract::<PathBuf>().map_err(|_| {
-                    PyValueError::new_err(format!("config: expected a TOML file's path or a mapping, got {c}"))
-                })?);
-            }
+            Err(_) => match preset_name(c) {
+                Some(name) => preset = Some(name),
+                None => {
+                    file = Some(c.extract::<PathBuf>().map_err(|_| {
+                        PyValueError::new_err(format!("config: expected a TOML file's path or a mapping, got {c}"))
+                    })?);
+                }
+            },
         },
     }
     let overrides = match overrides {
@@ -309,7 +310,27 @@ fn load_params(config: Option<&Bound<'_, PyAny>>, overrides: Option<&Bound<'_, P
         };
         items.push(format!("{key}={value}"));
     }
-    Params::load(path.as_deref(), &items).map_err(|e| to_py(&e))
+    match preset {
+        Some(name) => Params::preset_with(&name, &items),
+        None => Params::load(file.as_deref(), &items),
+    }
+    .map_err(|e| to_py(&e))
+}
+
+/// The preset `config` names: a string that is a preset's name (``"fast"``) and names nothing on disk, so that a
+/// file of that name in the working directory is read as it always was.
+fn preset_name(config: &Bound<'_, PyAny>) -> Option<String> {
+    let name: String = config.cast::<PyString>().ok()?.extract().ok()?;
+    let known = Params::preset_names().contains(&name.as_str()) && !std::path::Path::new(&name).exists();
+    known.then_some(name)
+}
+
+/// The names ``config=`` takes as presets, the shipped configs built in (``"fast"``, ``"balanced"``, ...): each
+/// gives exactly what its TOML file in the checkout's ``configs/`` gives. A file of that name in the working
+/// directory is read instead.
+#[pyfunction]
+fn preset_names() -> Vec<&'static str> {
+    Params::preset_names()
 }
 
 /// A positive integer argument, or `ValueError` naming it.
@@ -338,12 +359,12 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
 /// to the width). ``calib_ndisp``: a range a calib.txt states, used as ``jem`` uses one
 /// (measured instead, up to it, when it is half the width or more); ``ndisp`` wins. ``min_disp``: the smallest
 /// disparity searched (OpenCV SGBM's ``minDisparity``; default 0): the range is min_disp..min_disp+ndisp-1, and the
-/// left view's first ``min_disp`` columns are ``inf``, as ``jem --min-disp``. ``config``: a TOML file's
-/// path, or a mapping in the TOML's shape (``{"meanfield": {"iterations": 5}}``; any ``Mapping``). ``overrides``:
-/// a mapping ``{"section.key": value}``, applied last, as ``--set``. ``threads``: worker threads for this call
-/// (default: one per core; at most 4 per core, at least 16, as ``--threads``); the result is the same for any
-/// count. ``max_memory``: bytes (default 80 % of RAM, and of the address space left under ``ulimit -v``); a pair
-/// too large for it runs in tiles, as ``--max-memory`` does.
+/// left view's first ``min_disp`` columns are ``inf``, as ``jem --min-disp``. ``config``: a preset's name
+/// (``"fast"``; ``preset_names()``), a TOML file's path, or a mapping in the TOML's shape (``{"meanfield":
+/// {"iterations": 5}}``; any ``Mapping``). ``overrides``: a mapping ``{"section.key": value}``, applied last, as
+/// ``--set``. ``threads``: worker threads for this call (default: one per core; at most 4 per core, at least 16,
+/// as ``--threads``); the result is the same for any count. ``max_memory``: bytes (default 80 % of RAM, and of the
+/// address space left under ``ulimit -v``); a pair too large for it runs in tiles, as ``--max-memory`` does.
 ///
 /// ``rectify``: a stereo calibration file (OpenCV FileStorage YAML/XML, KITTI calib_cam_to_cam.txt): the raw views
 /// are rectified first, as ``jem match --rectify`` does, and the map is of the rectified left view.
@@ -443,6 +464,7 @@ fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rectify::rectify, m)?)?;
     m.add_function(wrap_pyfunction!(matcher::sequence_frames, m)?)?;
     m.add_function(wrap_pyfunction!(config_record, m)?)?;
+    m.add_function(wrap_pyfunction!(preset_names, m)?)?;
     m.add_class::<PyMatcher>()?;
     // maturin's package __init__ re-exports `*` of the native module: `__all__` makes that include __version__.
     let all = [
@@ -459,6 +481,7 @@ fn jem_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
         "rectify_maps",
         "rectify",
         "config_record",
+        "preset_names",
     ];
     m.add("__all__", all)?;
     Ok(())

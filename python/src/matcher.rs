@@ -10,7 +10,7 @@ use jem::{Error, FrameKind, NdispSource, Output, PairCheck, Params};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::{ImageArray, check_memory, guarded, load_params, positive, to_numpy, to_py};
+use super::{ImageArray, check_memory, guarded, load_params, positive, thread_pool, to_numpy, to_py};
 
 /// Matches rectified pairs with one configuration; with ``temporal=True`` the pairs are the frames of one stereo
 /// sequence, in order, and each is matched with what the frames before it showed (a still camera's frames are
@@ -36,6 +36,9 @@ pub(crate) struct State {
     matcher: jem::Matcher,
     params: Params,
     threads: Option<usize>,
+    /// The pool of `threads` workers, built at the first call and kept for the next: starting the threads anew
+    /// for every pair would cost each call their start-up.
+    pool: Option<rayon::ThreadPool>,
     options: MatchOptions,
 }
 
@@ -122,7 +125,7 @@ impl PyMatcher {
         let matcher = jem::Matcher::new(params.clone()).map_err(|e| to_py(&e))?;
         let matcher = matcher.with_ndisp(source).with_max_memory(limit).with_temporal(options.temporal);
         let matcher = matcher.with_min_disp(options.min_disp);
-        Ok(PyMatcher { state: Mutex::new(State { matcher, params, threads, options }) })
+        Ok(PyMatcher { state: Mutex::new(State { matcher, params, threads, pool: None, options }) })
     }
 
     /// Matches one pair of arrays and builds what `match` returns, in its turn ([`PyMatcher::turn`]).
@@ -165,9 +168,12 @@ impl State {
             warn_all(py, &rect.warnings())?;
         }
         let (l, r) = (left.to_rgb()?, right.to_rgb()?);
-        let (matcher, threads) = (&mut self.matcher, self.threads);
+        if let (Some(n), None) = (self.threads, &self.pool) {
+            self.pool = Some(thread_pool(n)?);
+        }
+        let (matcher, pool) = (&mut self.matcher, self.pool.as_ref());
         let (out, check) = py.detach(|| {
-            guarded(threads, || {
+            guarded(pool, || {
                 let rectified = rectification.map(|rect| rect.rectify_pair(&l, &r)).transpose()?;
                 let (l, r) = rectified.as_ref().map_or((&l, &r), |(a, b)| (a, b));
                 let out = matcher.match_pair(l, r)?;

@@ -25,6 +25,7 @@ mod cost;
 mod explain;
 mod lrc;
 mod meanfield;
+mod preset;
 mod sps;
 mod subpixel;
 mod wmedian;
