@@ -190,7 +190,6 @@ impl PyMatcher {
     #[new]
     #[pyo3(signature = (ndisp=None, config=None, overrides=None, threads=None, max_memory=None, temporal=false,
                         calib_ndisp=None, rectify=None, min_confidence=None, min_disp=None))]
-    #[allow(clippy::too_many_arguments)] // the Python signature, as jem.match's
     fn new(
         ndisp: Option<i64>,
         config: Option<&Bound<'_, PyAny>>,
