@@ -57,7 +57,7 @@ use denoise::bilateral;
 pub(crate) use jpeg::{blockiness, jpeg_noise};
 pub(crate) use noise::channel_noise;
 use sharpness::matching_blur;
-pub(crate) use sharpness::sharpness;
+pub(crate) use sharpness::{MAX_MATCHING_BLUR, sharpness};
 
 /// What was measured on a pair, for diagnostics (`jem -v`) and the adaptive stages.
 #[derive(Clone, Copy, Debug, PartialEq)]
