@@ -127,7 +127,7 @@ impl AlgReport {
 /// # Errors
 /// [`Error::Io`] if `dir` cannot be read, [`Error::Input`] if it holds no such folder.
 pub fn find_gt_scenes(dir: &Path) -> Result<Vec<PathBuf>> {
-    let scenes = crate::dataset::walk::find_dirs_with(&[dir.to_path_buf()], &["disp0GT.pfm"])?;
+    let scenes = crate::dataset::walk::find_dirs_with(&[dir.to_path_buf()], &[crate::dataset::GT_FILE])?;
     if scenes.is_empty() {
         return Err(Error::Input(format!("no scene folder with a disp0GT.pfm under {}", dir.display())));
     }

@@ -169,7 +169,8 @@ impl Sequence {
                 right,
             })
             .collect();
-        let calib = Some(dir.join("calib.txt")).filter(|c| layout == SequenceLayout::Folders && c.is_file());
+        let calib =
+            Some(dir.join(crate::dataset::CALIB_FILE)).filter(|c| layout == SequenceLayout::Folders && c.is_file());
         Ok(Sequence { root: dir.to_path_buf(), layout, frames, calib })
     }
 
