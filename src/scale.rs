@@ -69,7 +69,9 @@ pub(crate) fn downsample_rgb(image: &RgbImage, factor: usize) -> RgbImage {
     out
 }
 
-/// Reduces a plane by `factor` × `factor` box averaging, as [`downsample_rgb`] each channel.
+/// Reduces a plane by `factor` × `factor` box averaging, as [`downsample_rgb`] each channel: the sum of each of a
+/// block's columns, then the sum of those (the temporal pyramids' [`crate::imgproc::filter::box_reduce`] sums rows
+/// first, and rounds differently; see `imgproc::filter`'s module doc).
 ///
 /// # Panics
 /// If `factor` is 0.
