@@ -20,7 +20,7 @@
 //! # The search range
 //! [`Sequence::ndisp_source`] is `jem match`'s rule applied to the sequence: `--ndisp`, else the `ndisp` of the
 //! root's `calib.txt` (a stated range, measured instead when it is no real bound), else none (measured).
-//! [`run`] applies it to every frame alone, which keeps each frame's map identical to `jem match` on that pair;
+//! [`run()`] applies it to every frame alone, which keeps each frame's map identical to `jem match` on that pair;
 //! [`RangeRule::FirstFrame`] instead measures once on the first frame and holds that range for the sequence (a
 //! model that carries state between frames needs one range throughout).
 //!
