@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# A MiddEval3 tree whose calib.txt files state ndisp = the image width, as ETH3D's do: the case of issue 16 where
-# the stated range is no real bound and jem measures the range on the pair instead (src/range.rs).
+# A MiddEval3 tree whose calib.txt files state ndisp = the image width, as ETH3D's do: the case where the stated
+# range is no real bound and jem measures the range on the pair instead (src/setup/range.rs).
 #
 # Usage: scripts/loose-range.sh SRC OUT
 #   SRC  a MiddEval3 split (e.g. $JEM_DATA/MiddEval3/trainingQ): scene folders with im0.png, im1.png, calib.txt

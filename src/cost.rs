@@ -39,40 +39,37 @@ use crate::imgproc::filter::{local_mean_abs, pad_replicate, sobel_x};
 use crate::imgproc::stats::{plane_mean, rank_value};
 use crate::params::CostParams;
 
-/// Census codes of a grey image: one bit per window neighbour, set when the neighbour is darker than the centre;
-/// the neighbours in row-major order (centre skipped) fill the bits from the highest used one down to bit 0 (of
-/// n = width·height − 1 bits, the k-th neighbour is bit n − 1 − k). Borders replicate the edge pixels.
+/// [`census_transform_banded`] without a dead band: the binary Census, for the tests.
+#[cfg(test)]
+pub(crate) fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<u64> {
+    census_transform_banded(grey, win_w, win_h, 0.0)
+}
+
+/// Census codes of a grey image with a dead band: one bit per window neighbour, set when the neighbour is darker
+/// than the centre by more than `band` grey levels; the neighbours in row-major order (centre skipped) fill the bits
+/// from the highest used one down to bit 0 (of n = width·height − 1 bits, the k-th neighbour is bit n − 1 − k).
+/// Borders replicate the edge pixels.
 ///
 /// The image is padded once with replicated borders, so the inner loop has no clamping and runs over a whole
 /// row per window offset (vectorised across x).
 ///
 /// # Panics
 /// If the window is even-sized or has more than 65 pixels (validated in [`crate::Params::validate`]).
-#[cfg(test)]
-pub(crate) fn census_transform(grey: &Plane<f32>, win_w: usize, win_h: usize) -> Plane<u64> {
-    census_transform_banded(grey, win_w, win_h, 0.0)
-}
-
-/// [`census_transform`] with a dead band: bit k is set when the neighbour is darker than the centre by more than
-/// `band` grey levels.
-///
-/// # Panics
-/// As [`census_transform`].
 pub(crate) fn census_transform_banded(grey: &Plane<f32>, win_w: usize, win_h: usize, band: f32) -> Plane<u64> {
     window_codes(grey, win_w, win_h, |n, c| n < c - band)
 }
 
-/// Census support masks, in the bit order of [`census_transform`]: bit k is set when neighbour k is within `tau`
+/// Census support masks, in the bit order of [`census_transform_banded`]: bit k is set when neighbour k is within `tau`
 /// grey levels of the centre. A neighbour across a strong edge (most often another surface) tells nothing about
 /// the centre's disparity and pulls the match towards its own: the foreground fattening of window costs.
 ///
 /// # Panics
-/// As [`census_transform`].
+/// As [`census_transform_banded`].
 pub(crate) fn support_mask(grey: &Plane<f32>, win_w: usize, win_h: usize, tau: f32) -> Plane<u64> {
     window_codes(grey, win_w, win_h, |n, c| (n - c).abs() <= tau)
 }
 
-/// One bit per window neighbour, `bit(neighbour, centre)`, in the order of [`census_transform`] (borders
+/// One bit per window neighbour, `bit(neighbour, centre)`, in the order of [`census_transform_banded`] (borders
 /// replicated; the image padded once, so the inner loop runs clamp-free over a whole row per window offset).
 fn window_codes(grey: &Plane<f32>, win_w: usize, win_h: usize, bit: impl Fn(f32, f32) -> bool + Sync) -> Plane<u64> {
     assert!(win_w % 2 == 1 && win_h % 2 == 1 && win_w * win_h <= 65, "invalid census window {win_w}x{win_h}");

@@ -31,6 +31,7 @@ use std::str::FromStr;
 
 use rayon::prelude::*;
 
+use crate::dataset::{CALIB_FILE, GT_FILE, LEFT_FILE, MASK_FILE, RIGHT_FILE};
 use crate::error::{Error, Result};
 use crate::image::RgbImage;
 use crate::imgproc::filter::gaussian_blur;
@@ -363,7 +364,7 @@ impl Gaussian {
 }
 
 /// Files copied unchanged into each degraded scene, when the source scene has them.
-pub const COPIED_FILES: [&str; 5] = ["calib.txt", "disp0GT.pfm", "mask0nocc.png", "disp1GT.pfm", "mask1nocc.png"];
+pub const COPIED_FILES: [&str; 5] = [CALIB_FILE, GT_FILE, MASK_FILE, "disp1GT.pfm", "mask1nocc.png"];
 
 /// Makes a degraded copy of every scene under `src` in the new folder `out` (same relative paths; a `src` that
 /// is itself a scene becomes `out/NAME`), and writes `out/degrade.txt` with the recipe, seed and jem version.
@@ -484,7 +485,7 @@ fn degrade_scene(scene: &Path, dest: &Path, rel: &Path, recipe: &Recipe, seed: u
     std::fs::create_dir_all(dest).map_err(|e| Error::io(dest, e))?;
     // FNV-1a of the relative path: a per-scene stream that does not depend on where the tree lives.
     let key = crate::rng::fnv1a(crate::rng::FNV_OFFSET, rel.to_string_lossy().as_bytes());
-    for (name, view) in [("im0.png", View::Left), ("im1.png", View::Right)] {
+    for (name, view) in [(LEFT_FILE, View::Left), (RIGHT_FILE, View::Right)] {
         let image = crate::io::png::load_rgb(&scene.join(name))?;
         let out = degrade(&image, recipe, view, seed ^ key)?;
         let mut rgb = Vec::with_capacity(out.len() * 3);

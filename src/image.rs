@@ -231,7 +231,8 @@ impl RgbImage {
     /// Luma (ITU-R BT.601 weights), 0..=255.
     pub fn to_grey(&self) -> Plane<f32> {
         let [r, g, b] = &self.channels;
-        let data = r.iter().zip(g).zip(b).map(|((&r, &g), &b)| 0.299 * r + 0.587 * g + 0.114 * b).collect();
+        let [wr, wg, wb] = crate::imgproc::noise::GREY_WEIGHTS;
+        let data = r.iter().zip(g).zip(b).map(|((&r, &g), &b)| wr * r + wg * g + wb * b).collect();
         Plane::from_parts(self.width, self.height, data)
     }
 

@@ -1,9 +1,9 @@
 //! Running the pipeline at reduced resolution (the `downscale` key, `--downscale N`).
 //!
-//! With a factor N > 1, [`crate::run`] reduces both images by N×N box averaging ([`downsample_rgb`]), searches
-//! `ceil(ndisp / N)` labels, runs the normal pipeline on the small pair, and brings the disparity map back to the
-//! input size ([`upsample_disparity`]: bilinear, then × N). Memory and time of inference scale with pixels ×
-//! labels, so a factor of 2 needs about 1/8 of the memory and time.
+//! With a factor N > 1, [`crate::pipeline::run`] reduces both images by N×N box averaging ([`downsample_rgb`]),
+//! searches `ceil(ndisp / N)` labels, runs the normal pipeline on the small pair, and brings the disparity map back
+//! to the input size ([`upsample_disparity_guided`]: bilinear, then × N). Memory and time of inference scale with
+//! pixels × labels, so a factor of 2 needs about 1/8 of the memory and time.
 //!
 //! - **Downsampling**: output pixel (i, j) is the mean of input block `[i·N, (i+1)·N) × [j·N, (j+1)·N)` clipped
 //!   to the image, so a partial block at the right or bottom border is the mean of the pixels it has. The
@@ -69,7 +69,9 @@ pub(crate) fn downsample_rgb(image: &RgbImage, factor: usize) -> RgbImage {
     out
 }
 
-/// Reduces a plane by `factor` × `factor` box averaging, as [`downsample_rgb`] each channel.
+/// Reduces a plane by `factor` × `factor` box averaging, as [`downsample_rgb`] each channel: the sum of each of a
+/// block's columns, then the sum of those (the temporal pyramids' [`crate::imgproc::filter::box_reduce`] sums rows
+/// first, and rounds differently; see `imgproc::filter`'s module doc).
 ///
 /// # Panics
 /// If `factor` is 0.
@@ -187,14 +189,15 @@ pub(crate) fn upsample_mask(low: &Plane<bool>, factor: usize, width: usize, heig
     Plane::from_parts(width, height, data)
 }
 
-/// [`upsample_disparity`], edge-aware (see the module doc): where the (up to) four disparities a pixel interpolates
-/// span more than `edge_px` full-resolution pixels, it takes the one of them that maximises
+/// Brings a low-resolution disparity map back to `guide`'s size as [`upsample_plane`] and multiplies it by `factor`
+/// (disparities in full-resolution pixels), edge-aware (see the module doc): where the (up to) four disparities a
+/// pixel interpolates span more than `edge_px` full-resolution pixels, it takes the one of them that maximises
 /// −|I − Ī_k|² / 2σ² + ln(w_k + 0.05), with I its colour in `guide`, Ī_k the reduced pixel's colour in
 /// `low_guide` (the reduced guide), σ = `sigma_rgb` and w_k the bilinear weight (floored, so that a far corner of the
-/// right colour still wins). `edge_px` = 0 is plain [`upsample_disparity`] everywhere.
+/// right colour still wins). `edge_px` = 0 is the plain bilinear upsampling everywhere.
 ///
 /// # Panics
-/// If `low` and `low_guide` differ in size, or as [`upsample_disparity`] for `guide`'s size.
+/// If `low` and `low_guide` differ in size, or as [`upsample_plane`] for `guide`'s size.
 pub(crate) fn upsample_disparity_guided(
     low: &DisparityMap,
     low_guide: &RgbImage,

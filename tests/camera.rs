@@ -274,7 +274,7 @@ fn the_answer_checks_pass_every_trainingq_pair_and_catch_a_turned_right_view() {
 }
 
 /// `jem sequence --rectify CALIB` rectifies every frame as `jem match --rectify` rectifies a pair: frame by frame
-/// the same bytes (issue 51, item 1).
+/// the same bytes (a sequence must not rectify differently from the pair it is made of).
 #[test]
 fn sequence_with_rectify_is_jem_match_with_rectify_frame_by_frame() {
     let dir = tempfile::tempdir().unwrap();

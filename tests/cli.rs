@@ -113,7 +113,7 @@ fn ndisp_comes_from_calib_or_flag() {
     assert_clean_failure(dir.path(), &["im0.png", "im1.png", "-o", "e.pfm"], &["calib.txt", "ndisp"]);
 }
 
-/// Issue 50 (the README's own-camera steps): the calib.txt `jem rectify` writes states the geometry and no range,
+/// The README's own-camera steps: the calib.txt `jem rectify` writes states the geometry and no range,
 /// and `jem` on the rectified pair measures the range instead of refusing the file.
 #[test]
 fn a_rectified_pair_matches_with_the_calib_txt_rectify_wrote() {
@@ -255,7 +255,7 @@ fn memory_guard_fails_fast_with_the_estimate() {
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
-/// Issue 16: a pair too large for the memory limit, but whose coarse level and smallest tile fit, runs in tiles
+/// A pair too large for the memory limit, but whose coarse level and smallest tile fit, runs in tiles
 /// (jem::tile) instead of being refused, and is still matched.
 #[test]
 fn memory_limit_runs_in_tiles() {
@@ -302,7 +302,7 @@ fn verbose_prints_what_was_measured() {
     assert!(stdout.lines().any(|l| l == format!("Synth: {line}")), "no line 'Synth: {line}' in:\n{stdout}");
 }
 
-/// Issue 16: the memory a run plans for (the estimate in one piece; the budget when tiled) bounds its measured
+/// The memory a run plans for (the estimate in one piece; the budget when tiled) bounds its measured
 /// peak (`-v` prints both; Linux's VmHWM).
 #[test]
 fn memory_plan_bounds_the_measured_peak() {
@@ -368,7 +368,7 @@ fn memory_line(stderr: &str) -> Option<(f64, f64)> {
     Some((mib("peak "), mib("planned ")))
 }
 
-/// Issue 16: a large synthetic scene (1280×960, 160 labels: 3.3 GiB in one piece) under a 300 MB limit runs in
+/// A large synthetic scene (1280×960, 160 labels: 3.3 GiB in one piece) under a 300 MB limit runs in
 /// tiles, stays within the limit, and recovers its disparity: measured mean error 0.49 px, 0.65 % of the visible
 /// pixels over 1 px (the same as in one piece). The bounds leave room for tuning and fail on a misplaced tile or
 /// label window (errors of several px over whole tiles).
@@ -436,7 +436,7 @@ fn nan_and_inf_never_reach_the_output() {
     assert!(d.data().iter().all(|v| !v.is_nan()), "NaN in the output");
 }
 
-/// Issue 7: `--downscale N` runs at 1/N resolution and writes a full-size map; the same bytes whatever the thread
+/// `--downscale N` runs at 1/N resolution and writes a full-size map; the same bytes whatever the thread
 /// count; the flag wins over --config and --set; `jem batch` takes it too.
 #[test]
 fn downscale_flag_writes_a_full_size_map() {
@@ -477,7 +477,7 @@ fn downscale_flag_writes_a_full_size_map() {
     assert!(std::fs::read(scene.join("disp0DS2.pfm")).unwrap() == first, "batch and match agree");
 }
 
-/// Issue 7: a bad `--downscale` (0, negative, not an integer), a bad `downscale` key, or a factor too large for
+/// A bad `--downscale` (0, negative, not an integer), a bad `downscale` key, or a factor too large for
 /// the pair is one error line, exit code 2, and no output file.
 #[test]
 fn bad_downscale_fails_cleanly() {
@@ -503,7 +503,7 @@ fn bad_downscale_fails_cleanly() {
     );
 }
 
-/// Issue 7: the memory guard names the smallest `--downscale` that fits, and that factor then runs.
+/// The memory guard names the smallest `--downscale` that fits, and that factor then runs.
 #[test]
 fn memory_guard_suggests_a_downscale() {
     let dir = tempfile::tempdir().unwrap();
@@ -575,7 +575,7 @@ fn degrade_copies_a_tree_and_never_writes_into_its_input() {
     assert!(!dir.path().join("deg/c").exists());
 }
 
-/// Issue 19, item 3: a disparity a 16-bit PNG cannot hold is an error that names a format that can, and nothing
+/// A disparity a 16-bit PNG cannot hold is an error that names a format that can, and nothing
 /// is written (before: clipped at 255.996 without a word).
 #[test]
 fn png_output_refuses_disparities_it_cannot_hold() {
@@ -594,7 +594,7 @@ fn png_output_refuses_disparities_it_cannot_hold() {
     assert!(ok.status.success(), "{}", stderr(&ok));
 }
 
-/// Issue 19, item 5: `--threads` beyond what can help is refused at once, with the range.
+/// `--threads` beyond what can help is refused at once, with the range.
 #[test]
 fn threads_are_capped() {
     let dir = tempfile::tempdir().unwrap();
@@ -604,7 +604,7 @@ fn threads_are_capped() {
     }
 }
 
-/// Issue 19, item 1: `--alg GT` (any case) would write `disp0GT.pfm` over the ground truth: refused by batch, and
+/// `--alg GT` (any case) would write `disp0GT.pfm` over the ground truth: refused by batch, and
 /// the scene's files are untouched.
 #[test]
 fn alg_gt_is_refused() {
@@ -623,7 +623,7 @@ fn alg_gt_is_refused() {
     assert_eq!(std::fs::read(scene.join("disp0GT.pfm")).unwrap(), gt);
 }
 
-/// Issue 19, item 4: a PFM whose header has CRLF line ends is read correctly (it was scored as garbage), and one
+/// A PFM whose header has CRLF line ends is read correctly (it was scored as garbage), and one
 /// with bytes after the data is refused by eval, naming the file.
 #[test]
 fn pfm_headers_are_parsed_exactly() {
@@ -650,7 +650,7 @@ fn pfm_headers_are_parsed_exactly() {
     assert!(text.contains("disp0LONG.pfm") && text.contains("data bytes"), "{text}");
 }
 
-/// Issue 19, item 10: `jem viz` refuses an empty or non-finite colour range and an 8-bit photo given as a
+/// `jem viz` refuses an empty or non-finite colour range and an 8-bit photo given as a
 /// disparity map or as --gt (each gave a plausible picture and exit 0); nothing is written.
 #[test]
 fn viz_refuses_bad_ranges_and_photos() {
@@ -674,7 +674,7 @@ fn viz_refuses_bad_ranges_and_photos() {
     assert!(ok.status.success(), "{}", stderr(&ok));
 }
 
-/// Issue 19, item 2: an output that is (or links to) an input of the same command, or another of its outputs,
+/// An output that is (or links to) an input of the same command, or another of its outputs,
 /// is refused before any work; every file is left as it was.
 #[test]
 fn outputs_never_overwrite_inputs() {
@@ -721,7 +721,7 @@ fn ok_png16(dir: &Path, src: &str, dst: &str) {
     jem::io::write_disparity(&dir.join(dst), &map).unwrap();
 }
 
-/// Issue 19, item 8: when the confidence cannot be written, the disparity map is not written either.
+/// When the confidence cannot be written, the disparity map is not written either.
 #[test]
 fn all_outputs_or_none() {
     let dir = tempfile::tempdir().unwrap();
@@ -751,7 +751,7 @@ fn capped_reads_bom_and_one_line_overrides() {
     assert_clean_failure(dir.path(), &["viz", "zero.pfm", "-o", "v.png"], &["zero.pfm"]);
 }
 
-/// Issue 19, item 11: slanted-plane smoothing extrapolates planes to segment corners; the output stays inside
+/// Slanted-plane smoothing extrapolates planes to segment corners; the output stays inside
 /// the searched range 0..ndisp−1 (with a range too short for the shipped example, 16 or 24 labels, the map
 /// reached 18.0 and 26.0).
 #[test]
@@ -799,7 +799,7 @@ fn png_header_only(w: u32, h: u32) -> Vec<u8> {
     png
 }
 
-/// Issue 19, item 7: an image too large for the memory limit is refused from its header, before it is decoded
+/// An image too large for the memory limit is refused from its header, before it is decoded
 /// (the refusal gives the estimate, not a decoding error).
 #[test]
 fn memory_guard_before_decoding() {
@@ -820,7 +820,7 @@ fn memory_guard_before_decoding() {
     assert!(text.contains("needs about"), "{text}");
 }
 
-/// Issue 19, item 12: under a file-size limit (`ulimit -f`) too small for the output, the run fails with a
+/// Under a file-size limit (`ulimit -f`) too small for the output, the run fails with a
 /// clear error before writing; it was killed by SIGXFSZ and left its hidden temporary file.
 #[test]
 fn file_size_limit_is_an_error_not_a_leftover() {
@@ -838,7 +838,7 @@ fn file_size_limit_is_an_error_not_a_leftover() {
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "nothing left behind");
 }
 
-/// Issue 18, item 3: `--depth` and `--cloud` on a synthetic scene whose calib.txt gives f = width, B = 100,
+/// `--depth` and `--cloud` on a synthetic scene whose calib.txt gives f = width, B = 100,
 /// doffs = 0: the depth map is f·B/d of the written disparity map (where d ≥ 1 px, the default range), the PLY holds one point per valid pixel at
 /// (x − cx)·Z/f, (y − cy)·Z/f, Z with the left image's colour; a missing baseline is an error naming --baseline.
 #[test]
@@ -884,7 +884,7 @@ fn depth_and_point_cloud() {
     assert!(ok.status.success(), "{}", stderr(&ok));
 }
 
-/// Issue 18, item 4: JPEG input (8-bit, the image crate's decoder), also a grey JPEG beside a colour PNG.
+/// JPEG input (8-bit, the image crate's decoder), also a grey JPEG beside a colour PNG.
 #[test]
 fn jpeg_input() {
     let dir = tempfile::tempdir().unwrap();
@@ -938,7 +938,7 @@ fn bmp_tiff_and_webp_inputs_match_png_and_other_formats_are_listed() {
     );
 }
 
-/// Issue 16: a calib.txt whose ndisp is the image width (ETH3D style) is not trusted: the range is measured on
+/// A calib.txt whose ndisp is the image width (ETH3D style) is not trusted: the range is measured on
 /// the pair, the run is as accurate as with the true range, and far fewer labels are searched.
 #[test]
 fn ndisp_equal_to_width_is_measured() {
@@ -973,7 +973,7 @@ fn ndisp_near_the_width_runs_with_the_defaults() {
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
-/// Issue 38: `jem` with no range and `jem batch` with one that is no bound (a calib.txt with ndisp = the width,
+/// `jem` with no range and `jem batch` with one that is no bound (a calib.txt with ndisp = the width,
 /// as ETH3D writes) measure the range up to the same limit, [`jem::range::search_limit`] (before, `jem` stopped at
 /// half the width). A random texture seen with a disparity of 60 px in a 96 px wide pair: both paths find a range
 /// past half the width, agree on it, and write the same map.
@@ -1004,7 +1004,7 @@ fn jem_and_batch_search_up_to_the_same_limit() {
     assert!(jem == std::fs::read(scene.join("disp0T.pfm")).unwrap(), "jem and jem batch wrote different maps");
 }
 
-/// Issue 41, item 1: when the range is measured (no calib.txt, no `--ndisp`), the memory limit is checked from
+/// When the range is measured (no calib.txt, no `--ndisp`), the memory limit is checked from
 /// both headers before either image is decoded, in `jem` and `jem batch`: the loading, the range measurement
 /// (which then runs within the limit) and the run. 1ea02dd decoded first (here: a decoding error, as the files
 /// are headers only; on real images, a 2872 × 1984 pair peaked at 1.17 GB under `--max-memory 20M`).
@@ -1027,7 +1027,7 @@ fn memory_checked_before_decoding_when_the_range_is_measured() {
     assert!(text.contains("needs about"), "{text}");
 }
 
-/// Issue 41, item 2: both headers are read before either image is decoded, so a right image of another size is
+/// Both headers are read before either image is decoded, so a right image of another size is
 /// refused from its header (1ea02dd decoded it first: here a decoding error, as it is a header only); and with
 /// no range (no calib.txt, no `--ndisp`), views of different sizes are the same one-line error (1ea02dd: a panic
 /// in the cost volume, exit 101).
@@ -1044,7 +1044,7 @@ fn right_header_read_before_decoding() {
     assert_clean_failure(dir.path(), &["l.png", "small.png", "-o", "d.pfm"], &["320x240", "64x48"]);
 }
 
-/// Issue 41, item 3: an output path that is an existing folder (`-o`, `--confidence`, `--depth`, `--cloud`) is
+/// An output path that is an existing folder (`-o`, `--confidence`, `--depth`, `--cloud`) is
 /// refused before any work, and nothing is written (1ea02dd ran the pair, renamed `d.pfm` into place, then failed
 /// on the folder: exit 2 with `d.pfm` left). In batch, a time file that cannot be written (a folder in its
 /// place) leaves no disparity map that a later `--skip-existing` would trust.
@@ -1065,7 +1065,7 @@ fn an_output_that_is_a_folder_is_refused_before_any_work() {
     assert!(!dir.path().join("S/disp0A.pfm").exists(), "a disparity map without its time file");
 }
 
-/// Issue 41, item 9: a closed stdout and stderr (`jem batch … 2>&1 | head -1`) do not stop the work: every scene
+/// A closed stdout and stderr (`jem batch … 2>&1 | head -1`) do not stop the work: every scene
 /// is written and the exit code is 0 (1ea02dd panicked on its second progress line, exit 101, after one scene).
 #[test]
 fn a_closed_pipe_does_not_stop_the_batch() {
@@ -1090,7 +1090,7 @@ fn a_closed_pipe_does_not_stop_the_batch() {
     }
 }
 
-/// Issue 41, item 10: global flags before every subcommand, `degrade` included (1ea02dd: "the subcommand 'OUT'
+/// Global flags before every subcommand, `degrade` included (1ea02dd: "the subcommand 'OUT'
 /// cannot be used with --threads"): a degrade run, and each subcommand's help.
 #[test]
 fn global_flags_before_every_subcommand() {
@@ -1115,7 +1115,7 @@ fn global_flags_before_every_subcommand() {
     }
 }
 
-/// Issue 42, item 6: `--threads` and `--max-memory` are offered only where they mean something: `--threads` on the
+/// `--threads` and `--max-memory` are offered only where they mean something: `--threads` on the
 /// commands that share work out (match, batch, sequence, synth, degrade, eval), `--max-memory` on those that run the
 /// pipeline (match, batch, sequence); `config` and `viz` refuse both, before or after the subcommand, naming the flag. And `degrade
 /// --recipe`'s short help lists every recipe.
@@ -1151,7 +1151,7 @@ fn resource_flags_only_where_they_mean_something() {
     }
 }
 
-/// Issue 41, item 11: with no range given, a 1-pixel-wide pair is refused for its width, not with "invalid
+/// With no range given, a 1-pixel-wide pair is refused for its width, not with "invalid
 /// ndisp = 2" (1ea02dd) for a range nobody gave; pairs 2 pixels wide and more run, their range measured.
 #[test]
 fn a_one_pixel_wide_pair_is_refused_for_its_width() {
@@ -1178,7 +1178,7 @@ fn a_one_pixel_wide_pair_is_refused_for_its_width() {
     }
 }
 
-/// Issue 41, item 11: `--max-memory 0.5` (half a byte) is refused with a clear error; 1ea02dd read it as a limit of
+/// `--max-memory 0.5` (half a byte) is refused with a clear error; 1ea02dd read it as a limit of
 /// 0 bytes ("the memory limit is 0 B").
 #[test]
 fn a_max_memory_below_one_byte_is_refused() {
@@ -1223,7 +1223,7 @@ fn overflowing_geometry_writes_no_infinite_point() {
     assert!(!points.is_empty() && points.len() < 64 * 48, "{} points", points.len());
 }
 
-/// Issue 41, item 11: the image decoder's own allocation limit is `--max-memory` (checked from the headers
+/// The image decoder's own allocation limit is `--max-memory` (checked from the headers
 /// first), not its default of 512 MiB: a 20000 × 20000 header under `--max-memory 1T` reaches the decoder's
 /// real complaint (the data is missing) instead of 1ea02dd's "Memory limit exceeded".
 #[test]
@@ -1235,7 +1235,7 @@ fn the_decoder_limit_is_the_memory_limit() {
     assert!(!stderr(&run_in(dir.path(), &args)).contains("Memory limit exceeded"));
 }
 
-/// Issue 41, item 11: a newline in a scene's folder name is shown escaped (`a\nb`), so it cannot break the batch
+/// A newline in a scene's folder name is shown escaped (`a\nb`), so it cannot break the batch
 /// table or the progress lines (1ea02dd printed the name as it is: the row split over two lines).
 #[test]
 fn a_newline_in_a_scene_name_keeps_the_batch_table_whole() {
@@ -1252,7 +1252,7 @@ fn a_newline_in_a_scene_name_keeps_the_batch_table_whole() {
     assert!(progress.lines().all(|l| l.starts_with('[') || l.contains("pair(s)")), "{progress}");
 }
 
-/// Issue 41, item 11: the hidden temporary tree of a killed `jem degrade` (SIGTERM, SIGKILL) is removed by the next
+/// The hidden temporary tree of a killed `jem degrade` (SIGTERM, SIGKILL) is removed by the next
 /// run into the same folder when its process is gone; one whose process is alive is left alone (1ea02dd swept
 /// nothing: the leftover stayed for good).
 #[test]

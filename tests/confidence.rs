@@ -1,4 +1,4 @@
-//! Issue 51, item 3: a confidence that ranks errors. The map is the same whatever the thread count, puts a region
+//! A confidence that ranks errors. The map is the same whatever the thread count, puts a region
 //! that cannot be matched below the rest, and `jem eval` scores it (the sparsification AUC) when it is beside the
 //! result, and only then.
 

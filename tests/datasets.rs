@@ -283,7 +283,7 @@ fn slurm_array_tasks_cover_the_data_set() {
     assert!(String::from_utf8(out.stdout).unwrap().contains("3 of 3 scenes evaluated"));
 }
 
-/// Issue 41, item 8: a KITTI tree with only `disp_occ_0/` (as many published samples ship) is scored with
+/// A KITTI tree with only `disp_occ_0/` (as many published samples ship) is scored with
 /// `--mask all`, which needs only that folder (1ea02dd: "no scene with ground truth"); the default mask lists the
 /// frame as missing its `disp_noc_0/` truth.
 #[test]
@@ -314,7 +314,7 @@ fn kitti_with_only_disp_occ_is_scored_with_mask_all() {
     assert!(text.contains("0 of 1 scenes evaluated") && text.contains("disp_noc_0"), "{text}");
 }
 
-/// Issue 41, item 4: a KITTI frame with a left image and ground truth but no right image is a failed scene in
+/// A KITTI frame with a left image and ground truth but no right image is a failed scene in
 /// batch (exit 2, named; the other frames still run) and missing in eval (1ea02dd: batch exited 0 without listing
 /// it, and eval reported "1 of 1 evaluated" over the frames it kept).
 #[test]
@@ -344,7 +344,7 @@ fn a_kitti_frame_without_its_right_image_is_reported() {
     assert!(text.contains("1 of 2 scenes evaluated") && text.contains("000001_10"), "{text}");
 }
 
-/// Issue 41, item 4 (ETH3D): a scene of an ETH3D tree with its left image, calib.txt and ground truth but no right
+/// ETH3D: a scene of an ETH3D tree with its left image, calib.txt and ground truth but no right
 /// image is a failed scene in batch (exit 2, named; the other scene still runs) and missing in eval (1ea02dd: the
 /// folder was not taken for a scene at all, so batch exited 0 without listing it and eval reported "1 of 1").
 #[test]
@@ -406,7 +406,7 @@ fn pidns() -> String {
     format!("pidns {}\n", std::fs::read_link("/proc/self/ns/pid").unwrap().display())
 }
 
-/// Issue 41, item 5: KITTI's training and testing splits share frame names; two batches started together, one per
+/// KITTI's training and testing splits share frame names; two batches started together, one per
 /// split, each write their own results folder (`results/A/training/`, `results/A/testing/`, each with its
 /// `source.txt`) and both succeed (1ea02dd: one `results/A/` for both; in 3 of 5 tries both exited 0 and one run's
 /// results were lost). A results folder is locked while a batch writes it: a second live writer is refused with the
@@ -488,7 +488,7 @@ fn each_split_its_own_results_folder_and_a_lock() {
     assert!(out.status.success(), "another algorithm's results are another lock: {}", stderr(&out));
 }
 
-/// Issue 42, item 5: `source.txt` records the data set relative to the results folder and by a fingerprint (pair
+/// `source.txt` records the data set relative to the results folder and by a fingerprint (pair
 /// names and image sizes), so results still evaluate after the tree is moved (`mv`) or copied (`cp -r`), or the
 /// data set moved away from a `--results` folder; another data set's results are still refused (1ea02dd: an
 /// absolute path, so after `mv` eval refused "holds the results of …/k/training, not of …").

@@ -1,4 +1,4 @@
-//! Issue 42, "the first hour": what a newcomer sees. Every command ends with one line on stderr saying what it did
+//! The first hour: what a newcomer sees. Every command ends with one line on stderr saying what it did
 //! and where (`-q` silences it); `jem viz` draws KITTI and ETH3D trees with each benchmark's own error rule.
 
 mod common;
@@ -14,7 +14,7 @@ fn last_line(dir: &Path, args: &[&str]) -> String {
     stderr(&out).lines().last().unwrap_or_default().to_string()
 }
 
-/// Issue 42, item 3: each command's last line says what it did and where; with `-q` there is nothing on stderr
+/// Each command's last line says what it did and where; with `-q` there is nothing on stderr
 /// (and the files are written all the same).
 #[test]
 fn every_command_ends_with_what_it_did() {
@@ -114,7 +114,7 @@ fn occluded_exact() -> [u8; 3] {
     [0.5f32 * 255.0, 0.55 * 255.0, 0.7 * 255.0].map(|v| v.round() as u8)
 }
 
-/// Issue 42, item 4: a KITTI tree's contact sheet and a single KITTI map's error map use D1 (error > 3 px and > 5 %
+/// A KITTI tree's contact sheet and a single KITTI map's error map use D1 (error > 3 px and > 5 %
 /// of the true disparity), not MiddEval3's 2 px: 4 px off a true 100 is fine, 4 px off a true 20 is bad. Pixels in
 /// disp_occ_0 but not in disp_noc_0 are shaded as occluded. (Before: "no scene folder with im0.png and
 /// disp0T.pfm", and a single map's error map used the 2 px rule.)
@@ -165,7 +165,7 @@ fn viz_kitti_tree_with_d1() {
     );
 }
 
-/// Issue 42, item 4: an ETH3D tree's contact sheet uses bad-1 (error > 1 px, native pixels; MiddEval3's rule would
+/// An ETH3D tree's contact sheet uses bad-1 (error > 1 px, native pixels; MiddEval3's rule would
 /// let 1.5 px pass) with the ground truth of the `_gt` tree, and ETH3D's mask: anything but 255 is occluded.
 #[test]
 fn viz_eth3d_tree_with_bad1() {
@@ -202,7 +202,7 @@ fn viz_eth3d_tree_with_bad1() {
     assert_eq!(pixel(&d.join("o.png"), 8, 0).1, [230, 30, 30]);
 }
 
-/// Issue 42, item 6 (`viz --scale`): a MiddEval3 error map outside a trainingQ/H/F folder no longer takes 1
+/// `viz --scale`: a MiddEval3 error map outside a trainingQ/H/F folder no longer takes 1
 /// silently: the error asks for --scale, and --scale 4 makes 0.75 px (3 full-resolution px) bad.
 #[test]
 fn viz_scale_is_asked_for_when_the_path_does_not_tell() {

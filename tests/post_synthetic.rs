@@ -442,7 +442,7 @@ fn motorcycle_timings() {
     assert!(planes.data().iter().all(|d| d.is_finite()), "the planes leave no hole");
 }
 
-/// Issue 41, item 6: more segments than the image can hold (`SpsParams::max_segments`: pixels / min_support) are
+/// More segments than the image can hold (`SpsParams::max_segments`: pixels / min_support) are
 /// held to that bound, so 2^24 segments give exactly the map of the bound and still recover the planes (1a367fa:
 /// 2^24 segments on this 200 × 150 scene gave 1-px cells, none able to fit a plane alone; the map was wrecked).
 #[test]

@@ -1,4 +1,4 @@
-//! Issue 52, item 1: the left-right mask (`jem match --lr-mask`, `jem batch --lr-mask`) and `jem eval --regions`.
+//! The left-right mask (`jem match --lr-mask`, `jem batch --lr-mask`) and `jem eval --regions`.
 
 mod common;
 

@@ -1,4 +1,4 @@
-//! Issue 6: the research workflow — `jem batch`, `jem eval`, `jem viz` — run as a user would, on tiny scenes
+//! The research workflow — `jem batch`, `jem eval`, `jem viz` — run as a user would, on tiny scenes
 //! built in temporary folders (plus the real MiddEval3 trainingQ scenes when they are present).
 
 use std::path::{Path, PathBuf};
@@ -466,7 +466,7 @@ fn batch_skip_existing_leaves_finished_scenes_alone() {
     assert_ne!(std::fs::read(root.join("A/disp0K.pfm")).unwrap(), finished);
 }
 
-/// Issue 19, item 9: only a result that parses and has the scene's size counts as done; an empty, truncated,
+/// Only a result that parses and has the scene's size counts as done; an empty, truncated,
 /// foreign or wrongly sized file is redone (it was skipped before).
 #[test]
 fn skip_existing_needs_a_complete_result() {
@@ -561,7 +561,7 @@ fn viz_single_map_error_map_and_contact_sheet() {
     assert_eq!(o.status.code(), Some(2));
 }
 
-/// Issue 41, item 6: `post.sps.segments` above what the image holds (pixels / `post.sps.min_support`: 307 on a
+/// `post.sps.segments` above what the image holds (pixels / `post.sps.min_support`: 307 on a
 /// 64 × 48 scene) gives one warning naming the key and the bound, in `jem` and in `jem batch`, and the map of the
 /// bound (1a367fa: accepted silently up to 2^24; 50000 wrecked Teddy, avgErr 1.79 → 30.4). Under the bound
 /// nothing is said and nothing changes.

@@ -393,7 +393,6 @@ fn to_numpy<'py>(py: Python<'py>, plane: Plane<f32>) -> Bound<'py, PyArray2<f32>
                  confidence=false, return_info=false, calib_ndisp=None, rectify=None, min_confidence=None,
                  min_disp=None)
 )]
-#[allow(clippy::too_many_arguments)] // the Python signature the issue asks for
 fn match_pair<'py>(
     py: Python<'py>,
     left: &Bound<'py, PyAny>,

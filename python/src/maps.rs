@@ -29,7 +29,6 @@ const PFM_BYTES_PER_PX: u64 = 8;
 /// ``max_memory``: bytes the call may hold (default: as ``match``); a map too large for it raises MemoryError.
 #[pyfunction]
 #[pyo3(signature = (disp, f, baseline, doffs=0.0, max_depth=None, max_memory=None))]
-#[allow(clippy::too_many_arguments)] // the camera's numbers and the memory limit
 pub(crate) fn depth<'py>(
     py: Python<'py>,
     disp: &Bound<'py, PyAny>,
@@ -53,7 +52,6 @@ pub(crate) fn depth<'py>(
 /// point beyond it (default f·baseline, as ``--cloud``; ``float("inf")`` keeps all). ``max_memory``: as ``depth``.
 #[pyfunction]
 #[pyo3(signature = (disp, left, f, baseline, cx, cy, doffs=0.0, max_depth=None, max_memory=None))]
-#[allow(clippy::too_many_arguments)] // the camera's five numbers, as calib.txt gives them
 pub(crate) fn cloud<'py>(
     py: Python<'py>,
     disp: &Bound<'py, PyAny>,

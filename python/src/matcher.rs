@@ -196,7 +196,6 @@ impl PyMatcher {
     #[new]
     #[pyo3(signature = (ndisp=None, config=None, overrides=None, threads=None, max_memory=None, temporal=false,
                         calib_ndisp=None, rectify=None, min_confidence=None, min_disp=None))]
-    #[allow(clippy::too_many_arguments)] // the Python signature, as jem.match's
     fn new(
         ndisp: Option<i64>,
         config: Option<&Bound<'_, PyAny>>,
@@ -301,9 +300,8 @@ fn info<'py>(py: Python<'py>, out: &Output, check: &PairCheck, warnings: Vec<Str
     info.set_item("tiled", out.plan.tiles.is_some())?;
     info.set_item("noise", out.measured.map(|m| (m.stats.noise[0], m.stats.noise[1])))?;
     let timings = PyDict::new(py);
-    for (name, d) in &out.timings.stages {
-        let sum = timings.get_item(name)?.map_or(Ok(0.0), |v| v.extract::<f64>())?;
-        timings.set_item(name, sum + d.as_secs_f64())?;
+    for (name, d) in &out.timings.per_stage().stages {
+        timings.set_item(name, d.as_secs_f64())?;
     }
     info.set_item("timings", timings)?;
     info.set_item("seconds", out.seconds)?;

@@ -121,7 +121,7 @@ def test_confidence_and_info(synth_pair):
 
 
 def test_a_segment_count_the_image_cannot_hold_warns(synth_pair):
-    # Issue 41, item 6: held to pixels / post.sps.min_support, as jem does (which says so on stderr).
+    # Held to pixels / post.sps.min_support, as jem does (which says so on stderr).
     small = tuple(view[:48, :64] for view in synth_pair)
     with pytest.warns(UserWarning, match=r"post\.sps\.segments = 100000 .*using 307"):
         held = jem.match(*small, ndisp=16, overrides={"post.sps.segments": 100000})

@@ -16,18 +16,14 @@ pub fn one_line(text: &str) -> String {
 /// The end-of-run table: scene, size, ndisp, seconds (and per-stage seconds with -v), status; then counts, with -v
 /// what was measured on each pair (as `jem -v` prints it), and the failures.
 pub fn summary(reports: &[SceneReport], verbose: bool) -> String {
-    let mut stages: Vec<&'static str> = Vec::new();
-    if verbose {
-        for r in reports {
-            if let SceneStatus::Done(run) = &r.status {
-                for (name, _) in &run.timings.stages {
-                    if !stages.contains(name) {
-                        stages.push(name);
-                    }
-                }
-            }
+    // Every stage any scene ran, in the order first run.
+    let mut all = crate::pipeline::Timings::default();
+    for r in reports.iter().filter(|_| verbose) {
+        if let SceneStatus::Done(run) = &r.status {
+            all.add_summed(&run.timings);
         }
     }
+    let stages: Vec<&'static str> = all.stages.iter().map(|&(name, _)| name).collect();
     let mut header: Vec<String> = ["scene", "size", "ndisp", "seconds"].map(String::from).to_vec();
     header.extend(stages.iter().map(|s| s.to_string()));
     header.push("status".into());
@@ -44,9 +40,9 @@ pub fn summary(reports: &[SceneReport], verbose: bool) -> String {
                     run.ndisp.to_string(),
                     format!("{:.3}", run.seconds),
                 ]);
+                let per_stage = run.timings.per_stage();
                 for s in &stages {
-                    let t =
-                        run.timings.stages.iter().filter(|(n, _)| n == s).map(|(_, d)| d.as_secs_f64()).sum::<f64>();
+                    let t = per_stage.stages.iter().find(|(n, _)| n == s).map_or(0.0, |(_, d)| d.as_secs_f64());
                     row.push(format!("{t:.3}"));
                 }
                 row.push("ok".into());

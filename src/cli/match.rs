@@ -212,7 +212,7 @@ impl<'a> Request<'a> {
         {
             return Err(Error::Input(format!("{}: the left-right mask is written as .png", m.display())));
         }
-        let calib = left.parent().unwrap_or(Path::new(".")).join("calib.txt");
+        let calib = left.parent().unwrap_or(Path::new(".")).join(jem::dataset::CALIB_FILE);
         if let Some(d) = &args.depth {
             jem::io::DisparityFormat::from_path(d)?;
         }

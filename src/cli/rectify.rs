@@ -10,6 +10,7 @@ use jem::rectify::{Rectification, StereoCalibration, View};
 use jem::{Error, Result};
 
 use super::{GlobalArgs, MemoryArg, ThreadsArg};
+use jem::dataset::{CALIB_FILE, LEFT_FILE, RIGHT_FILE};
 
 /// Arguments of `jem rectify` (the help text is on [`Command::Rectify`](super::Command::Rectify)).
 #[derive(Args, Debug, Clone)]
@@ -75,7 +76,7 @@ pub(super) fn warn(rectification: &Rectification, calib: &Path, quiet: bool) {
 
 /// Rectifies one pair.
 pub(super) fn run(args: &RectifyArgs, global: &GlobalArgs) -> Result<ExitCode> {
-    let names = ["im0.png", "im1.png", "calib.txt", "rectify.yml"];
+    let names = [LEFT_FILE, RIGHT_FILE, CALIB_FILE, "rectify.yml"];
     let mut outputs: Vec<PathBuf> = names.iter().map(|n| args.output.join(n)).collect();
     if args.maps {
         outputs.extend(["map0x.pfm", "map0y.pfm", "map1x.pfm", "map1y.pfm"].map(|n| args.output.join(n)));

@@ -77,7 +77,7 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     }
     let dir = args.input.parent().unwrap_or(Path::new("."));
     let truth = args.gt.as_deref().map(|gt| (gt, viz::gt_rule(gt, args.layout, args.scale)));
-    let mut read = vec![args.input.as_path().to_path_buf(), dir.join("calib.txt")];
+    let mut read = vec![args.input.as_path().to_path_buf(), dir.join(jem::dataset::CALIB_FILE)];
     if let Some((gt, rule)) = &truth {
         read.push(gt.to_path_buf());
         if let Ok(found) = rule {
@@ -119,7 +119,7 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
             return Err(e);
         }
     };
-    let calib = viz::calib_range(&dir.join("calib.txt"));
+    let calib = viz::calib_range(&dir.join(jem::dataset::CALIB_FILE));
     let (vmin, vmax) = viz::colour_range(&disp, (args.vmin, args.vmax), calib, ("--vmin", "--vmax"))?;
     let colour = viz::colorize(&disp, vmin, vmax);
     let (picture, error) = match &truth {

@@ -2,20 +2,20 @@
 //! so that one configuration serves clean, noisy, dark and unevenly exposed pairs.
 //!
 //! 1. **Contrast** (`stretch.enabled`). A view whose robust range (the 0.5th to the 99.5th percentile of grey) is below
-//!    [`TARGET_RANGE`] / `stretch.min_gain` is stretched by an affine map to span [`TARGET_RANGE`] grey levels,
-//!    each view by its own range (one gain for both would push a darker right view below 0). A dark image gets
-//!    the contrast the colour thresholds (σf, μ, the weighted median's and the planes' colour weights) assume,
-//!    and its noise is then measured relative to its contrast: what matters for matching is the
-//!    signal-to-noise ratio, not the absolute grey levels.
-//! 2. **Noise** (`[condition.denoise]`). The noise σn of each view is measured after the stretch ([`estimate_noise`]); a
-//!    view noisier than `denoise.min_sigma` is smoothed by an edge-preserving bilateral filter (range scale
-//!    `denoise.strength` × σn) **for the matching cost only**: Census bits of noisy near-flat windows flip at
-//!    random, and no averaging of the cost afterwards recovers a stable code; the guidance (colour weights of the
-//!    mean field, weighted median, planes) keeps the original edges. A clean camera measures 0.5–1.6 grey
-//!    levels (texture counts a little as noise) and is not filtered: filtering it removes the fine texture
-//!    Census relies on. JPEG compression flattens the flat regions (σn ≈ 0) but leaves block steps on the
-//!    same image grid in both views; [`blockiness`] measures them, and a view's noise is taken as
-//!    max(σn, blockiness·√π/2) (the mean step between two blocks with independent errors of σ is 2σ/√π).
+//!    [`contrast::TARGET_RANGE`] / `stretch.min_gain` is stretched by an affine map to span
+//!    [`contrast::TARGET_RANGE`] grey levels, each view by its own range (one gain for both would push a darker
+//!    right view below 0). A dark image gets the contrast the colour thresholds (σf, μ, the weighted median's and
+//!    the planes' colour weights) assume, and its noise is then measured relative to its contrast: what matters for
+//!    matching is the signal-to-noise ratio, not the absolute grey levels.
+//! 2. **Noise** (`[condition.denoise]`). The noise σn of each view is measured after the stretch
+//!    ([`noise::estimate_noise`]); a view noisier than `denoise.min_sigma` is smoothed by an edge-preserving bilateral
+//!    filter (range scale `denoise.strength` × σn) **for the matching cost only**: Census bits of noisy near-flat
+//!    windows flip at random, and no averaging of the cost afterwards recovers a stable code; the guidance (colour
+//!    weights of the mean field, weighted median, planes) keeps the original edges. A clean camera measures 0.5–1.6
+//!    grey levels (texture counts a little as noise) and is not filtered: filtering it removes the fine texture Census
+//!    relies on. JPEG compression flattens the flat regions (σn ≈ 0) but leaves block steps on the same image grid in
+//!    both views; [`blockiness`] measures them, and a view's noise is taken as max(σn, blockiness·√π/2) (the mean step
+//!    between two blocks with independent errors of σ is 2σ/√π).
 //! 3. **Coarse prior** (`prior_*`, in [`crate::pipeline`], prior.rs): the whole pipeline first runs on the
 //!    conditioned pair reduced 2× (noise halves, the range of labels too; a quarter of the plane segments, so
 //!    they keep their size in the scene), and the full-resolution cost of label d at pixel i
@@ -31,8 +31,8 @@
 //!    keeps the precision; the prior also places each pixel well enough that three full-resolution iterations do
 //!    the work of five. With `prior.levels` L the coarse run has a coarse prior of its own, L − 1 levels deep (default
 //!    3: the half-resolution run is guided by a quarter-resolution one, and that by an eighth-resolution one).
-//! 4. **Vertical alignment** (`vertical.enabled`, in [`crate::run`] and the tiled run): with the coarse run's answer,
-//!    the right view's residual vertical offset (imperfect rectification) is measured and, where it reaches
+//! 4. **Vertical alignment** (`vertical.enabled`, in [`crate::pipeline::run`] and the tiled run): with the coarse run's
+//!    answer, the right view's residual vertical offset (imperfect rectification) is measured and, where it reaches
 //!    `vertical.min_px`, removed from the guidance and the cost pair before the full-resolution cost
 //!    ([`crate::condition::vertical`]).
 //!
@@ -57,7 +57,7 @@ use denoise::bilateral;
 pub(crate) use jpeg::{blockiness, jpeg_noise};
 pub(crate) use noise::channel_noise;
 use sharpness::matching_blur;
-pub(crate) use sharpness::sharpness;
+pub(crate) use sharpness::{MAX_MATCHING_BLUR, sharpness};
 
 /// What was measured on a pair, for diagnostics (`jem -v`) and the adaptive stages.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -70,7 +70,7 @@ pub struct PairStats {
     /// again on the views the denoiser or the sharpness matching filtered (at most `noise`).
     pub cost_noise: [f32; 2],
     /// The Gaussian blur σ (px) given to the left and the right view of the cost pair so that their sharpness
-    /// matches ([`sharpness`]; 0 = none).
+    /// matches ([`sharpness()`]; 0 = none).
     pub cost_blur: [f32; 2],
     /// Each view's JPEG blocking ([`blockiness`], grey levels; 0 = no block grid).
     pub blocking: [f32; 2],

@@ -32,12 +32,23 @@ pub(crate) fn sharpness(grey: &Plane<f32>) -> f32 {
     if grad > 0.0 { (lap / grad) as f32 } else { 0.0 }
 }
 
-/// The Gaussian σ (px, in steps of 0.125 up to 3) whose blur brings `img`'s [`sharpness`] closest to `target`.
-/// Sharpness falls as the blur grows, so a bisection finds the first step at or below `target` (six blurs instead
-/// of 24: on a large image each is a pass over every pixel), and the closer of it and the step before wins.
+/// The steps of the blur [`matching_blur`] tries (σ, px).
+const BLUR_STEP: f32 = 0.125;
+
+/// How many steps [`matching_blur`] tries, the last one [`MAX_MATCHING_BLUR`].
+const BLUR_STEPS: usize = 24;
+
+/// The largest blur (σ, px) the front end gives the sharper view: 24 steps of 0.125, 3 px. A view blurrier than
+/// the other by more is beyond what the front end matches (`diagnose` reports it).
+pub(crate) const MAX_MATCHING_BLUR: f32 = BLUR_STEPS as f32 * BLUR_STEP;
+
+/// The Gaussian σ (px, in steps of [`BLUR_STEP`] up to [`MAX_MATCHING_BLUR`]) whose blur brings `img`'s
+/// [`sharpness`] closest to `target`. Sharpness falls as the blur grows, so a bisection finds the first step at or
+/// below `target` (six blurs instead of 24: on a large image each is a pass over every pixel), and the closer of it
+/// and the step before wins.
 pub(super) fn matching_blur(grey: &Plane<f32>, target: f32) -> f32 {
-    const STEPS: usize = 24;
-    let sigma = |k: usize| k as f32 * 0.125;
+    const STEPS: usize = BLUR_STEPS;
+    let sigma = |k: usize| k as f32 * BLUR_STEP;
     // Each step's sharpness once (a blur of the whole image each).
     let mut seen = [None; STEPS + 1];
     let mut at = |k: usize| {

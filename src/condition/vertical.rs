@@ -284,9 +284,10 @@ pub(crate) fn estimate(
                 .map(|(r, t)| t - r.iter().zip(&coef).map(|(a, c)| a * c).sum::<f64>())
                 .collect();
             let mut abs: Vec<f64> = residuals.iter().map(|r| r.abs()).collect();
-            abs.sort_by(f64::total_cmp);
             // Tukey's biweight at 3 robust standard deviations (1.4826 × the median absolute residual).
-            let cut = 3.0 * (1.4826 * abs[abs.len() / 2] + 1e-3);
+            let mid = abs.len() / 2;
+            let median = crate::imgproc::stats::nth_smallest(&mut abs, mid);
+            let cut = 3.0 * (1.4826 * median + 1e-3);
             weights = base
                 .iter()
                 .zip(&residuals)

@@ -1,5 +1,5 @@
 //! The KITTI stereo layouts (2012 and 2015 training/testing trees as distributed) and the devkit's handling of
-//! invalid result pixels ([`interpolate_background`]).
+//! invalid result pixels ([`crate::eval::interpolate_background`]).
 
 use std::path::Path;
 

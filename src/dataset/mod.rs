@@ -42,8 +42,23 @@ pub const KITTI_NDISP: usize = 192;
 /// The file in a results folder that names the data set whose results it holds.
 pub const SOURCE_FILE: &str = "source.txt";
 
+/// A MiddEval3 scene's left view (ETH3D's two-view scenes name their files as MiddEval3's).
+pub const LEFT_FILE: &str = "im0.png";
+
+/// A MiddEval3 scene's right view.
+pub const RIGHT_FILE: &str = "im1.png";
+
+/// A MiddEval3 scene's calibration (`cam0`, `cam1`, `doffs`, `baseline`, `ndisp`, …).
+pub const CALIB_FILE: &str = "calib.txt";
+
+/// A MiddEval3 scene's ground truth of the left view.
+pub const GT_FILE: &str = "disp0GT.pfm";
+
+/// A MiddEval3 scene's mask of the left view (255 visible, 128 occluded, 0 no truth).
+pub const MASK_FILE: &str = "mask0nocc.png";
+
 /// The files that make a folder a MiddEval3 or ETH3D scene.
-pub const SCENE_FILES: [&str; 3] = ["im0.png", "im1.png", "calib.txt"];
+pub const SCENE_FILES: [&str; 3] = [LEFT_FILE, RIGHT_FILE, CALIB_FILE];
 
 /// A benchmark's folder layout (see the module doc).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -113,6 +128,13 @@ pub struct Truth {
     pub disparity: PathBuf,
     /// The occlusion mask (MiddEval3, ETH3D: `mask0nocc.png`); KITTI has separate maps instead.
     pub mask: Option<PathBuf>,
+}
+
+impl Truth {
+    /// The ground truth of a MiddEval3 (or ETH3D) scene folder: its [`GT_FILE`] and [`MASK_FILE`].
+    pub fn in_scene(dir: &Path) -> Truth {
+        Truth { disparity: dir.join(GT_FILE), mask: Some(dir.join(MASK_FILE)) }
+    }
 }
 
 /// Where an algorithm's result for a pair goes.
@@ -221,13 +243,10 @@ impl Pair {
     /// ETH3D's truth is in the tree `gt` (default: the sibling `<root name>_gt/`).
     pub fn truth(&self, all: bool, gt: Option<&Path>) -> Truth {
         match self.layout {
-            Layout::Middlebury => {
-                Truth { disparity: self.root.join("disp0GT.pfm"), mask: Some(self.root.join("mask0nocc.png")) }
-            }
+            Layout::Middlebury => Truth::in_scene(&self.root),
             Layout::Eth3d => {
                 let tree = gt.map_or_else(|| eth3d_gt_tree(&self.root), Path::to_path_buf);
-                let scene = tree.join(&self.name);
-                Truth { disparity: scene.join("disp0GT.pfm"), mask: Some(scene.join("mask0nocc.png")) }
+                Truth::in_scene(&tree.join(&self.name))
             }
             Layout::Kitti2015 | Layout::Kitti2012 => {
                 let (noc, occ) = kitti::truth_folders(self.layout);
@@ -306,7 +325,7 @@ pub fn discover(roots: &[PathBuf], purpose: Purpose, how: &Discovery) -> Result<
 fn scene(dir: &Path, purpose: Purpose, how: &Discovery) -> Option<Option<Pair>> {
     let has = |f: &str| dir.join(f).is_file();
     let inputs = SCENE_FILES.iter().all(|f| has(f));
-    let truth_here = purpose == Purpose::Score && has("disp0GT.pfm");
+    let truth_here = purpose == Purpose::Score && has(GT_FILE);
     let parent = dir.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let eth3d = || how.gt.is_some() || is_eth3d_tree(parent);
     // In an ETH3D tree a folder with any of the scene files is a scene, listed even when one is missing, so that
@@ -331,9 +350,9 @@ fn scene(dir: &Path, purpose: Purpose, how: &Discovery) -> Option<Option<Pair>> 
         layout,
         name,
         root: dir.to_path_buf(),
-        left: dir.join("im0.png"),
-        right: dir.join("im1.png"),
-        calib: Some(dir.join("calib.txt")),
+        left: dir.join(LEFT_FILE),
+        right: dir.join(RIGHT_FILE),
+        calib: Some(dir.join(CALIB_FILE)),
     };
     if layout == Layout::Eth3d {
         pair.root = parent.to_path_buf();

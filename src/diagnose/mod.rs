@@ -25,6 +25,7 @@ mod repetitive;
 
 pub use repetitive::Repetition;
 
+use crate::condition::MAX_MATCHING_BLUR;
 use crate::image::{Plane, RgbImage};
 use crate::imgproc::filter::{central_differences, gaussian_blur_plane};
 use crate::params::{CostParams, VerticalParams};
@@ -57,9 +58,6 @@ const MIN_TEXTURED_SHARE: f32 = 0.05;
 
 /// A difference in the clipped share of the views beyond this (a fraction of the pixels) is reported.
 const MAX_CLIPPED_DIFFERENCE: f32 = 0.10;
-
-/// The largest blur (σ, px) the front end gives the sharper view (`condition::sharpness`).
-const MAX_MATCHING_BLUR: f32 = 3.0;
 
 /// More pixels than this share equal in both views (within half a grey level): the same image twice. Two cameras
 /// never see that (their noise alone differs), even of a scene all at infinity.

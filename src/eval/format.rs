@@ -52,7 +52,7 @@ pub fn render(reports: &[AlgReport], papers: &[Option<PaperColumn>], format: For
 
 /// [`render`], and with `regions` (one per report, from [`split_report`](super::split_report); `jem eval
 /// --regions`) where the error is: in JSON a `"regions"` member per algorithm (see
-/// [`RegionReport`](super::RegionReport)), in text and Markdown the tables of
+/// [`super::RegionReport`]), in text and Markdown the tables of
 /// [`render_regions`](super::render_regions) after each report's.
 ///
 /// # Panics

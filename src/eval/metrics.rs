@@ -8,6 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
+use crate::dataset::{CALIB_FILE, GT_FILE, MASK_FILE};
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane};
 use crate::io::calib::Calib;
@@ -264,7 +265,7 @@ pub fn evaluate_files(
 /// As [`evaluate_files`], or a missing/malformed `calib.txt` or mask.
 pub fn evaluate_scene(dir: &Path, alg: &str, scale: u32, mask_mode: MaskMode) -> Result<Metrics> {
     let (result, ndisp) = scene_result(dir, alg)?;
-    let mask = dir.join("mask0nocc.png");
+    let mask = dir.join(MASK_FILE);
     let mask = match (mask.is_file(), mask_mode) {
         (true, _) => Some(mask),
         (false, MaskMode::All) => None,
@@ -272,7 +273,7 @@ pub fn evaluate_scene(dir: &Path, alg: &str, scale: u32, mask_mode: MaskMode) ->
             return Err(Error::Input(format!("no {} (needed for the nonocc mask)", mask.display())));
         }
     };
-    evaluate_files(&result, &dir.join("disp0GT.pfm"), mask.as_deref(), ndisp, scale, mask_mode)
+    evaluate_files(&result, &dir.join(GT_FILE), mask.as_deref(), ndisp, scale, mask_mode)
 }
 
 /// The error of a valid result `d` against the truth `g` as MiddEval3 scores it: `d` clipped to `[0, max_d]`, the
@@ -291,7 +292,7 @@ pub(crate) fn scene_result(dir: &Path, alg: &str) -> Result<(PathBuf, usize)> {
     if !result.is_file() {
         return Err(Error::Input(format!("no result file {}", result.display())));
     }
-    let calib_path = dir.join("calib.txt");
+    let calib_path = dir.join(CALIB_FILE);
     let ndisp = Calib::load(&calib_path)?.ndisp().map_err(|msg| Error::Calib { path: calib_path.clone(), msg })?;
     Ok((result, ndisp))
 }

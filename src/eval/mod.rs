@@ -53,7 +53,7 @@
 //!   their resolution and weight, scores them in parallel and collects an [`AlgReport`] with its averages.
 //! - `resolution.rs`: a MiddEval3 folder's resolution, from its path or from its scenes' names and sizes
 //!   ([`scene_resolution`], [`file_resolution`]).
-//! - `sparsification.rs`: how well a confidence map ranks the errors ([`sparsification`], the AUC of Hu &
+//! - `sparsification.rs`: how well a confidence map ranks the errors ([`sparsification()`], the AUC of Hu &
 //!   Mordohai), scored when the result has one beside it (`conf0NAME.pfm`).
 //! - `paper.rs`: the paper's numbers ([`PaperResults`], `paper-results.tsv`), printed beside ours.
 //! - `format.rs`: [`render`] prints reports as a text or Markdown table, JSON or CSV.

@@ -1,8 +1,7 @@
 //! One algorithm over a data set: [`evaluate_dir`] finds the pairs with ground truth ([`crate::dataset::discover`]),
-//! their resolution ([`scene_resolution`](super::scene_resolution), MiddEval3) and weight ([`scene_weight`]), scores them in parallel into an
-//! [`AlgReport`], whose weighted and plain means are the "Averages" of the [`eval`](crate::eval) module doc.
-//! Per-scene failures are recorded, not returned. [`find_gt_scenes`] lists MiddEval3 scene folders with ground
-//! truth.
+//! their resolution ([`super::scene_resolution`], MiddEval3) and weight ([`scene_weight`]), scores them in parallel
+//! into an [`AlgReport`], whose weighted and plain means are the "Averages" of the [`eval`](crate::eval) module doc.
+//! Per-scene failures are recorded, not returned. [`find_gt_scenes`] lists MiddEval3 scene folders with ground truth.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -127,7 +126,7 @@ impl AlgReport {
 /// # Errors
 /// [`Error::Io`] if `dir` cannot be read, [`Error::Input`] if it holds no such folder.
 pub fn find_gt_scenes(dir: &Path) -> Result<Vec<PathBuf>> {
-    let scenes = crate::dataset::walk::find_dirs_with(&[dir.to_path_buf()], &["disp0GT.pfm"])?;
+    let scenes = crate::dataset::walk::find_dirs_with(&[dir.to_path_buf()], &[crate::dataset::GT_FILE])?;
     if scenes.is_empty() {
         return Err(Error::Input(format!("no scene folder with a disp0GT.pfm under {}", dir.display())));
     }
@@ -150,7 +149,7 @@ pub struct Sources {
 /// [`crate::dataset`] puts them). One layout per call.
 ///
 /// `scale = None` infers the factor of MiddEval3 scenes from each scene's path (after resolving `.`/symlinks), else
-/// from its name and image size ([`scene_resolution`](super::scene_resolution); [`AlgReport::scale_inferred`]
+/// from its name and image size ([`super::scene_resolution`]; [`AlgReport::scale_inferred`]
 /// then says so); KITTI and ETH3D are scored in native pixels (1).
 ///
 /// # Errors

@@ -166,10 +166,10 @@ pub fn scene_resolution(scene: &Path) -> Option<Resolution> {
         return Some(Resolution { scale, source: ScaleSource::Path });
     }
     let name = resolved.file_name()?.to_str()?.to_string();
-    let size = crate::io::read_image_header(&scene.join("im0.png"))
+    let size = crate::io::read_image_header(&scene.join(crate::dataset::LEFT_FILE))
         .ok()
         .map(|h| (h.width, h.height))
-        .or_else(|| disparity_size(&scene.join("disp0GT.pfm")))?;
+        .or_else(|| disparity_size(&scene.join(crate::dataset::GT_FILE)))?;
     let scale = scale_from_scene_size(&name, size)?;
     Some(Resolution { scale, source: ScaleSource::SceneSize { scene: name, size } })
 }

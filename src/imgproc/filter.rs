@@ -1,6 +1,20 @@
 //! Neighbourhood filters on planes and images: replicated padding, the Sobel gradient (horizontal, magnitude), central
 //! differences, a local mean of |v|, a separable Gaussian blur, and the minimum or maximum over a square window.
 //! Borders are replicated everywhere.
+//!
+//! Three box means, which agree to float rounding but not bit for bit (the test
+//! `the_box_means_agree_but_round_differently` holds both), each kept for the callers whose outputs were measured
+//! with its rounding (merging two would change those outputs):
+//! - [`box_mean`]: each window summed on its own, row by row, in `f32`; O(r²) a pixel, for the small windows of the
+//!   temporal tests (r 1 to 3).
+//! - [`local_mean_abs`]: the mean of |v|, row sums first and then sums of them, in `f32`; O(r) a pixel (the cost's
+//!   gradient normalisation, the texture regions, the prior's lost pixels).
+//! - [`box_mean_separable`]: running sums in `f64`; O(1) a pixel, for wide windows (the confidence's features, the
+//!   sub-pixel normalisation).
+//!
+//! Likewise two 2×2-and-larger block means: [`box_reduce`] (each block's rows summed, then the row sums; the
+//! temporal pyramids) and [`crate::scale::downsample_plane`] (each block's columns summed, then the column sums; the
+//! pipeline's reduced resolutions).
 
 use rayon::prelude::*;
 
@@ -182,7 +196,8 @@ fn running_extreme(src: &[f32], r: usize, empty: f32, pick: impl Fn(f32, f32) ->
 }
 
 /// The plane reduced `factor` times by the mean of each `factor` × `factor` block (the last row and column of
-/// blocks may be partial), summed in a fixed order.
+/// blocks may be partial): the sum of each of the block's rows, then the sum of those (not the order of
+/// [`crate::scale::downsample_plane`]; see the module doc).
 ///
 /// # Panics
 /// If `factor` is 0.
@@ -201,7 +216,8 @@ pub(crate) fn box_reduce(p: &Plane<f32>, factor: usize) -> Plane<f32> {
     out
 }
 
-/// The mean of each pixel's (2r + 1)² window (borders replicated), summed in a fixed order.
+/// The mean of each pixel's (2r + 1)² window (borders replicated), each window summed on its own row by row (see the
+/// module doc for the other box means).
 pub(crate) fn box_mean(p: &Plane<f32>, r: usize) -> Plane<f32> {
     let (w, h) = p.dims();
     let mut out = Plane::new(w, h, 0.0f32);
@@ -287,6 +303,23 @@ mod tests {
                 assert!((a - b).abs() < 1e-5, "r {r}: {a} vs {b}");
             }
         }
+    }
+
+    /// Each pair of box means (and the two block means) agrees within float rounding, and differs somewhere in the
+    /// last bit: they sum in different orders, so one cannot stand in for another without changing outputs.
+    #[test]
+    fn the_box_means_agree_but_round_differently() {
+        let data: Vec<f32> = crate::test_util::rand_vec(61 * 47, 9).iter().map(|v| v * 200.0 + 0.1).collect();
+        let p = Plane::from_parts(61, 47, data);
+        let close_not_equal = |a: &Plane<f32>, b: &Plane<f32>, what: &str| {
+            assert!(a.data.iter().zip(&b.data).all(|(x, y)| (x - y).abs() <= 1e-4 * x.abs().max(1.0)), "{what}");
+            assert!(a.data.iter().zip(&b.data).any(|(x, y)| x.to_bits() != y.to_bits()), "{what}: bit-identical");
+        };
+        let direct = box_mean(&p, 2);
+        close_not_equal(&direct, &local_mean_abs(&p, 2), "box_mean, local_mean_abs");
+        close_not_equal(&direct, &box_mean_separable(&p, 2), "box_mean, box_mean_separable");
+        close_not_equal(&local_mean_abs(&p, 2), &box_mean_separable(&p, 2), "local_mean_abs, box_mean_separable");
+        close_not_equal(&box_reduce(&p, 3), &crate::scale::downsample_plane(&p, 3), "box_reduce, downsample_plane");
     }
 
     #[test]

@@ -95,7 +95,7 @@ impl Lattice {
     /// Builds the lattice for an image's (x/σxy, y/σxy, r/σrgb, g/σrgb, b/σrgb) features.
     ///
     /// # Panics
-    /// If a σ is not positive, or the features exceed [`MAX_FEATURE`] (check with [`features_fit`]; e.g. more
+    /// If a σ is not positive, or the features exceed `MAX_FEATURE` (check with `features_fit`; e.g. more
     /// than 4 500 pixels per side at σxy = 5) so that a lattice coordinate could overflow its 16 bits.
     pub fn build(image: &RgbImage, sigma_xy: f32, sigma_rgb: f32) -> Lattice {
         assert!(sigma_xy > 0.0 && sigma_rgb > 0.0, "lattice sigmas must be positive");
@@ -157,7 +157,7 @@ impl Lattice {
         self.nvert
     }
 
-    /// k̃(i, i): the weight the filter gives a pixel's own input, already scaled by [`OUTPUT_SCALE`].
+    /// k̃(i, i): the weight the filter gives a pixel's own input, already scaled by `OUTPUT_SCALE`.
     ///
     /// A pixel splats weight w_k onto simplex vertex k and slices back with the same weights, so its self-weight
     /// is Σ_{k,k'} w_k w_k' B(k, k'), where B is the blur's response from vertex k at vertex k'. Two vertices of
@@ -260,7 +260,7 @@ impl Lattice {
     }
 
     /// The last step of [`Lattice::filter`] for one pixel: `out = Σ_k w_k · vals[v_k]` (scaled by
-    /// [`OUTPUT_SCALE`]), with `vals` from [`Lattice::splat_blur`] and `out.len()` channels.
+    /// `OUTPUT_SCALE`), with `vals` from [`Lattice::splat_blur`] and `out.len()` channels.
     #[inline(always)]
     pub fn slice(&self, vals: &[f32], pixel: usize, out: &mut [f32]) {
         self.slice_channels(vals, pixel, out.len(), 0, out);

@@ -1,6 +1,6 @@
-//! Label bands (our addition, for tiles; [`crate::tile`]): each pixel's marginal is kept to a contiguous run of
-//! labels and is 0 outside it, so the update, the splat and the slice of an iteration cost the pixel's band, not
-//! the view's whole label range. The blur still runs over every label of a vertex.
+//! Label bands (our addition, for tiles; [`crate::pipeline::tile`]): each pixel's marginal is kept to a contiguous run
+//! of labels and is 0 outside it, so the update, the splat and the slice of an iteration cost the pixel's band, not the
+//! view's whole label range. The blur still runs over every label of a vertex.
 //!
 //! A band holds what the pixel can plausibly take: every answer of the coarse level within the fully connected
 //! kernel's reach (3σx), widened by the labels over which the coarse prior still changes its penalty (its margin

@@ -28,9 +28,10 @@
 //!   (evidence crosses the local term twice as fast per iteration);
 //! - [`anneal`]: deterministic annealing of the unary temperature and the label-aware local coupling;
 //! - [`pyramid`]: coarse-to-fine inference (the same model on a 2× reduced grid first);
-//! - [`bands`]: label bands, each pixel's marginal kept to a run of labels (the tiles of [`crate::tile`]);
+//! - [`bands`]: label bands, each pixel's marginal kept to a run of labels (the tiles of [`crate::pipeline::tile`]);
 //! - in [`full`]: the normalisation of the message (the paper leaves it unnormalised);
-//! - in [`energy`]: the floor under tiny probabilities ([`MIN_RELATIVE_PROBABILITY`]) and the sub-pixel parabola.
+//! - in [`energy`]: the floor under tiny probabilities ([`energy::MIN_RELATIVE_PROBABILITY`]) and the sub-pixel
+//!   parabola.
 //!
 //! Memory: Q, `N × M` f32 (and the next Q with the Jacobi schedule; the checkerboard updates Q in place), plus
 //! the lattice's two `vertices × M` buffers (the fully connected message is sliced per pixel inside the update,
@@ -165,7 +166,7 @@ impl<'a> MeanField<'a> {
     }
 
     /// Like [`MeanField::with_buffers`], with each pixel's marginal kept to its band of labels (0 outside it):
-    /// an iteration's update, splat and slice cost the bands, not all labels ([`bands`]).
+    /// an iteration's update, splat and slice cost the bands, not all labels (`bands`).
     ///
     /// # Panics
     /// If the image, the cost volume and the bands differ in size or labels.
@@ -181,7 +182,7 @@ impl<'a> MeanField<'a> {
     }
 
     /// Like [`MeanField::with_buffers`], but Q starts from the marginals of a level reduced 2 times instead of
-    /// the unary: every pixel takes its 2 × 2 block's (coarse-to-fine inference, [`infer_coarse_to_fine`]).
+    /// the unary: every pixel takes its 2 × 2 block's (coarse-to-fine inference, `infer_coarse_to_fine`).
     ///
     /// # Panics
     /// If the image and the cost volume differ in size, or `coarse` is not their size reduced 2 times or has
@@ -274,7 +275,7 @@ impl<'a> MeanField<'a> {
     }
 
     /// One mean-field iteration over all pixels, with the configured [`Schedule`] and the next unary scale of the
-    /// [`UnarySchedule`].
+    /// `UnarySchedule`.
     pub fn step(&mut self) {
         self.done += 1;
         self.unary_scale = self.unary_schedule.at(self.done);

@@ -8,9 +8,9 @@
 //! ```
 //!
 //! Around it: `window.rs` (label windows: a tile's fine pass on the labels the coarse answer holds only), [`tile`]
-//! (pairs too large for one cost volume: a coarse level, then tiles over label windows), `memory.rs` (the memory
-//! model and guard: [`estimate_memory_bytes`], [`check_memory`]) and `output.rs` (what a run returns:
-//! [`PipelineOutput`], [`Measured`], [`Timings`]).
+//! (pairs too large for one cost volume: a coarse level, then tiles over label windows), `memory.rs` (the memory model
+//! and guard: [`crate::setup::memory::estimate_memory_bytes`], [`crate::setup::memory::check_memory`]) and `output.rs`
+//! (what a run returns: [`PipelineOutput`], [`Measured`], [`Timings`]).
 
 mod fine;
 mod output;

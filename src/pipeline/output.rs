@@ -32,6 +32,14 @@ impl Timings {
         }
     }
 
+    /// Each stage once, its durations summed, in the order first run: what a report shows of a stage that ran more
+    /// than once (in every tile, on both views).
+    pub fn per_stage(&self) -> Timings {
+        let mut sum = Timings::default();
+        sum.add_summed(self);
+        sum
+    }
+
     /// Sum of all stages.
     pub fn total(&self) -> Duration {
         self.stages.iter().map(|(_, d)| *d).sum()
@@ -153,5 +161,7 @@ mod tests {
         sum.add_summed(&Timings { stages: vec![("mf", ms(2)), ("cost", ms(3))] });
         sum.add_summed(&Timings { stages: vec![("mf", ms(4))] });
         assert_eq!(sum.stages, vec![("cost", ms(4)), ("mf", ms(6))]);
+        let twice = Timings { stages: vec![("cost", ms(1)), ("mf", ms(2)), ("cost", ms(3))] };
+        assert_eq!(twice.per_stage().stages, vec![("cost", ms(4)), ("mf", ms(2))]);
     }
 }

@@ -7,6 +7,7 @@ use crate::condition;
 use crate::condition::vertical::{self, VerticalOffset};
 use crate::cost;
 use crate::image::{Plane, StereoPair};
+use crate::imgproc::noise::GREY_PAIR_NOISE_PER_SIGMA;
 use crate::params::{self, Params};
 
 use super::output::{Measured, PipelineOutput, Timings, VerticalMeasured};
@@ -51,8 +52,9 @@ impl<'a> Prepared<'a> {
             // JPEG: steps no larger than the block grid's own are compression artefacts, not texture.
             cost_params.census_dead_band +=
                 cond.stats.block_band(c) * cond.stats.blocking[0].max(cond.stats.blocking[1]);
-            // Two pixels' grey noise (0.668·σn each) in a Census comparison of the cost pair: 0.945·σn.
-            cost_params.census_ternary += c.noise.ternary_per_sigma * 0.945 * cond.stats.cost_sigma();
+            // Two pixels' grey noise in a Census comparison of the cost pair.
+            cost_params.census_ternary +=
+                c.noise.ternary_per_sigma * GREY_PAIR_NOISE_PER_SIGMA * cond.stats.cost_sigma();
             if cost_params.census_support > 0.0 {
                 cost_params.census_support += c.noise.support_per_sigma * cond.stats.sigma();
             }

@@ -8,17 +8,17 @@
 //! 2. conditions the full-resolution pair once (noise, contrast: [`crate::condition`]), so every tile sees the
 //!    same images and the same measured noise;
 //! 3. cuts the image into square *cores* of at most `core_px` pixels and runs the pipeline from the cost volume on
-//!    (`fine_pass` in fine.rs: mean field for both views, left-right check, fill, weighted median, planes) on each
-//!    core plus a halo, over a *label window* `[lo, hi]`: the coarse disparities in and around the core,
-//!    widened by F + 2 labels (the coarse answer is good to about one coarse label) — the full range where the
-//!    coarse run left no disparity. The right crop is shifted by `lo` columns, so label d' of the tile is
-//!    disparity `lo + d'` and the tile is an ordinary problem of `hi − lo + 1` labels. The coarse answer is
-//!    also the tile's prior (a point prior: no spread at its depth edges), with the weight of the untiled run, or
-//!    more where the full resolution adds little detail to the coarse level ([`tiled_prior_floor`]). Inside the
-//!    window, each pixel's inference keeps to its own *label band* (`crate::meanfield::bands`): the coarse answers
-//!    within the kernel's reach, ± the prior's margin and truncation, and the pixel's own best label. On the ×4
-//!    scenes a band is about 44 labels where the tile's window is about 104: the iterations are about a tenth
-//!    faster (their time is mostly per pixel, not per label) and a little more accurate;
+//!    (`fine_pass` in fine.rs: mean field for both views, left-right check, fill, weighted median, planes) on each core
+//!    plus a halo, over a *label window* `[lo, hi]`: the coarse disparities in and around the core, widened by F + 2
+//!    labels (the coarse answer is good to about one coarse label) — the full range where the coarse run left no
+//!    disparity. The right crop is shifted by `lo` columns, so label d' of the tile is disparity `lo + d'` and the tile
+//!    is an ordinary problem of `hi − lo + 1` labels. The coarse answer is also the tile's prior (a point prior: no
+//!    spread at its depth edges), with the weight of the untiled run, or more where the full resolution adds little
+//!    detail to the coarse level ([`super::prior::tiled_prior_floor`]). Inside the window, each pixel's inference keeps
+//!    to its own *label band* (`crate::meanfield::bands`): the coarse answers within the kernel's reach, ± the prior's
+//!    margin and truncation, and the pixel's own best label. On the ×4 scenes a band is about 44 labels where the
+//!    tile's window is about 104: the iterations are about a tenth faster (their time is mostly per pixel, not per
+//!    label) and a little more accurate;
 //! 4. keeps each tile's core (`lo` added back) and stitches the cores.
 //!
 //! **Halo.** A core pixel must see what it would see untiled: the fully connected kernel reaches 3σx, and the
@@ -37,15 +37,15 @@
 //! a core is split while its four quarters are less work in all than it is by a fifth (docs/tuning-log.md,
 //! "Serial work in the tiles").
 //!
-//! **Memory.** Each tile needs [`crate::estimate_memory_bytes`] for its crop and window, plus one volume for what
-//! the allocator keeps of freed volumes and one for the right view's volume, derived before the left view's
+//! **Memory.** Each tile needs [`crate::setup::memory::estimate_memory_bytes`] for its crop and window, plus one volume
+//! for what the allocator keeps of freed volumes and one for the right view's volume, derived before the left view's
 //! inference (`tile_need`); a core whose tile would exceed nine tenths of the budget (the rest is left for what the
-//! allocator keeps between tiles) is split in four until it fits (or reaches [`MIN_CORE_PX`]). One tile at a time
-//! is alive (its pipeline is parallel inside; `run_tiled` says why tiles do not run side by side). The coarse run
-//! needs the untiled estimate at 1/F. On top: the full-size pair, its conditioned and aligned copies, the prior and
-//! the full-size maps, [`FULL_SIZE_BYTES_PER_PX`] per pixel. A tile's spent volumes and marginals are the next
-//! tile's (`meanfield::Buffers`): a volume freed to the OS and allocated again is page-faulted and zeroed again,
-//! which was a tenth of a ×4 run's time.
+//! allocator keeps between tiles) is split in four until it fits (or reaches [`MIN_CORE_PX`]). One tile at a time is
+//! alive (its pipeline is parallel inside; `run_tiled` says why tiles do not run side by side). The coarse run needs
+//! the untiled estimate at 1/F. On top: the full-size pair, its conditioned and aligned copies, the prior and the
+//! full-size maps, [`crate::setup::strategy::FULL_SIZE_BYTES_PER_PX`] per pixel. A tile's spent volumes and marginals
+//! are the next tile's (`meanfield::Buffers`): a volume freed to the OS and allocated again is page-faulted and zeroed
+//! again, which was a tenth of a ×4 run's time.
 //!
 //! Parameters measured in pixels keep their meaning; the plane segments keep their size (a tile gets the share
 //! of `post.sps.segments` that its area is of the image).
@@ -153,7 +153,7 @@ pub fn run_tiled(
     Ok(out)
 }
 
-/// The memory a tile plans for: [`crate::estimate_memory_bytes`] of its crop and window, plus one volume
+/// The memory a tile plans for: [`crate::setup::memory::estimate_memory_bytes`] of its crop and window, plus one volume
 /// (crop pixels × labels × 4 bytes): inside a tile the allocator keeps some of what is freed (a volume freed on
 /// the heap leaves a hole the next, larger one does not fit). Measured on a 1280×960 scene of 160 labels under
 /// `--max-memory 300M` (tests/cli.rs): one tile used 182 MiB against an estimate of 148. Plus the right view's

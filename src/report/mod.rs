@@ -266,7 +266,7 @@ pub fn write_report(dir: &Path, out: &Path, opts: &ReportOptions) -> Result<Repo
     let written = (|| {
         let mut set = crate::io::AllOrNone::new();
         let names: Vec<String> = (0..rows.len()).map(|i| file_stem(i, &rows[i].name)).collect();
-        let (pictures, not_drawn) = draw_rows(&mut rows, &names, &per_alg, &opts.algs, &files, opts, &mut set)?;
+        let (pictures, not_drawn) = draw_rows(&mut rows, &names, &per_alg, &files, opts, &mut set)?;
         if rows.iter().all(|r| r.left.is_none()) {
             let why: Vec<String> = not_drawn.iter().map(|n| format!("{} ({}): {}", n.scene, n.alg, n.reason)).collect();
             return Err(Error::Input(format!("no scene could be drawn: {}", why.join("; "))));
@@ -414,16 +414,15 @@ fn draw_row(row: &Row, stem: &str, sheets: &[Option<&SheetRow>], algs: &[String]
 
 /// Draws every row's pictures, a few rows at a time (in parallel), staging their files into `set` as they come;
 /// fills in the rows' pictures. Returns the number of files and what could not be drawn.
-#[allow(clippy::too_many_arguments)] // the rows, their names and sheets, where they go and the set they join
 fn draw_rows(
     rows: &mut [Row],
     names: &[String],
     per_alg: &[Vec<SheetRow>],
-    algs: &[String],
     files: &Path,
     opts: &ReportOptions,
     set: &mut crate::io::AllOrNone,
 ) -> Result<(usize, Vec<NotDrawn>)> {
+    let algs = &opts.algs;
     let sheet_of = |row: &Row, a: usize| per_alg[a].iter().find(|s| s.location == row.location);
     let (mut count, mut not_drawn) = (0, Vec::new());
     let batch = rayon::current_num_threads().max(1);

@@ -11,6 +11,7 @@
 use std::path::Path;
 
 use super::write::{SequenceFrame, write_sequence};
+use crate::dataset::{CALIB_FILE, GT_FILE, LEFT_FILE, MASK_FILE, RIGHT_FILE};
 use crate::degrade::{Recipe, View};
 use crate::error::{Error, Result};
 use crate::image::{Plane, RgbImage};
@@ -48,7 +49,7 @@ pub fn sequence_from_scene(scene: &Path, out: &Path, how: &FromScene) -> Result<
     if how.frames < 2 {
         return Err(Error::param("--frames", how.frames, "at least 2"));
     }
-    let (left, right) = crate::io::png::load_rgb_pair(&scene.join("im0.png"), &scene.join("im1.png"))?;
+    let (left, right) = crate::io::png::load_rgb_pair(&scene.join(LEFT_FILE), &scene.join(RIGHT_FILE))?;
     let (w, h) = left.dims();
     let travel = (how.frames - 1).saturating_mul(how.pan_px);
     if travel + MIN_WINDOW_PX > w {
@@ -63,9 +64,9 @@ pub fn sequence_from_scene(scene: &Path, out: &Path, how: &FromScene) -> Result<
         ));
     }
     let window = w - travel;
-    let gt_path = scene.join("disp0GT.pfm");
+    let gt_path = scene.join(GT_FILE);
     let gt = gt_path.is_file().then(|| crate::io::pfm::read_pfm(&gt_path)).transpose()?;
-    let mask_path = scene.join("mask0nocc.png");
+    let mask_path = scene.join(MASK_FILE);
     let mask = mask_path.is_file().then(|| crate::io::png::load_grey8(&mask_path)).transpose()?;
     if let Some(g) = &gt {
         crate::eval::check_size(&gt_path, "ground truth", g.dims(), "the images", (w, h))?;
@@ -73,8 +74,8 @@ pub fn sequence_from_scene(scene: &Path, out: &Path, how: &FromScene) -> Result<
     if let Some(m) = &mask {
         crate::eval::check_size(&mask_path, "mask", m.dims(), "the images", (w, h))?;
     }
-    let calib_path = scene.join("calib.txt");
-    let calib = String::from_utf8(crate::io::read_capped(&calib_path, crate::io::MAX_CALIB_BYTES, "calib.txt")?)
+    let calib_path = scene.join(CALIB_FILE);
+    let calib = String::from_utf8(crate::io::read_capped(&calib_path, crate::io::MAX_CALIB_BYTES, CALIB_FILE)?)
         .map_err(|_| Error::Calib { path: calib_path.clone(), msg: "not a text file".into() })?;
     let calib = calib_with_width(&calib, window);
     let note = format!(
@@ -101,7 +102,7 @@ pub fn sequence_from_scene(scene: &Path, out: &Path, how: &FromScene) -> Result<
         });
         Ok(SequenceFrame { left: crop_rgb(&left, View::Left)?, right: crop_rgb(&right, View::Right)?, gt, mask })
     };
-    let mut files = || vec![("calib.txt", calib.clone()), ("made.txt", note.clone())];
+    let mut files = || vec![(CALIB_FILE, calib.clone()), ("made.txt", note.clone())];
     Ok(write_sequence(out, how.frames, &mut frame, &mut files)?.len())
 }
 

@@ -20,7 +20,7 @@
 //! # The search range
 //! [`Sequence::ndisp_source`] is `jem match`'s rule applied to the sequence: `--ndisp`, else the `ndisp` of the
 //! root's `calib.txt` (a stated range, measured instead when it is no real bound), else none (measured).
-//! [`run`] applies it to every frame alone, which keeps each frame's map identical to `jem match` on that pair;
+//! [`run()`] applies it to every frame alone, which keeps each frame's map identical to `jem match` on that pair;
 //! [`RangeRule::FirstFrame`] instead measures once on the first frame and holds that range for the sequence (a
 //! model that carries state between frames needs one range throughout).
 //!
@@ -169,7 +169,8 @@ impl Sequence {
                 right,
             })
             .collect();
-        let calib = Some(dir.join("calib.txt")).filter(|c| layout == SequenceLayout::Folders && c.is_file());
+        let calib =
+            Some(dir.join(crate::dataset::CALIB_FILE)).filter(|c| layout == SequenceLayout::Folders && c.is_file());
         Ok(Sequence { root: dir.to_path_buf(), layout, frames, calib })
     }
 

@@ -322,14 +322,7 @@ fn match_frame(
 
 /// `timings` as (stage, seconds), each stage once, in the order first run.
 fn stage_seconds(timings: &crate::pipeline::Timings) -> Vec<(&'static str, f64)> {
-    let mut out: Vec<(&'static str, f64)> = Vec::new();
-    for (name, d) in &timings.stages {
-        match out.iter_mut().find(|(n, _)| n == name) {
-            Some((_, s)) => *s += d.as_secs_f64(),
-            None => out.push((name, d.as_secs_f64())),
-        }
-    }
-    out
+    timings.per_stage().stages.iter().map(|&(name, d)| (name, d.as_secs_f64())).collect()
 }
 
 /// The file extension of a format.

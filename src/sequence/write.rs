@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use super::FOLDERS;
+use crate::dataset::{CALIB_FILE, GT_FILE, LEFT_FILE, RIGHT_FILE};
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane, RgbImage};
 
@@ -21,11 +22,11 @@ pub struct SequenceFrame {
 }
 
 /// The files a sequence may have at its root besides its folders: [`write_sequence`] writes no others.
-pub const ROOT_FILES: [&str; 3] = ["calib.txt", "made.txt", "truth.txt"];
+pub const ROOT_FILES: [&str; 3] = [CALIB_FILE, "made.txt", "truth.txt"];
 
 /// Names in a folder that say it holds a scene or a sequence already: [`write_sequence`] refuses such a folder.
 const TAKEN: [&str; 10] =
-    ["left", "right", "gt", "mask", "calib.txt", "made.txt", "truth.txt", "im0.png", "im1.png", "disp0GT.pfm"];
+    ["left", "right", "gt", "mask", CALIB_FILE, "made.txt", "truth.txt", LEFT_FILE, RIGHT_FILE, GT_FILE];
 
 /// Writes a sequence of `count` frames into `out` (created if missing): `left/<stem>.png`, `right/<stem>.png`,
 /// `gt/<stem>.pfm` and `mask/<stem>.png` when the frames have them, then each `(name, text)` that `files` returns

@@ -1,5 +1,5 @@
 //! The memory model: what a run will need, estimated before anything large is allocated, and the guard that
-//! refuses a run that would not fit ([`check_memory`]; [`super::tile`] runs such a pair in tiles instead).
+//! refuses a run that would not fit ([`check_memory`]; [`crate::pipeline::tile`] runs such a pair in tiles instead).
 
 use std::sync::{Condvar, Mutex};
 
@@ -7,8 +7,8 @@ use crate::error::{self, Error, Result};
 use crate::params::{LrcMode, Model, Params, Schedule};
 use crate::scale;
 
-/// Estimated peak memory of [`crate::run`] in bytes for a `width × height` pair with `ndisp` labels and `params`
-/// (including [`Params::downscale`]).
+/// Estimated peak memory of [`crate::pipeline::run`] in bytes for a `width × height` pair with `ndisp` labels and
+/// `params` (including [`Params::downscale`]).
 ///
 /// The model, at the resolution the pipeline runs at (the input reduced by `params.downscale`: N pixels,
 /// M labels, one N × M `f32` volume = 4NM bytes):

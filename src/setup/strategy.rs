@@ -90,7 +90,7 @@ impl Strategy {
     /// user's own way to fit), else in tiles within the smaller of `limit_bytes` and [`TILED_BUDGET_BYTES`].
     ///
     /// # Errors
-    /// [`crate::Error::OutOfMemory`] (as [`crate::check_memory`]) when neither fits.
+    /// [`crate::Error::OutOfMemory`] (as [`super::memory::check_memory`]) when neither fits.
     pub(crate) fn choose(
         width: usize,
         height: usize,

@@ -29,12 +29,9 @@
 use rayon::prelude::*;
 
 use crate::image::{Plane, RgbImage};
+use crate::imgproc::noise::GREY_NOISE_PER_SIGMA;
 use crate::params::Params;
 use crate::scale;
-
-/// The standard deviation of a grey pixel's noise per unit of per-channel noise σn: the grey weights'
-/// √(0.299² + 0.587² + 0.114²), the channels' noise independent.
-pub(crate) const GREY_NOISE_PER_SIGMA: f32 = 0.668;
 
 /// r below this: the octave holds no detail of its own (see the module doc).
 pub(crate) const DETAIL_RATIO: f64 = 0.25;

@@ -52,6 +52,7 @@ mod scene;
 mod sequence;
 mod texture;
 
+use crate::dataset::{CALIB_FILE, GT_FILE, LEFT_FILE, MASK_FILE, RIGHT_FILE};
 use scene::Scene;
 pub use sequence::{FrameTruth, GainChange, Motion, SequenceParams, render_frame, write_synth_sequence};
 
@@ -184,11 +185,11 @@ pub fn write_scene(dir: &Path, scene: &SynthScene) -> Result<()> {
         .map(|()| bytes)
     };
     let files = [
-        ("im0.png", rgb("im0.png", &scene.left)?),
-        ("im1.png", rgb("im1.png", &scene.right)?),
-        ("calib.txt", calib_text(w, h, scene.ndisp, scene.vmin, scene.vmax).into_bytes()),
-        ("disp0GT.pfm", crate::io::pfm::encode_pfm(&scene.gt)),
-        ("mask0nocc.png", encode_mask_png(&dir.join("mask0nocc.png"), &scene.mask)?),
+        (LEFT_FILE, rgb(LEFT_FILE, &scene.left)?),
+        (RIGHT_FILE, rgb(RIGHT_FILE, &scene.right)?),
+        (CALIB_FILE, calib_text(w, h, scene.ndisp, scene.vmin, scene.vmax).into_bytes()),
+        (GT_FILE, crate::io::pfm::encode_pfm(&scene.gt)),
+        (MASK_FILE, encode_mask_png(&dir.join(MASK_FILE), &scene.mask)?),
     ];
     let paths: Vec<std::path::PathBuf> = files.iter().map(|(name, _)| dir.join(name)).collect();
     let refs: Vec<(&Path, &[u8])> = paths.iter().zip(&files).map(|(p, (_, b))| (p.as_path(), b.as_slice())).collect();

@@ -358,7 +358,10 @@ pub fn write_synth_sequence(out: &std::path::Path, params: &SequenceParams) -> R
     let (w, h, ndisp) = (params.scene.width, params.scene.height, params.scene.ndisp);
     let stems = crate::sequence::write_sequence(out, params.frames, &mut frame, &mut || {
         let (vmin, vmax) = range.get();
-        vec![("calib.txt", super::calib_text(w, h, ndisp, vmin, vmax)), ("truth.txt", truth.borrow().clone())]
+        vec![
+            (crate::dataset::CALIB_FILE, super::calib_text(w, h, ndisp, vmin, vmax)),
+            ("truth.txt", truth.borrow().clone()),
+        ]
     })?;
     Ok(stems)
 }

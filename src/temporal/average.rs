@@ -6,6 +6,7 @@ use super::exposure::Exposure;
 use super::motion::Shift;
 use crate::image::{DisparityMap, Plane, RgbImage};
 use crate::imgproc::filter::box_mean;
+use crate::imgproc::noise::GREY_NOISE_PER_SIGMA;
 
 /// The most frames a running mean holds: beyond √16 = 4 times less noise, the mean follows slow changes (light,
 /// exposure) too slowly for the little it still gains.
@@ -13,9 +14,6 @@ pub(crate) const MAX_FRAMES: u16 = 16;
 
 /// A change larger than this many standard deviations of the noise is the scene's, not the noise's.
 const CHANGE_SIGMAS: f32 = 4.0;
-
-/// The grey's noise σ for per-channel noise σ (√(0.299² + 0.587² + 0.114²)).
-const GREY_PER_CHANNEL: f32 = 0.668;
 
 /// The least per-channel noise σ the change test assumes (quantisation and the clean camera's own noise).
 const MIN_SIGMA: f32 = 0.5;
@@ -72,7 +70,7 @@ fn fold_view(mean: &mut RgbImage, count: &mut Plane<u16>, frame: &RgbImage, nois
     let (grey_frame, grey_mean) = (frame.to_grey(), mean.to_grey());
     let diff = Plane::from_parts(w, h, grey_frame.data.iter().zip(&grey_mean.data).map(|(f, m)| f - m).collect());
     let local = box_mean(&diff, 1);
-    let sigma_grey = GREY_PER_CHANNEL * noise_sigma.max(MIN_SIGMA);
+    let sigma_grey = GREY_NOISE_PER_SIGMA * noise_sigma.max(MIN_SIGMA);
     let mut restarted = Plane::new(w, h, false);
     for i in 0..w * h {
         let n = f32::from(count.data[i]);

@@ -19,6 +19,7 @@ use rayon::prelude::*;
 
 use super::motion::Shift;
 use crate::image::{Plane, RgbImage};
+use crate::imgproc::stats::nth_smallest;
 
 /// An exposure change: the current frame's grey ≈ `gain` × the reference's + `offset` (grey levels, 0–255).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -93,12 +94,12 @@ pub(crate) fn fit(reference: &Plane<f32>, current: &Plane<f32>, shift: Shift) ->
         return None;
     }
     let mid = ratios.len() / 2;
-    let mut line = (*ratios.select_nth_unstable_by(mid, f64::total_cmp).1, 0.0);
+    let mut line = (nth_smallest(&mut ratios, mid), 0.0);
     for _ in 0..3 {
         let residuals: Vec<f64> = blocks.iter().map(|&(r, c)| c - (line.0 * r + line.1)).collect();
         let mut abs: Vec<f64> = residuals.iter().map(|e| e.abs()).collect();
         let mid = abs.len() / 2;
-        let median = *abs.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let median = nth_smallest(&mut abs, mid);
         let limit = (OUTLIER_DEVIATIONS * 1.4826 * median).max(0.5);
         keep.iter_mut().zip(&residuals).for_each(|(k, e)| *k = e.abs() <= limit);
         line = least_squares(&blocks, &keep)?;

@@ -232,7 +232,7 @@ fn carry_previous(
     grey: &Plane<f32>,
     noise: f32,
 ) -> (PipelineOutput, Plane<bool>, Option<Motion>) {
-    let limit = RELEASE_NOISE_MULTIPLE * (motion::GREY_DIFFERENCE_PER_SIGMA as f32 * noise + 0.5);
+    let limit = RELEASE_NOISE_MULTIPLE * (crate::imgproc::noise::GREY_DIFFERENCE_PER_SIGMA as f32 * noise + 0.5);
     let reference = compared.reference.as_ref().unwrap_or(&prev.grey);
     match beyond_shift(reference, grey, &prev.answer.disparity, compared.shift, noise) {
         Some(m) => {
@@ -269,7 +269,7 @@ fn beyond_shift(
     shift: Shift,
     noise: f32,
 ) -> Option<Motion> {
-    let tracker = Tracker::new(reference, grey, disparity, crate::setup::working::GREY_NOISE_PER_SIGMA * noise);
+    let tracker = Tracker::new(reference, grey, disparity, crate::imgproc::noise::GREY_NOISE_PER_SIGMA * noise);
     let (dx, dy) = (shift.dx as f64, shift.dy as f64);
     let tracks = tracker.follow(|x, y, _| Some((x - dx, y - dy)), Reach::Wide);
     let n = tracks.len() as f64;

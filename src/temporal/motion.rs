@@ -5,6 +5,7 @@ use rayon::prelude::*;
 
 use crate::image::Plane;
 use crate::imgproc::filter::{box_mean, box_reduce};
+use crate::imgproc::noise::GREY_DIFFERENCE_PER_SIGMA;
 use crate::pipeline::PipelineOutput;
 
 /// The shift search covers ±this many pixels of the search image (the grey image reduced until it is at most
@@ -96,20 +97,15 @@ pub(crate) fn global_shift(prev: &Plane<f32>, cur: &Plane<f32>) -> Shift {
 }
 
 /// The share of the image's own contrast that the shift leaves unexplained beyond what noise gives: (residual −
-/// 0.754·σn) / σ(grey). Two frames of one scene read about 0 (the frames' noise accounts for the residual: the
-/// grey of independent per-channel noise σn differs between two frames by 0.754·σn on average), a new scene
-/// about 1 or more.
+/// [`GREY_DIFFERENCE_PER_SIGMA`]·σn) / σ(grey). Two frames of one scene read about 0 (the frames' noise accounts for
+/// the residual: the grey of independent per-channel noise σn differs between two frames by that much on average),
+/// a new scene about 1 or more.
 pub(crate) fn unexplained(shift: Shift, cur: &Plane<f32>, noise_sigma: f32) -> f64 {
     let n = cur.data.len().max(1) as f64;
     let mean = cur.data.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
     let var = cur.data.iter().map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>() / n;
     (shift.residual - GREY_DIFFERENCE_PER_SIGMA * f64::from(noise_sigma)) / var.sqrt().max(1e-6)
 }
-
-/// The mean |difference| of the grey of two frames with independent per-channel noise of σ 1: the grey's σ is
-/// √(0.299² + 0.587² + 0.114²) = 0.668, the difference's √2 times that, and its mean absolute value √(2/π) times
-/// its σ.
-pub(crate) const GREY_DIFFERENCE_PER_SIGMA: f64 = 0.754;
 
 /// The previous frame's answer moved by `shift`: pixel (x, y) takes what (x + dx, y + dy) held; where that is
 /// outside the frame there is no answer (`inf`, confidence 0, not consistent).

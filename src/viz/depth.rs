@@ -4,6 +4,7 @@
 
 use super::{Canvas, colormap, vstack};
 use crate::image::Plane;
+use crate::imgproc::stats::rank_value;
 
 /// The share of the finite depths left outside the automatic range at each end: a handful of pixels put
 /// kilometres away (the sky, a mismatch) must not squeeze the scene into one colour.
@@ -16,9 +17,7 @@ pub fn depth_range(depth: &Plane<f32>) -> Option<(f32, f32)> {
     if v.is_empty() {
         return None;
     }
-    v.sort_unstable_by(f32::total_cmp);
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-    Some((at(RANGE_TAIL), at(1.0 - RANGE_TAIL)))
+    Some((rank_value(&mut v, RANGE_TAIL), rank_value(&mut v, 1.0 - RANGE_TAIL)))
 }
 
 /// The picture of a depth map over `[near, far]`: each pixel coloured by 1/Z (pixels without depth black), and

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use super::{
     BACKGROUND, Canvas, ErrorRule, NO_GT, calib_range, colorize, error_map, finite_range, fit_width, hstack, vstack,
 };
-use crate::dataset::{Discovery, Layout, Pair, Purpose};
+use crate::dataset::{CALIB_FILE, Discovery, LEFT_FILE, Layout, Pair, Purpose, Truth};
 use crate::error::{Error, Result};
 use crate::eval::{Resolution, file_resolution, scene_resolution};
 use crate::image::{DisparityMap, Plane};
@@ -50,6 +50,14 @@ pub struct TruthFiles {
 }
 
 impl TruthFiles {
+    /// The files of `truth` that exist: none without its disparity map; its mask when that exists.
+    fn existing(truth: Truth) -> Option<TruthFiles> {
+        truth.disparity.is_file().then(|| TruthFiles {
+            occlusion: truth.mask.filter(|m| m.is_file()).map(Occlusion::Mask),
+            disparity: truth.disparity,
+        })
+    }
+
     /// Every file it reads.
     pub fn paths(&self) -> Vec<&Path> {
         let occ = self.occlusion.as_ref().map(|o| match o {
@@ -153,8 +161,7 @@ pub fn gt_rule(gt: &Path, layout: Option<Layout>, scale: Option<u32>) -> Result<
     } else {
         Layout::Middlebury
     });
-    let mask = folder.join("mask0nocc.png");
-    let mask = mask.is_file().then_some(Occlusion::Mask(mask));
+    let mask = Truth::in_scene(folder).mask.filter(|m| m.is_file()).map(Occlusion::Mask);
     Ok(match layout {
         Layout::Kitti2015 | Layout::Kitti2012 => {
             // The sibling map (disp_noc_0 <-> disp_occ_0) with the same file name, if there is one.
@@ -275,11 +282,7 @@ fn pair_row(pair: &Pair, result: PathBuf, config: PathBuf, opts: &SheetOptions) 
     let truth = if pair.layout.is_kitti() {
         kitti_truth(pair.truth(true, None).disparity, pair.truth(false, None).disparity)
     } else {
-        let t = pair.truth(false, opts.gt.as_deref());
-        t.disparity.is_file().then(|| TruthFiles {
-            occlusion: t.mask.filter(|m| m.is_file()).map(Occlusion::Mask),
-            disparity: t.disparity,
-        })
+        TruthFiles::existing(pair.truth(false, opts.gt.as_deref()))
     };
     let calib = pair.calib.clone().filter(|c| c.is_file());
     SheetRow {
@@ -298,7 +301,7 @@ fn pair_row(pair: &Pair, result: PathBuf, config: PathBuf, opts: &SheetOptions) 
 /// Every MiddEval3 scene folder under `dir` with `im0.png` and `disp0<alg>.pfm`.
 fn middlebury_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<SheetRow>> {
     let result_name = format!("disp0{alg}.pfm");
-    let scenes = crate::dataset::walk::find_dirs_with(&[dir.to_path_buf()], &["im0.png", &result_name])?;
+    let scenes = crate::dataset::walk::find_dirs_with(&[dir.to_path_buf()], &[LEFT_FILE, &result_name])?;
     if scenes.is_empty() {
         return Err(Error::Input(format!(
             "no scene folder with im0.png and {result_name} (MiddEval3), nor a KITTI or ETH3D tree, under {}",
@@ -308,23 +311,19 @@ fn middlebury_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<She
     scenes
         .into_iter()
         .map(|s| {
-            let gt = s.join("disp0GT.pfm");
-            let (truth, rule, resolution) = if gt.is_file() {
-                let (scale, resolution) = middlebury_resolution(&s, opts.scale)?;
-                let mask = s.join("mask0nocc.png");
-                let occlusion = mask.is_file().then_some(Occlusion::Mask(mask));
-                (Some(TruthFiles { disparity: gt, occlusion }), ErrorRule::Middlebury { scale }, resolution)
-            } else {
-                (None, ErrorRule::Middlebury { scale: opts.scale.unwrap_or(1) }, None)
+            let truth = TruthFiles::existing(Truth::in_scene(&s));
+            let (scale, resolution) = match &truth {
+                Some(_) => middlebury_resolution(&s, opts.scale)?,
+                None => (opts.scale.unwrap_or(1), None),
             };
             Ok(SheetRow {
                 name: crate::batch::scene_name(&s),
                 location: s.clone(),
-                left: s.join("im0.png"),
+                left: s.join(LEFT_FILE),
                 result: s.join(&result_name),
                 truth,
-                calib: Some(s.join("calib.txt")),
-                rule,
+                calib: Some(s.join(CALIB_FILE)),
+                rule: ErrorRule::Middlebury { scale },
                 resolution,
                 config: s.join(format!("config{alg}.toml")),
             })
@@ -557,3 +556,7 @@ fn footer(width: usize) -> Canvas {
     }
     c
 }
+
+#[cfg(test)]
+#[path = "sheet_tests.rs"]
+mod tests;

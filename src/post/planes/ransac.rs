@@ -154,10 +154,8 @@ fn ransac_segment(pts: &Points, p: &SpsParams, min_weight: f64, rng: &mut SplitM
         }
         // Too few points or all samples degenerate: fronto-parallel at the median.
         None => {
-            let mut v = pts.d.clone();
-            let mid = (v.len() - 1) / 2;
-            let (_, m, _) = v.select_nth_unstable_by(mid, f32::total_cmp);
-            Some([0.0, 0.0, f64::from(*m)])
+            let median = crate::imgproc::stats::lower_median(&mut pts.d.clone());
+            Some([0.0, 0.0, f64::from(median)])
         }
     }
 }

@@ -96,7 +96,5 @@ fn median_of_data(scene: &Scene) -> f64 {
     if v.is_empty() {
         return 0.0;
     }
-    let mid = (v.len() - 1) / 2;
-    let (_, m, _) = v.select_nth_unstable_by(mid, f32::total_cmp);
-    f64::from(*m)
+    f64::from(crate::imgproc::stats::lower_median(&mut v))
 }
