@@ -111,8 +111,12 @@ impl Output {
     /// reliable pixels only (`jem --min-confidence`).
     ///
     /// # Errors
-    /// As [`Output::confidence_map`].
+    /// [`crate::Error::InvalidParam`] naming `min_confidence` when it is not a confidence from 0 to 1 (NaN included);
+    /// as [`Output::confidence_map`].
     pub fn reliable_disparity(&self, min_confidence: f32) -> Result<DisparityMap> {
+        if !(0.0..=1.0).contains(&min_confidence) {
+            return Err(crate::Error::param("min_confidence", min_confidence, "a confidence from 0 to 1"));
+        }
         let confidence = self.confidence_map()?;
         let mut out = self.disparity.clone();
         out.data.iter_mut().zip(&confidence.data).filter(|&(_, &c)| c < min_confidence).for_each(|(d, _)| {
@@ -479,6 +483,10 @@ mod tests {
             assert!(if c < 0.95 { k.is_infinite() } else { k.to_bits() == d.to_bits() });
         }
         assert_eq!(out.reliable_disparity(0.0).unwrap().data, out.disparity.data);
+        for outside in [-0.1, 1.5, f32::NAN] {
+            let e = out.reliable_disparity(outside).unwrap_err().to_string();
+            assert!(e.starts_with("invalid min_confidence") && e.contains("from 0 to 1"), "{e}");
+        }
     }
 
     /// A matcher told not to compute the confidence map skips that stage and gives the same disparity map.
