@@ -6,6 +6,10 @@
 //! place happen while the registry is held (`hold`), so a signal waits for them: files written as one are all
 //! renamed, or none (a temporary file removed under a write stays unrenamed, and the write fails).
 
+// Without the toolkit nothing removes what is registered (only the CLI handles signals): the registry is kept so
+// that the writes stay the same code either way.
+#![cfg_attr(not(feature = "toolkit"), allow(dead_code, unreachable_pub))]
+
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard};
 
@@ -65,7 +69,7 @@ fn remove(entries: impl Iterator<Item = Entry>) {
     for entry in entries {
         match entry {
             Entry::File(path, token) => {
-                if token.is_none_or(|t| crate::dataset::lock_holds(&path, &t)) {
+                if still_held(&path, token.as_deref()) {
                     let _ = std::fs::remove_file(&path);
                 }
             }
@@ -74,6 +78,19 @@ fn remove(entries: impl Iterator<Item = Entry>) {
             }
         }
     }
+}
+
+/// Whether a file registered with `token` is still this run's to remove: a file without a token always is; one with
+/// a data set's lock token only while that lock still holds it (the toolkit's data sets are the only holders).
+#[cfg(feature = "toolkit")]
+fn still_held(path: &Path, token: Option<&str>) -> bool {
+    token.is_none_or(|t| crate::dataset::lock_holds(path, t))
+}
+
+/// Whether a file registered with `token` is still this run's to remove (without the toolkit no file has a token).
+#[cfg(not(feature = "toolkit"))]
+fn still_held(_path: &Path, token: Option<&str>) -> bool {
+    token.is_none()
 }
 
 #[cfg(test)]

@@ -44,14 +44,21 @@
 #![deny(missing_docs)]
 #![warn(unreachable_pub)]
 
+#[cfg(feature = "toolkit")]
 pub mod batch;
+#[cfg(feature = "toolkit")]
 pub mod cleanup;
+#[cfg(not(feature = "toolkit"))]
+mod cleanup;
 mod condition;
 mod cost;
+#[cfg(feature = "toolkit")]
 pub mod dataset;
+#[cfg(feature = "toolkit")]
 pub mod degrade;
 mod diagnose;
 mod error;
+#[cfg(feature = "toolkit")]
 pub mod eval;
 mod fastmath;
 pub mod geometry;
@@ -67,15 +74,21 @@ mod pipeline;
 mod post;
 mod process;
 pub mod rectify;
+#[cfg(feature = "toolkit")]
 pub mod report;
 mod rng;
 mod scale;
+#[cfg(feature = "toolkit")]
 pub mod sequence;
 mod setup;
+#[cfg(feature = "toolkit")]
 pub mod synth;
+#[cfg(feature = "toolkit")]
 mod table;
 mod temporal;
+#[cfg(feature = "toolkit")]
 pub mod threads;
+#[cfg(feature = "toolkit")]
 pub mod viz;
 
 pub use diagnose::{PairCheck, Repetition};
@@ -84,6 +97,7 @@ pub use image::{DisparityMap, Plane, RgbImage};
 pub use matcher::{Exposure, FrameKind, Matcher, Output, Progress, RunPlan, Tiles, default_memory_limit};
 pub use params::{LrcMode, Model, Params};
 pub use pipeline::{Measured, Timings, VerticalMeasured};
+#[cfg(feature = "toolkit")]
 pub use process::peak_rss_bytes;
 pub use setup::NdispSource;
 pub use setup::memory::MemoryBudget;

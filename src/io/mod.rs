@@ -18,7 +18,9 @@ use crate::image::{DisparityMap, RgbImage};
 
 pub use png::{IMAGE_FORMATS, ImageHeader, PNG16_MAX_DISPARITY};
 pub use write::{AllOrNone, check_replaceable, write_all_or_none, write_atomic, write_atomic_with};
-pub(crate) use write::{file_kind, sweep_stale_temps};
+pub(crate) use write::file_kind;
+#[cfg(feature = "toolkit")]
+pub(crate) use write::sweep_stale_temps;
 
 /// An image file (any of [`IMAGE_FORMATS`]; 8 or 16 bit; grey, RGB or RGBA) as an [`RgbImage`]: samples on the 8-bit
 /// scale (16-bit values divided by 257), grey as three equal channels, alpha dropped.
@@ -344,6 +346,7 @@ pub fn read_regular(path: &Path) -> Result<Vec<u8>> {
 /// A regular file's text ([`read_regular`]), at most `max` bytes of it ([`read_capped`]); `None` when it is
 /// missing, not a regular file, too large or not UTF-8: for the small files jem writes beside its results and
 /// reads back when they are there.
+#[cfg_attr(not(feature = "toolkit"), allow(dead_code))]
 pub(crate) fn read_small_text(path: &Path, max: u64) -> Option<String> {
     String::from_utf8(read_capped(path, max, "file").ok()?).ok()
 }

@@ -247,6 +247,7 @@ const TEMP_MARK: &str = ".jem-tmp-";
 /// Removes the temporary files ([`temp_path`]) in `dir` that a run of this machine left when it was killed
 /// (`kill -9` cannot be caught): those whose process is gone. Another machine's, and a live run's, are left alone;
 /// without `/proc` nothing is removed.
+#[cfg(feature = "toolkit")]
 pub(crate) fn sweep_stale_temps(dir: &Path) {
     if !crate::process::proc_available() {
         return;
