@@ -66,7 +66,7 @@ const MAX_IDENTICAL_SHARE: f32 = 0.99;
 /// What was checked on a pair (see the module doc); `None` where it could not be measured.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PairCheck {
-    /// The share of the reliable matches at negative disparity (0..1; over [`SWAPPED_SHARE`]: swapped).
+    /// The share of the reliable matches at negative disparity (0..1; over 0.6: swapped, see the module doc).
     pub negative_share: Option<f32>,
     /// The right view's vertical offset measured from the row profiles (px; + = the right view's content lower).
     pub vertical_px: Option<f32>,
