@@ -30,9 +30,12 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
-//! Around matching: [`eval`] scores results against ground truth (MiddEval3, KITTI, ETH3D), [`batch`] and
-//! [`dataset`] run whole data sets, [`viz`] draws colour maps, [`report`] writes an HTML page of results,
-//! [`synth`] renders scenes with exact ground truth, [`degrade`] makes degraded copies of a data set.
+//! The stereo library is [`Matcher`] and its types at the root, [`params`], [`io`], [`geometry`] and [`rectify`].
+//! The benchmark toolkit around it is behind the `toolkit` feature (on with the default `cli`; a library user with
+//! `default-features = false` compiles none of it): [`eval`] scores results against ground truth (MiddEval3, KITTI,
+//! ETH3D), [`batch`] and [`dataset`] run whole data sets, [`viz`] draws colour maps, [`report`] writes an HTML page
+//! of results, [`synth`] renders scenes with exact ground truth, [`degrade`] makes degraded copies of a data set,
+//! [`sequence`] runs stereo sequences, and [`threads`] and [`cleanup`] serve the front ends.
 //!
 //! ## Inside
 //!

@@ -17,10 +17,10 @@ use crate::error::{Error, Result};
 use crate::image::{DisparityMap, RgbImage};
 
 pub use png::{IMAGE_FORMATS, ImageHeader, PNG16_MAX_DISPARITY};
-pub use write::{AllOrNone, check_replaceable, write_all_or_none, write_atomic, write_atomic_with};
 pub(crate) use write::file_kind;
 #[cfg(feature = "toolkit")]
 pub(crate) use write::sweep_stale_temps;
+pub use write::{AllOrNone, check_replaceable, write_all_or_none, write_atomic, write_atomic_with};
 
 /// An image file (any of [`IMAGE_FORMATS`]; 8 or 16 bit; grey, RGB or RGBA) as an [`RgbImage`]: samples on the 8-bit
 /// scale (16-bit values divided by 257), grey as three equal channels, alpha dropped.
