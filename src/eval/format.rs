@@ -10,6 +10,7 @@ use super::regions::RegionReport;
 use super::report::AlgReport;
 use super::sparsification::Sparsification;
 use super::text::{fixed, json_num, json_str};
+use crate::error::Error;
 use crate::table::Table;
 
 /// How [`render`] prints reports.
@@ -26,14 +27,14 @@ pub enum Format {
 }
 
 impl FromStr for Format {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = Error;
+    fn from_str(s: &str) -> std::result::Result<Self, Error> {
         match s {
             "table" => Ok(Format::Table),
             "csv" => Ok(Format::Csv),
             "json" => Ok(Format::Json),
             "markdown" | "md" => Ok(Format::Markdown),
-            _ => Err(format!("unknown format {s:?} (expected table, csv, json or markdown)")),
+            _ => Err(Error::argument(format!("unknown format {s:?} (expected table, csv, json or markdown)"))),
         }
     }
 }

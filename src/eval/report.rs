@@ -4,7 +4,6 @@
 //! Per-scene failures are recorded, not returned. [`find_gt_scenes`] lists MiddEval3 scene folders with ground
 //! truth.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
@@ -125,11 +124,11 @@ impl AlgReport {
 /// Folders under `dir` (recursively, `dir` included) holding a `disp0GT.pfm`, sorted by path.
 ///
 /// # Errors
-/// [`Error::Io`] if `dir` cannot be read, [`Error::Input`] if it holds no such folder.
+/// [`Error::Io`] if `dir` cannot be read, [`Error::Dataset`] if it holds no such folder.
 pub fn find_gt_scenes(dir: &Path) -> Result<Vec<PathBuf>> {
     let scenes = crate::dataset::walk::find_dirs_with(&[dir.to_path_buf()], &["disp0GT.pfm"])?;
     if scenes.is_empty() {
-        return Err(Error::Input(format!("no scene folder with a disp0GT.pfm under {}", dir.display())));
+        return Err(Error::dataset(format!("no scene folder with a disp0GT.pfm under {}", dir.display())));
     }
     Ok(scenes)
 }
@@ -167,13 +166,13 @@ pub fn evaluate_dir(
     let how = Discovery { layout: src.layout, gt: src.gt.clone() };
     let pairs = crate::dataset::discover(&[dir.to_path_buf()], Purpose::Score, &how)?;
     let Some(layout) = pairs.first().map(|p| p.layout) else {
-        return Err(Error::Input(format!(
+        return Err(Error::dataset(format!(
             "no scene with ground truth under {} (MiddEval3 disp0GT.pfm, KITTI disp_noc*/ or disp_occ*/, ETH3D *_gt/)",
             dir.display()
         )));
     };
     if let Some(other) = pairs.iter().find(|p| p.layout != layout) {
-        return Err(Error::Input(format!(
+        return Err(Error::dataset(format!(
             "{} holds {} and {} data ({} and {}); evaluate one data set at a time",
             dir.display(),
             layout.name(),
@@ -203,7 +202,7 @@ pub fn evaluate_dir(
                 sparsification,
                 weight: if layout == Layout::Middlebury { scene_weight(&name) } else { 1.0 },
                 truth_unusable: metrics.as_ref().is_err_and(|e| !blames_result(e, &files.disparity)),
-                metrics: metrics.map_err(|e| error_chain(&e)),
+                metrics: metrics.map_err(|e| e.chain()),
                 seconds: read_seconds(&files.time),
                 name,
                 dir,
@@ -219,13 +218,13 @@ pub fn evaluate_dir(
 fn check_truth(pair: &Pair, mask_mode: MaskMode, src: &Sources) -> Result<()> {
     let truth = pair.truth(mask_mode == MaskMode::All, src.gt.as_deref());
     if !truth.disparity.is_file() {
-        return Err(Error::Input(format!("no ground truth {}", truth.disparity.display())));
+        return Err(Error::dataset(format!("no ground truth {}", truth.disparity.display())));
     }
     if let Some(mask) = truth.mask.filter(|m| mask_mode == MaskMode::Nonocc && !m.is_file()) {
-        return Err(Error::Input(format!("no {} (needed for the nonocc mask)", mask.display())));
+        return Err(Error::dataset(format!("no {} (needed for the nonocc mask)", mask.display())));
     }
     if let Some(calib) = pair.calib.as_ref().filter(|c| pair.layout == Layout::Middlebury && !c.is_file()) {
-        return Err(Error::Input(format!("no {} (needed for the search range)", calib.display())));
+        return Err(Error::dataset(format!("no {} (needed for the search range)", calib.display())));
     }
     Ok(())
 }
@@ -238,7 +237,17 @@ fn blames_result(e: &Error, result: &Path) -> bool {
             path == result
         }
         Error::Calib { .. } => false,
-        Error::Input(msg) => msg.starts_with("no result file") || msg.starts_with(&result.display().to_string()),
+        // Messages of these name the file they concern first; a missing result is named after "no result file".
+        Error::InputImage { .. }
+        | Error::InputFile { .. }
+        | Error::Config { .. }
+        | Error::Dataset { .. }
+        | Error::Locked { .. }
+        | Error::Output { .. }
+        | Error::Argument { .. } => {
+            let msg = e.to_string();
+            msg.starts_with("no result file") || msg.starts_with(&result.display().to_string())
+        }
         _ => true,
     }
 }
@@ -250,7 +259,7 @@ fn score_pair(pair: &Pair, alg: &str, scale: u32, mask_mode: MaskMode, src: &Sou
     }
     let result = pair.result_files(alg, src.results.as_deref()).disparity;
     if !result.is_file() {
-        return Err(Error::Input(format!("no result file {}", result.display())));
+        return Err(Error::dataset(format!("no result file {}", result.display())));
     }
     let truth = pair.truth(mask_mode == MaskMode::All, src.gt.as_deref());
     // No clipping: neither benchmark clips a result to a search range.
@@ -258,7 +267,7 @@ fn score_pair(pair: &Pair, alg: &str, scale: u32, mask_mode: MaskMode, src: &Sou
     if pair.layout == Layout::Eth3d {
         let mask = truth.mask.filter(|_| mask_mode == MaskMode::Nonocc);
         if let Some(m) = mask.as_ref().filter(|m| !m.is_file()) {
-            return Err(Error::Input(format!("no {} (needed for the nonocc mask)", m.display())));
+            return Err(Error::dataset(format!("no {} (needed for the nonocc mask)", m.display())));
         }
         return evaluate_files(&result, &truth.disparity, mask.as_deref(), unbounded, scale, mask_mode);
     }
@@ -270,7 +279,7 @@ fn score_pair(pair: &Pair, alg: &str, scale: u32, mask_mode: MaskMode, src: &Sou
     super::interpolate_background(&mut map);
     let mut metrics = evaluate(&map, &gt, None, unbounded, scale, mask_mode);
     if metrics.pixels == 0 {
-        return Err(Error::Input(format!("{}: no pixel with ground truth", truth.disparity.display())));
+        return Err(Error::dataset_at(&truth.disparity, "no pixel with ground truth"));
     }
     metrics.invalid = 100.0 * invalid_before as f64 / known as f64;
     Ok(metrics)
@@ -307,7 +316,7 @@ fn infer_common_scale(root: &Path, dirs: &[PathBuf]) -> Result<(u32, Option<Stri
     let mut from_sizes = 0;
     for d in dirs {
         let Some(res) = scene_resolution(d) else {
-            return Err(Error::Input(format!(
+            return Err(Error::dataset(format!(
                 "cannot tell the resolution of {}: no trainingQ/H/F-like folder in its path, and its name and \
                  image size are not a MiddEval3 scene's; pass --scale 1, 2 or 4",
                 d.display()
@@ -316,7 +325,7 @@ fn infer_common_scale(root: &Path, dirs: &[PathBuf]) -> Result<(u32, Option<Stri
         from_sizes += usize::from(res.from_contents());
         match found {
             Some((f, other)) if f != res.scale => {
-                return Err(Error::Input(format!(
+                return Err(Error::dataset(format!(
                     "{} and {} are at different resolutions; evaluate one folder at a time or pass --scale",
                     other.display(),
                     d.display()
@@ -325,7 +334,7 @@ fn infer_common_scale(root: &Path, dirs: &[PathBuf]) -> Result<(u32, Option<Stri
             _ => found = Some((res.scale, d)),
         }
     }
-    let (scale, _) = found.ok_or_else(|| Error::Input("no scenes".into()))?;
+    let (scale, _) = found.ok_or_else(|| Error::dataset("no scenes"))?;
     let note = (from_sizes > 0).then(|| {
         let of = if from_sizes == dirs.len() { "its".to_string() } else { format!("{from_sizes} of its") };
         format!(
@@ -360,17 +369,6 @@ fn read_seconds(path: &Path) -> Option<f64> {
     let text = text.trim();
     let number = text.strip_prefix("runtime").map_or(text, str::trim_start);
     number.parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0)
-}
-
-/// The error and its sources on one line.
-pub(super) fn error_chain(e: &Error) -> String {
-    let mut msg = e.to_string();
-    let mut source = std::error::Error::source(e);
-    while let Some(s) = source {
-        let _ = write!(msg, ": {s}");
-        source = s.source();
-    }
-    msg
 }
 
 #[cfg(test)]

@@ -183,7 +183,7 @@ struct Loaded {
 /// sequence's `calib.txt` range, else none).
 ///
 /// # Errors
-/// [`Error::Input`] when the sequence has no ground truth, or no frame could be scored; a malformed
+/// [`Error::Dataset`] when the sequence has no ground truth, or no frame could be scored; a malformed
 /// `calib.txt`. Per-frame problems are recorded in the report.
 pub fn evaluate_sequence(
     results: &Path,
@@ -193,7 +193,7 @@ pub fn evaluate_sequence(
     ndisp: Option<usize>,
 ) -> Result<SequenceReport> {
     if !seq.has_ground_truth() {
-        return Err(Error::Input(format!("{}: the sequence has no ground truth (gt/<stem>.pfm)", seq.root.display())));
+        return Err(Error::dataset_at(&seq.root, "the sequence has no ground truth (gt/<stem>.pfm)"));
     }
     let ndisp = match (ndisp, &seq.calib) {
         (Some(n), _) => n,
@@ -232,7 +232,7 @@ pub fn evaluate_sequence(
         SequenceReport { results: results.to_path_buf(), sequence: seq.root.clone(), mask: mask_mode, scale, frames };
     if report.mean().is_none() {
         let why = report.excluded().next().map_or(String::new(), |(s, e)| format!(" (frame {s}: {e})"));
-        return Err(Error::Input(format!("{}: no frame could be scored{why}", results.display())));
+        return Err(Error::dataset_at(results, format!("no frame could be scored{why}")));
     }
     Ok(report)
 }
@@ -245,7 +245,7 @@ fn result_extension(results: &Path) -> String {
 
 /// Loads a frame's result, truth and mask, or says why it cannot be scored.
 fn load_frame(results: &Path, f: &crate::sequence::Frame, ext: &str) -> std::result::Result<Loaded, String> {
-    let chain = |e: Error| super::report::error_chain(&e);
+    let chain = |e: Error| e.chain();
     let Some(gt_path) = &f.gt else { return Err("no ground truth".into()) };
     let path = results.join(format!("{}.{ext}", f.stem));
     if !path.is_file() {
