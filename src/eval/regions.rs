@@ -35,6 +35,7 @@
 //! Complexity: O(w·h) per scene besides the sort of the scored pixels by texture (O(n log n)).
 
 use std::path::Path;
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
@@ -278,7 +279,7 @@ pub struct RegionReport {
     /// Factor to full-resolution px.
     pub scale: u32,
     /// (scene name, MiddEval3 weight, its split or why there is none), in the report's order.
-    pub scenes: Vec<(String, f64, std::result::Result<RegionSplit, String>)>,
+    pub scenes: Vec<(String, f64, std::result::Result<RegionSplit, Arc<Error>>)>,
 }
 
 impl RegionReport {
@@ -326,7 +327,7 @@ pub fn split_report(report: &AlgReport) -> Result<RegionReport> {
         .par_iter()
         .map(|s| {
             let split = match &s.metrics {
-                Ok(_) => split_scene(&s.dir, &report.alg, report.scale).map_err(|e| e.chain()),
+                Ok(_) => split_scene(&s.dir, &report.alg, report.scale).map_err(Arc::new),
                 Err(e) => Err(e.clone()),
             };
             (s.name.clone(), s.weight, split)

@@ -5,6 +5,7 @@
 //! truth.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
@@ -35,7 +36,7 @@ pub struct SceneResult {
     /// MiddEval3 weight ([`scene_weight`]); 1 for KITTI and ETH3D.
     pub weight: f64,
     /// The scores, or why the scene could not be evaluated.
-    pub metrics: std::result::Result<Metrics, String>,
+    pub metrics: std::result::Result<Metrics, Arc<Error>>,
     /// Run time from `time<alg>.txt`, when present and readable.
     pub seconds: Option<f64>,
     /// How well the confidence map beside the result ranks its errors, when there is one (and it reads).
@@ -93,9 +94,9 @@ impl AlgReport {
         })
     }
 
-    /// The scenes left out of the averages, with the reason.
-    pub fn excluded(&self) -> impl Iterator<Item = (&str, &str)> {
-        self.scenes.iter().filter_map(|s| s.metrics.as_ref().err().map(|e| (s.name.as_str(), e.as_str())))
+    /// The scenes left out of the averages, with the reason ([`Error::chain`]).
+    pub fn excluded(&self) -> impl Iterator<Item = (&str, String)> {
+        self.scenes.iter().filter_map(|s| s.metrics.as_ref().err().map(|e| (s.name.as_str(), e.chain())))
     }
 
     /// Mean run time per pair over the evaluated scenes that have a time file, and how many had one.
@@ -202,7 +203,7 @@ pub fn evaluate_dir(
                 sparsification,
                 weight: if layout == Layout::Middlebury { scene_weight(&name) } else { 1.0 },
                 truth_unusable: metrics.as_ref().is_err_and(|e| !blames_result(e, &files.disparity)),
-                metrics: metrics.map_err(|e| e.chain()),
+                metrics: metrics.map_err(Arc::new),
                 seconds: read_seconds(&files.time),
                 name,
                 dir,
@@ -382,7 +383,7 @@ pub(super) mod tests {
             name: name.into(),
             dir: PathBuf::from(name),
             weight: scene_weight(name),
-            metrics: if ok { Ok(m) } else { Err("no result".into()) },
+            metrics: if ok { Ok(m) } else { Err(Arc::new(Error::dataset("no result"))) },
             seconds: Some(avgerr),
             sparsification: None,
             truth_unusable: false,
@@ -410,7 +411,7 @@ pub(super) mod tests {
         assert!((w.rms - 2.0 * 6.0 / 2.5).abs() < 1e-12);
         assert_eq!((w.bad2, w.pixels), (10.0, 300));
         assert!((r.mean().unwrap().avgerr - 7.0 / 3.0).abs() < 1e-12);
-        assert_eq!(r.excluded().collect::<Vec<_>>(), vec![("Vintage", "no result")]);
+        assert_eq!(r.excluded().collect::<Vec<_>>(), vec![("Vintage", "no result".to_string())]);
         assert_eq!(r.mean_seconds(), Some((7.0 / 3.0, 3)));
     }
 }

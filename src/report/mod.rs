@@ -22,6 +22,7 @@ mod html;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
@@ -107,7 +108,7 @@ struct AlgCell {
     /// Its pictures, or why there are none (`None`: no result).
     pictures: Option<std::result::Result<Pictures, String>>,
     /// Its scores, or why there are none (`None`: the scene has no ground truth).
-    metrics: Option<std::result::Result<Metrics, String>>,
+    metrics: Option<std::result::Result<Metrics, Arc<Error>>>,
     /// Its run time, in seconds.
     seconds: Option<f64>,
     /// The paper's avgErr for the scene, when a paper column is shown.
