@@ -87,9 +87,16 @@ pub struct Recipe(pub Vec<Degradation>);
 const FULL_WELL_ELECTRONS: f64 = 255.0 * 16.0;
 
 impl FromStr for Degradation {
-    type Err = String;
+    type Err = Error;
 
-    fn from_str(text: &str) -> std::result::Result<Self, String> {
+    fn from_str(text: &str) -> std::result::Result<Self, Error> {
+        Degradation::parse_step(text).map_err(Error::argument)
+    }
+}
+
+impl Degradation {
+    /// [`Degradation::from_str`], with the message alone.
+    fn parse_step(text: &str) -> std::result::Result<Self, String> {
         let mut parts = text.split(':');
         let kind = parts.next().unwrap_or_default();
         let args: Vec<&str> = parts.collect();
@@ -191,9 +198,9 @@ impl fmt::Display for Degradation {
 }
 
 impl FromStr for Recipe {
-    type Err = String;
+    type Err = Error;
 
-    fn from_str(text: &str) -> std::result::Result<Self, String> {
+    fn from_str(text: &str) -> std::result::Result<Self, Error> {
         if text == "none" {
             return Ok(Recipe(Vec::new()));
         }
@@ -375,26 +382,22 @@ pub const COPIED_FILES: [&str; 5] = [CALIB_FILE, GT_FILE, MASK_FILE, "disp1GT.pf
 /// (`sweep_stale`). Returns the degraded scene folders.
 ///
 /// # Errors
-/// [`Error::Input`] if `out` exists and is not an empty folder, or `out` and `src` contain one another, or `src`
-/// holds no scene; [`Error::Io`] / [`Error::Image`] naming the file for unreadable inputs or failed writes.
+/// [`Error::Output`] if `out` exists and is not an empty folder, or `out` and `src` contain one another,
+/// [`Error::Dataset`] if `src` holds no scene; [`Error::Io`] / [`Error::Image`] naming the file for unreadable inputs or failed writes.
 pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Result<Vec<PathBuf>> {
     let src_real = std::fs::canonicalize(src).map_err(|e| Error::io(src, e))?;
     if out.exists() {
         let empty = std::fs::read_dir(out).map_err(|e| Error::io(out, e))?.next().is_none();
         if !out.is_dir() || !empty {
-            return Err(Error::Input(format!(
-                "{}: exists and is not an empty folder (refusing to write into it)",
-                out.display()
-            )));
+            return Err(Error::output_at(out, "exists and is not an empty folder (refusing to write into it)"));
         }
     }
     let out_real = resolve_new_path(out)?;
     if out_real.starts_with(&src_real) || src_real.starts_with(&out_real) {
-        return Err(Error::Input(format!(
-            "{}: the output folder must be outside the input {} (and not contain it)",
-            out.display(),
-            src.display()
-        )));
+        return Err(Error::output_at(
+            out,
+            format!("the output folder must be outside the input {} (and not contain it)", src.display()),
+        ));
     }
     let parent = match out.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
@@ -403,10 +406,7 @@ pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Resul
     crate::io::create_folder(&parent)?;
     let scenes = crate::dataset::walk::find_scenes(&[src.to_path_buf()])?;
     if scenes.is_empty() {
-        return Err(Error::Input(format!(
-            "{}: no scene folder (with im0.png, im1.png, calib.txt) found",
-            src.display()
-        )));
+        return Err(Error::dataset_at(src, "no scene folder (with im0.png, im1.png, calib.txt) found"));
     }
     let prefix =
         format!(".{}.jem-tmp-{}-", out.file_name().unwrap_or_default().to_string_lossy(), crate::process::host_name());

@@ -60,7 +60,7 @@ impl CameraOverrides {
     /// keeps every depth).
     ///
     /// # Errors
-    /// [`Error::Input`] naming every invalid flag and its value.
+    /// [`Error::Argument`] naming every invalid flag and its value.
     pub fn check(&self) -> Result<()> {
         let values = [
             ("--focal", self.focal, true),
@@ -85,7 +85,7 @@ impl CameraOverrides {
         if invalid.is_empty() {
             return Ok(());
         }
-        Err(Error::Input(format!("invalid {}", invalid.join(", "))))
+        Err(Error::argument(format!("invalid {}", invalid.join(", "))))
     }
 }
 
@@ -108,10 +108,10 @@ impl Camera {
     /// meaningful). `doffs` defaults to 0.
     ///
     /// # Errors
-    /// [`Error::Input`] naming the flags of invalid values given on the command line
+    /// [`Error::Argument`] naming the flags of invalid values given on the command line
     /// ([`CameraOverrides::check`]); else one error naming every value missing or invalid at once, the file read
     /// (or that none was found at `calib_path`) and the flags that give them: [`Error::Calib`] when the file
-    /// exists, [`Error::Input`] when not; [`Error::Input`] when f·B is beyond 32-bit floats ([`fits_f32`]).
+    /// exists, [`Error::Argument`] when not; [`Error::Argument`] when f·B is beyond 32-bit floats ([`fits_f32`]).
     pub fn resolve(
         calib: Option<&Calib>,
         calib_path: &Path,
@@ -165,13 +165,13 @@ impl Camera {
             let msg = parts.join("; ");
             return Err(match calib {
                 Some(_) => Error::Calib { path: calib_path.to_path_buf(), msg: format!("{msg} (read from this file)") },
-                None => Error::Input(format!("{msg}: no {} was found", calib_path.display())),
+                None => Error::argument(format!("{msg}: no {} was found", calib_path.display())),
             });
         }
         let max_depth = overrides.max_depth.unwrap_or(focal * baseline);
         let camera = Camera { focal, cx, cy, baseline, doffs, max_depth };
         if !fits_f32(camera.focal * camera.baseline) {
-            return Err(Error::Input(format!(
+            return Err(Error::argument(format!(
                 "focal length {:?} times baseline {:?} is beyond 32-bit floats: no depth f·B / d could be written; \
                  check {}'s cam0 and baseline (or --focal, --baseline)",
                 camera.focal,

@@ -24,10 +24,10 @@ impl<T> Plane<T> {
     /// Wraps `width × height` samples, row-major.
     ///
     /// # Errors
-    /// [`crate::error::Error::Input`] if `data.len()` is not `width × height`.
+    /// [`crate::error::Error::InputImage`] if `data.len()` is not `width × height`.
     pub fn from_vec(width: usize, height: usize, data: Vec<T>) -> crate::error::Result<Self> {
         if width.checked_mul(height) != Some(data.len()) {
-            return Err(crate::error::Error::Input(format!(
+            return Err(crate::error::Error::bad_image(format!(
                 "{} samples cannot make a {width}x{height} plane",
                 data.len()
             )));
@@ -166,17 +166,17 @@ impl RgbImage {
     /// An image from its red, green and blue planes, each `width × height` samples, row-major.
     ///
     /// # Errors
-    /// [`crate::error::Error::Input`] if a plane has another length, or a sample is not finite.
+    /// [`crate::error::Error::InputImage`] if a plane has another length, or a sample is not finite.
     pub fn from_channels(width: usize, height: usize, channels: [Vec<f32>; 3]) -> crate::error::Result<Self> {
         let n = width.checked_mul(height);
         if let Some(c) = channels.iter().find(|c| Some(c.len()) != n) {
-            return Err(crate::error::Error::Input(format!(
+            return Err(crate::error::Error::bad_image(format!(
                 "{} samples cannot make a {width}x{height} channel",
                 c.len()
             )));
         }
         if channels.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(crate::error::Error::Input("an image sample is not finite".into()));
+            return Err(crate::error::Error::bad_image("an image sample is not finite"));
         }
         Ok(RgbImage { width, height, channels })
     }
@@ -362,7 +362,7 @@ impl<'a> StereoPair<'a> {
             return Err(crate::error::Error::SizeMismatch { left: left.dims(), right: right.dims() });
         }
         if left.is_empty() {
-            return Err(crate::error::Error::Input("the images are empty (0 pixels)".into()));
+            return Err(crate::error::Error::bad_image("the images are empty (0 pixels)"));
         }
         if ndisp == 0 || ndisp >= left.width {
             return Err(crate::error::Error::param(

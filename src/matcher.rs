@@ -101,9 +101,9 @@ impl Output {
     /// The confidence map.
     ///
     /// # Errors
-    /// [`crate::error::Error::Input`] when the matcher was told not to compute it ([`Matcher::with_confidence`]).
+    /// [`crate::error::Error::Argument`] when the matcher was told not to compute it ([`Matcher::with_confidence`]).
     pub fn confidence_map(&self) -> Result<&Plane<f32>> {
-        let missing = || crate::error::Error::Input("no confidence map was computed for this run".into());
+        let missing = || crate::error::Error::argument("no confidence map was computed for this run");
         self.confidence.as_ref().ok_or_else(missing)
     }
 
@@ -238,7 +238,7 @@ impl Matcher {
     /// The left view's disparity map of a rectified pair (and the rest of [`Output`]).
     ///
     /// # Errors
-    /// [`crate::error::Error::SizeMismatch`] or [`crate::error::Error::Input`] for unequal, empty or 1-pixel-wide images,
+    /// [`crate::error::Error::SizeMismatch`] or [`crate::error::Error::InputImage`] for unequal, empty or 1-pixel-wide images,
     /// [`crate::error::Error::InvalidParam`] for an impossible range or parameters the image cannot hold,
     /// [`crate::error::Error::OutOfMemory`] when the run fits the limit neither in one piece nor in tiles.
     pub fn match_pair(&mut self, left: &RgbImage, right: &RgbImage) -> Result<Output> {
@@ -286,7 +286,7 @@ impl Matcher {
     /// callers that convert their own pixels ([`RgbImage::from_channels`]): check first, then convert.
     ///
     /// # Errors
-    /// [`crate::error::Error::SizeMismatch`], [`crate::error::Error::Input`] for empty or 1-pixel-wide views,
+    /// [`crate::error::Error::SizeMismatch`], [`crate::error::Error::InputImage`] for empty or 1-pixel-wide views,
     /// [`crate::error::Error::OutOfMemory`] when the pair cannot fit.
     pub fn check_size(&self, left: (usize, usize), right: (usize, usize), input_bytes: u64) -> Result<()> {
         let (w, h) = left;
@@ -294,10 +294,10 @@ impl Matcher {
             return Err(crate::error::Error::SizeMismatch { left, right });
         }
         if w == 0 || h == 0 {
-            return Err(crate::error::Error::Input("the images are empty (0 pixels)".into()));
+            return Err(crate::error::Error::bad_image("the images are empty (0 pixels)"));
         }
         if w < 2 {
-            return Err(crate::error::Error::Input(format!(
+            return Err(crate::error::Error::bad_image(format!(
                 "the images are {w}x{h}; a stereo pair must be at least 2 pixels wide"
             )));
         }

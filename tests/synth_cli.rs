@@ -30,7 +30,7 @@ fn synth_writes_a_middlebury_scene_deterministically() {
     assert_eq!(mask.dims(), (120, 64));
     assert!(mask.data().iter().all(|&m| m == 255 || m == 128));
     let calib = jem::io::calib::Calib::load(&a.join("calib.txt")).unwrap();
-    assert_eq!(calib.ndisp(), Ok(24));
+    assert_eq!(calib.ndisp().ok(), Some(24));
     assert_eq!(jem::io::calib::read_ndisp(&a.join("calib.txt")).unwrap(), 24);
 
     // Same seed: byte-identical, and nothing else (no temporary files) in the folder.

@@ -29,13 +29,7 @@ use pyo3::types::{PyInt, PyList, PyMapping, PyString};
 /// system refused, `ValueError` for everything else (bad shapes, ranges, config keys, malformed files). The
 /// message is the command line's: the error and each of its causes.
 fn to_py(err: &Error) -> PyErr {
-    let mut msg = err.to_string();
-    let mut source = std::error::Error::source(err);
-    while let Some(s) = source {
-        msg.push_str(": ");
-        msg.push_str(&s.to_string());
-        source = s.source();
-    }
+    let msg = err.chain();
     match err {
         Error::OutOfMemory { .. } => PyMemoryError::new_err(msg),
         Error::Io { source, .. } => std::io::Error::new(source.kind(), msg).into(),

@@ -77,10 +77,10 @@ impl Shard {
 }
 
 impl FromStr for Shard {
-    type Err = String;
+    type Err = Error;
     /// Parses `I/N` with 1 ≤ I ≤ N.
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        let bad = || format!("invalid shard {s:?} (expected I/N with 1 <= I <= N, e.g. 3/8)");
+    fn from_str(s: &str) -> std::result::Result<Self, Error> {
+        let bad = || Error::argument(format!("invalid shard {s:?} (expected I/N with 1 <= I <= N, e.g. 3/8)"));
         let (i, n) = s.split_once('/').ok_or_else(bad)?;
         let (index, count) =
             (i.trim().parse::<usize>().map_err(|_| bad())?, n.trim().parse::<usize>().map_err(|_| bad())?);
@@ -295,21 +295,9 @@ fn has_complete_result(pair: &Pair, opts: &BatchOptions) -> bool {
 fn guarded(f: impl FnOnce() -> Result<SceneRun>) -> SceneStatus {
     match catch_unwind(AssertUnwindSafe(f)) {
         Ok(Ok(run)) => SceneStatus::Done(run),
-        Ok(Err(e)) => SceneStatus::Failed(error_chain(&e)),
+        Ok(Err(e)) => SceneStatus::Failed(e.chain()),
         Err(payload) => SceneStatus::Failed(format!("panic in the pipeline: {}", panic_message(payload.as_ref()))),
     }
-}
-
-/// The error and its sources on one line.
-fn error_chain(e: &Error) -> String {
-    let mut msg = e.to_string();
-    let mut source = std::error::Error::source(e);
-    while let Some(s) = source {
-        msg.push_str(": ");
-        msg.push_str(&s.to_string());
-        source = s.source();
-    }
-    msg
 }
 
 /// Runs every scene, `opts.jobs` at a time, and returns one report per scene in list order. `on_event` is
@@ -331,7 +319,7 @@ pub fn run_batch(
             let failed = |pair: &Pair| SceneReport {
                 dir: pair.location(),
                 name: pair.name.clone(),
-                status: SceneStatus::Failed(error_chain(&e)),
+                status: SceneStatus::Failed(e.chain()),
             };
             return scenes.iter().map(failed).collect();
         }
@@ -433,7 +421,7 @@ mod tests {
 
     #[test]
     fn shard_parse_and_partition() {
-        assert_eq!("2/3".parse::<Shard>(), Ok(Shard { index: 2, count: 3 }));
+        assert_eq!("2/3".parse::<Shard>().ok(), Some(Shard { index: 2, count: 3 }));
         for bad in ["0/3", "4/3", "1/0", "3", "a/b", "1/2/3", ""] {
             assert!(bad.parse::<Shard>().is_err(), "{bad}");
         }
@@ -469,7 +457,7 @@ mod tests {
         };
         assert_eq!(failed(guarded(|| panic!("static"))), "panic in the pipeline: static");
         assert_eq!(failed(guarded(|| todo!("mean field"))), "panic in the pipeline: not yet implemented: mean field");
-        assert_eq!(failed(guarded(|| Err(Error::Input("bad calib".into())))), "bad calib");
+        assert_eq!(failed(guarded(|| Err(Error::argument("bad calib")))), "bad calib");
         let run = SceneRun { size: (2, 1), ndisp: 1, seconds: 0.5, timings: Timings::default(), measured: None };
         assert!(matches!(guarded(|| Ok(run)), SceneStatus::Done(r) if r.seconds == 0.5));
     }

@@ -239,15 +239,15 @@ fn find_pairs(args: &BatchArgs) -> Result<(Vec<jem::dataset::Pair>, Vec<jem::dat
     let all = jem::dataset::discover(&args.dirs, jem::dataset::Purpose::Run, &how)?;
     if all.is_empty() {
         let dirs: Vec<String> = args.dirs.iter().map(|d| d.display().to_string()).collect();
-        return Err(Error::Input(format!(
+        return Err(Error::dataset(format!(
             "no scene folder (with im0.png, im1.png and calib.txt) or KITTI frame (image_2/ + image_3/, \
              colored_0/ + colored_1/) under {}",
             dirs.join(", ")
         )));
     }
     if args.results.is_some() && all.iter().all(|p| p.layout == jem::dataset::Layout::Middlebury) {
-        return Err(Error::Input(
-            "--results is for KITTI and ETH3D data sets; MiddEval3 results go into each scene folder".into(),
+        return Err(Error::argument(
+            "--results is for KITTI and ETH3D data sets; MiddEval3 results go into each scene folder",
         ));
     }
     let scenes = match args.shard {

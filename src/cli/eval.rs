@@ -15,14 +15,14 @@ use super::ThreadsArg;
 pub(super) struct ScaleArg(pub(super) Option<u32>);
 
 impl std::str::FromStr for ScaleArg {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = Error;
+    fn from_str(s: &str) -> std::result::Result<Self, Error> {
         match s {
             "auto" => Ok(ScaleArg(None)),
             "1" => Ok(ScaleArg(Some(1))),
             "2" => Ok(ScaleArg(Some(2))),
             "4" => Ok(ScaleArg(Some(4))),
-            _ => Err(format!("invalid scale {s:?} (expected auto, 1, 2 or 4)")),
+            _ => Err(Error::argument(format!("invalid scale {s:?} (expected auto, 1, 2 or 4)"))),
         }
     }
 }
@@ -97,7 +97,7 @@ pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCod
         return run_sequence(args, global, &seq);
     }
     if args.algs.is_empty() {
-        return Err(Error::Input(format!(
+        return Err(Error::argument(format!(
             "{}: give the results to score with --alg NAME (a folder `jem sequence` wrote needs none)",
             args.dir.display()
         )));
@@ -106,13 +106,13 @@ pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCod
         jem::batch::validate_alg_name(a)?;
     }
     if args.regions && args.format == jem::eval::Format::Csv {
-        return Err(Error::Input("--regions prints a table, markdown or json, not csv".into()));
+        return Err(Error::argument("--regions prints a table, markdown or json, not csv"));
     }
     let papers = if args.paper.is_empty() {
         Vec::new()
     } else {
         if args.paper.len() != 1 && args.paper.len() != args.algs.len() {
-            return Err(Error::Input(format!(
+            return Err(Error::argument(format!(
                 "{} --paper columns for {} --alg: give one for all, or one per --alg",
                 args.paper.len(),
                 args.algs.len()
@@ -120,7 +120,7 @@ pub(super) fn run(args: &EvalArgs, global: &super::GlobalArgs) -> Result<ExitCod
         }
         let path = paper_file(args.paper_file.as_deref());
         if !path.is_file() {
-            return Err(Error::Input(format!(
+            return Err(Error::dataset(format!(
                 "--paper needs the paper's numbers, but {} does not exist (use --paper-file or set JEM_DATA)",
                 path.display()
             )));
@@ -177,11 +177,10 @@ fn sequence_truth(dir: &Path, gt: Option<&Path>) -> Result<Option<jem::sequence:
     };
     let Some(root) = candidate else { return Ok(None) };
     Sequence::open(&root).map(Some).map_err(|e| match gt {
-        None => Error::Input(format!(
-            "{}: made from the sequence {}, which does not open ({e}); give its truth with --gt",
-            dir.join(jem::sequence::RUN_FILE).display(),
-            root.display()
-        )),
+        None => Error::dataset_at(
+            &dir.join(jem::sequence::RUN_FILE),
+            format!("made from the sequence {}, which does not open ({e}); give its truth with --gt", root.display()),
+        ),
         Some(_) => e,
     })
 }
@@ -190,7 +189,7 @@ fn sequence_truth(dir: &Path, gt: Option<&Path>) -> Result<Option<jem::sequence:
 fn run_sequence(args: &EvalArgs, global: &super::GlobalArgs, seq: &jem::sequence::Sequence) -> Result<ExitCode> {
     use jem::eval::sequence::{evaluate_sequence, render_sequence};
     if !args.algs.is_empty() || !args.paper.is_empty() {
-        return Err(Error::Input(format!(
+        return Err(Error::argument(format!(
             "{}: a sequence's results are scored without --alg or --paper",
             args.dir.display()
         )));

@@ -104,11 +104,14 @@ pub(super) enum MinDisp {
 }
 
 impl std::str::FromStr for MinDisp {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = Error;
+    fn from_str(s: &str) -> std::result::Result<Self, Error> {
         match s {
             "calib" => Ok(MinDisp::Calib),
-            _ => s.parse().map(MinDisp::Px).map_err(|_| format!("{s:?} is neither a disparity of 0 or more nor calib")),
+            _ => s
+                .parse()
+                .map(MinDisp::Px)
+                .map_err(|_| Error::argument(format!("{s:?} is neither a disparity of 0 or more nor calib"))),
         }
     }
 }
@@ -143,7 +146,10 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         warnings.extend(rect.warnings().into_iter().map(|w| format!("{}: {w}", calib.display())));
     }
     if args.strict && !warnings.is_empty() {
-        return Err(Error::Input(format!("the pair looks wrong (--strict: nothing written): {}", warnings.join("; "))));
+        return Err(Error::bad_image(format!(
+            "the pair looks wrong (--strict: nothing written): {}",
+            warnings.join("; ")
+        )));
     }
     // With --min-confidence, the map written holds the reliable pixels only.
     let reliable = args.min_confidence.map(|c| out.reliable_disparity(c)).transpose()?;
@@ -194,7 +200,7 @@ struct Request<'a> {
 impl<'a> Request<'a> {
     fn check(args: &'a MatchArgs) -> Result<Request<'a>> {
         let (Some(left), Some(right), Some(output)) = (&args.left, &args.right, &args.output) else {
-            return Err(Error::Input("usage: jem LEFT RIGHT -o OUT (see --help)".into()));
+            return Err(Error::argument("usage: jem LEFT RIGHT -o OUT (see --help)"));
         };
         jem::io::DisparityFormat::from_path(output)?;
         if let Some(c) = args.min_confidence
@@ -203,14 +209,14 @@ impl<'a> Request<'a> {
             return Err(Error::param("--min-confidence", c, "a confidence from 0 to 1"));
         }
         if args.max_depth.is_some() && args.depth.is_none() && args.cloud.is_none() {
-            return Err(Error::Input("--max-depth limits --depth and --cloud; give one of them".into()));
+            return Err(Error::argument("--max-depth limits --depth and --cloud; give one of them"));
         }
         if let Some(c) = &args.confidence {
             jem::io::DisparityFormat::from_path(c)?;
         }
         if let Some(m) = args.lr_mask.as_ref().filter(|m| !m.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")))
         {
-            return Err(Error::Input(format!("{}: the left-right mask is written as .png", m.display())));
+            return Err(Error::output_at(m, "the left-right mask is written as .png"));
         }
         let calib = left.parent().unwrap_or(Path::new(".")).join(jem::dataset::CALIB_FILE);
         if let Some(d) = &args.depth {
@@ -219,29 +225,29 @@ impl<'a> Request<'a> {
         if let Some(c) = &args.cloud
             && !c.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
         {
-            return Err(Error::Input(format!("{}: a point cloud is written as .ply", c.display())));
+            return Err(Error::output_at(c, "a point cloud is written as .ply"));
         }
         // calib.txt, read once when something needs it (the range, or the camera); with --rectify, the rectified
         // pair's (it states no range).
         let wants_camera = args.cloud.is_some() || args.depth.is_some();
         let from_vmin = args.min_disp == Some(MinDisp::Calib);
         if from_vmin && args.rectify.is_some() {
-            return Err(Error::Input(
-                "--min-disp calib reads calib.txt beside LEFT, which --rectify replaces; give --min-disp D".into(),
+            return Err(Error::argument(
+                "--min-disp calib reads calib.txt beside LEFT, which --rectify replaces; give --min-disp D",
             ));
         }
         if from_vmin && !calib.is_file() {
-            return Err(Error::Input(format!("--min-disp calib: there is no {}", calib.display())));
+            return Err(Error::argument(format!("--min-disp calib: there is no {}", calib.display())));
         }
         let rectification = match &args.rectify {
             Some(c) => Some(super::rectify::plan(c, (left, right), None, args.memory.memory_limit())?),
             None => None,
         };
         let calib_file = match &rectification {
-            Some(rect) => Some(
-                calib::Calib::parse(&rect.calib_txt())
-                    .map_err(|msg| Error::Calib { path: args.rectify.clone().unwrap_or_default(), msg })?,
-            ),
+            Some(rect) => Some(calib::Calib::parse(&rect.calib_txt()).map_err(|e| match e {
+                Error::Calib { msg, .. } => Error::Calib { path: args.rectify.clone().unwrap_or_default(), msg },
+                e => e,
+            })?),
             None if (args.ndisp.is_none() || wants_camera || from_vmin) && calib.is_file() => {
                 Some(calib::Calib::load(&calib)?)
             }
@@ -273,16 +279,14 @@ impl<'a> Request<'a> {
         // The range: --ndisp, else calib.txt's (measured instead when it is missing, the file states none, as
         // `jem rectify` writes it, or it is no real bound: half the width or more).
         let stated_ndisp = match &calib_file {
-            Some(c) if args.ndisp.is_none() && rectification.is_none() => {
-                c.stated_ndisp().map_err(|msg| Error::Calib { path: calib.clone(), msg })?
-            }
+            Some(c) if args.ndisp.is_none() && rectification.is_none() => c.stated_ndisp()?,
             _ => None,
         };
         // --min-disp calib: the smallest disparity from vmin, the range's top kept at calib.txt's ndisp − 1.
         let (min_disp, stated_ndisp) = match (args.min_disp, &calib_file) {
             (Some(MinDisp::Px(d)), _) => (d, stated_ndisp),
             (Some(MinDisp::Calib), Some(c)) => {
-                let (d, n) = c.vmin_search().map_err(|msg| Error::Calib { path: calib.clone(), msg })?;
+                let (d, n) = c.vmin_search()?;
                 (d, n.filter(|_| args.ndisp.is_none()))
             }
             _ => (0, stated_ndisp),

@@ -355,7 +355,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()
-            .map_err(|e| Error::Input(format!("cannot start {n} threads: {e}")))?;
+            .map_err(|e| Error::argument(format!("cannot start {n} threads: {e}")))?;
     }
     match cli.command {
         None => r#match::run(&cli.match_args, &cli.global),
@@ -417,14 +417,7 @@ fn one_line_usage_error(rendered: &str) -> String {
 
 /// Prints `error: ...` and each cause on one line.
 pub fn print_error(err: &Error) {
-    let mut msg = format!("error: {err}");
-    let mut source = std::error::Error::source(err);
-    while let Some(s) = source {
-        msg.push_str(": ");
-        msg.push_str(&s.to_string());
-        source = s.source();
-    }
-    note!("{msg}");
+    note!("error: {}", err.chain());
 }
 
 /// The command line as typed, each argument quoted for a POSIX shell where it needs it.

@@ -82,10 +82,7 @@ pub(super) fn run(args: &RectifyArgs, global: &GlobalArgs) -> Result<ExitCode> {
         outputs.extend(["map0x.pfm", "map0y.pfm", "map1x.pfm", "map1y.pfm"].map(|n| args.output.join(n)));
     }
     if args.output.exists() && !args.output.is_dir() {
-        return Err(Error::Input(format!(
-            "{}: exists and is not a folder; give -o the name of a new folder",
-            args.output.display()
-        )));
+        return Err(Error::output_at(&args.output, "exists and is not a folder; give -o the name of a new folder"));
     }
     // A folder holding a scene (im0.png, im1.png, calib.txt, ground truth, results) would get a new pair beside
     // results and ground truth of the old one, as `jem synth` refuses.

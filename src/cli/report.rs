@@ -61,7 +61,7 @@ pub(super) fn run(args: &ReportArgs, global: &super::GlobalArgs) -> Result<ExitC
         Vec::new()
     } else {
         if args.paper.len() != 1 && args.paper.len() != args.algs.len() {
-            return Err(Error::Input(format!(
+            return Err(Error::argument(format!(
                 "{} --paper columns for {} --alg: give one per --alg (- for none), or one for all",
                 args.paper.len(),
                 args.algs.len()
@@ -74,7 +74,7 @@ pub(super) fn run(args: &ReportArgs, global: &super::GlobalArgs) -> Result<ExitC
             vec![None; args.algs.len()]
         } else {
             if !path.is_file() {
-                return Err(Error::Input(format!(
+                return Err(Error::dataset(format!(
                     "--paper needs the paper's numbers, but {} does not exist (use --paper-file or set JEM_DATA)",
                     path.display()
                 )));

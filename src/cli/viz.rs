@@ -59,7 +59,7 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     use jem::viz;
     let ext = args.output.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     if ext.as_deref() != Some("png") {
-        return Err(Error::Input(format!("{}: viz writes PNG (use a .png name)", args.output.display())));
+        return Err(Error::output_at(&args.output, "viz writes PNG (use a .png name)"));
     }
     if let Some(s) = args.scale
         && ![1, 2, 4].contains(&s)
@@ -89,7 +89,7 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let disp = jem::io::read_disparity(&args.input)?;
     if args.depth {
         if args.gt.is_some() {
-            return Err(Error::Input("--gt scores disparity maps; a depth map (--depth) is drawn alone".into()));
+            return Err(Error::argument("--gt scores disparity maps; a depth map (--depth) is drawn alone"));
         }
         let auto = viz::depth_range(&disp);
         let near = args.vmin.or(auto.map(|r| r.0)).unwrap_or(1.0);
@@ -147,7 +147,10 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
 fn sheet(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     use jem::viz;
     let Some(alg) = &args.alg else {
-        return Err(Error::Input(format!("{} is a folder: give --alg NAME for a contact sheet", args.input.display())));
+        return Err(Error::argument(format!(
+            "{} is a folder: give --alg NAME for a contact sheet",
+            args.input.display()
+        )));
     };
     jem::batch::validate_alg_name(alg)?;
     if args.panel_width < 16 {

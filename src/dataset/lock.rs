@@ -209,11 +209,10 @@ pub(crate) fn lock_holds(file: &Path, token: &str) -> bool {
 /// The error for a lock that cannot be read.
 fn unreadable(file: &Path, why: &str) -> Error {
     let dir = file.parent().unwrap_or(Path::new("."));
-    Error::Input(format!(
-        "{}: this lock cannot be read ({why}); remove it if no jem run is writing into {}",
-        file.display(),
-        dir.display()
-    ))
+    Error::locked_at(
+        file,
+        format!("this lock cannot be read ({why}); remove it if no jem run is writing into {}", dir.display()),
+    )
 }
 
 /// Why a lock was not taken.
@@ -238,7 +237,7 @@ impl NotTaken {
 /// MiddEval3 pairs, the results folders of the others (created if missing). `shard` is `(I, N)` for part I of N.
 ///
 /// # Errors
-/// [`Error::Input`] naming the folder, the lock file and the run holding it when another live run (or one this
+/// [`Error::Locked`] naming the folder, the lock file and the run holding it when another live run (or one this
 /// machine cannot check) holds a conflicting lock, or naming a KITTI/ETH3D lock that cannot be read; [`Error::Io`]
 /// if a folder or lock cannot be made. No lock is kept on error. A MiddEval3 scene whose lock cannot be read is
 /// no error: it is listed in [`ResultsLock::refused`].
@@ -287,7 +286,7 @@ pub fn lock_results(
 /// `.jem-lock`, taken over when stale, as [`lock_results`] locks a results folder.
 ///
 /// # Errors
-/// [`Error::Input`] naming the folder, the lock file and the run holding it when another live run (or one this
+/// [`Error::Locked`] naming the folder, the lock file and the run holding it when another live run (or one this
 /// machine cannot check) holds it, or naming a lock that cannot be read; [`Error::Io`] if the lock cannot be made.
 pub fn lock_folder(dir: &Path) -> Result<ResultsLock> {
     let me = Identity::new(None);
@@ -384,12 +383,14 @@ fn who(holder: Option<&Holder>) -> String {
 /// The error for a live (or unknown) holder of `file`.
 fn held(file: &Path, holder: Option<&Holder>) -> Error {
     let dir = file.parent().unwrap_or(Path::new("."));
-    Error::Input(format!(
-        "{}: {} is writing these results; wait for it to end, or remove {} if no such run is going on",
-        dir.display(),
-        who(holder),
-        file.display()
-    ))
+    Error::locked_at(
+        dir,
+        format!(
+            "{} is writing these results; wait for it to end, or remove {} if no such run is going on",
+            who(holder),
+            file.display()
+        ),
+    )
 }
 
 /// Creates the lock `file` holding `me.token`, taking over a stale one (a few tries, against a race with another
@@ -445,10 +446,7 @@ fn acquire(file: &Path, me: &Identity, lock: &mut ResultsLock) -> std::result::R
         }
         let _ = std::fs::remove_file(&aside);
     }
-    Err(NotTaken::Held(Error::Input(format!(
-        "{}: could not take the lock (other runs are taking it at the same time)",
-        file.display()
-    ))))
+    Err(NotTaken::Held(Error::locked_at(file, "could not take the lock (other runs are taking it at the same time)")))
 }
 
 /// Errors if `dir` holds a live lock of another run that conflicts with this one's `own` lock: any but another

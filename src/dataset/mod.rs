@@ -30,7 +30,7 @@ pub mod walk;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 
 pub(crate) use lock::lock_holds;
 pub use lock::{ResultsLock, lock_folder, lock_results, writers};
@@ -91,14 +91,16 @@ impl Layout {
 }
 
 impl FromStr for Layout {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = Error;
+    fn from_str(s: &str) -> std::result::Result<Self, Error> {
         match s {
             "middlebury" | "middeval3" => Ok(Layout::Middlebury),
             "kitti2015" => Ok(Layout::Kitti2015),
             "kitti2012" => Ok(Layout::Kitti2012),
             "eth3d" => Ok(Layout::Eth3d),
-            _ => Err(format!("unknown layout {s:?} (expected middlebury, kitti2015, kitti2012 or eth3d)")),
+            _ => Err(Error::argument(format!(
+                "unknown layout {s:?} (expected middlebury, kitti2015, kitti2012 or eth3d)"
+            ))),
         }
     }
 }
@@ -295,7 +297,7 @@ pub struct Discovery {
 /// are skipped; a folder reached twice (symbolic links) is read once.
 ///
 /// # Errors
-/// [`Error::Io`](crate::Error::Io) if a root cannot be read, [`Error::Input`](crate::Error::Input) if one is not
+/// [`Error::Io`](crate::Error::Io) if a root cannot be read, [`Error::Dataset`](crate::Error::Dataset) if one is not
 /// a folder. Unreadable sub-folders are skipped.
 pub fn discover(roots: &[PathBuf], purpose: Purpose, how: &Discovery) -> Result<Vec<Pair>> {
     let mut found = Vec::new();

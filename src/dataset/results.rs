@@ -124,7 +124,7 @@ fn holds(have: &str, pair: &Pair, dir: &Path) -> std::result::Result<Match, Mism
 /// without its results being taken for another's.
 ///
 /// # Errors
-/// [`Error::Input`] naming the folder and the data sets, or the source file and what is wrong with it;
+/// [`Error::Output`] naming the folder and the data sets, or the source file and what is wrong with it;
 /// [`Error::Io`] if a folder or file cannot be made or a source file cannot be read.
 pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, claim: bool) -> Result<()> {
     let mut claimed: std::collections::BTreeMap<PathBuf, (&Pair, bool)> = Default::default();
@@ -132,13 +132,15 @@ pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, cla
         let Some(dir) = pair.results_dir(alg, results) else { continue };
         match claimed.get(&dir) {
             Some((other, _)) if other.root != pair.root => {
-                return Err(Error::Input(format!(
-                    "{}: the results of {} and of {} would share this folder (same frame names); run them one at a \
+                return Err(Error::output_at(
+                    &dir,
+                    format!(
+                        "the results of {} and of {} would share this folder (same frame names); run them one at a \
                      time with different --alg or --results",
-                    dir.display(),
-                    other.root.display(),
-                    pair.root.display()
-                )));
+                        other.root.display(),
+                        pair.root.display()
+                    ),
+                ));
             }
             Some(_) => continue,
             None => {}
@@ -147,11 +149,13 @@ pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, cla
         if let (Ok(d), Ok(r)) = (resolve_to_existing(&dir), std::fs::canonicalize(&pair.root))
             && d.starts_with(&r)
         {
-            return Err(Error::Input(format!(
-                "{}: results would go inside the data set {} (never written to); choose another --results",
-                dir.display(),
-                pair.root.display()
-            )));
+            return Err(Error::output_at(
+                &dir,
+                format!(
+                    "results would go inside the data set {} (never written to); choose another --results",
+                    pair.root.display()
+                ),
+            ));
         }
         // Results of this data set where a jem before per-split folders put them (`RES/NAME/`): say where they
         // are, rather than report every result missing, or compute them all again beside them.
@@ -160,13 +164,15 @@ pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, cla
             && let Ok(have) = crate::io::read_capped(&old.join(SOURCE_FILE), MAX_SOURCE_BYTES, SOURCE_FILE)
             && holds(&String::from_utf8_lossy(&have), pair, old).is_ok()
         {
-            return Err(Error::Input(format!(
-                "{}: holds results of {} written by an older jem, which put them there; move its {SOURCE_FILE} and \
+            return Err(Error::output_at(
+                old,
+                format!(
+                    "holds results of {} written by an older jem, which put them there; move its {SOURCE_FILE} and \
                  result folders into {} (each split now has its own folder)",
-                old.display(),
-                pair.root.display(),
-                dir.display()
-            )));
+                    pair.root.display(),
+                    dir.display()
+                ),
+            ));
         }
         let source = dir.join(SOURCE_FILE);
         let moved = match crate::io::read_capped(&source, MAX_SOURCE_BYTES, SOURCE_FILE) {
@@ -175,30 +181,36 @@ pub fn check_results_dirs(pairs: &[Pair], alg: &str, results: Option<&Path>, cla
             Ok(have) => match holds(&String::from_utf8_lossy(&have), pair, &dir) {
                 Ok(how) => how == Match::Fingerprint,
                 Err(Mismatch::Malformed(why)) => {
-                    return Err(Error::Input(format!(
-                        "{}: unreadable ({why}), not a {SOURCE_FILE} jem wrote: it should name the data set whose \
+                    return Err(Error::output_at(
+                        &source,
+                        format!(
+                            "unreadable ({why}), not a {SOURCE_FILE} jem wrote: it should name the data set whose \
                          results this folder holds; if they are {}'s, remove it and run again",
-                        source.display(),
-                        pair.root.display()
-                    )));
+                            pair.root.display()
+                        ),
+                    ));
                 }
                 Err(Mismatch::Other(other, true)) => {
-                    return Err(Error::Input(format!(
-                        "{}: holds the results of {other}, not of {} (see {SOURCE_FILE}); choose another --alg or \
+                    return Err(Error::output_at(
+                        &dir,
+                        format!(
+                            "holds the results of {other}, not of {} (see {SOURCE_FILE}); choose another --alg or \
                          --results",
-                        dir.display(),
-                        pair.root.display()
-                    )));
+                            pair.root.display()
+                        ),
+                    ));
                 }
                 Err(Mismatch::Other(other, false)) => {
-                    return Err(Error::Input(format!(
-                        "{}: holds the results of {other}, which no longer exists, and the data sets differ (see \
+                    return Err(Error::output_at(
+                        &dir,
+                        format!(
+                            "holds the results of {other}, which no longer exists, and the data sets differ (see \
                          {SOURCE_FILE}); if {} is that data set, moved and changed since, remove {} and run again; \
                          otherwise choose another --alg or --results",
-                        dir.display(),
-                        pair.root.display(),
-                        source.display()
-                    )));
+                            pair.root.display(),
+                            source.display()
+                        ),
+                    ));
                 }
             },
         };

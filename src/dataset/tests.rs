@@ -185,7 +185,7 @@ fn a_results_folder_belongs_to_one_data_set() {
 #[test]
 fn layout_names_round_trip() {
     for l in [Layout::Middlebury, Layout::Kitti2015, Layout::Kitti2012, Layout::Eth3d] {
-        assert_eq!(l.name().parse::<Layout>(), Ok(l));
+        assert_eq!(l.name().parse::<Layout>().ok(), Some(l));
     }
     assert!("kitti".parse::<Layout>().is_err());
 }

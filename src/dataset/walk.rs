@@ -34,14 +34,14 @@ pub fn find_dirs_with(roots: &[PathBuf], files: &[&str]) -> Result<Vec<PathBuf>>
 /// a folder reached twice (symbolic links, cycles) is visited once (by canonical path).
 ///
 /// # Errors
-/// [`Error::Io`] if a root cannot be read, [`Error::Input`] if one is not a folder (unreadable sub-folders are
+/// [`Error::Io`] if a root cannot be read, [`Error::Dataset`] if one is not a folder (unreadable sub-folders are
 /// skipped).
 pub(crate) fn walk_folders(roots: &[PathBuf], visit: &mut dyn FnMut(&Path) -> bool) -> Result<()> {
     let mut seen = BTreeSet::new();
     for root in roots {
         let meta = std::fs::metadata(root).map_err(|e| Error::io(root, e))?;
         if !meta.is_dir() {
-            return Err(Error::Input(format!("{} is not a folder", root.display())));
+            return Err(Error::dataset(format!("{} is not a folder", root.display())));
         }
         walk(root, visit, &mut seen, true)?;
     }

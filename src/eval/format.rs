@@ -10,6 +10,7 @@ use super::regions::RegionReport;
 use super::report::AlgReport;
 use super::sparsification::Sparsification;
 use super::text::{fixed, json_num, json_str};
+use crate::error::Error;
 use crate::table::Table;
 
 /// How [`render`] prints reports.
@@ -26,14 +27,14 @@ pub enum Format {
 }
 
 impl FromStr for Format {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = Error;
+    fn from_str(s: &str) -> std::result::Result<Self, Error> {
         match s {
             "table" => Ok(Format::Table),
             "csv" => Ok(Format::Csv),
             "json" => Ok(Format::Json),
             "markdown" | "md" => Ok(Format::Markdown),
-            _ => Err(format!("unknown format {s:?} (expected table, csv, json or markdown)")),
+            _ => Err(Error::argument(format!("unknown format {s:?} (expected table, csv, json or markdown)"))),
         }
     }
 }
@@ -137,7 +138,7 @@ fn render_json(reports: &[AlgReport], paper: &[Option<&PaperColumn>], regions: &
                 );
             }
             let excluded: Vec<String> =
-                r.excluded().map(|(n, e)| format!("{}: {}", json_str(n), json_str(e))).collect();
+                r.excluded().map(|(n, e)| format!("{}: {}", json_str(n), json_str(&e))).collect();
             if !excluded.is_empty() {
                 let _ = write!(o, ",\n  \"excluded\": {{{}}}", excluded.join(", "));
             }
@@ -202,7 +203,7 @@ fn render_csv(reports: &[AlgReport], paper: &[Option<&PaperColumn>]) -> String {
             let pv = p.and_then(|p| p.scenes.get(&s.name).copied());
             match &s.metrics {
                 Ok(m) => row(&s.name, Some(s.weight), Some(m), s.seconds, pv, ""),
-                Err(e) => row(&s.name, Some(s.weight), None, s.seconds, pv, e),
+                Err(e) => row(&s.name, Some(s.weight), None, s.seconds, pv, &e.chain()),
             }
         }
         let mean_t = r.mean_seconds().map(|(t, _)| t);
@@ -307,7 +308,7 @@ fn render_text(reports: &[AlgReport], paper: &[Option<&PaperColumn>], md: bool) 
             out.push('\n');
         }
         let _ = writeln!(out, "{}.", notes.join("; "));
-        let excluded: Vec<(&str, &str)> = r.excluded().collect();
+        let excluded: Vec<(&str, String)> = r.excluded().collect();
         if !excluded.is_empty() {
             let _ = writeln!(out, "Excluded from the averages:");
             for (n, e) in excluded {

@@ -50,12 +50,12 @@ impl MaskMode {
 }
 
 impl FromStr for MaskMode {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = Error;
+    fn from_str(s: &str) -> std::result::Result<Self, Error> {
         match s {
             "nonocc" => Ok(MaskMode::Nonocc),
             "all" => Ok(MaskMode::All),
-            _ => Err(format!("unknown mask {s:?} (expected nonocc or all)")),
+            _ => Err(Error::argument(format!("unknown mask {s:?} (expected nonocc or all)"))),
         }
     }
 }
@@ -217,14 +217,10 @@ pub(crate) fn check_size(
     if dims == expected {
         return Ok(());
     }
-    Err(Error::Input(format!(
-        "{}: {what} is {}x{} but {against} is {}x{}",
-        path.display(),
-        dims.0,
-        dims.1,
-        expected.0,
-        expected.1
-    )))
+    Err(Error::bad_image_at(
+        path,
+        format!("{what} is {}x{} but {against} is {}x{}", dims.0, dims.1, expected.0, expected.1),
+    ))
 }
 
 /// Loads a result, the GT and an optional mask, checks their sizes and scores them with [`evaluate`].
@@ -249,11 +245,7 @@ pub fn evaluate_files(
     }
     let metrics = evaluate(&result_map, &gt_map, mask_plane.as_ref(), ndisp, scale, mask_mode);
     if metrics.pixels == 0 {
-        return Err(Error::Input(format!(
-            "{}: no pixel with ground truth under the {} mask",
-            gt.display(),
-            mask_mode.name()
-        )));
+        return Err(Error::dataset_at(gt, format!("no pixel with ground truth under the {} mask", mask_mode.name())));
     }
     Ok(metrics)
 }
@@ -270,7 +262,7 @@ pub fn evaluate_scene(dir: &Path, alg: &str, scale: u32, mask_mode: MaskMode) ->
         (true, _) => Some(mask),
         (false, MaskMode::All) => None,
         (false, MaskMode::Nonocc) => {
-            return Err(Error::Input(format!("no {} (needed for the nonocc mask)", mask.display())));
+            return Err(Error::dataset(format!("no {} (needed for the nonocc mask)", mask.display())));
         }
     };
     evaluate_files(&result, &dir.join(GT_FILE), mask.as_deref(), ndisp, scale, mask_mode)
@@ -290,10 +282,10 @@ pub(crate) fn pixel_error(d: f32, g: f32, scale: f64, max_d: f64) -> f64 {
 pub(crate) fn scene_result(dir: &Path, alg: &str) -> Result<(PathBuf, usize)> {
     let result = dir.join(format!("disp0{alg}.pfm"));
     if !result.is_file() {
-        return Err(Error::Input(format!("no result file {}", result.display())));
+        return Err(Error::dataset(format!("no result file {}", result.display())));
     }
     let calib_path = dir.join(CALIB_FILE);
-    let ndisp = Calib::load(&calib_path)?.ndisp().map_err(|msg| Error::Calib { path: calib_path.clone(), msg })?;
+    let ndisp = Calib::load(&calib_path)?.ndisp()?;
     Ok((result, ndisp))
 }
 

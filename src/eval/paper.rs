@@ -30,10 +30,15 @@ impl PaperResults {
     /// Parses the TSV text.
     ///
     /// # Errors
-    /// A message naming the line for a missing header, a column or scene given twice, a weight that is not a
+    /// [`Error::Dataset`] naming the line for a missing header, a column or scene given twice, a weight that is not a
     /// positive number, a value that is neither a number ≥ 0 nor missing, or a row with the wrong number of fields.
     /// Empty fields and `-` are missing values.
-    pub fn parse(text: &str) -> std::result::Result<Self, String> {
+    pub fn parse(text: &str) -> Result<Self> {
+        Self::parse_text(text).map_err(Error::dataset)
+    }
+
+    /// [`PaperResults::parse`], with the message alone.
+    fn parse_text(text: &str) -> std::result::Result<Self, String> {
         let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'));
         let (_, header) = lines.next().ok_or("no header line")?;
         let head: Vec<&str> = header.split('\t').map(str::trim).collect();
@@ -71,11 +76,11 @@ impl PaperResults {
     /// Reads and parses a TSV file (at most 1 MiB).
     ///
     /// # Errors
-    /// [`Error::Io`] or [`Error::Input`] naming the path.
+    /// [`Error::Io`] or [`Error::InputFile`] naming the path, [`Error::Dataset`] naming it for malformed text.
     pub fn load(path: &Path) -> Result<Self> {
         let bytes = crate::io::read_capped(path, 1 << 20, "paper results file")?;
-        let text = String::from_utf8(bytes).map_err(|_| Error::Input(format!("{}: not UTF-8 text", path.display())))?;
-        Self::parse(&text).map_err(|msg| Error::Input(format!("{}: {msg}", path.display())))
+        let text = String::from_utf8(bytes).map_err(|_| Error::input_file_at(path, "not UTF-8 text"))?;
+        Self::parse_text(&text).map_err(|msg| Error::dataset_at(path, msg))
     }
 
     /// The column names.
@@ -86,10 +91,10 @@ impl PaperResults {
     /// One column by name.
     ///
     /// # Errors
-    /// [`Error::Input`] listing the available columns.
+    /// [`Error::Argument`] listing the available columns.
     pub fn column(&self, name: &str) -> Result<PaperColumn> {
         let Some(k) = self.columns.iter().position(|c| c == name) else {
-            return Err(Error::Input(format!("no paper column {name:?} (available: {})", self.columns.join(", "))));
+            return Err(Error::argument(format!("no paper column {name:?} (available: {})", self.columns.join(", "))));
         };
         let mut scenes = BTreeMap::new();
         let (mut sum, mut total) = (0.0, 0.0);
@@ -146,10 +151,10 @@ mod tests {
             ("Teddy\t1\tnan\t2\n", "line 2: A \"nan\" is not a score"),
             ("Teddy\t-1\t2\t3\n", "line 2: bad weight \"-1\""),
         ] {
-            let e = PaperResults::parse(&format!("{head}{rows}")).unwrap_err();
+            let e = PaperResults::parse(&format!("{head}{rows}")).unwrap_err().to_string();
             assert!(e.contains(needle), "{e}");
         }
-        assert!(PaperResults::parse("scene\tweight\tA\tA\n").unwrap_err().contains("column \"A\" twice"));
+        assert!(PaperResults::parse("scene\tweight\tA\tA\n").unwrap_err().to_string().contains("column \"A\" twice"));
         let ok = PaperResults::parse(&format!("{head}Teddy\t1\t\t-\n")).unwrap();
         assert!(ok.column("A").unwrap().scenes.is_empty());
     }

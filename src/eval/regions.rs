@@ -35,11 +35,12 @@
 //! Complexity: O(w·h) per scene besides the sort of the scored pixels by texture (O(n log n)).
 
 use std::path::Path;
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
 use super::metrics::{check_size, pixel_error, scene_result};
-use super::report::{AlgReport, error_chain};
+use super::report::AlgReport;
 use crate::dataset::Layout;
 use crate::dataset::{GT_FILE, LEFT_FILE, MASK_FILE};
 use crate::error::{Error, Result};
@@ -268,8 +269,7 @@ pub fn split_scene(dir: &Path, alg: &str, scale: u32) -> Result<RegionSplit> {
     }
     let inputs =
         RegionInputs { result: &result, gt: &gt, mask: &mask, left: &left, lr_mask: lr_mask.as_ref(), ndisp, scale };
-    split_by_region(&inputs)
-        .ok_or_else(|| Error::Input(format!("{}: no scored pixel with a valid result", result_path.display())))
+    split_by_region(&inputs).ok_or_else(|| Error::dataset_at(&result_path, "no scored pixel with a valid result"))
 }
 
 /// One algorithm's splits over the scenes of an [`AlgReport`].
@@ -280,7 +280,7 @@ pub struct RegionReport {
     /// Factor to full-resolution px.
     pub scale: u32,
     /// (scene name, MiddEval3 weight, its split or why there is none), in the report's order.
-    pub scenes: Vec<(String, f64, std::result::Result<RegionSplit, String>)>,
+    pub scenes: Vec<(String, f64, std::result::Result<RegionSplit, Arc<Error>>)>,
 }
 
 impl RegionReport {
@@ -312,23 +312,23 @@ impl RegionReport {
 /// The splits of the scenes `report` scored (in parallel).
 ///
 /// # Errors
-/// [`Error::Input`] unless the report is of a MiddEval3 tree scored with the nonocc mask.
+/// [`Error::Argument`] unless the report is of a MiddEval3 tree scored with the nonocc mask.
 pub fn split_report(report: &AlgReport) -> Result<RegionReport> {
     if report.layout != Layout::Middlebury {
-        return Err(Error::Input(format!(
+        return Err(Error::argument(format!(
             "--regions splits MiddEval3 results only (this is a {} data set)",
             report.layout.name()
         )));
     }
     if report.mask != super::MaskMode::Nonocc {
-        return Err(Error::Input("--regions scores the non-occluded pixels: use it with --mask nonocc".into()));
+        return Err(Error::argument("--regions scores the non-occluded pixels: use it with --mask nonocc"));
     }
     let scenes = report
         .scenes
         .par_iter()
         .map(|s| {
             let split = match &s.metrics {
-                Ok(_) => split_scene(&s.dir, &report.alg, report.scale).map_err(|e| error_chain(&e)),
+                Ok(_) => split_scene(&s.dir, &report.alg, report.scale).map_err(Arc::new),
                 Err(e) => Err(e.clone()),
             };
             (s.name.clone(), s.weight, split)

@@ -169,7 +169,7 @@ pub(super) fn regions_json(r: &RegionReport) -> String {
     let excluded: Vec<String> = r
         .scenes
         .iter()
-        .filter_map(|(n, _, s)| s.as_ref().err().map(|e| format!("{}: {}", json_str(n), json_str(e))))
+        .filter_map(|(n, _, s)| s.as_ref().err().map(|e| format!("{}: {}", json_str(n), json_str(&e.chain()))))
         .collect();
     if !excluded.is_empty() {
         let _ = write!(o, ", \"excluded\": {{{}}}", excluded.join(", "));

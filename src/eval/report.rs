@@ -3,8 +3,8 @@
 //! into an [`AlgReport`], whose weighted and plain means are the "Averages" of the [`eval`](crate::eval) module doc.
 //! Per-scene failures are recorded, not returned. [`find_gt_scenes`] lists MiddEval3 scene folders with ground truth.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
@@ -35,7 +35,7 @@ pub struct SceneResult {
     /// MiddEval3 weight ([`scene_weight`]); 1 for KITTI and ETH3D.
     pub weight: f64,
     /// The scores, or why the scene could not be evaluated.
-    pub metrics: std::result::Result<Metrics, String>,
+    pub metrics: std::result::Result<Metrics, Arc<Error>>,
     /// Run time from `time<alg>.txt`, when present and readable.
     pub seconds: Option<f64>,
     /// How well the confidence map beside the result ranks its errors, when there is one (and it reads).
@@ -93,9 +93,9 @@ impl AlgReport {
         })
     }
 
-    /// The scenes left out of the averages, with the reason.
-    pub fn excluded(&self) -> impl Iterator<Item = (&str, &str)> {
-        self.scenes.iter().filter_map(|s| s.metrics.as_ref().err().map(|e| (s.name.as_str(), e.as_str())))
+    /// The scenes left out of the averages, with the reason ([`Error::chain`]).
+    pub fn excluded(&self) -> impl Iterator<Item = (&str, String)> {
+        self.scenes.iter().filter_map(|s| s.metrics.as_ref().err().map(|e| (s.name.as_str(), e.chain())))
     }
 
     /// Mean run time per pair over the evaluated scenes that have a time file, and how many had one.
@@ -124,11 +124,11 @@ impl AlgReport {
 /// Folders under `dir` (recursively, `dir` included) holding a `disp0GT.pfm`, sorted by path.
 ///
 /// # Errors
-/// [`Error::Io`] if `dir` cannot be read, [`Error::Input`] if it holds no such folder.
+/// [`Error::Io`] if `dir` cannot be read, [`Error::Dataset`] if it holds no such folder.
 pub fn find_gt_scenes(dir: &Path) -> Result<Vec<PathBuf>> {
     let scenes = crate::dataset::walk::find_dirs_with(&[dir.to_path_buf()], &[crate::dataset::GT_FILE])?;
     if scenes.is_empty() {
-        return Err(Error::Input(format!("no scene folder with a disp0GT.pfm under {}", dir.display())));
+        return Err(Error::dataset(format!("no scene folder with a disp0GT.pfm under {}", dir.display())));
     }
     Ok(scenes)
 }
@@ -166,13 +166,13 @@ pub fn evaluate_dir(
     let how = Discovery { layout: src.layout, gt: src.gt.clone() };
     let pairs = crate::dataset::discover(&[dir.to_path_buf()], Purpose::Score, &how)?;
     let Some(layout) = pairs.first().map(|p| p.layout) else {
-        return Err(Error::Input(format!(
+        return Err(Error::dataset(format!(
             "no scene with ground truth under {} (MiddEval3 disp0GT.pfm, KITTI disp_noc*/ or disp_occ*/, ETH3D *_gt/)",
             dir.display()
         )));
     };
     if let Some(other) = pairs.iter().find(|p| p.layout != layout) {
-        return Err(Error::Input(format!(
+        return Err(Error::dataset(format!(
             "{} holds {} and {} data ({} and {}); evaluate one data set at a time",
             dir.display(),
             layout.name(),
@@ -202,7 +202,7 @@ pub fn evaluate_dir(
                 sparsification,
                 weight: if layout == Layout::Middlebury { scene_weight(&name) } else { 1.0 },
                 truth_unusable: metrics.as_ref().is_err_and(|e| !blames_result(e, &files.disparity)),
-                metrics: metrics.map_err(|e| error_chain(&e)),
+                metrics: metrics.map_err(Arc::new),
                 seconds: read_seconds(&files.time),
                 name,
                 dir,
@@ -218,13 +218,13 @@ pub fn evaluate_dir(
 fn check_truth(pair: &Pair, mask_mode: MaskMode, src: &Sources) -> Result<()> {
     let truth = pair.truth(mask_mode == MaskMode::All, src.gt.as_deref());
     if !truth.disparity.is_file() {
-        return Err(Error::Input(format!("no ground truth {}", truth.disparity.display())));
+        return Err(Error::dataset(format!("no ground truth {}", truth.disparity.display())));
     }
     if let Some(mask) = truth.mask.filter(|m| mask_mode == MaskMode::Nonocc && !m.is_file()) {
-        return Err(Error::Input(format!("no {} (needed for the nonocc mask)", mask.display())));
+        return Err(Error::dataset(format!("no {} (needed for the nonocc mask)", mask.display())));
     }
     if let Some(calib) = pair.calib.as_ref().filter(|c| pair.layout == Layout::Middlebury && !c.is_file()) {
-        return Err(Error::Input(format!("no {} (needed for the search range)", calib.display())));
+        return Err(Error::dataset(format!("no {} (needed for the search range)", calib.display())));
     }
     Ok(())
 }
@@ -237,7 +237,17 @@ fn blames_result(e: &Error, result: &Path) -> bool {
             path == result
         }
         Error::Calib { .. } => false,
-        Error::Input(msg) => msg.starts_with("no result file") || msg.starts_with(&result.display().to_string()),
+        // Messages of these name the file they concern first; a missing result is named after "no result file".
+        Error::InputImage { .. }
+        | Error::InputFile { .. }
+        | Error::Config { .. }
+        | Error::Dataset { .. }
+        | Error::Locked { .. }
+        | Error::Output { .. }
+        | Error::Argument { .. } => {
+            let msg = e.to_string();
+            msg.starts_with("no result file") || msg.starts_with(&result.display().to_string())
+        }
         _ => true,
     }
 }
@@ -249,7 +259,7 @@ fn score_pair(pair: &Pair, alg: &str, scale: u32, mask_mode: MaskMode, src: &Sou
     }
     let result = pair.result_files(alg, src.results.as_deref()).disparity;
     if !result.is_file() {
-        return Err(Error::Input(format!("no result file {}", result.display())));
+        return Err(Error::dataset(format!("no result file {}", result.display())));
     }
     let truth = pair.truth(mask_mode == MaskMode::All, src.gt.as_deref());
     // No clipping: neither benchmark clips a result to a search range.
@@ -257,7 +267,7 @@ fn score_pair(pair: &Pair, alg: &str, scale: u32, mask_mode: MaskMode, src: &Sou
     if pair.layout == Layout::Eth3d {
         let mask = truth.mask.filter(|_| mask_mode == MaskMode::Nonocc);
         if let Some(m) = mask.as_ref().filter(|m| !m.is_file()) {
-            return Err(Error::Input(format!("no {} (needed for the nonocc mask)", m.display())));
+            return Err(Error::dataset(format!("no {} (needed for the nonocc mask)", m.display())));
         }
         return evaluate_files(&result, &truth.disparity, mask.as_deref(), unbounded, scale, mask_mode);
     }
@@ -269,7 +279,7 @@ fn score_pair(pair: &Pair, alg: &str, scale: u32, mask_mode: MaskMode, src: &Sou
     super::interpolate_background(&mut map);
     let mut metrics = evaluate(&map, &gt, None, unbounded, scale, mask_mode);
     if metrics.pixels == 0 {
-        return Err(Error::Input(format!("{}: no pixel with ground truth", truth.disparity.display())));
+        return Err(Error::dataset_at(&truth.disparity, "no pixel with ground truth"));
     }
     metrics.invalid = 100.0 * invalid_before as f64 / known as f64;
     Ok(metrics)
@@ -306,7 +316,7 @@ fn infer_common_scale(root: &Path, dirs: &[PathBuf]) -> Result<(u32, Option<Stri
     let mut from_sizes = 0;
     for d in dirs {
         let Some(res) = scene_resolution(d) else {
-            return Err(Error::Input(format!(
+            return Err(Error::dataset(format!(
                 "cannot tell the resolution of {}: no trainingQ/H/F-like folder in its path, and its name and \
                  image size are not a MiddEval3 scene's; pass --scale 1, 2 or 4",
                 d.display()
@@ -315,7 +325,7 @@ fn infer_common_scale(root: &Path, dirs: &[PathBuf]) -> Result<(u32, Option<Stri
         from_sizes += usize::from(res.from_contents());
         match found {
             Some((f, other)) if f != res.scale => {
-                return Err(Error::Input(format!(
+                return Err(Error::dataset(format!(
                     "{} and {} are at different resolutions; evaluate one folder at a time or pass --scale",
                     other.display(),
                     d.display()
@@ -324,7 +334,7 @@ fn infer_common_scale(root: &Path, dirs: &[PathBuf]) -> Result<(u32, Option<Stri
             _ => found = Some((res.scale, d)),
         }
     }
-    let (scale, _) = found.ok_or_else(|| Error::Input("no scenes".into()))?;
+    let (scale, _) = found.ok_or_else(|| Error::dataset("no scenes"))?;
     let note = (from_sizes > 0).then(|| {
         let of = if from_sizes == dirs.len() { "its".to_string() } else { format!("{from_sizes} of its") };
         format!(
@@ -361,17 +371,6 @@ fn read_seconds(path: &Path) -> Option<f64> {
     number.parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0)
 }
 
-/// The error and its sources on one line.
-pub(super) fn error_chain(e: &Error) -> String {
-    let mut msg = e.to_string();
-    let mut source = std::error::Error::source(e);
-    while let Some(s) = source {
-        let _ = write!(msg, ": {s}");
-        source = s.source();
-    }
-    msg
-}
-
 #[cfg(test)]
 pub(super) mod tests {
     use super::*;
@@ -383,7 +382,7 @@ pub(super) mod tests {
             name: name.into(),
             dir: PathBuf::from(name),
             weight: scene_weight(name),
-            metrics: if ok { Ok(m) } else { Err("no result".into()) },
+            metrics: if ok { Ok(m) } else { Err(Arc::new(Error::dataset("no result"))) },
             seconds: Some(avgerr),
             sparsification: None,
             truth_unusable: false,
@@ -411,7 +410,7 @@ pub(super) mod tests {
         assert!((w.rms - 2.0 * 6.0 / 2.5).abs() < 1e-12);
         assert_eq!((w.bad2, w.pixels), (10.0, 300));
         assert!((r.mean().unwrap().avgerr - 7.0 / 3.0).abs() < 1e-12);
-        assert_eq!(r.excluded().collect::<Vec<_>>(), vec![("Vintage", "no result")]);
+        assert_eq!(r.excluded().collect::<Vec<_>>(), vec![("Vintage", "no result".to_string())]);
         assert_eq!(r.mean_seconds(), Some((7.0 / 3.0, 3)));
     }
 }

@@ -23,6 +23,7 @@
 //! and out of it is not scored.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use super::format::{csv_field, csv_num};
 use super::metrics::{MaskMode, Metrics, check_size, evaluate};
@@ -49,12 +50,12 @@ pub struct Change {
 }
 
 /// One frame's scores.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct FrameScore {
     /// The frame's stem.
     pub stem: String,
     /// Its scores as a pair, or why it has none.
-    pub metrics: std::result::Result<Metrics, String>,
+    pub metrics: std::result::Result<Metrics, Arc<Error>>,
     /// The change from the previous frame (`None` for the first frame, or when either frame has no scores).
     pub change: Option<Change>,
     /// Its run time from the results' times file.
@@ -62,7 +63,7 @@ pub struct FrameScore {
 }
 
 /// A sequence's scores.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct SequenceReport {
     /// The results folder.
     pub results: PathBuf,
@@ -118,9 +119,9 @@ impl SequenceReport {
         mean_finite(self.frames.iter().filter_map(|f| f.seconds))
     }
 
-    /// Frames without scores.
-    pub fn excluded(&self) -> impl Iterator<Item = (&str, &str)> {
-        self.frames.iter().filter_map(|f| f.metrics.as_ref().err().map(|e| (f.stem.as_str(), e.as_str())))
+    /// Frames without scores, with the reason ([`Error::chain`]).
+    pub fn excluded(&self) -> impl Iterator<Item = (&str, String)> {
+        self.frames.iter().filter_map(|f| f.metrics.as_ref().err().map(|e| (f.stem.as_str(), e.chain())))
     }
 }
 
@@ -183,7 +184,7 @@ struct Loaded {
 /// sequence's `calib.txt` range, else none).
 ///
 /// # Errors
-/// [`Error::Input`] when the sequence has no ground truth, or no frame could be scored; a malformed
+/// [`Error::Dataset`] when the sequence has no ground truth, or no frame could be scored; a malformed
 /// `calib.txt`. Per-frame problems are recorded in the report.
 pub fn evaluate_sequence(
     results: &Path,
@@ -193,7 +194,7 @@ pub fn evaluate_sequence(
     ndisp: Option<usize>,
 ) -> Result<SequenceReport> {
     if !seq.has_ground_truth() {
-        return Err(Error::Input(format!("{}: the sequence has no ground truth (gt/<stem>.pfm)", seq.root.display())));
+        return Err(Error::dataset_at(&seq.root, "the sequence has no ground truth (gt/<stem>.pfm)"));
     }
     let ndisp = match (ndisp, &seq.calib) {
         (Some(n), _) => n,
@@ -219,7 +220,7 @@ pub fn evaluate_sequence(
         let metrics = loaded.as_ref().map_err(|e| e.clone()).and_then(|l| {
             let m = evaluate(&l.result, &l.gt, l.mask.as_ref(), ndisp, scale, mask_mode);
             if m.pixels == 0 {
-                Err(format!("no pixel with ground truth under the {} mask", mask_mode.name()))
+                Err(Arc::new(Error::dataset(format!("no pixel with ground truth under the {} mask", mask_mode.name()))))
             } else {
                 Ok(m)
             }
@@ -232,7 +233,7 @@ pub fn evaluate_sequence(
         SequenceReport { results: results.to_path_buf(), sequence: seq.root.clone(), mask: mask_mode, scale, frames };
     if report.mean().is_none() {
         let why = report.excluded().next().map_or(String::new(), |(s, e)| format!(" (frame {s}: {e})"));
-        return Err(Error::Input(format!("{}: no frame could be scored{why}", results.display())));
+        return Err(Error::dataset_at(results, format!("no frame could be scored{why}")));
     }
     Ok(report)
 }
@@ -244,12 +245,12 @@ fn result_extension(results: &Path) -> String {
 }
 
 /// Loads a frame's result, truth and mask, or says why it cannot be scored.
-fn load_frame(results: &Path, f: &crate::sequence::Frame, ext: &str) -> std::result::Result<Loaded, String> {
-    let chain = |e: Error| super::report::error_chain(&e);
-    let Some(gt_path) = &f.gt else { return Err("no ground truth".into()) };
+fn load_frame(results: &Path, f: &crate::sequence::Frame, ext: &str) -> std::result::Result<Loaded, Arc<Error>> {
+    let chain = Arc::new;
+    let Some(gt_path) = &f.gt else { return Err(Arc::new(Error::dataset("no ground truth"))) };
     let path = results.join(format!("{}.{ext}", f.stem));
     if !path.is_file() {
-        return Err(format!("no result {}", path.display()));
+        return Err(Arc::new(Error::dataset(format!("no result {}", path.display()))));
     }
     let gt = crate::io::pfm::read_pfm(gt_path).map_err(chain)?;
     let result = crate::io::read_disparity(&path).map_err(chain)?;
@@ -311,7 +312,7 @@ pub fn render_sequence(report: &SequenceReport, format: super::Format) -> String
                 format!("{{{}}}", fields.join(", "))
             });
             let excluded: Vec<String> =
-                report.excluded().map(|(s, e)| format!("{}: {}", json_str(s), json_str(e))).collect();
+                report.excluded().map(|(s, e)| format!("{}: {}", json_str(s), json_str(&e))).collect();
             let opt = |v: Option<f64>| v.map_or("null".into(), json_num);
             format!(
                 "{{\"results\": {}, \"sequence\": {}, \"mask\": \"{}\", \"scale\": {}, \"frames\": {{{}}}, \"mean\": {mean}, \
@@ -347,7 +348,7 @@ pub fn render_sequence(report: &SequenceReport, format: super::Format) -> String
                     c.map_or(String::new(), |c| c.static_pixels.to_string()),
                     c.map_or(String::new(), |c| c.moving_pixels.to_string()),
                     csv_num(f.seconds),
-                    csv_field(f.metrics.as_ref().err().map_or("", String::as_str))
+                    csv_field(&f.metrics.as_ref().err().map_or(String::new(), |e| e.chain()))
                 ));
             }
             out
@@ -366,7 +367,7 @@ pub fn render_sequence(report: &SequenceReport, format: super::Format) -> String
                     Ok(m) => row.extend(cols.iter().map(|k| fixed(Some(m.get(k))))),
                     Err(e) => {
                         row.extend(["-", "-", "-"].map(String::from));
-                        row.push(format!("({e})"));
+                        row.push(format!("({})", e.chain()));
                         rows.push(row);
                         continue;
                     }
@@ -494,7 +495,7 @@ mod tests {
         // A missing result is listed, and the changes into and out of it are not scored.
         std::fs::remove_file(out.join("000001.pfm")).unwrap();
         let report = evaluate_sequence(&out, &seq, MaskMode::Nonocc, 1, None).unwrap();
-        assert!(report.frames[1].metrics.as_ref().unwrap_err().contains("no result"));
+        assert!(report.frames[1].metrics.as_ref().unwrap_err().to_string().contains("no result"));
         assert!(report.frames[1].change.is_none() && report.frames[2].change.is_none());
         assert_eq!(report.excluded().count(), 1);
         assert_eq!(report.flicker(), None);

@@ -1,7 +1,7 @@
 //! Middlebury `calib.txt`: `key=value` lines (`cam0=[...]`, `ndisp=290`, `vmin=..`, `vmax=..`, ...), parsed by key.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 
@@ -9,30 +9,23 @@ use crate::error::{Error, Result};
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Calib {
     entries: BTreeMap<String, String>,
+    /// The file it was read from (empty when parsed from text): its errors name it.
+    path: PathBuf,
 }
 
 impl Calib {
     /// Parses `key=value` lines; blank lines and `#` comments are skipped, surrounding whitespace is trimmed.
     ///
     /// # Errors
-    /// A message for a non-empty line without `=` or with an empty key.
-    pub fn parse(text: &str) -> std::result::Result<Calib, String> {
-        let mut entries = BTreeMap::new();
-        for (n, line) in text.lines().enumerate() {
-            let line = line.trim();
-            if line.is_empty() || line.starts_with('#') {
-                continue;
-            }
-            let Some((k, v)) = line.split_once('=') else {
-                return Err(format!("line {}: expected key=value, found {:?}", n + 1, truncate(line)));
-            };
-            let k = k.trim();
-            if k.is_empty() {
-                return Err(format!("line {}: empty key", n + 1));
-            }
-            entries.insert(k.to_string(), v.trim().to_string());
-        }
-        Ok(Calib { entries })
+    /// [`Error::Calib`] (without a path) for a non-empty line without `=` or with an empty key.
+    pub fn parse(text: &str) -> Result<Calib> {
+        let entries = parse_entries(text).map_err(|msg| Error::Calib { path: PathBuf::new(), msg })?;
+        Ok(Calib { entries, path: PathBuf::new() })
+    }
+
+    /// An [`Error::Calib`] naming the file the keys were read from.
+    fn error(&self, msg: impl Into<String>) -> Error {
+        Error::Calib { path: self.path.clone(), msg: msg.into() }
     }
 
     /// Reads and parses a `calib.txt` file.
@@ -45,7 +38,8 @@ impl Calib {
             .map_err(|_| Error::Calib { path: path.to_path_buf(), msg: "not a text file".into() })?;
         // A UTF-8 byte-order mark (some Windows editors write one) is not part of the first key.
         let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
-        Calib::parse(text).map_err(|msg| Error::Calib { path: path.to_path_buf(), msg })
+        let entries = parse_entries(text).map_err(|msg| Error::Calib { path: path.to_path_buf(), msg })?;
+        Ok(Calib { entries, path: path.to_path_buf() })
     }
 
     /// The raw value of `key`.
@@ -56,12 +50,13 @@ impl Calib {
     /// `ndisp` as a positive integer, if present and valid.
     ///
     /// # Errors
-    /// A message when the key is missing or not a positive integer.
-    pub fn ndisp(&self) -> std::result::Result<usize, String> {
-        let v = self.get("ndisp").ok_or("no ndisp key")?;
+    /// [`Error::Calib`] naming the file (when it was read from one) when the key is missing or not a positive
+    /// integer.
+    pub fn ndisp(&self) -> Result<usize> {
+        let v = self.get("ndisp").ok_or_else(|| self.error("no ndisp key"))?;
         match v.parse::<usize>() {
             Ok(n) if n > 0 => Ok(n),
-            _ => Err(format!("ndisp = {:?} is not a positive integer", truncate(v))),
+            _ => Err(self.error(format!("ndisp = {:?} is not a positive integer", truncate(v)))),
         }
     }
 
@@ -69,8 +64,8 @@ impl Calib {
     /// writes: the range is then measured), a positive integer when present.
     ///
     /// # Errors
-    /// A message when the key is present but not a positive integer.
-    pub fn stated_ndisp(&self) -> std::result::Result<Option<usize>, String> {
+    /// As [`Calib::ndisp`] when the key is present but not a positive integer.
+    pub fn stated_ndisp(&self) -> Result<Option<usize>> {
         match self.get("ndisp") {
             None => Ok(None),
             Some(_) => self.ndisp().map(Some),
@@ -87,14 +82,19 @@ impl Calib {
     /// every default) ignores it.
     ///
     /// # Errors
-    /// A message when `vmin` is missing, not a number of 0 or more, or not below `ndisp`.
-    pub fn vmin_search(&self) -> std::result::Result<(usize, Option<usize>), String> {
-        let raw = self.get("vmin").ok_or("states no vmin (--min-disp calib takes the smallest disparity from it)")?;
+    /// [`Error::Calib`] as [`Calib::ndisp`] when `vmin` is missing, not a number of 0 or more, or not below `ndisp`.
+    pub fn vmin_search(&self) -> Result<(usize, Option<usize>)> {
+        let raw = self.get("vmin");
+        let raw =
+            raw.ok_or_else(|| self.error("states no vmin (--min-disp calib takes the smallest disparity from it)"))?;
         let vmin = raw.parse::<f64>().ok().filter(|v| v.is_finite() && *v >= 0.0 && *v < 1e9);
-        let vmin = vmin.ok_or_else(|| format!("vmin = {:?} is not a disparity of 0 or more", truncate(raw)))?;
+        let vmin =
+            vmin.ok_or_else(|| self.error(format!("vmin = {:?} is not a disparity of 0 or more", truncate(raw))))?;
         let min_disp = vmin.floor() as usize;
         match self.stated_ndisp()? {
-            Some(n) if min_disp >= n => Err(format!("vmin = {raw} is not below ndisp = {n}: no range is left")),
+            Some(n) if min_disp >= n => {
+                Err(self.error(format!("vmin = {raw} is not below ndisp = {n}: no range is left")))
+            }
             Some(n) => Ok((min_disp, Some(n - min_disp))),
             None => Ok((min_disp, None)),
         }
@@ -111,7 +111,27 @@ impl Calib {
 /// # Errors
 /// [`Error::Io`] or [`Error::Calib`] naming the path.
 pub fn read_ndisp(path: &Path) -> Result<usize> {
-    Calib::load(path)?.ndisp().map_err(|msg| Error::Calib { path: path.to_path_buf(), msg })
+    Calib::load(path)?.ndisp()
+}
+
+/// The `key=value` entries of the text.
+fn parse_entries(text: &str) -> std::result::Result<BTreeMap<String, String>, String> {
+    let mut entries = BTreeMap::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let Some((k, v)) = line.split_once('=') else {
+            return Err(format!("line {}: expected key=value, found {:?}", n + 1, truncate(line)));
+        };
+        let k = k.trim();
+        if k.is_empty() {
+            return Err(format!("line {}: empty key", n + 1));
+        }
+        entries.insert(k.to_string(), v.trim().to_string());
+    }
+    Ok(entries)
 }
 
 fn truncate(s: &str) -> String {
@@ -129,7 +149,7 @@ mod tests {
     #[test]
     fn parses_middlebury_calib_by_key() {
         let c = Calib::parse(TEDDY).unwrap();
-        assert_eq!(c.ndisp(), Ok(64));
+        assert_eq!(c.ndisp().unwrap(), 64);
         assert_eq!(c.float("vmin"), Some(13.0));
         assert_eq!(c.float("baseline"), Some(178.089));
         assert_eq!(c.get("cam0"), Some("[1746.24 0 14.88; 0 1746.24 65.5; 0 0 1]"));
@@ -138,9 +158,9 @@ mod tests {
     /// `--min-disp calib`: vmin rounded down, the top of the range kept at ndisp − 1.
     #[test]
     fn the_search_from_vmin_keeps_the_top_of_the_range() {
-        assert_eq!(Calib::parse(TEDDY).unwrap().vmin_search(), Ok((13, Some(51))));
-        assert_eq!(Calib::parse("vmin=7.9\nndisp=70").unwrap().vmin_search(), Ok((7, Some(63))));
-        assert_eq!(Calib::parse("vmin=0\nwidth=3").unwrap().vmin_search(), Ok((0, None)));
+        assert_eq!(Calib::parse(TEDDY).unwrap().vmin_search().ok(), Some((13, Some(51))));
+        assert_eq!(Calib::parse("vmin=7.9\nndisp=70").unwrap().vmin_search().ok(), Some((7, Some(63))));
+        assert_eq!(Calib::parse("vmin=0\nwidth=3").unwrap().vmin_search().ok(), Some((0, None)));
         for (bad, why) in [
             ("ndisp=64", "states no vmin"),
             ("vmin=-2\nndisp=64", "not a disparity"),
@@ -148,7 +168,7 @@ mod tests {
             ("vmin=64\nndisp=64", "not below ndisp"),
             ("vmin=3\nndisp=x", "not a positive integer"),
         ] {
-            let e = Calib::parse(bad).unwrap().vmin_search().unwrap_err();
+            let e = Calib::parse(bad).unwrap().vmin_search().unwrap_err().to_string();
             assert!(e.contains(why), "{bad}: {e}");
         }
     }
@@ -156,7 +176,7 @@ mod tests {
     #[test]
     fn order_whitespace_and_crlf_do_not_matter() {
         let c = Calib::parse("\r\n  vmax = 9 \r\n# note\nndisp= 32\r\n").unwrap();
-        assert_eq!(c.ndisp(), Ok(32));
+        assert_eq!(c.ndisp().unwrap(), 32);
         assert_eq!(c.float("vmax"), Some(9.0));
     }
 
@@ -170,8 +190,8 @@ mod tests {
         for bad in ["ndisp=0", "ndisp=-3", "ndisp=abc", "ndisp="] {
             assert!(Calib::parse(bad).unwrap().stated_ndisp().is_err(), "{bad}");
         }
-        assert_eq!(Calib::parse("width=3").unwrap().stated_ndisp(), Ok(None));
-        assert_eq!(Calib::parse("ndisp=64").unwrap().stated_ndisp(), Ok(Some(64)));
+        assert_eq!(Calib::parse("width=3").unwrap().stated_ndisp().ok(), Some(None));
+        assert_eq!(Calib::parse("ndisp=64").unwrap().stated_ndisp().ok(), Some(Some(64)));
     }
 
     #[test]

@@ -60,11 +60,11 @@ pub(crate) fn read_exr(path: &Path) -> Result<Plane<f32>> {
     let channels = &layer.channel_data.list;
     let chosen = channels.iter().find(|c| c.name.eq("Y")).or_else(|| channels.first());
     let Some(channel) = chosen else {
-        return Err(JemError::Input(format!("{}: EXR has no channels", path.display())));
+        return Err(JemError::bad_image_at(path, "EXR has no channels"));
     };
     let data: Vec<f32> = channel.sample_data.values_as_f32().collect();
     if data.len() != w * h {
-        return Err(JemError::Input(format!("{}: EXR channel has the wrong number of samples", path.display())));
+        return Err(JemError::bad_image_at(path, "EXR channel has the wrong number of samples"));
     }
     Ok(Plane::from_parts(w, h, data))
 }

@@ -68,7 +68,7 @@ pub fn read_image_header(path: &Path) -> Result<ImageHeader> {
 /// Both views' headers ([`read_image_header`]), checked as a pair: the same size, at least 2 pixels wide.
 ///
 /// # Errors
-/// As [`read_image_header`]; [`Error::SizeMismatch`] for unequal sizes, [`Error::Input`] for a pair too narrow.
+/// As [`read_image_header`]; [`Error::SizeMismatch`] for unequal sizes, [`Error::InputImage`] for a pair too narrow.
 pub fn read_pair_header(left: &Path, right: &Path) -> Result<ImageHeader> {
     png::read_pair_header(left, right)
 }
@@ -128,10 +128,10 @@ pub const LR_REJECTED: u8 = 255;
 /// [`read_grey8`]). Nothing is written; `path` names the file in an error.
 ///
 /// # Errors
-/// [`Error::Input`] if `path` is not a `.png`; [`Error::Image`] naming the path.
+/// [`Error::Output`] if `path` is not a `.png`; [`Error::Image`] naming the path.
 pub fn encode_lr_mask(path: &Path, consistent: &crate::image::Plane<bool>) -> Result<Vec<u8>> {
     if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
-        return Err(Error::Input(format!("{}: the left-right mask is written as .png", path.display())));
+        return Err(Error::output_at(path, "the left-right mask is written as .png"));
     }
     let (w, h) = consistent.dims();
     let grey: Vec<u8> = consistent.data().iter().map(|&ok| if ok { 0 } else { LR_REJECTED }).collect();
@@ -159,17 +159,14 @@ impl DisparityFormat {
     /// The format implied by a file name's extension (`.pfm`, `.exr`, `.png`).
     ///
     /// # Errors
-    /// [`Error::Input`] for any other extension.
+    /// [`Error::Output`] for any other extension.
     pub fn from_path(path: &Path) -> Result<Self> {
         let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
         match ext.as_deref() {
             Some("pfm") => Ok(DisparityFormat::Pfm),
             Some("exr") => Ok(DisparityFormat::Exr),
             Some("png") => Ok(DisparityFormat::Png16),
-            _ => Err(Error::Input(format!(
-                "{}: unknown output format (use a .pfm, .exr or .png file name)",
-                path.display()
-            ))),
+            _ => Err(Error::output_at(path, "unknown output format (use a .pfm, .exr or .png file name)")),
         }
     }
 }
@@ -228,23 +225,24 @@ fn same_file(a: &Path, b: &Path) -> bool {
 /// ([`check_replaceable`]), one of its inputs or another of its outputs (also through symbolic or hard links).
 ///
 /// # Errors
-/// [`Error::Input`] naming the path (and the other path).
+/// [`Error::Output`] naming the path (and the other path).
 pub fn check_outputs(inputs: &[&Path], outputs: &[&Path]) -> Result<()> {
     for (k, out) in outputs.iter().enumerate() {
         check_replaceable(out)?;
         if let Some(input) = inputs.iter().find(|i| same_file(out, i)) {
-            return Err(Error::Input(format!(
-                "{}: this output would overwrite an input of the same command ({}); choose another name",
-                out.display(),
-                input.display()
-            )));
+            return Err(Error::output_at(
+                out,
+                format!(
+                    "this output would overwrite an input of the same command ({}); choose another name",
+                    input.display()
+                ),
+            ));
         }
         if let Some(other) = outputs[..k].iter().find(|o| same_file(out, o)) {
-            return Err(Error::Input(format!(
-                "{}: the same file is given for two outputs ({}); choose another name",
-                out.display(),
-                other.display()
-            )));
+            return Err(Error::output_at(
+                out,
+                format!("the same file is given for two outputs ({}); choose another name", other.display()),
+            ));
         }
     }
     Ok(())
@@ -305,7 +303,7 @@ pub fn read_disparity(path: &Path) -> Result<DisparityMap> {
 /// bytes. The file is opened without blocking and checked again once open (it may have been replaced meanwhile).
 ///
 /// # Errors
-/// [`Error::Io`] naming the path when it cannot be opened, [`Error::Input`] naming it and what it is when it is not
+/// [`Error::Io`] naming the path when it cannot be opened, [`Error::InputFile`] naming it and what it is when it is not
 /// a regular file.
 pub fn open_regular(path: &Path) -> Result<std::fs::File> {
     let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
@@ -328,7 +326,7 @@ fn check_regular(path: &Path, meta: &std::fs::Metadata) -> Result<()> {
         return Ok(());
     }
     let what = if meta.is_dir() { "a folder" } else { file_kind(meta) };
-    Err(Error::Input(format!("{}: is {what}, not a regular file; jem reads only regular files", path.display())))
+    Err(Error::input_file_at(path, format!("is {what}, not a regular file; jem reads only regular files")))
 }
 
 /// A regular file's bytes ([`open_regular`]), all of them.
@@ -356,14 +354,14 @@ pub(crate) fn read_small_text(path: &Path, max: u64) -> Option<String> {
 /// bytes instead of filling the memory.
 ///
 /// # Errors
-/// [`Error::Io`] naming the path, or [`Error::Input`] when it is not a regular file or is larger than `max`.
+/// [`Error::Io`] naming the path, or [`Error::InputFile`] when it is not a regular file or is larger than `max`.
 pub fn read_capped(path: &Path, max: u64, what: &str) -> Result<Vec<u8>> {
     use std::io::Read;
     let file = open_regular(path)?;
     let mut bytes = Vec::new();
     file.take(max + 1).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
     if bytes.len() as u64 > max {
-        return Err(Error::Input(format!("{}: larger than {max} bytes, too large for a {what}", path.display())));
+        return Err(Error::input_file_at(path, format!("larger than {max} bytes, too large for a {what}")));
     }
     Ok(bytes)
 }
@@ -372,7 +370,7 @@ pub fn read_capped(path: &Path, max: u64, what: &str) -> Result<Vec<u8>> {
 /// is refused with what to do, instead of the system's "File exists" or "Not a directory".
 ///
 /// # Errors
-/// [`Error::Input`] naming `dir`, or the file above it that is in the way; [`Error::Io`] when it cannot be made.
+/// [`Error::Output`] naming `dir`, or the file above it that is in the way; [`Error::Io`] when it cannot be made.
 pub fn create_folder(dir: &Path) -> Result<()> {
     check_folder_name(dir)?;
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))
@@ -388,17 +386,13 @@ pub fn check_folder_name(dir: &Path) -> Result<()> {
         return Ok(());
     }
     if std::fs::symlink_metadata(dir).is_ok() {
-        return Err(Error::Input(format!(
-            "{}: exists and is not a folder; give the name of a folder (a new one is made)",
-            dir.display()
-        )));
+        return Err(Error::output_at(dir, "exists and is not a folder; give the name of a folder (a new one is made)"));
     }
     if let Some(file) = dir.ancestors().skip(1).find(|a| !a.as_os_str().is_empty() && a.exists() && !a.is_dir()) {
-        return Err(Error::Input(format!(
-            "{}: is a file, so the folder {} cannot be made in it; give another name",
-            file.display(),
-            dir.display()
-        )));
+        return Err(Error::output_at(
+            file,
+            format!("is a file, so the folder {} cannot be made in it; give another name", dir.display()),
+        ));
     }
     Ok(())
 }
@@ -598,7 +592,7 @@ mod tests {
     fn failed_write_leaves_nothing() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("x.txt");
-        let r = write_atomic_with(&p, |_| Err(Error::Input("boom".into())));
+        let r = write_atomic_with(&p, |_| Err(Error::argument("boom")));
         assert!(r.is_err());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
     }

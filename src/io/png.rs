@@ -25,12 +25,14 @@ where
 {
     match reader.format() {
         Some(f) if f.reading_enabled() => Ok(()),
-        Some(f) => Err(Error::Input(format!(
-            "{}: {} images are not read (supported: {IMAGE_FORMATS})",
-            path.display(),
-            f.extensions_str().first().map_or("these", |e| e).to_ascii_uppercase()
-        ))),
-        None => Err(Error::Input(format!("{}: not an image jem reads (supported: {IMAGE_FORMATS})", path.display()))),
+        Some(f) => Err(Error::bad_image_at(
+            path,
+            format!(
+                "{} images are not read (supported: {IMAGE_FORMATS})",
+                f.extensions_str().first().map_or("these", |e| e).to_ascii_uppercase()
+            ),
+        )),
+        None => Err(Error::bad_image_at(path, format!("not an image jem reads (supported: {IMAGE_FORMATS})"))),
     }
 }
 
@@ -109,7 +111,7 @@ pub(crate) fn decode_bounded(path: &Path, max_bytes: u64) -> Result<DynamicImage
 /// [`load_rgb_pair`] holds at its peak (both loads at once).
 ///
 /// # Errors
-/// As [`read_header`]; [`Error::SizeMismatch`] for unequal sizes, [`Error::Input`] for empty images or images
+/// As [`read_header`]; [`Error::SizeMismatch`] for unequal sizes, [`Error::InputImage`] for empty images or images
 /// narrower than 2 pixels (no disparity range fits them).
 pub(crate) fn read_pair_header(left: &Path, right: &Path) -> Result<ImageHeader> {
     let (l, r) = (read_header(left)?, read_header(right)?);
@@ -117,15 +119,13 @@ pub(crate) fn read_pair_header(left: &Path, right: &Path) -> Result<ImageHeader>
         return Err(Error::SizeMismatch { left: (l.width, l.height), right: (r.width, r.height) });
     }
     if l.width == 0 || l.height == 0 {
-        return Err(Error::Input(format!("{}: the images are empty (0 pixels)", left.display())));
+        return Err(Error::bad_image_at(left, "the images are empty (0 pixels)"));
     }
     if l.width < 2 {
-        return Err(Error::Input(format!(
-            "{}: the images are {}x{}; a stereo pair must be at least 2 pixels wide",
-            left.display(),
-            l.width,
-            l.height
-        )));
+        return Err(Error::bad_image_at(
+            left,
+            format!("the images are {}x{}; a stereo pair must be at least 2 pixels wide", l.width, l.height),
+        ));
     }
     Ok(ImageHeader { load_bytes: l.load_bytes.saturating_add(r.load_bytes), ..l })
 }
@@ -198,11 +198,13 @@ fn check_float_samples(path: &Path, img: &DynamicImage) -> Result<()> {
     let colour = samples.chunks_exact(channels).flat_map(|px| &px[..3]);
     match colour.copied().find(|v| !(0.0..=1.0).contains(v)) {
         None => Ok(()),
-        Some(v) => Err(Error::Input(format!(
-            "{}: a floating-point image with a sample {v} outside 0..1; jem reads float samples on the 0..1 scale \
-             (save the image with 8- or 16-bit samples, or scale it to 0..1)",
-            path.display()
-        ))),
+        Some(v) => Err(Error::bad_image_at(
+            path,
+            format!(
+                "a floating-point image with a sample {v} outside 0..1; jem reads float samples on the 0..1 scale \
+             (save the image with 8- or 16-bit samples, or scale it to 0..1)"
+            ),
+        )),
     }
 }
 
@@ -287,17 +289,19 @@ pub const PNG16_MAX_DISPARITY: f32 = 65535.0 / 256.0;
 /// A disparity of 0 is stored as 1/256 (0 means invalid); negative and non-finite ones become 0 (invalid).
 ///
 /// # Errors
-/// [`Error::Input`] naming the path if a disparity exceeds [`PNG16_MAX_DISPARITY`] (nothing is written: the
+/// [`Error::Output`] naming the path if a disparity exceeds [`PNG16_MAX_DISPARITY`] (nothing is written: the
 /// format cannot hold it; `.pfm` or `.exr` can); [`Error::Image`] or [`Error::Io`] naming the path.
 pub(crate) fn encode_disparity_png16(path: &Path, map: &DisparityMap) -> Result<Vec<u8>> {
     if let Some(max) = map.data.iter().copied().filter(|d| d.is_finite()).reduce(f32::max)
         && max * 256.0 > 65535.5
     {
-        return Err(Error::Input(format!(
-            "{}: disparity {max} does not fit a 16-bit PNG (at most {:.3}); write .pfm or .exr instead",
-            path.display(),
-            PNG16_MAX_DISPARITY
-        )));
+        return Err(Error::output_at(
+            path,
+            format!(
+                "disparity {max} does not fit a 16-bit PNG (at most {:.3}); write .pfm or .exr instead",
+                PNG16_MAX_DISPARITY
+            ),
+        ));
     }
     let value = |d: f32| if d.is_finite() && d >= 0.0 { (d * 256.0).round().clamp(1.0, 65535.0) as u16 } else { 0 };
     encode_grey16_png(path, map, value)
@@ -319,12 +323,12 @@ fn encode_grey16_png(path: &Path, map: &Plane<f32>, value: impl Fn(f32) -> u16) 
 /// less are invalid.
 ///
 /// # Errors
-/// [`Error::Input`] naming the path, nothing written, when a depth rounds above 65535 (the format cannot hold it;
+/// [`Error::Output`] naming the path, nothing written, when a depth rounds above 65535 (the format cannot hold it;
 /// the message says how far the depths go) or a valid depth rounds to 0 (it would read as invalid: the unit is too
 /// coarse); [`Error::Image`] naming the path.
 pub(crate) fn encode_depth_png16(path: &Path, depth: &Plane<f32>) -> Result<Vec<u8>> {
     let valid = || depth.data.iter().copied().filter(|z| z.is_finite() && *z > 0.0);
-    let refuse = |why: String| Err(Error::Input(format!("{}: {why}", path.display())));
+    let refuse = |why: String| Err(Error::output_at(path, why));
     if let Some(max) = valid().reduce(f32::max).filter(|&z| z.round() > 65535.0) {
         return refuse(format!(
             "depth {max:.0} (the baseline's unit) does not fit a 16-bit PNG (at most 65535): leave the farther \
@@ -351,11 +355,13 @@ pub(crate) fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
     // A disparity PNG is one 16-bit channel (KITTI convention); an 8-bit or colour image is a picture, and
     // reading it as disparities would give plausible-looking nonsense.
     if img.color() != image::ColorType::L16 {
-        return Err(Error::Input(format!(
-            "{}: a {:?} PNG is not a disparity map (expected 16-bit grey, disparity × 256; or use .pfm/.exr)",
-            path.display(),
-            img.color()
-        )));
+        return Err(Error::bad_image_at(
+            path,
+            format!(
+                "a {:?} PNG is not a disparity map (expected 16-bit grey, disparity × 256; or use .pfm/.exr)",
+                img.color()
+            ),
+        ));
     }
     let grey = img.to_luma16();
     let data = grey.pixels().map(|p| if p.0[0] == 0 { f32::INFINITY } else { f32::from(p.0[0]) / 256.0 }).collect();

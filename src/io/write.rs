@@ -15,7 +15,7 @@ use crate::error::{Error, Result};
 /// names the file that failed. [`AllOrNone`] does the same for files produced one at a time.
 ///
 /// # Errors
-/// [`Error::Io`] naming the first file that could not be written, [`Error::Input`] for a destination that is not
+/// [`Error::Io`] naming the first file that could not be written, [`Error::Output`] for a destination that is not
 /// a regular file.
 pub fn write_all_or_none(files: &[(&Path, &[u8])]) -> Result<()> {
     for &(path, bytes) in files {
@@ -47,7 +47,7 @@ impl AllOrNone {
     /// Writes `bytes` to `path`'s temporary file (flushed to disk); `path` itself is written at the commit.
     ///
     /// # Errors
-    /// [`Error::Io`] naming `path`, or [`Error::Input`] for a file above the file-size limit (`ulimit -f`); the
+    /// [`Error::Io`] naming `path`, or [`Error::Output`] for a file above the file-size limit (`ulimit -f`); the
     /// set should then be dropped.
     pub fn add(&mut self, path: &Path, bytes: &[u8]) -> Result<()> {
         check_file_size_limit(path, bytes.len() as u64)?;
@@ -59,7 +59,7 @@ impl AllOrNone {
     /// Renames every file into place (see [`write_all_or_none`] for what a failed rename undoes).
     ///
     /// # Errors
-    /// [`Error::Io`] or [`Error::Input`] naming the file whose rename failed.
+    /// [`Error::Io`] or [`Error::Output`] naming the file whose rename failed.
     pub fn commit(mut self) -> Result<()> {
         let staged = std::mem::take(&mut self.staged);
         commit_staged(&staged)
@@ -128,20 +128,19 @@ fn commit_staged(staged: &[(PathBuf, PathBuf)]) -> Result<()> {
 /// not done either: a stream cannot be written all or none.
 ///
 /// # Errors
-/// [`Error::Input`] naming the path and what it is.
+/// [`Error::Output`] naming the path and what it is.
 pub fn check_replaceable(path: &Path) -> Result<()> {
     let Ok(meta) = std::fs::metadata(path) else { return Ok(()) };
     if meta.is_file() {
         return Ok(());
     }
     if meta.is_dir() {
-        return Err(Error::Input(format!("{}: is a folder; an output must be a file name", path.display())));
+        return Err(Error::output_at(path, "is a folder; an output must be a file name"));
     }
-    Err(Error::Input(format!(
-        "{}: is {}, not a regular file; jem writes only regular files and will not replace it",
-        path.display(),
-        file_kind(&meta)
-    )))
+    Err(Error::output_at(
+        path,
+        format!("is {}, not a regular file; jem writes only regular files and will not replace it", file_kind(&meta)),
+    ))
 }
 
 /// What a file that is not a regular file or a folder is, in words.
@@ -170,7 +169,7 @@ pub(crate) fn file_kind(meta: &std::fs::Metadata) -> &'static str {
 /// Writes `bytes` to `path` atomically: a temporary file in the same folder, flushed, then renamed.
 ///
 /// # Errors
-/// [`Error::Io`] naming `path` (the temporary file is removed on failure); [`Error::Input`] when `path` exists and
+/// [`Error::Io`] naming `path` (the temporary file is removed on failure); [`Error::Output`] when `path` exists and
 /// is not a regular file ([`check_replaceable`]).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     check_file_size_limit(path, bytes.len() as u64)?;
@@ -181,10 +180,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 /// middle of the write (SIGXFSZ), leaving the temporary file behind.
 fn check_file_size_limit(path: &Path, bytes: u64) -> Result<()> {
     match crate::process::file_size_limit() {
-        Some(limit) if bytes > limit => Err(Error::Input(format!(
-            "{}: needs {bytes} bytes but the file-size limit (ulimit -f) is {limit} bytes",
-            path.display()
-        ))),
+        Some(limit) if bytes > limit => Err(Error::output_at(
+            path,
+            format!("needs {bytes} bytes but the file-size limit (ulimit -f) is {limit} bytes"),
+        )),
         _ => Ok(()),
     }
 }

@@ -180,7 +180,7 @@ impl Params {
             Some(path) => {
                 let bytes = crate::io::read_capped(path, crate::io::MAX_CONFIG_BYTES, "config")?;
                 let text = String::from_utf8(bytes)
-                    .map_err(|_| Error::Input(format!("{}: a config is UTF-8 text; this is not", path.display())))?;
+                    .map_err(|_| Error::config_at(path, "a config is UTF-8 text; this is not"))?;
                 Self::merged(Some((&text, path)), overrides)
             }
             None => Self::merged(None, overrides),

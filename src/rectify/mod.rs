@@ -331,11 +331,11 @@ impl Rectification {
     /// whole grey levels as an 8-bit image holds them.
     ///
     /// # Errors
-    /// [`Error::Input`] when the image is not of the rectification's size.
+    /// [`Error::InputImage`] when the image is not of the rectification's size.
     pub fn rectify_view(&self, image: &RgbImage, view: View) -> Result<RgbImage> {
         if image.dims() != self.size {
             let (w, h) = image.dims();
-            return Err(Error::Input(format!(
+            return Err(Error::bad_image(format!(
                 "the {} view is {w}x{h}, the rectification is for {}x{}",
                 if view == View::Left { "left" } else { "right" },
                 self.size.0,

@@ -263,15 +263,15 @@ fn body_row(h: &mut String, m: &Model, row: &Row, folder: &str) {
 fn score_cells(h: &mut String, m: &Model, a: usize, cell: &AlgCell, best: &[Option<f64>]) {
     let (cols, paper) = alg_columns(m, a);
     let why = match &cell.metrics {
-        Some(Err(e)) => Some(e.as_str()),
-        None if m.rule.is_some() => Some("no ground truth"),
+        Some(Err(e)) => Some(e.chain()),
+        None if m.rule.is_some() => Some("no ground truth".to_string()),
         _ => None,
     };
     let metrics = cell.metrics.as_ref().and_then(|r| r.as_ref().ok());
     for (k, c) in cols.iter().enumerate() {
         let v = metrics.map(|x| (c.value)(x));
         let class = if v.is_some() && v == best[k] { "best" } else { "" };
-        h.push_str(&value_cell(v, c.digits, class, why));
+        h.push_str(&value_cell(v, c.digits, class, why.as_deref()));
     }
     h.push_str(&value_cell(cell.seconds, 2, "", None));
     if paper {

@@ -22,6 +22,7 @@ mod html;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
@@ -107,7 +108,7 @@ struct AlgCell {
     /// Its pictures, or why there are none (`None`: no result).
     pictures: Option<std::result::Result<Pictures, String>>,
     /// Its scores, or why there are none (`None`: the scene has no ground truth).
-    metrics: Option<std::result::Result<Metrics, String>>,
+    metrics: Option<std::result::Result<Metrics, Arc<Error>>>,
     /// Its run time, in seconds.
     seconds: Option<f64>,
     /// The paper's avgErr for the scene, when a paper column is shown.
@@ -195,19 +196,19 @@ struct Model {
 fn check_request(out: &Path, opts: &ReportOptions) -> Result<PathBuf> {
     let ext = out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     if !matches!(ext.as_deref(), Some("html" | "htm")) {
-        return Err(Error::Input(format!("{}: a report is an HTML page (use a .html name)", out.display())));
+        return Err(Error::output_at(out, "a report is an HTML page (use a .html name)"));
     }
     if opts.algs.is_empty() {
-        return Err(Error::Input("no --alg: name the results to report on".into()));
+        return Err(Error::argument("no --alg: name the results to report on"));
     }
     for (i, a) in opts.algs.iter().enumerate() {
         crate::batch::validate_alg_name(a)?;
         if opts.algs[..i].contains(a) {
-            return Err(Error::Input(format!("--alg {a} is given twice")));
+            return Err(Error::argument(format!("--alg {a} is given twice")));
         }
     }
     if !opts.papers.is_empty() && opts.papers.len() != opts.algs.len() {
-        return Err(Error::Input(format!(
+        return Err(Error::argument(format!(
             "{} paper columns for {} algorithms: give one per --alg (- for none)",
             opts.papers.len(),
             opts.algs.len()
@@ -216,19 +217,18 @@ fn check_request(out: &Path, opts: &ReportOptions) -> Result<PathBuf> {
     if !(32..=1024).contains(&opts.thumb_width) {
         return Err(Error::param("--thumb-width", opts.thumb_width, "32 to 1024 pixels"));
     }
-    let stem = out.file_stem().and_then(|s| s.to_str()).filter(|s| !s.is_empty()).ok_or_else(|| {
-        Error::Input(format!("{}: the page needs a name that is text (its pictures go beside it)", out.display()))
-    })?;
+    let stem = out
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .filter(|s| !s.is_empty())
+        .ok_or_else(|| Error::output_at(out, "the page needs a name that is text (its pictures go beside it)"))?;
     let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if !parent.is_dir() {
-        return Err(Error::Input(format!("{}: the folder {} does not exist", out.display(), parent.display())));
+        return Err(Error::output_at(out, format!("the folder {} does not exist", parent.display())));
     }
     let files = out.with_file_name(format!("{stem}_files"));
     if files.exists() && !files.is_dir() {
-        return Err(Error::Input(format!(
-            "{}: the report's pictures go there, but it is a file, not a folder",
-            files.display()
-        )));
+        return Err(Error::output_at(&files, "the report's pictures go there, but it is a file, not a folder"));
     }
     Ok(files)
 }
@@ -269,7 +269,7 @@ pub fn write_report(dir: &Path, out: &Path, opts: &ReportOptions) -> Result<Repo
         let (pictures, not_drawn) = draw_rows(&mut rows, &names, &per_alg, &files, opts, &mut set)?;
         if rows.iter().all(|r| r.left.is_none()) {
             let why: Vec<String> = not_drawn.iter().map(|n| format!("{} ({}): {}", n.scene, n.alg, n.reason)).collect();
-            return Err(Error::Input(format!("no scene could be drawn: {}", why.join("; "))));
+            return Err(Error::dataset(format!("no scene could be drawn: {}", why.join("; "))));
         }
         let rule = per_alg.iter().flatten().find(|r| r.truth.is_some()).map(|r| r.rule);
         let model = Model {

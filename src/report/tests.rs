@@ -38,7 +38,7 @@ fn rows_join_each_algorithms_results_and_scores_by_scene() {
         name: name.into(),
         dir: PathBuf::from("set").join(name),
         weight: crate::eval::scene_weight(name),
-        metrics: if ok { Ok(m) } else { Err("no result file".into()) },
+        metrics: if ok { Ok(m) } else { Err(std::sync::Arc::new(crate::Error::dataset("no result file"))) },
         seconds: Some(2.5),
         sparsification: None,
         truth_unusable: false,

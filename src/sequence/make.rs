@@ -43,7 +43,7 @@ pub fn frame_seed(seed: u64, k: usize) -> u64 {
 ///
 /// # Errors
 /// [`Error::InvalidParam`] for fewer than 2 frames or a pan that leaves a window narrower than 32 px;
-/// [`Error::Input`] for a ground truth or mask of another size than the images; unreadable files, naming them;
+/// [`Error::InputImage`] for a ground truth or mask of another size than the images; unreadable files, naming them;
 /// as [`write_sequence`].
 pub fn sequence_from_scene(scene: &Path, out: &Path, how: &FromScene) -> Result<usize> {
     if how.frames < 2 {

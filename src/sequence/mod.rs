@@ -118,15 +118,15 @@ impl Sequence {
     /// Reads the sequence folder `dir` (see the module doc).
     ///
     /// # Errors
-    /// [`Error::Input`] naming the folder when it is no sequence, a view folder holds no frame, the views' frames
+    /// [`Error::Dataset`] naming the folder when it is no sequence, a view folder holds no frame, the views' frames
     /// do not pair, or a folder holds two images of one stem; [`Error::Io`] for an unreadable folder.
     pub fn open(dir: &Path) -> Result<Sequence> {
         let Some(layout) = Sequence::recognise(dir) else {
-            return Err(Error::Input(format!(
-                "{}: not a stereo sequence (expected left/ and right/ folders of frames, or KITTI raw's image_02/data \
+            return Err(Error::dataset_at(
+                dir,
+                "not a stereo sequence (expected left/ and right/ folders of frames, or KITTI raw's image_02/data \
                  and image_03/data)",
-                dir.display()
-            )));
+            ));
         };
         let (l, r) = match layout {
             SequenceLayout::Folders => (FOLDERS[0], FOLDERS[1]),
@@ -135,24 +135,22 @@ impl Sequence {
         let (left, right) = (list_images(&dir.join(l))?, list_images(&dir.join(r))?);
         if left.is_empty() {
             let formats = crate::io::png::IMAGE_FORMATS;
-            return Err(Error::Input(format!("{}: no frames ({formats} images)", dir.join(l).display())));
+            return Err(Error::dataset_at(&dir.join(l), format!("no frames ({formats} images)")));
         }
         if left.len() != right.len() {
-            return Err(Error::Input(format!(
-                "{}: {l}/ holds {} frames but {r}/ holds {}; frames pair by name",
-                dir.display(),
-                left.len(),
-                right.len()
-            )));
+            return Err(Error::dataset_at(
+                dir,
+                format!("{l}/ holds {} frames but {r}/ holds {}; frames pair by name", left.len(), right.len()),
+            ));
         }
         if let Some(((ls, lp), (rs, rp))) = left.iter().zip(&right).find(|((ls, _), (rs, _))| ls != rs) {
             let (missing, folder) = if ls < rs { (lp, r) } else { (rp, l) };
             let name = missing.file_name().unwrap_or_default().to_string_lossy();
             let stem = if ls < rs { ls } else { rs };
-            return Err(Error::Input(format!(
-                "{}: frame {name} has no partner named {stem}.* in {folder}/; frames pair by name",
-                dir.display()
-            )));
+            return Err(Error::dataset_at(
+                dir,
+                format!("frame {name} has no partner named {stem}.* in {folder}/; frames pair by name"),
+            ));
         }
         let in_folder = |folder: &str, stem: &str, ext: &str| {
             let p = dir.join(folder).join(format!("{stem}.{ext}"));
@@ -185,7 +183,7 @@ impl Sequence {
             (Some(n), _) => Ok(NdispSource::Given(n)),
             (None, Some(c)) => {
                 let calib = crate::io::calib::Calib::load(c)?;
-                match calib.stated_ndisp().map_err(|msg| Error::Calib { path: c.clone(), msg })? {
+                match calib.stated_ndisp()? {
                     Some(n) => Ok(NdispSource::Stated(n)),
                     None => Ok(NdispSource::Unknown),
                 }
@@ -209,7 +207,7 @@ fn is_image(path: &Path) -> bool {
 /// The images of `folder` as `(stem, path)`, sorted by stem.
 ///
 /// # Errors
-/// [`Error::Io`] for an unreadable folder, [`Error::Input`] for two images of one stem or a stem holding a control
+/// [`Error::Io`] for an unreadable folder, [`Error::Dataset`] for two images of one stem or a stem holding a control
 /// character.
 fn list_images(folder: &Path) -> Result<Vec<(String, PathBuf)>> {
     let entries = std::fs::read_dir(folder).map_err(|e| Error::io(folder, e))?;
@@ -224,24 +222,20 @@ fn list_images(folder: &Path) -> Result<Vec<(String, PathBuf)>> {
         let Some(stem) = path.file_stem().and_then(|s| s.to_str()).map(str::to_owned) else { continue };
         if stem.chars().any(char::is_control) {
             // A line break in a frame's name would split its line of times.txt (and of every report) in two.
-            return Err(Error::Input(format!(
-                "{}: frame {:?} has a control character (a line break?) in its name; rename the file",
-                folder.display(),
-                stem
-            )));
+            return Err(Error::dataset_at(
+                folder,
+                format!("frame {:?} has a control character (a line break?) in its name; rename the file", stem),
+            ));
         }
         frames.push((stem, path));
     }
     frames.sort();
     if let Some(pair) = frames.windows(2).find(|p| p[0].0 == p[1].0) {
         let name = |p: &Path| p.file_name().unwrap_or_default().to_string_lossy().into_owned();
-        return Err(Error::Input(format!(
-            "{}: two images of frame {} ({} and {})",
-            folder.display(),
-            pair[0].0,
-            name(&pair[0].1),
-            name(&pair[1].1)
-        )));
+        return Err(Error::dataset_at(
+            folder,
+            format!("two images of frame {} ({} and {})", pair[0].0, name(&pair[0].1), name(&pair[1].1)),
+        ));
     }
     Ok(frames)
 }

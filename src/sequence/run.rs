@@ -159,8 +159,8 @@ pub struct RunSummary {
 /// first frame: a run that writes no frame leaves nothing (a folder it made is removed again).
 ///
 /// # Errors
-/// [`Error::Input`] when `out` is the sequence folder or one of its input folders, a file, or holds another run's
-/// results, when another run holds its lock, or a file where an output goes is not a regular file; any error of
+/// [`Error::Output`] when `out` is the sequence folder or one of its input folders, a file, or holds another run's
+/// results, [`Error::Locked`] when another run holds its lock, [`Error::Output`] when a file where an output goes is not a regular file; any error of
 /// loading, planning (memory) or running a frame, naming the frame ([`Error::Frame`]). Frames written before the
 /// error stay, whole, and a rerun continues from them.
 pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(Event<'_>)) -> Result<RunSummary> {
@@ -186,7 +186,7 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
 /// Creates the output folder `out` if missing; whether it was created.
 ///
 /// # Errors
-/// [`Error::Input`] when it exists and is not a folder, [`Error::Io`] when it cannot be made.
+/// [`Error::Output`] when it exists and is not a folder, [`Error::Io`] when it cannot be made.
 fn make_folder(out: &Path) -> Result<bool> {
     let created = !out.is_dir();
     crate::io::create_folder(out)?;
@@ -383,11 +383,13 @@ fn check_output_folder(seq: &Sequence, out: &Path) -> Result<()> {
         SequenceLayout::KittiRaw => &KITTI_RAW,
     };
     if out_real == root || inputs.iter().any(|f| out_real.starts_with(root.join(f))) {
-        return Err(Error::Input(format!(
-            "{}: the output folder must not be the sequence folder {} or one of its frame folders",
-            out.display(),
-            seq.root.display()
-        )));
+        return Err(Error::output_at(
+            out,
+            format!(
+                "the output folder must not be the sequence folder {} or one of its frame folders",
+                seq.root.display()
+            ),
+        ));
     }
     Ok(())
 }
@@ -400,16 +402,18 @@ fn claim_folder(seq: &Sequence, out: &Path, ext: &str, record: &str) -> Result<(
         let foreign =
             out.join(TIMES_FILE).exists() || seq.frames.iter().any(|f| out.join(format!("{}.{ext}", f.stem)).exists());
         if foreign {
-            return Err(Error::Input(format!(
-                "{}: holds frame results without a {RUN_FILE}; refusing to mix them with this run's (use another \
-                 folder)",
-                out.display()
-            )));
+            return Err(Error::output_at(
+                out,
+                format!(
+                    "holds frame results without a {RUN_FILE}; refusing to mix them with this run's (use another \
+                 folder)"
+                ),
+            ));
         }
         return Ok(());
     }
     let old = String::from_utf8(crate::io::read_capped(&path, MAX_RECORD_BYTES, RUN_FILE)?)
-        .map_err(|_| Error::Input(format!("{}: not a text file; use another folder", path.display())))?;
+        .map_err(|_| Error::output_at(&path, "not a text file; use another folder"))?;
     let keys = ["source", "mode", "format", "range", "config", "rectify"];
     let value = |text: &str, key: &str| {
         text.lines().find_map(|l| l.strip_prefix(key).and_then(|r| r.strip_prefix('='))).map(str::to_owned)
@@ -425,10 +429,10 @@ fn claim_folder(seq: &Sequence, out: &Path, ext: &str, record: &str) -> Result<(
             (_, None) => format!("no {key} recorded (an older jem's run)"),
             (_, Some(v)) => format!("{key} {v}"),
         };
-        return Err(Error::Input(format!(
-            "{}: holds the results of another run, with {what}; use another folder",
-            path.display()
-        )));
+        return Err(Error::output_at(
+            &path,
+            format!("holds the results of another run, with {what}; use another folder"),
+        ));
     }
     Ok(())
 }

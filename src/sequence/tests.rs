@@ -196,8 +196,7 @@ fn writing_refuses_a_folder_holding_a_scene_or_sequence() {
 fn a_failed_write_leaves_no_part_of_a_sequence() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("seq");
-    let mut failing =
-        |k: usize| if k < 2 { Ok(frame(k as f32)) } else { Err(crate::Error::Input("frame 2 broke".into())) };
+    let mut failing = |k: usize| if k < 2 { Ok(frame(k as f32)) } else { Err(crate::Error::dataset("frame 2 broke")) };
     let e = write_sequence(&out, 4, &mut failing, &mut Vec::new).unwrap_err().to_string();
     assert_eq!(e, "frame 2 broke");
     assert!(!out.exists(), "the folder it created is removed");
@@ -253,7 +252,7 @@ fn a_sliding_window_crops_the_ground_truth_exactly() {
         }
     }
     let calib = crate::io::calib::Calib::load(&out.join("calib.txt")).unwrap();
-    assert_eq!((calib.float("width"), calib.ndisp()), (Some(window as f32), Ok(24)));
+    assert_eq!((calib.float("width"), calib.ndisp().ok()), (Some(window as f32), Some(24)));
     let too_far = FromScene { pan_px: 30, ..how };
     let e = sequence_from_scene(&dir.path().join("scene"), &dir.path().join("x"), &too_far).unwrap_err();
     assert!(e.to_string().contains("--pan") && !dir.path().join("x").exists(), "{e}");

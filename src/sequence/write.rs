@@ -38,8 +38,8 @@ const TAKEN: [&str; 10] =
 /// run into `out`). Returns the stems written.
 ///
 /// # Errors
-/// [`Error::Input`] when `out` is a file or already holds a scene or a sequence (`left/`, `calib.txt`, `im0.png`,
-/// …), or the frames differ in what they carry; whatever `frame` returns; [`Error::Io`] / [`Error::Image`] naming
+/// [`Error::Output`] when `out` is a file or already holds a scene or a sequence (`left/`, `calib.txt`, `im0.png`,
+/// …), [`Error::Dataset`] when the frames differ in what they carry; whatever `frame` returns; [`Error::Io`] / [`Error::Image`] naming
 /// the file that could not be written.
 ///
 /// # Panics
@@ -51,17 +51,14 @@ pub fn write_sequence(
     files: &mut dyn FnMut() -> Vec<(&'static str, String)>,
 ) -> Result<Vec<String>> {
     if out.exists() && !out.is_dir() {
-        return Err(Error::Input(format!(
-            "{}: exists and is not a folder; give the name of a folder (a new one is made)",
-            out.display()
-        )));
+        return Err(Error::output_at(out, "exists and is not a folder; give the name of a folder (a new one is made)"));
     }
     let taken = TAKEN.iter().find(|n| out.join(n).exists());
     if let Some(name) = taken {
-        return Err(Error::Input(format!(
-            "{}: already holds a scene or a sequence ({name}); refusing to write into it",
-            out.display()
-        )));
+        return Err(Error::output_at(
+            out,
+            format!("already holds a scene or a sequence ({name}); refusing to write into it"),
+        ));
     }
     let created = !out.exists();
     crate::io::create_folder(out)?;
@@ -101,7 +98,7 @@ fn write_frames(
         let f = frame(k)?;
         let has = (f.gt.is_some(), f.mask.is_some());
         if *carries.get_or_insert(has) != has {
-            return Err(Error::Input(format!("frame {k} carries other ground truth than the first frame")));
+            return Err(Error::dataset(format!("frame {k} carries other ground truth than the first frame")));
         }
         if k == 0 {
             let folders = FOLDERS.iter().zip([true, true, has.0, has.1]).filter(|(_, on)| *on);

@@ -136,7 +136,7 @@ impl Plan<'_> {
 /// Settles the range of `left`/`right` (see [`NdispSource`]) and how to run the pair within `limit_bytes`.
 ///
 /// # Errors
-/// [`Error::SizeMismatch`] or [`Error::Input`] for unequal or empty images, or images narrower than 2 pixels
+/// [`Error::SizeMismatch`] or [`Error::InputImage`] for unequal or empty images, or images narrower than 2 pixels
 /// (checked before the range is measured), [`Error::InvalidParam`] for an impossible range, [`Error::OutOfMemory`]
 /// when the run fits `limit_bytes` neither in one piece nor in tiles, or the range measurement does not fit beside
 /// the pair.
@@ -151,11 +151,11 @@ pub(crate) fn plan_match<'a>(
         return Err(Error::SizeMismatch { left: left.dims(), right: right.dims() });
     }
     if left.is_empty() {
-        return Err(Error::Input("the images are empty (0 pixels)".into()));
+        return Err(Error::bad_image("the images are empty (0 pixels)"));
     }
     if left.width < 2 {
         let (w, h) = left.dims();
-        return Err(Error::Input(format!("the images are {w}x{h}; a stereo pair must be at least 2 pixels wide")));
+        return Err(Error::bad_image(format!("the images are {w}x{h}; a stereo pair must be at least 2 pixels wide")));
     }
     let (ndisp, ndisp_measured) = search_range(left, right, source, params, limit_bytes)?;
     let pair = StereoPair::borrowed(left, right, ndisp)?;

@@ -167,7 +167,7 @@ fn render(scene: &Scene, params: &SynthParams) -> SynthScene {
 /// ([`check_scene_folder`]).
 ///
 /// # Errors
-/// [`Error::Input`] for a folder holding a scene; [`Error::Io`] or [`Error::Image`] naming the file.
+/// [`Error::Output`] for a folder holding a scene; [`Error::Io`] or [`Error::Image`] naming the file.
 pub fn write_scene(dir: &Path, scene: &SynthScene) -> Result<()> {
     check_scene_folder(dir)?;
     crate::io::create_folder(dir)?;
@@ -202,7 +202,7 @@ pub fn write_scene(dir: &Path, scene: &SynthScene) -> Result<()> {
 /// or one holding none of them, is fine.
 ///
 /// # Errors
-/// [`Error::Input`] naming the folder and the files found.
+/// [`Error::Output`] naming the folder and the files found.
 pub fn check_scene_folder(dir: &Path) -> Result<()> {
     let Ok(entries) = std::fs::read_dir(dir) else { return Ok(()) };
     let mut found: Vec<String> = entries
@@ -214,11 +214,10 @@ pub fn check_scene_folder(dir: &Path) -> Result<()> {
         return Ok(());
     }
     found.sort();
-    Err(Error::Input(format!(
-        "{}: already holds a scene ({}); write the new one into a new or empty folder",
-        dir.display(),
-        found.join(", ")
-    )))
+    Err(Error::output_at(
+        dir,
+        format!("already holds a scene ({}); write the new one into a new or empty folder", found.join(", ")),
+    ))
 }
 
 /// Whether `name` is one of the files a MiddEval3 scene folder holds.

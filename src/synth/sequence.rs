@@ -69,12 +69,11 @@ impl Motion {
 }
 
 impl FromStr for Motion {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        Motion::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| format!("unknown motion {s:?} (expected static, pan, dolly, object or cut)"))
+    type Err = Error;
+    fn from_str(s: &str) -> std::result::Result<Self, Error> {
+        Motion::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
+            Error::argument(format!("unknown motion {s:?} (expected static, pan, dolly, object or cut)"))
+        })
     }
 }
 

@@ -175,7 +175,7 @@ fn a_written_sequence_opens_with_ground_truth_for_every_frame() {
     assert!(truth.contains("000002 0.200000 0.000000000 0"), "{truth}");
     let e = write_synth_sequence(dir.path(), &p).unwrap_err().to_string();
     assert!(e.contains("already holds"), "{e}");
-    assert!("spin".parse::<Motion>().unwrap_err().contains("static, pan, dolly, object or cut"));
+    assert!("spin".parse::<Motion>().unwrap_err().to_string().contains("static, pan, dolly, object or cut"));
     assert!(write_synth_sequence(&dir.path().join("x"), &params(Motion::Pan, 1)).is_err());
 }
 

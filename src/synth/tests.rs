@@ -219,7 +219,7 @@ fn written_files_read_back() {
     assert_eq!(crate::io::png::load_grey8(&sub.join("mask0nocc.png")).unwrap(), s.mask);
     assert_eq!(crate::io::pfm::read_pfm(&sub.join("disp0GT.pfm")).unwrap(), s.gt);
     let calib = crate::io::calib::Calib::load(&sub.join("calib.txt")).unwrap();
-    assert_eq!(calib.ndisp(), Ok(20));
+    assert_eq!(calib.ndisp().ok(), Some(20));
     assert_eq!(calib.float("vmin"), Some(s.vmin));
     assert_eq!(calib.float("vmax"), Some(s.vmax));
     assert_eq!(calib.float("width"), Some(100.0));

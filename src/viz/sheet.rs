@@ -109,7 +109,7 @@ fn middlebury_resolution(path: &Path, scale: Option<u32>) -> Result<(u32, Option
     }
     let found = if path.is_dir() { scene_resolution(path) } else { file_resolution(path) };
     let Some(res) = found else {
-        return Err(Error::Input(format!(
+        return Err(Error::dataset(format!(
             "cannot tell the resolution of {}: no trainingQ/H/F-like folder in its path, and its name and size are \
              not a MiddEval3 scene's; the error map's MiddEval3 rule (bad-2 at full resolution) needs it: pass \
              --scale 1, 2 or 4 (or --layout for a KITTI or ETH3D tree)",
@@ -242,7 +242,7 @@ pub fn sheet_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<Shee
         return middlebury_rows(dir, alg, opts);
     }
     if let Some(other) = pairs.iter().find(|p| p.layout != pairs[0].layout) {
-        return Err(Error::Input(format!(
+        return Err(Error::dataset(format!(
             "{} holds {} and {} data ({} and {}); draw one data set at a time",
             dir.display(),
             pairs[0].layout.name(),
@@ -266,7 +266,7 @@ pub fn sheet_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<Shee
                 p.result_files(alg, opts.results.as_deref()).disparity.parent().map(|d| d.display().to_string())
             })
             .collect();
-        return Err(Error::Input(format!(
+        return Err(Error::dataset(format!(
             "no result of {alg} for the {} {} pair(s) under {} (looked in {}; run `jem batch` first, or give --results)",
             pairs.len(),
             pairs[0].layout.name(),
@@ -303,7 +303,7 @@ fn middlebury_rows(dir: &Path, alg: &str, opts: &SheetOptions) -> Result<Vec<She
     let result_name = format!("disp0{alg}.pfm");
     let scenes = crate::dataset::walk::find_dirs_with(&[dir.to_path_buf()], &[LEFT_FILE, &result_name])?;
     if scenes.is_empty() {
-        return Err(Error::Input(format!(
+        return Err(Error::dataset(format!(
             "no scene folder with im0.png and {result_name} (MiddEval3), nor a KITTI or ETH3D tree, under {}",
             dir.display()
         )));
@@ -373,15 +373,17 @@ pub fn render_row(row: &SheetRow) -> Result<RowPictures> {
     let result = crate::io::read_disparity(&row.result)?;
     let left = Canvas::from_rgb_image(&crate::io::png::load_rgb(&row.left)?);
     if (left.width, left.height) != result.dims() {
-        return Err(Error::Input(format!(
-            "{}: the result is {}x{} but the left image {} is {}x{}",
-            row.result.display(),
-            result.width,
-            result.height,
-            row.left.display(),
-            left.width,
-            left.height
-        )));
+        return Err(Error::bad_image_at(
+            &row.result,
+            format!(
+                "the result is {}x{} but the left image {} is {}x{}",
+                result.width,
+                result.height,
+                row.left.display(),
+                left.width,
+                left.height
+            ),
+        ));
     }
     let gt = row.truth.as_ref().map(|t| load_truth(&result, t, row.rule)).transpose()?;
     let range = row
@@ -464,7 +466,7 @@ pub fn contact_sheet(rows: Vec<SheetRow>, alg: &str, panel_width: usize) -> Resu
     }
     if drawn_rows.is_empty() {
         let why: Vec<String> = skipped.iter().map(|(_, e)| e.clone()).collect();
-        return Err(Error::Input(format!("no scene could be drawn: {}", why.join("; "))));
+        return Err(Error::dataset(format!("no scene could be drawn: {}", why.join("; "))));
     }
     let rule = drawn.iter().find(|r| r.truth.is_some()).map(|r| r.rule);
     let header = header(&drawn_rows[0], alg, rule, panel_width);
