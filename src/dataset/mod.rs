@@ -297,7 +297,7 @@ pub struct Discovery {
 /// are skipped; a folder reached twice (symbolic links) is read once.
 ///
 /// # Errors
-/// [`Error::Io`](crate::Error::Io) if a root cannot be read, [`Error::Dataset`](crate::Error::Dataset) if one is not
+/// [`Error::Io`] if a root cannot be read, [`Error::Dataset`] if one is not
 /// a folder. Unreadable sub-folders are skipped.
 pub fn discover(roots: &[PathBuf], purpose: Purpose, how: &Discovery) -> Result<Vec<Pair>> {
     let mut found = Vec::new();
