@@ -107,6 +107,19 @@ impl Output {
         self.confidence.as_ref().ok_or_else(missing)
     }
 
+    /// Refuses a `min_confidence` that is not a confidence from 0 to 1 (NaN included), naming it `name` (the
+    /// front ends check theirs with it before anything runs).
+    ///
+    /// # Errors
+    /// [`crate::Error::InvalidParam`] naming `name`.
+    pub fn check_min_confidence(name: &str, min_confidence: f32) -> Result<()> {
+        if (0.0..=1.0).contains(&min_confidence) {
+            Ok(())
+        } else {
+            Err(crate::Error::param(name, min_confidence, "a confidence from 0 to 1"))
+        }
+    }
+
     /// The disparity map with every pixel whose confidence is below `min_confidence` made invalid (`inf`): the
     /// reliable pixels only (`jem --min-confidence`).
     ///
@@ -114,9 +127,7 @@ impl Output {
     /// [`crate::Error::InvalidParam`] naming `min_confidence` when it is not a confidence from 0 to 1 (NaN included);
     /// as [`Output::confidence_map`].
     pub fn reliable_disparity(&self, min_confidence: f32) -> Result<DisparityMap> {
-        if !(0.0..=1.0).contains(&min_confidence) {
-            return Err(crate::Error::param("min_confidence", min_confidence, "a confidence from 0 to 1"));
-        }
+        Output::check_min_confidence("min_confidence", min_confidence)?;
         let confidence = self.confidence_map()?;
         let mut out = self.disparity.clone();
         out.data.iter_mut().zip(&confidence.data).filter(|&(_, &c)| c < min_confidence).for_each(|(d, _)| {

@@ -59,10 +59,8 @@ impl MatchOptions {
     /// From the ``temporal``, ``rectify`` and ``min_confidence`` arguments, checked (``min_disp``: 0 until
     /// [`MatchOptions::with_min_disp`]).
     pub(crate) fn new(temporal: bool, rectify: Option<PathBuf>, min_confidence: Option<f32>) -> PyResult<MatchOptions> {
-        if let Some(c) = min_confidence
-            && !(0.0..=1.0).contains(&c)
-        {
-            return Err(to_py(&Error::param("min_confidence", c, "a confidence from 0 to 1")));
+        if let Some(c) = min_confidence {
+            jem::Output::check_min_confidence("min_confidence", c).map_err(|e| to_py(&e))?;
         }
         let calibration = match &rectify {
             Some(path) => Some((StereoCalibration::load(path).map_err(|e| to_py(&e))?, None)),

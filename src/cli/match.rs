@@ -203,10 +203,8 @@ impl<'a> Request<'a> {
             return Err(Error::argument("usage: jem LEFT RIGHT -o OUT (see --help)"));
         };
         jem::io::DisparityFormat::from_path(output)?;
-        if let Some(c) = args.min_confidence
-            && !(0.0..=1.0).contains(&c)
-        {
-            return Err(Error::param("--min-confidence", c, "a confidence from 0 to 1"));
+        if let Some(c) = args.min_confidence {
+            jem::Output::check_min_confidence("--min-confidence", c)?;
         }
         if args.max_depth.is_some() && args.depth.is_none() && args.cloud.is_none() {
             return Err(Error::argument("--max-depth limits --depth and --cloud; give one of them"));
