@@ -2,8 +2,6 @@
 //! whether it is still there, this process's peak memory and file-size limit, the machine's memory and CPU. Each answer
 //! is `None` (or empty) where `/proc` cannot tell, and callers treat that as "unknown", never as "no".
 
-use std::path::Path;
-
 /// This machine's name (`/proc/sys/kernel/hostname`, kept to letters, digits, `-` and `.`; empty where there is
 /// none): temporary trees and results locks carry it, so that a machine never takes another one's in a shared
 /// folder.
@@ -15,7 +13,7 @@ pub(crate) fn host_name() -> String {
 /// The PID namespace of this process (`/proc/self/ns/pid`'s link target, `pid:[4026531836]`); `None` where
 /// there is none to read. Two processes' pids can be compared only within one namespace: in a container (or
 /// `unshare --pid`) a live run may be pid 1, which on the host is another process.
-#[cfg_attr(not(feature = "toolkit"), allow(dead_code))]
+#[cfg(feature = "toolkit")]
 pub(crate) fn pid_namespace() -> Option<String> {
     let target = std::fs::read_link("/proc/self/ns/pid").ok()?;
     let text = target.to_str()?;
@@ -23,20 +21,20 @@ pub(crate) fn pid_namespace() -> Option<String> {
 }
 
 /// Whether `/proc` describes this machine's processes at all (without it nothing here can tell).
-#[cfg_attr(not(feature = "toolkit"), allow(dead_code))]
+#[cfg(feature = "toolkit")]
 pub(crate) fn proc_available() -> bool {
-    Path::new("/proc/self").exists()
+    std::path::Path::new("/proc/self").exists()
 }
 
 /// Whether a process `pid` exists on this machine; `None` where `/proc` cannot tell.
-#[cfg_attr(not(feature = "toolkit"), allow(dead_code))]
+#[cfg(feature = "toolkit")]
 pub(crate) fn pid_exists(pid: u32) -> Option<bool> {
-    proc_available().then(|| Path::new(&format!("/proc/{pid}")).exists())
+    proc_available().then(|| std::path::Path::new(&format!("/proc/{pid}")).exists())
 }
 
 /// The start time (clock ticks after boot, `/proc/PID/stat` field 22) of process `pid` (`self` for this one):
 /// with the pid, it names a process even after the pid is reused.
-#[cfg_attr(not(feature = "toolkit"), allow(dead_code))]
+#[cfg(feature = "toolkit")]
 pub(crate) fn process_start(pid: &str) -> Option<u64> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     // The command name (field 2) is in parentheses and may hold spaces: count from the last ')'.
@@ -44,7 +42,7 @@ pub(crate) fn process_start(pid: &str) -> Option<u64> {
 }
 
 /// This process's peak resident set size in bytes (`VmHWM` of `/proc/self/status`).
-#[cfg_attr(not(feature = "toolkit"), allow(dead_code, unreachable_pub))]
+#[cfg(feature = "toolkit")]
 pub fn peak_rss_bytes() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
@@ -81,7 +79,7 @@ pub(crate) fn physical_memory_bytes() -> Option<u64> {
 
 /// The CPU's model name (the first `model name` of `/proc/cpuinfo`, as `Intel(R) Xeon(R) ...`) and the number of
 /// processors it lists; the file is read only up to 1 MiB.
-#[cfg_attr(not(feature = "toolkit"), allow(dead_code))]
+#[cfg(feature = "toolkit")]
 pub(crate) fn cpu_model() -> Option<(String, usize)> {
     use std::io::Read;
     let mut text = String::new();

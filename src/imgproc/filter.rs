@@ -40,7 +40,7 @@ pub(crate) fn sobel_x(grey: &Plane<f32>) -> Plane<f32> {
 }
 
 /// Sobel gradient magnitude √(gx² + gy²) (`[-1 0 1; -2 0 2; -1 0 1]` and its transpose), borders replicated.
-#[cfg_attr(not(feature = "toolkit"), allow(dead_code))]
+#[cfg(feature = "toolkit")]
 pub(crate) fn sobel_magnitude(grey: &Plane<f32>) -> Plane<f32> {
     sobel_map(grey, f32::hypot)
 }

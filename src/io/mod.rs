@@ -344,7 +344,7 @@ pub fn read_regular(path: &Path) -> Result<Vec<u8>> {
 /// A regular file's text ([`read_regular`]), at most `max` bytes of it ([`read_capped`]); `None` when it is
 /// missing, not a regular file, too large or not UTF-8: for the small files jem writes beside its results and
 /// reads back when they are there.
-#[cfg_attr(not(feature = "toolkit"), allow(dead_code))]
+#[cfg(feature = "toolkit")]
 pub(crate) fn read_small_text(path: &Path, max: u64) -> Option<String> {
     String::from_utf8(read_capped(path, max, "file").ok()?).ok()
 }

@@ -86,7 +86,7 @@ pub fn read_pfm_within(path: &Path, max_bytes: u64) -> Result<Plane<f32>> {
 ///
 /// # Errors
 /// [`Error::Io`] if it cannot be read, [`Error::Pfm`] naming the path if the header is malformed.
-#[cfg_attr(not(feature = "toolkit"), allow(dead_code))]
+#[cfg(feature = "toolkit")]
 pub(crate) fn read_pfm_size(path: &Path) -> Result<(usize, usize)> {
     use std::io::Read;
     let file = super::open_regular(path)?;
