@@ -97,7 +97,7 @@ pub mod viz;
 pub use diagnose::{PairCheck, Repetition};
 pub use error::{Error, Result};
 pub use image::{DisparityMap, Plane, RgbImage};
-pub use matcher::{Exposure, FrameKind, Matcher, Output, Progress, RunPlan, Tiles, default_memory_limit};
+pub use matcher::{Exposure, FrameKind, Matcher, Output, Progress, Rectified, RunPlan, Tiles, default_memory_limit};
 pub use params::{LrcMode, Model, Params};
 pub use pipeline::{Measured, Timings, VerticalMeasured};
 #[cfg(feature = "toolkit")]

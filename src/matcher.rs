@@ -1,10 +1,12 @@
 //! [`Matcher`]: the library's front door. Built once from a configuration, it matches pairs: decoded images
 //! ([`Matcher::match_pair`]) or image files ([`Matcher::match_files`], whose size is checked against the memory
-//! limit from the headers, before decoding). Every front end (`jem`, `jem batch`, the Python module) matches
-//! through it.
+//! limit from the headers, before decoding). What a front end asks besides the match is done inside it too: raw
+//! views rectified first ([`Matcher::with_rectification`]), the pair checked ([`Matcher::with_checks`]), the
+//! unreliable pixels dropped ([`Matcher::with_min_confidence`]). Every front end (`jem`, `jem sequence`,
+//! `jem batch`, the Python module) matches through it.
 
 use std::borrow::Cow;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -12,6 +14,7 @@ use crate::error::Result;
 use crate::image::{DisparityMap, Plane, RgbImage};
 use crate::params::Params;
 use crate::pipeline::{self, Measured, PipelineOutput, Timings};
+use crate::rectify::Rectification;
 use crate::setup::memory::MemoryBudget;
 use crate::setup::strategy::Strategy;
 use crate::setup::{self, NdispSource, Plan};
@@ -40,6 +43,12 @@ pub struct Matcher {
     confidence: bool,
     /// The smallest disparity searched (`with_min_disp`).
     min_disp: usize,
+    /// Raw views are rectified with this before matching (`with_rectification`).
+    rectification: Option<Rectification>,
+    /// Whether each match checks the pair (`with_checks`).
+    checks: bool,
+    /// Pixels of a lower confidence are dropped from the map (`with_min_confidence`).
+    min_confidence: Option<f32>,
 }
 
 /// How a match was set up: its range, whether it went in tiles, the memory it planned for.
@@ -95,9 +104,34 @@ pub struct Output {
     /// The exposure change the temporal model compensated in this frame (against the previous frame or the
     /// still camera's running mean); `None` when there was none, or for a pair matched alone.
     pub exposure: Option<Exposure>,
+    /// What the pair check found ([`Matcher::with_checks`]; `None` when not asked for). Its warnings as a front
+    /// end says them: [`Output::warnings`].
+    pub checks: Option<crate::PairCheck>,
+    /// The rectified view the map belongs to, when the matcher rectified the pair ([`Matcher::with_rectification`]).
+    pub rectified: Option<Rectified>,
+}
+
+/// The pair as a matcher rectified it before matching ([`Matcher::with_rectification`]).
+#[derive(Clone, Debug)]
+pub struct Rectified {
+    /// The rectified left view: the view the disparity map is of (the colours of a point cloud, say).
+    pub left: RgbImage,
+    /// The calibration file the pair was rectified with.
+    pub calibration: PathBuf,
 }
 
 impl Output {
+    /// The pair check's warnings, one line per problem (none when the pair looks right or was not checked). For a
+    /// pair the matcher rectified, a warning that the pair is not rectified doubts the calibration instead of
+    /// advising to rectify it ([`crate::PairCheck::after_rectify`]).
+    pub fn warnings(&self) -> Vec<String> {
+        let warnings = self.checks.as_ref().map(crate::PairCheck::warnings).unwrap_or_default();
+        match &self.rectified {
+            Some(r) => warnings.into_iter().map(|w| crate::PairCheck::after_rectify(w, &r.calibration)).collect(),
+            None => warnings,
+        }
+    }
+
     /// The confidence map.
     ///
     /// # Errors
@@ -162,6 +196,9 @@ impl Matcher {
             temporal: None,
             confidence: true,
             min_disp: 0,
+            rectification: None,
+            checks: false,
+            min_confidence: None,
         })
     }
 
@@ -185,6 +222,50 @@ impl Matcher {
     /// The smallest disparity searched.
     pub fn min_disp(&self) -> usize {
         self.min_disp
+    }
+
+    /// The confidence below which pixels are dropped from the map ([`Matcher::with_min_confidence`]), if any.
+    pub fn min_confidence(&self) -> Option<f32> {
+        self.min_confidence
+    }
+
+    /// Rectifies each pair with `rectification` before matching it, as `jem rectify` does: the pairs given are the
+    /// raw views (of the rectification's size; another size is an error), the outputs are of the rectified left view
+    /// ([`Output::rectified`]), and the search range, the pair check and the temporal model all see the rectified
+    /// pair. Its warnings ([`Rectification::warnings`]) are the caller's to show.
+    pub fn with_rectification(mut self, rectification: Rectification) -> Matcher {
+        self.rectification = Some(rectification);
+        self
+    }
+
+    /// [`Matcher::with_rectification`] for a matcher in use, say for views of another size (`None`: no more).
+    pub fn set_rectification(&mut self, rectification: Option<Rectification>) {
+        self.rectification = rectification;
+    }
+
+    /// The rectification applied before matching, if any.
+    pub fn rectification(&self) -> Option<&Rectification> {
+        self.rectification.as_ref()
+    }
+
+    /// Whether each match also checks the pair for what would make any disparity map of it wrong
+    /// ([`Output::checks`], [`Output::warnings`]; default: no). The check reads the confidence map when there is
+    /// one (a region of repetitive texture matched doubtfully).
+    pub fn with_checks(mut self, on: bool) -> Matcher {
+        self.checks = on;
+        self
+    }
+
+    /// Keeps in the map only the pixels whose confidence is `min_confidence` or more (the others invalid, `inf`;
+    /// [`Output::reliable_disparity`]); the confidence is then computed whatever [`Matcher::with_confidence`]
+    /// says, and the pair check ([`Matcher::with_checks`]) reads the map before the bound.
+    ///
+    /// # Errors
+    /// [`crate::Error::InvalidParam`] naming `min_confidence` when it is not a confidence from 0 to 1.
+    pub fn with_min_confidence(mut self, min_confidence: f32) -> Result<Matcher> {
+        Output::check_min_confidence("min_confidence", min_confidence)?;
+        self.min_confidence = Some(min_confidence);
+        Ok(self)
     }
 
     /// The memory limit in bytes: a pair whose run would need more runs in tiles, and one that fits neither way is
@@ -213,7 +294,8 @@ impl Matcher {
     }
 
     /// Whether each match computes its confidence map ([`Output::confidence`]; default: yes). It costs a few per
-    /// cent of a run; `false` saves that when only the disparity map is wanted.
+    /// cent of a run; `false` saves that when only the disparity map is wanted (a bound on it,
+    /// [`Matcher::with_min_confidence`], computes it all the same).
     pub fn with_confidence(mut self, on: bool) -> Matcher {
         self.confidence = on;
         self
@@ -246,10 +328,17 @@ impl Matcher {
         self.max_memory_bytes
     }
 
-    /// The left view's disparity map of a rectified pair (and the rest of [`Output`]).
+    /// Whether the matcher remembers the pairs as the frames of a sequence ([`Matcher::with_temporal`]).
+    pub fn is_temporal(&self) -> bool {
+        self.temporal.is_some()
+    }
+
+    /// The left view's disparity map of a rectified pair, or of a raw one with [`Matcher::with_rectification`]
+    /// (and the rest of [`Output`]).
     ///
     /// # Errors
-    /// [`crate::error::Error::SizeMismatch`] or [`crate::error::Error::InputImage`] for unequal, empty or 1-pixel-wide images,
+    /// [`crate::error::Error::SizeMismatch`] or [`crate::error::Error::InputImage`] for unequal, empty or 1-pixel-wide images
+    /// (or views not of the rectification's size),
     /// [`crate::error::Error::InvalidParam`] for an impossible range or parameters the image cannot hold,
     /// [`crate::error::Error::OutOfMemory`] when the run fits the limit neither in one piece nor in tiles.
     pub fn match_pair(&mut self, left: &RgbImage, right: &RgbImage) -> Result<Output> {
@@ -266,9 +355,37 @@ impl Matcher {
         right: &RgbImage,
         on_progress: &dyn Fn(Progress<'_>),
     ) -> Result<Output> {
-        let (left, right) = self.cut(left, right)?;
-        let plan = setup::plan_match(&left, &right, self.source(), &self.params, self.max_memory_bytes)?;
-        self.run(&plan, on_progress)
+        let rectified = self.rectify(left, right)?;
+        let (left, right) = rectified.as_ref().map_or((left, right), |(l, r)| (l, r));
+        let (l, r) = self.cut(left, right)?;
+        let plan = setup::plan_match(&l, &r, self.source(), &self.params, self.max_memory_bytes)?;
+        let out = self.run(&plan, on_progress)?;
+        let out = self.finish(out, left, right)?;
+        Ok(self.with_views(out, rectified))
+    }
+
+    /// The pair rectified, when the matcher rectifies ([`Matcher::with_rectification`]).
+    fn rectify(&self, left: &RgbImage, right: &RgbImage) -> Result<Option<(RgbImage, RgbImage)>> {
+        self.rectification.as_ref().map(|rect| rect.rectify_pair(left, right)).transpose()
+    }
+
+    /// What a match does after the run on the pair it matched: the pair check, then the confidence bound.
+    fn finish(&self, mut out: Output, left: &RgbImage, right: &RgbImage) -> Result<Output> {
+        if self.checks {
+            out.checks = Some(self.check_pair(left, right, &out));
+        }
+        if let Some(c) = self.min_confidence {
+            out.disparity = out.reliable_disparity(c)?;
+        }
+        Ok(out)
+    }
+
+    /// `out` with the rectified left view of `rectified` (none when the pair was matched as given).
+    fn with_views(&self, mut out: Output, rectified: Option<(RgbImage, RgbImage)>) -> Output {
+        if let (Some((left, _)), Some(rect)) = (rectified, &self.rectification) {
+            out.rectified = Some(Rectified { left, calibration: rect.calibration_path().to_path_buf() });
+        }
+        out
     }
 
     /// The pair as the pipeline matches it: as it is, or cut for a search from `min_disp` (`src/min_disp.rs`).
@@ -323,6 +440,8 @@ impl Matcher {
     /// # Errors
     /// As [`Matcher::match_pair`], for the range.
     pub fn search_range(&self, left: &RgbImage, right: &RgbImage) -> Result<(usize, bool)> {
+        let rectified = self.rectify(left, right)?;
+        let (left, right) = rectified.as_ref().map_or((left, right), |(l, r)| (l, r));
         let (left, right) = self.cut(left, right)?;
         let plan = setup::plan_match(&left, &right, self.ndisp, &self.params, self.max_memory_bytes)?;
         Ok((plan.pair.ndisp, plan.ndisp_measured))
@@ -354,8 +473,10 @@ impl Matcher {
         let budget = self.budget.clone();
         let mut held = budget.as_deref().map(|b| wait_for(b, need, on_progress));
         on_progress(Progress::Stage("loading"));
-        let (l, r) = crate::io::png::load_rgb_pair_within(left, right, self.max_memory_bytes)?;
-        let (l, r) = self.cut(&l, &r)?;
+        let raw = crate::io::png::load_rgb_pair_within(left, right, self.max_memory_bytes)?;
+        let rectified = self.rectify(&raw.0, &raw.1)?;
+        let views = rectified.as_ref().unwrap_or(&raw);
+        let (l, r) = self.cut(&views.0, &views.1)?;
         let plan = setup::plan_match(&l, &r, self.source(), &self.params, self.max_memory_bytes)?;
         if let Some(budget) = budget.as_deref() {
             let (w, h) = l.dims();
@@ -367,18 +488,20 @@ impl Matcher {
         }
         let out = self.run(&plan, on_progress);
         drop(held);
-        out
+        let out = self.finish(out?, &views.0, &views.1)?;
+        Ok(self.with_views(out, rectified))
     }
 
     /// Checks a matched pair for what would make any disparity map of it wrong ([`crate::PairCheck`]: swapped
     /// views, a vertical offset beyond the alignment, a range over half the width, no texture, an exposure or focus
     /// difference beyond the front end; with its confidence map, a large region of repetitive texture whose answer
-    /// is doubtful); `out` is the match's output (its measured range and noise).
+    /// is doubtful); `out` is the match's output (its measured range and noise), `left`, `right` the pair matched
+    /// (rectified, when the matcher rectified it).
     ///
     /// The swap check runs within what the memory limit leaves beside what the caller holds by then (the pair, the
     /// output maps and the check's grey views: 41 bytes a pixel): given the whole limit, it took a downscaled run
     /// past it.
-    pub fn check_pair(&self, left: &RgbImage, right: &RgbImage, out: &Output) -> crate::PairCheck {
+    fn check_pair(&self, left: &RgbImage, right: &RgbImage, out: &Output) -> crate::PairCheck {
         let width = left.width().max(1) as f32;
         let range_share = out.plan.ndisp_measured.then(|| (out.plan.min_disp + out.plan.ndisp) as f32 / width);
         let noise = out.measured.map(|m| (m.stats.sigma(), m.stats.gain[0]));
@@ -413,7 +536,8 @@ impl Matcher {
         };
         on_progress(Progress::Planned(&run_plan));
         let on_stage = |stage: &str| on_progress(Progress::Stage(stage));
-        let options = pipeline::RunOptions { on_stage: &on_stage, confidence: self.confidence };
+        let confidence = self.confidence || self.min_confidence.is_some();
+        let options = pipeline::RunOptions { on_stage: &on_stage, confidence };
         let start = Instant::now();
         // A remembered sequence runs its frames through the temporal model where the pipeline runs whole and at
         // full resolution; any other frame runs alone and starts the sequence again.
@@ -441,7 +565,19 @@ impl Matcher {
             0 => (disparity, confidence, consistent),
             d => crate::min_disp::widen_output(&disparity, confidence.as_ref(), &consistent, d),
         };
-        Ok(Output { disparity, confidence, consistent, timings, measured, plan: run_plan, seconds, frame, exposure })
+        Ok(Output {
+            disparity,
+            confidence,
+            consistent,
+            timings,
+            measured,
+            plan: run_plan,
+            seconds,
+            frame,
+            exposure,
+            checks: None,
+            rectified: None,
+        })
     }
 }
 
@@ -513,6 +649,66 @@ mod tests {
         assert_eq!(bits(&with), bits(&without));
         let stages = |o: &Output| o.timings.stages.iter().map(|(name, _)| *name).collect::<Vec<_>>();
         assert!(stages(&with).contains(&"confidence") && !stages(&without).contains(&"confidence"));
+    }
+
+    /// A small rig: equal pinhole cameras, the right one 0.1 to the right and turned by 1° about the vertical.
+    fn small_rig() -> crate::rectify::StereoCalibration {
+        use crate::rectify::Intrinsics;
+        let k = |cx: f64| Intrinsics {
+            matrix: [[90.0, 0.0, cx], [0.0, 90.0, 32.0], [0.0, 0.0, 1.0]],
+            distortion: [0.0; 8],
+        };
+        let (c, s) = (1f64.to_radians().cos(), 1f64.to_radians().sin());
+        crate::rectify::StereoCalibration {
+            path: PathBuf::from("rig.yml"),
+            cameras: [k(48.0), k(47.0)],
+            rotation: [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]],
+            translation: [-0.1, 0.0, 0.0],
+            image_size: Some((96, 64)),
+            given: None,
+            prerectified: None,
+        }
+    }
+
+    /// A matcher with a rectification matches the rectified pair, as rectifying first and matching after does,
+    /// and gives the rectified left view; its pair check's warnings doubt the calibration, not the rectifying.
+    #[test]
+    fn a_matcher_with_a_rectification_matches_the_rectified_pair() {
+        let scene = render_scene(&SynthParams { width: 96, height: 64, ndisp: 16, seed: 3 }).unwrap();
+        let rect = small_rig().rectification((96, 64)).unwrap();
+        let plain = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(16));
+        let (l, r) = rect.rectify_pair(&scene.left, &scene.right).unwrap();
+        let expected = plain.clone().match_pair(&l, &r).unwrap();
+        let mut rectifying = plain.with_rectification(rect).with_checks(true);
+        let out = rectifying.match_pair(&scene.left, &scene.right).unwrap();
+        let bits = |o: &Output| o.disparity.data.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&out), bits(&expected));
+        let rectified = out.rectified.as_ref().unwrap();
+        assert_eq!((&rectified.left.channels, rectified.calibration.as_path()), (&l.channels, Path::new("rig.yml")));
+        assert_eq!(rectifying.search_range(&scene.left, &scene.right).unwrap(), (16, false));
+        let mut offset = out.clone();
+        let check = offset.checks.as_mut().unwrap();
+        check.vertical_px = Some(check.vertical_limit_px + 5.0);
+        let (plain_words, words) = (check.warnings().join(" "), offset.warnings().join(" "));
+        assert!(plain_words.contains("rectify it with --rectify CALIB"), "{plain_words}");
+        assert!(words.contains("after --rectify rig.yml") && !words.contains("rectify it with"), "{words}");
+        let small = RgbImage::new(64, 48);
+        assert!(rectifying.match_pair(&small, &small).unwrap_err().to_string().contains("rectification is for 96x64"));
+    }
+
+    /// A bound on the confidence gives the map of the reliable pixels, with the confidence computed though it
+    /// was not asked for, and the pair checked on the map before the bound.
+    #[test]
+    fn a_matcher_with_a_confidence_bound_keeps_the_reliable_pixels() {
+        let scene = render_scene(&SynthParams { width: 64, height: 48, ndisp: 16, seed: 2 }).unwrap();
+        let matcher = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(16)).with_checks(true);
+        let full = matcher.clone().match_pair(&scene.left, &scene.right).unwrap();
+        let mut bounded = matcher.with_confidence(false).with_min_confidence(0.95).unwrap();
+        let out = bounded.match_pair(&scene.left, &scene.right).unwrap();
+        assert_eq!(out.disparity.data, full.reliable_disparity(0.95).unwrap().data);
+        assert!(out.disparity.data.iter().any(|d| d.is_infinite()) && out.confidence.is_some());
+        assert_eq!(out.checks.map(|c| c.to_string()), full.checks.map(|c| c.to_string()));
+        assert!(Matcher::new(Params::default()).unwrap().with_min_confidence(1.5).is_err());
     }
 
     #[test]

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard, TryLockError};
 
-use jem::rectify::{Rectification, StereoCalibration};
+use jem::rectify::StereoCalibration;
 use jem::{Error, FrameKind, NdispSource, Output, PairCheck, Params};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -46,10 +46,9 @@ pub(crate) struct State {
 /// pixels only.
 pub(crate) struct MatchOptions {
     temporal: bool,
-    /// The stereo calibration, and its rectification for the last size seen.
-    calibration: Option<(StereoCalibration, Option<Rectification>)>,
-    /// The calibration's file, which a warning that the pair is not rectified names.
-    calibration_path: Option<PathBuf>,
+    /// The stereo calibration the raw views are rectified with (for each size, the matcher is given its
+    /// rectification).
+    calibration: Option<StereoCalibration>,
     min_confidence: Option<f32>,
     /// The smallest disparity searched (``min_disp``).
     min_disp: usize,
@@ -63,10 +62,10 @@ impl MatchOptions {
             jem::Output::check_min_confidence("min_confidence", c).map_err(|e| to_py(&e))?;
         }
         let calibration = match &rectify {
-            Some(path) => Some((StereoCalibration::load(path).map_err(|e| to_py(&e))?, None)),
+            Some(path) => Some(StereoCalibration::load(path).map_err(|e| to_py(&e))?),
             None => None,
         };
-        Ok(MatchOptions { temporal, calibration, calibration_path: rectify, min_confidence, min_disp: 0 })
+        Ok(MatchOptions { temporal, calibration, min_confidence, min_disp: 0 })
     }
 
     /// With the ``min_disp`` argument: a disparity of 0 or more (``None``: 0).
@@ -75,15 +74,6 @@ impl MatchOptions {
         let d = usize::try_from(d).map_err(|_| to_py(&Error::param("min_disp", d, "a disparity of 0 or more")))?;
         self.min_disp = d;
         Ok(self)
-    }
-
-    /// The rectification for views of `size`, computed once per size.
-    fn rectification(&mut self, size: (usize, usize)) -> PyResult<Option<&Rectification>> {
-        let Some((calibration, held)) = &mut self.calibration else { return Ok(None) };
-        if held.as_ref().is_none_or(|r| r.size() != size) {
-            *held = Some(calibration.rectification(size).map_err(|e| to_py(&e))?);
-        }
-        Ok(held.as_ref())
     }
 }
 
@@ -122,7 +112,11 @@ impl PyMatcher {
         let limit = positive("max_memory", max_memory)?.unwrap_or_else(jem::default_memory_limit);
         let matcher = jem::Matcher::new(params.clone()).map_err(|e| to_py(&e))?;
         let matcher = matcher.with_ndisp(source).with_max_memory(limit).with_temporal(options.temporal);
-        let matcher = matcher.with_min_disp(options.min_disp);
+        let matcher = matcher.with_min_disp(options.min_disp).with_checks(true);
+        let matcher = match options.min_confidence {
+            Some(c) => matcher.with_min_confidence(c).map_err(|e| to_py(&e))?,
+            None => matcher,
+        };
         Ok(PyMatcher { state: Mutex::new(State { matcher, params, threads, pool: None, options }) })
     }
 
@@ -150,8 +144,8 @@ impl State {
         return_info: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (left, right) = (ImageArray::inspect(left, "left")?, ImageArray::inspect(right, "right")?);
-        // The confidence map costs a few per cent of a run: computed only when shown or used.
-        self.matcher.set_confidence(confidence || self.options.min_confidence.is_some());
+        // The confidence map costs a few per cent of a run: computed only when shown or used (a bound on it).
+        self.matcher.set_confidence(confidence);
         // From the shapes, before anything is copied: a pair too large for the limit costs no memory.
         let input_bytes = left.load_bytes().saturating_add(right.load_bytes());
         let sizes = ((left.width, left.height), (right.width, right.height));
@@ -161,8 +155,15 @@ impl State {
             let per_px = jem::rectify::RECTIFY_BYTES_PER_PX.saturating_add(24);
             check_memory("rectify", sizes.0, per_px, self.matcher.max_memory())?;
         }
-        let rectification = self.options.rectification((left.width, left.height))?;
-        if let Some(rect) = rectification {
+        let size = (left.width, left.height);
+        if let Some(calibration) = &self.options.calibration
+            && self.matcher.rectification().is_none_or(|r| r.size() != size)
+        {
+            // Computed once per size.
+            let rectification = calibration.rectification(size).map_err(|e| to_py(&e))?;
+            self.matcher.set_rectification(Some(rectification));
+        }
+        if let Some(rect) = self.matcher.rectification() {
             warn_all(py, &rect.warnings())?;
         }
         let (l, r) = (left.to_rgb()?, right.to_rgb()?);
@@ -170,22 +171,8 @@ impl State {
             self.pool = Some(thread_pool(n)?);
         }
         let (matcher, pool) = (&mut self.matcher, self.pool.as_ref());
-        let (out, check) = py.detach(|| {
-            guarded(pool, || {
-                let rectified = rectification.map(|rect| rect.rectify_pair(&l, &r)).transpose()?;
-                let (l, r) = rectified.as_ref().map_or((&l, &r), |(a, b)| (a, b));
-                let out = matcher.match_pair(l, r)?;
-                let check = matcher.check_pair(l, r, &out);
-                Ok((out, check))
-            })
-        })?;
-        let shown = Shown {
-            confidence,
-            return_info,
-            min_confidence: self.options.min_confidence,
-            rectified_with: self.options.calibration_path.clone(),
-        };
-        results(py, out, &check, &self.params, shown)
+        let out = py.detach(|| guarded(pool, || matcher.match_pair(&l, &r)))?;
+        results(py, out, &self.params, Shown { confidence, return_info })
     }
 }
 
@@ -235,42 +222,25 @@ impl PyMatcher {
 struct Shown {
     confidence: bool,
     return_info: bool,
-    min_confidence: Option<f32>,
-    /// The calibration the pair was rectified with (``rectify=``).
-    rectified_with: Option<PathBuf>,
-}
-
-impl Shown {
-    /// The pair check's warnings, for a pair rectified with a calibration worded as `jem match --rectify` words them.
-    fn warnings(&self, check: &PairCheck) -> Vec<String> {
-        match &self.rectified_with {
-            Some(calib) => check.warnings().into_iter().map(|w| PairCheck::after_rectify(w, calib)).collect(),
-            None => check.warnings(),
-        }
-    }
 }
 
 /// What `match` returns for `out`: the map (the reliable pixels only with ``min_confidence``), then the confidence
 /// and the info dict when asked for. Values too large for this image (held to a bound, as `jem` warns on stderr)
 /// and a pair that looks wrong (swapped, unrectified, ...; the lines `jem` prints) give a UserWarning each.
-fn results<'py>(
-    py: Python<'py>,
-    out: Output,
-    check: &PairCheck,
-    params: &Params,
-    shown: Shown,
-) -> PyResult<Bound<'py, PyAny>> {
+fn results<'py>(py: Python<'py>, out: Output, params: &Params, shown: Shown) -> PyResult<Bound<'py, PyAny>> {
     let (w, h) = out.disparity.dims();
-    let said = shown.warnings(check);
+    let said = out.warnings();
     let warnings: Vec<String> = params.image_warnings(w, h).into_iter().chain(said.iter().cloned()).collect();
     warn_all(py, &warnings)?;
-    let info = if shown.return_info { Some(info(py, &out, check, said)?) } else { None };
-    let reliable = shown.min_confidence.map(|c| out.reliable_disparity(c)).transpose().map_err(|e| to_py(&e))?;
+    let info = match (&out.checks, shown.return_info) {
+        (Some(check), true) => Some(info(py, &out, check, said)?),
+        _ => None,
+    };
     if shown.confidence {
         out.confidence_map().map_err(|e| to_py(&e))?;
     }
     let Output { disparity, confidence, .. } = out;
-    let mut result = vec![to_numpy(py, reliable.unwrap_or(disparity)).into_any()];
+    let mut result = vec![to_numpy(py, disparity).into_any()];
     if let Some(confidence) = confidence.filter(|_| shown.confidence) {
         result.push(to_numpy(py, confidence).into_any());
     }

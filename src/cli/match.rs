@@ -126,23 +126,25 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         .with_min_disp(request.min_disp)
         .with_max_memory(args.memory.memory_limit())
         // Always: the pair checks read it (a region of repetitive texture matched doubtfully).
-        .with_confidence(true);
+        .with_confidence(true)
+        .with_checks(true);
+    if let Some(rect) = &request.rectification {
+        matcher.set_rectification(Some(rect.clone()));
+    }
+    if let Some(c) = args.min_confidence {
+        // With --min-confidence, the map written holds the reliable pixels only.
+        matcher = matcher.with_min_confidence(c)?;
+    }
     let header = jem::io::read_pair_header(request.left, request.right)?;
     for warning in params.image_warnings(header.width, header.height).iter().filter(|_| !global.quiet) {
         note!("warning: {warning}");
     }
     // Both headers are checked against the memory limit before either image is decoded.
     let (l, r) = matcher.read_pair(request.left, request.right)?;
-    let (l, r) = match &request.rectification {
-        Some(rect) => rect.rectify_pair(&l, &r)?,
-        None => (l, r),
-    };
     let load_time = start.elapsed();
     let out = match_with_progress(&mut matcher, (&l, &r), request.stated_ndisp, global.quiet)?;
-    let check = matcher.check_pair(&l, &r, &out);
-    let mut warnings = check.warnings();
+    let mut warnings = out.warnings();
     if let (Some(rect), Some(calib)) = (&request.rectification, &args.rectify) {
-        warnings = warnings.into_iter().map(|w| jem::PairCheck::after_rectify(w, calib)).collect();
         warnings.extend(rect.warnings().into_iter().map(|w| format!("{}: {w}", calib.display())));
     }
     if args.strict && !warnings.is_empty() {
@@ -151,10 +153,9 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
             warnings.join("; ")
         )));
     }
-    // With --min-confidence, the map written holds the reliable pixels only.
-    let reliable = args.min_confidence.map(|c| out.reliable_disparity(c)).transpose()?;
-    let disparity = reliable.as_ref().unwrap_or(&out.disparity);
-    write_outputs(args, &request, &out, disparity, &l)?;
+    // The view the map is of: the rectified left view with --rectify.
+    let left_view = out.rectified.as_ref().map_or(&l, |r| &r.left);
+    write_outputs(args, &request, &out, left_view)?;
     for warning in warnings.iter().filter(|_| !global.quiet) {
         note!("warning: {warning}");
     }
@@ -170,14 +171,16 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         if let Some(m) = &out.measured {
             note!("{m}");
         }
-        note!("{check}");
+        if let Some(check) = &out.checks {
+            note!("{check}");
+        }
         if let Some(peak) = jem::peak_rss_bytes() {
             note!("memory: peak {} (planned {})", human(peak), human(out.plan.memory_bytes));
         }
     }
     if !global.quiet {
         let seconds = start.elapsed().as_secs_f64();
-        note!("{}", wrote_line(args, &out, disparity, seconds, request.camera.as_ref()));
+        note!("{}", wrote_line(args, &out, seconds, request.camera.as_ref()));
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -336,13 +339,8 @@ fn match_with_progress(
 
 /// Writes the disparity map and what else was asked for, all or none: every file is encoded first, then they are
 /// written as one.
-fn write_outputs(
-    args: &MatchArgs,
-    request: &Request<'_>,
-    out: &jem::Output,
-    disparity: &jem::DisparityMap,
-    left: &jem::RgbImage,
-) -> Result<()> {
+fn write_outputs(args: &MatchArgs, request: &Request<'_>, out: &jem::Output, left: &jem::RgbImage) -> Result<()> {
+    let disparity = &out.disparity;
     let output = args.output.as_deref().unwrap_or(Path::new("?"));
     let mut files = vec![(output, jem::io::encode_disparity(output, disparity)?)];
     if let Some(c) = &args.confidence {
@@ -366,13 +364,8 @@ fn write_outputs(
 }
 
 /// The last line of a match: `wrote d.pfm (741×497, 96 % valid, ndisp 70, 2.8 s)`, then the other files written.
-fn wrote_line(
-    args: &MatchArgs,
-    out: &jem::Output,
-    disparity: &jem::DisparityMap,
-    seconds: f64,
-    camera: Option<&jem::geometry::Camera>,
-) -> String {
+fn wrote_line(args: &MatchArgs, out: &jem::Output, seconds: f64, camera: Option<&jem::geometry::Camera>) -> String {
+    let disparity = &out.disparity;
     let (ndisp, measured) = (out.plan.ndisp, out.plan.ndisp_measured);
     let from = if out.plan.min_disp > 0 { format!(" from {}", out.plan.min_disp) } else { String::new() };
     let (w, h) = disparity.dims();

@@ -70,16 +70,16 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
     if let (Some(rect), Some(calib)) = (&rectification, &args.rectify) {
         super::rectify::warn(rect, calib, global.quiet);
     }
-    let opts = RunOptions {
-        rectification: rectification.as_ref(),
-        params: &params,
-        ndisp: args.ndisp,
-        format,
-        limit_bytes: args.memory.memory_limit(),
-        range: if args.range_once || !args.independent { RangeRule::FirstFrame } else { RangeRule::PerFrame },
-        temporal: !args.independent,
-        min_disp: args.min_disp,
-    };
+    let mut matcher = jem::Matcher::new(params)?
+        .with_ndisp(args.ndisp.map_or(jem::NdispSource::Unknown, jem::NdispSource::Given))
+        .with_max_memory(args.memory.memory_limit())
+        .with_temporal(!args.independent)
+        .with_min_disp(args.min_disp);
+    if let Some(rect) = rectification {
+        matcher = matcher.with_rectification(rect);
+    }
+    let range = if args.range_once || !args.independent { RangeRule::FirstFrame } else { RangeRule::PerFrame };
+    let opts = RunOptions { format, range };
     let quiet = global.quiet;
     // Said once the output folder is taken, with the first frame, so that a refusal is the only line.
     let started = std::cell::Cell::new(false);
@@ -141,7 +141,7 @@ pub(super) fn run(args: &SequenceArgs, global: &GlobalArgs) -> Result<ExitCode> 
         }
         Event::Finished { .. } => {}
     };
-    let summary = jem::sequence::run(&seq, &args.output, &opts, &on_event)?;
+    let summary = jem::sequence::run(&seq, &args.output, matcher, &opts, &on_event)?;
     flush_skipped();
     if !quiet {
         note!("{}", closing_line(&seq, args, &summary));

@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use crate::dataset::{CALIB_FILE, GT_FILE, MASK_FILE};
+use crate::dataset::CALIB_FILE;
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane};
 use crate::io::calib::Calib;
@@ -257,7 +257,8 @@ pub fn evaluate_files(
 /// As [`evaluate_files`], or a missing/malformed `calib.txt` or mask.
 pub fn evaluate_scene(dir: &Path, alg: &str, scale: u32, mask_mode: MaskMode) -> Result<Metrics> {
     let (result, ndisp) = scene_result(dir, alg)?;
-    let mask = dir.join(MASK_FILE);
+    let truth = crate::dataset::Truth::in_scene(dir);
+    let mask = truth.mask.unwrap_or_default();
     let mask = match (mask.is_file(), mask_mode) {
         (true, _) => Some(mask),
         (false, MaskMode::All) => None,
@@ -265,7 +266,7 @@ pub fn evaluate_scene(dir: &Path, alg: &str, scale: u32, mask_mode: MaskMode) ->
             return Err(Error::dataset(format!("no {} (needed for the nonocc mask)", mask.display())));
         }
     };
-    evaluate_files(&result, &dir.join(GT_FILE), mask.as_deref(), ndisp, scale, mask_mode)
+    evaluate_files(&result, &truth.disparity, mask.as_deref(), ndisp, scale, mask_mode)
 }
 
 /// The error of a valid result `d` against the truth `g` as MiddEval3 scores it: `d` clipped to `[0, max_d]`, the

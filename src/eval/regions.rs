@@ -41,8 +41,8 @@ use rayon::prelude::*;
 
 use super::metrics::{check_size, pixel_error, scene_result};
 use super::report::AlgReport;
+use crate::dataset::LEFT_FILE;
 use crate::dataset::Layout;
-use crate::dataset::{GT_FILE, LEFT_FILE, MASK_FILE};
 use crate::error::{Error, Result};
 use crate::image::{DisparityMap, Plane, RgbImage};
 use crate::imgproc::filter::{local_mean_abs, sobel_magnitude};
@@ -251,12 +251,12 @@ fn least_textured(left: &RgbImage, scored: &[bool], share: f64) -> Vec<bool> {
 /// A missing or malformed file (naming it), maps of different sizes, or no scored pixel with a valid result.
 pub fn split_scene(dir: &Path, alg: &str, scale: u32) -> Result<RegionSplit> {
     let (result_path, ndisp) = scene_result(dir, alg)?;
-    let gt_path = dir.join(GT_FILE);
+    let crate::dataset::Truth { disparity: gt_path, mask } = crate::dataset::Truth::in_scene(dir);
     let gt = crate::io::read_disparity(&gt_path)?;
     let result = crate::io::read_disparity(&result_path)?;
     let truth = format!("the ground truth {}", gt_path.display());
     check_size(&result_path, "result", result.dims(), &truth, gt.dims())?;
-    let mask_path = dir.join(MASK_FILE);
+    let mask_path = mask.unwrap_or_default();
     let mask = crate::io::read_grey8(&mask_path)?;
     check_size(&mask_path, "mask", mask.dims(), &truth, gt.dims())?;
     let left_path = dir.join(LEFT_FILE);

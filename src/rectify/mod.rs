@@ -91,6 +91,8 @@ pub struct Rectification {
     size: (usize, usize),
     cameras: [Intrinsics; 2],
     transforms: RectifyingTransforms,
+    /// The calibration file it was made from (named by the warnings of a pair rectified with it).
+    calibration: PathBuf,
 }
 
 impl StereoCalibration {
@@ -166,7 +168,8 @@ impl StereoCalibration {
             };
             let transforms =
                 RectifyingTransforms { r1: linalg::IDENTITY, r2: linalg::IDENTITY, p1: pre.p1, p2: pre.p2 };
-            return self.checked(Rectification { size, cameras: [pinhole(&pre.p1), pinhole(&pre.p2)], transforms });
+            let cameras = [pinhole(&pre.p1), pinhole(&pre.p2)];
+            return self.checked(Rectification { size, cameras, transforms, calibration: self.path.clone() });
         }
         if let Some(stated) = self.image_size
             && stated != size
@@ -185,7 +188,7 @@ impl StereoCalibration {
                     .ok_or_else(|| err("T is zero: the two cameras are at the same place".into()))?
             }
         };
-        self.checked(Rectification { size, cameras: self.cameras, transforms })
+        self.checked(Rectification { size, cameras: self.cameras, transforms, calibration: self.path.clone() })
     }
 
     /// `rect`, if its views are side by side, its focal length valid and its right camera to the right.
@@ -227,6 +230,11 @@ impl Rectification {
     /// The size of both views, before and after.
     pub fn size(&self) -> (usize, usize) {
         self.size
+    }
+
+    /// The calibration file it was made from ([`StereoCalibration::path`]).
+    pub fn calibration_path(&self) -> &Path {
+        &self.calibration
     }
 
     /// The rotations and projections (OpenCV's R1, R2, P1, P2).

@@ -11,7 +11,7 @@
 use std::path::Path;
 
 use super::write::{SequenceFrame, write_sequence};
-use crate::dataset::{CALIB_FILE, GT_FILE, LEFT_FILE, MASK_FILE, RIGHT_FILE};
+use crate::dataset::{CALIB_FILE, LEFT_FILE, RIGHT_FILE};
 use crate::degrade::{Recipe, View};
 use crate::error::{Error, Result};
 use crate::image::{Plane, RgbImage};
@@ -64,9 +64,10 @@ pub fn sequence_from_scene(scene: &Path, out: &Path, how: &FromScene) -> Result<
         ));
     }
     let window = w - travel;
-    let gt_path = scene.join(GT_FILE);
+    let truth = crate::dataset::Truth::in_scene(scene);
+    let gt_path = truth.disparity;
     let gt = gt_path.is_file().then(|| crate::io::pfm::read_pfm(&gt_path)).transpose()?;
-    let mask_path = scene.join(MASK_FILE);
+    let mask_path = truth.mask.unwrap_or_default();
     let mask = mask_path.is_file().then(|| crate::io::png::load_grey8(&mask_path)).transpose()?;
     if let Some(g) = &gt {
         crate::eval::check_size(&gt_path, "ground truth", g.dims(), "the images", (w, h))?;

@@ -28,7 +28,6 @@ use super::{FOLDERS, KITTI_RAW, Sequence, SequenceLayout};
 use crate::error::{Error, Result};
 use crate::io::DisparityFormat;
 use crate::matcher::Matcher;
-use crate::params::Params;
 use crate::setup::NdispSource;
 
 /// The times file of an output folder.
@@ -51,26 +50,15 @@ pub enum RangeRule {
     FirstFrame,
 }
 
-/// What [`run`] does.
-#[derive(Clone, Debug)]
-pub struct RunOptions<'a> {
-    /// The pipeline's parameters.
-    pub params: &'a Params,
-    /// `--ndisp`: the range for every frame.
-    pub ndisp: Option<usize>,
+/// What [`run`] does besides matching (how each frame is matched is the [`Matcher`]'s: its parameters, range,
+/// memory limit, smallest disparity, rectification and temporal model).
+#[derive(Clone, Copy, Debug)]
+pub struct RunOptions {
     /// The output format.
     pub format: DisparityFormat,
-    /// The memory limit of a frame's run ([`Matcher::with_max_memory`]).
-    pub limit_bytes: u64,
-    /// How the range is settled.
+    /// How the range is settled (a temporal matcher, [`Matcher::with_temporal`], holds the first frame's range
+    /// whatever this says).
     pub range: RangeRule,
-    /// Match the frames with the temporal model ([`Matcher::with_temporal`]): the range is then settled on the
-    /// first frame whatever `range` says. `false`: each frame alone, as `jem match` matches it.
-    pub temporal: bool,
-    /// Rectify every frame with this before matching (`jem sequence --rectify`, as `jem match --rectify`).
-    pub rectification: Option<&'a crate::rectify::Rectification>,
-    /// The smallest disparity searched in every frame ([`Matcher::with_min_disp`]; 0: from 0).
-    pub min_disp: usize,
 }
 
 /// One frame matched.
@@ -153,8 +141,9 @@ pub struct RunSummary {
 }
 
 /// Matches every frame of `seq` into the folder `out` (created if missing), skipping frames an earlier run of
-/// the same kind left there (see the module doc). Frames run one after another; each uses the threads of the
-/// current rayon pool. The folder is locked against a second run for the time of this one
+/// the same kind left there (see the module doc), each with `matcher` (the range it is given, else the one the
+/// sequence's `calib.txt` states: [`Sequence::ndisp_source`]; no confidence map or pair check is made, as none is
+/// written). Frames run one after another; each uses the threads of the current rayon pool. The folder is locked against a second run for the time of this one
 /// ([`crate::dataset::lock_folder`]), and its record ([`RUN_FILE`], [`CONFIG_FILE`]) is written with the
 /// first frame: a run that writes no frame leaves nothing (a folder it made is removed again).
 ///
@@ -163,10 +152,20 @@ pub struct RunSummary {
 /// results, [`Error::Locked`] when another run holds its lock, [`Error::Output`] when a file where an output goes is not a regular file; any error of
 /// loading, planning (memory) or running a frame, naming the frame ([`Error::Frame`]). Frames written before the
 /// error stay, whole, and a rerun continues from them.
-pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(Event<'_>)) -> Result<RunSummary> {
+pub fn run(
+    seq: &Sequence,
+    out: &Path,
+    matcher: Matcher,
+    opts: &RunOptions,
+    on_event: &dyn Fn(Event<'_>),
+) -> Result<RunSummary> {
     check_output_folder(seq, out)?;
-    let source = seq.ndisp_source(opts.ndisp)?;
-    let record = record_text(seq, opts, source);
+    let source = match matcher.ndisp() {
+        NdispSource::Unknown => seq.ndisp_source(None)?,
+        given => given,
+    };
+    let matcher = matcher.with_ndisp(source).with_confidence(false).with_checks(false);
+    let record = record_text(seq, &matcher, opts, source);
     let created = make_folder(out)?;
     let result = (|| {
         let lock = crate::dataset::lock_folder(out)?;
@@ -174,7 +173,7 @@ pub fn run(seq: &Sequence, out: &Path, opts: &RunOptions<'_>, on_event: &dyn Fn(
             on_event(Event::Note(note));
         }
         crate::io::sweep_stale_temps(out);
-        run_locked(seq, out, opts, source, &record, on_event)
+        run_locked(seq, out, matcher, opts, &record, on_event)
     })();
     if result.is_err() && created {
         // Empty unless a frame was written (then it stays, with its record, for a rerun to continue).
@@ -197,8 +196,8 @@ fn make_folder(out: &Path) -> Result<bool> {
 fn run_locked(
     seq: &Sequence,
     out: &Path,
-    opts: &RunOptions<'_>,
-    source: NdispSource,
+    mut matcher: Matcher,
+    opts: &RunOptions,
     record: &str,
     on_event: &dyn Fn(Event<'_>),
 ) -> Result<RunSummary> {
@@ -208,7 +207,7 @@ fn run_locked(
         crate::io::check_replaceable(&path)?;
     }
     claim_folder(seq, out, ext, record)?;
-    let config = opts.params.to_toml();
+    let config = matcher.params().to_toml();
     let mut recorded = false;
     let mut times = read_times(&out.join(TIMES_FILE));
     // Each map is decoded once, here, before any frame runs: the frames written after a frame decide whether it is
@@ -218,18 +217,12 @@ fn run_locked(
     let order: std::collections::HashMap<&str, usize> =
         seq.frames.iter().enumerate().map(|(i, f)| (f.stem.as_str(), i)).collect();
     let mut summary = RunSummary::default();
-    let mut matcher = Matcher::new(opts.params.clone())?
-        .with_max_memory(opts.limit_bytes)
-        .with_ndisp(source)
-        .with_temporal(opts.temporal)
-        .with_min_disp(opts.min_disp)
-        .with_confidence(false);
     for (index, frame) in seq.frames.iter().enumerate() {
         let named = |e: Error| Error::Frame { stem: frame.stem.clone(), source: Box::new(e) };
         let result = out.join(format!("{}.{ext}", frame.stem));
         if opts.range == RangeRule::FirstFrame && index == 0 {
             let settled = (|| {
-                let (l, r) = read_frame(&matcher, &frame.left, &frame.right, opts.rectification)?;
+                let (l, r) = matcher.read_pair(&frame.left, &frame.right)?;
                 matcher.search_range(&l, &r)
             })()
             .map_err(named)?;
@@ -239,9 +232,9 @@ fn run_locked(
         if written[index] {
             // The temporal model's state after a frame is not in the folder: a written frame before one still to
             // run is matched again to rebuild it (not written again); once every frame is written, none is.
-            if opts.temporal && last_missing.is_some_and(|m| m > index) {
+            if matcher.is_temporal() && last_missing.is_some_and(|m| m > index) {
                 on_event(Event::Replayed { index, stem: &frame.stem });
-                match_frame(&mut matcher, opts, frame, &|_| {}).map_err(named)?;
+                match_frame(&mut matcher, frame, &|_| {}).map_err(named)?;
                 summary.replayed.push(frame.stem.clone());
             } else {
                 on_event(Event::Skipped { index, stem: &frame.stem });
@@ -252,7 +245,7 @@ fn run_locked(
         times.retain(|(s, _)| *s != frame.stem);
         on_event(Event::Started { index, stem: &frame.stem });
         let on_stage = |stage: &str| on_event(Event::Stage { index, stage });
-        let (map, run) = match_frame(&mut matcher, opts, frame, &on_stage).map_err(named)?;
+        let (map, run) = match_frame(&mut matcher, frame, &on_stage).map_err(named)?;
         on_event(Event::Stage { index, stage: "writing" });
         times.push((frame.stem.clone(), run.seconds));
         times.sort_by_key(|(s, _)| order.get(s.as_str()).copied());
@@ -272,30 +265,15 @@ fn run_locked(
     Ok(summary)
 }
 
-/// A frame's pair as `jem match` reads it (headers and the memory limit before decoding), rectified when asked.
-fn read_frame(
-    matcher: &Matcher,
-    left: &Path,
-    right: &Path,
-    rectification: Option<&crate::rectify::Rectification>,
-) -> Result<(crate::image::RgbImage, crate::image::RgbImage)> {
-    let (l, r) = matcher.read_pair(left, right)?;
-    match rectification {
-        Some(rect) => rect.rectify_pair(&l, &r),
-        None => Ok((l, r)),
-    }
-}
-
-/// Matches one frame as `jem match` does: headers and the memory limit before decoding, the rectification when
-/// asked, then the run.
+/// Matches one frame as `jem match` does: headers and the memory limit before decoding, then the run (the
+/// rectification first when the matcher has one).
 fn match_frame(
     matcher: &mut Matcher,
-    opts: &RunOptions<'_>,
     frame: &super::Frame,
     on_stage: &dyn Fn(&str),
 ) -> Result<(crate::image::DisparityMap, FrameRun)> {
     on_stage("loading");
-    let (l, r) = read_frame(matcher, &frame.left, &frame.right, opts.rectification)?;
+    let (l, r) = matcher.read_pair(&frame.left, &frame.right)?;
     let stem = &frame.stem;
     let start = Instant::now();
     let out = matcher.match_pair_with(&l, &r, &|progress| {
@@ -335,7 +313,7 @@ pub(crate) fn extension(format: DisparityFormat) -> &'static str {
 }
 
 /// The record of a run ([`RUN_FILE`]): `key=value` lines. A rerun must match it to continue the folder.
-fn record_text(seq: &Sequence, opts: &RunOptions<'_>, source: NdispSource) -> String {
+fn record_text(seq: &Sequence, matcher: &Matcher, opts: &RunOptions, source: NdispSource) -> String {
     let root = std::fs::canonicalize(&seq.root).unwrap_or_else(|_| seq.root.clone());
     let range = match (opts.range, source) {
         (_, NdispSource::Given(n)) => format!("given {n}"),
@@ -344,19 +322,23 @@ fn record_text(seq: &Sequence, opts: &RunOptions<'_>, source: NdispSource) -> St
         (RangeRule::PerFrame, NdispSource::Unknown) => "measured per frame".into(),
         (RangeRule::FirstFrame, NdispSource::Unknown) => "measured on the first frame".into(),
     };
-    let fingerprint = crate::rng::fnv1a(crate::rng::FNV_OFFSET, opts.params.to_toml().as_bytes());
+    // The configuration, and a bound on the confidence when there is one (it changes the maps as a parameter
+    // does; without one the fingerprint is that of the configuration alone, as before the bound existed).
+    let bound = matcher.min_confidence().map_or(String::new(), |c| format!("\nmin_confidence = {c}\n"));
+    let config = matcher.params().to_toml() + &bound;
+    let fingerprint = crate::rng::fnv1a(crate::rng::FNV_OFFSET, config.as_bytes());
     // What the rectification does (its cameras, rotations and projections), not only the file it came from: a
     // calibration file changed in place rectifies the frames differently.
-    let rectify = opts.rectification.map_or("none".to_string(), |r| format!("{:016x}", r.fingerprint()));
+    let rectify = matcher.rectification().map_or("none".to_string(), |r| format!("{:016x}", r.fingerprint()));
     // Only when set: the records of runs from 0 (every run before the option existed) stay as they were.
-    let range = match opts.min_disp {
+    let range = match matcher.min_disp() {
         0 => range,
         d => format!("{range}, from {d}"),
     };
     format!(
         "source={}\nmode={}\nformat={}\nrange={range}\nconfig={fingerprint:016x}\nrectify={rectify}\njem={}\n",
         root.display(),
-        if opts.temporal { "temporal" } else { "independent" },
+        if matcher.is_temporal() { "temporal" } else { "independent" },
         extension(opts.format),
         env!("CARGO_PKG_VERSION")
     )

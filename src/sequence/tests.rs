@@ -307,17 +307,15 @@ fn sequence_of(dir: &Path, n: usize) -> (Sequence, crate::Params) {
     (Sequence::open(&seq).unwrap(), params)
 }
 
-fn options(params: &crate::Params) -> RunOptions<'_> {
-    RunOptions {
-        params,
-        ndisp: None,
-        format: crate::io::DisparityFormat::Pfm,
-        limit_bytes: u64::MAX,
-        range: RangeRule::PerFrame,
-        temporal: false,
-        rectification: None,
-        min_disp: 0,
-    }
+/// Frames written as PFM, the range settled on each.
+const PER_FRAME: RunOptions = RunOptions { format: crate::io::DisparityFormat::Pfm, range: RangeRule::PerFrame };
+
+/// Frames held to the first one's range.
+const FIRST_FRAME: RunOptions = RunOptions { range: RangeRule::FirstFrame, ..PER_FRAME };
+
+/// A matcher of `params` without a memory limit.
+fn matcher(params: &crate::Params) -> crate::Matcher {
+    crate::Matcher::new(params.clone()).unwrap().with_max_memory(u64::MAX)
 }
 
 #[test]
@@ -325,7 +323,7 @@ fn each_frame_is_the_map_jem_match_plans_and_runs() {
     let dir = tempfile::tempdir().unwrap();
     let (seq, params) = small_sequence(dir.path());
     let out = dir.path().join("out");
-    let summary = run(&seq, &out, &options(&params), &|_| {}).unwrap();
+    let summary = run(&seq, &out, matcher(&params), &PER_FRAME, &|_| {}).unwrap();
     assert_eq!(summary.ran.len(), 3);
     for f in &seq.frames {
         let (l, r) = crate::io::png::load_rgb_pair(&f.left, &f.right).unwrap();
@@ -346,12 +344,12 @@ fn a_rerun_skips_the_frames_written_and_runs_the_rest() {
     let dir = tempfile::tempdir().unwrap();
     let (seq, params) = small_sequence(dir.path());
     let out = dir.path().join("out");
-    run(&seq, &out, &options(&params), &|_| {}).unwrap();
+    run(&seq, &out, matcher(&params), &PER_FRAME, &|_| {}).unwrap();
     let before = std::fs::read(out.join("000001.pfm")).unwrap();
     std::fs::remove_file(out.join("000001.pfm")).unwrap();
     std::fs::write(out.join("000002.pfm"), b"Pf\ntruncated").unwrap();
     let events = std::sync::Mutex::new(Vec::new());
-    let summary = run(&seq, &out, &options(&params), &|e| {
+    let summary = run(&seq, &out, matcher(&params), &PER_FRAME, &|e| {
         let line = match e {
             Event::Skipped { stem, .. } => format!("skip {stem}"),
             Event::Finished { run, .. } => format!("ran {}", run.stem),
@@ -372,20 +370,20 @@ fn a_temporal_rerun_replays_the_frames_before_the_missing_one_and_writes_the_sam
     let dir = tempfile::tempdir().unwrap();
     let (seq, params) = small_sequence(dir.path());
     let out = dir.path().join("out");
-    let opts = RunOptions { temporal: true, range: RangeRule::FirstFrame, ..options(&params) };
-    let first = run(&seq, &out, &opts, &|_| {}).unwrap();
+    let temporal = || matcher(&params).with_temporal(true);
+    let first = run(&seq, &out, temporal(), &FIRST_FRAME, &|_| {}).unwrap();
     assert!(first.ran.iter().all(|r| r.kind.is_some()), "every frame says how it was matched");
     let last = std::fs::read(out.join("000002.pfm")).unwrap();
     let kept = std::fs::read(out.join("000000.pfm")).unwrap();
     std::fs::remove_file(out.join("000002.pfm")).unwrap();
-    let again = run(&seq, &out, &opts, &|_| {}).unwrap();
+    let again = run(&seq, &out, temporal(), &FIRST_FRAME, &|_| {}).unwrap();
     assert_eq!(again.replayed, ["000000", "000001"], "the state is rebuilt from the frames before");
     assert!(again.skipped.is_empty());
     assert_eq!(again.ran.iter().map(|r| r.stem.as_str()).collect::<Vec<_>>(), ["000002"]);
     assert_eq!(std::fs::read(out.join("000002.pfm")).unwrap(), last, "the same map as the run without a stop");
     assert_eq!(std::fs::read(out.join("000000.pfm")).unwrap(), kept, "a replayed frame is not written again");
     // Everything written: nothing to rebuild, every frame skipped.
-    let done = run(&seq, &out, &opts, &|_| {}).unwrap();
+    let done = run(&seq, &out, temporal(), &FIRST_FRAME, &|_| {}).unwrap();
     assert_eq!((done.skipped.len(), done.replayed.len(), done.ran.len()), (3, 0, 0));
 }
 
@@ -394,12 +392,12 @@ fn a_temporal_rerun_reads_each_written_map_once() {
     let dir = tempfile::tempdir().unwrap();
     let (seq, params) = sequence_of(dir.path(), 8);
     let out = dir.path().join("out");
-    let opts = RunOptions { temporal: true, range: RangeRule::FirstFrame, ..options(&params) };
-    run(&seq, &out, &opts, &|_| {}).unwrap();
+    let temporal = || matcher(&params).with_temporal(true);
+    run(&seq, &out, temporal(), &FIRST_FRAME, &|_| {}).unwrap();
     let last = std::fs::read(out.join("000007.pfm")).unwrap();
     std::fs::remove_file(out.join("000007.pfm")).unwrap();
     run::MAPS_READ.with(|n| n.set(0));
-    let again = run(&seq, &out, &opts, &|_| {}).unwrap();
+    let again = run(&seq, &out, temporal(), &FIRST_FRAME, &|_| {}).unwrap();
     assert_eq!(again.replayed.len(), 7);
     // One look at each frame's map (the missing one included), not one per later frame for each frame.
     assert_eq!(run::MAPS_READ.with(|n| n.get()), 8);
@@ -411,7 +409,7 @@ fn frames_in_bmp_tiff_and_webp_are_read_as_the_png() {
     let dir = tempfile::tempdir().unwrap();
     let (seq, params) = small_sequence(dir.path());
     let png_out = dir.path().join("png-out");
-    run(&seq, &png_out, &options(&params), &|_| {}).unwrap();
+    run(&seq, &png_out, matcher(&params), &PER_FRAME, &|_| {}).unwrap();
     // The same frames in the other formats jem match reads, one format per frame.
     let other = dir.path().join("other");
     std::fs::create_dir_all(other.join("left")).unwrap();
@@ -429,7 +427,7 @@ fn frames_in_bmp_tiff_and_webp_are_read_as_the_png() {
     let stems: Vec<&str> = converted.frames.iter().map(|f| f.stem.as_str()).collect();
     assert_eq!(stems, ["000000", "000001", "000002"]);
     let out = dir.path().join("other-out");
-    assert_eq!(run(&converted, &out, &options(&params), &|_| {}).unwrap().ran.len(), 3);
+    assert_eq!(run(&converted, &out, matcher(&params), &PER_FRAME, &|_| {}).unwrap().ran.len(), 3);
     for f in &seq.frames {
         let name = format!("{}.pfm", f.stem);
         assert_eq!(std::fs::read(out.join(&name)).unwrap(), std::fs::read(png_out.join(&name)).unwrap(), "{name}");
@@ -441,20 +439,20 @@ fn an_output_folder_of_another_run_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let (seq, params) = small_sequence(dir.path());
     let out = dir.path().join("out");
-    run(&seq, &out, &options(&params), &|_| {}).unwrap();
+    run(&seq, &out, matcher(&params), &PER_FRAME, &|_| {}).unwrap();
     let mut other = params.clone();
     other.post.fill = !other.post.fill;
-    let e = run(&seq, &out, &options(&other), &|_| {}).unwrap_err().to_string();
+    let e = run(&seq, &out, matcher(&other), &PER_FRAME, &|_| {}).unwrap_err().to_string();
     assert!(e.contains("another run") && e.contains("configuration"), "{e}");
-    let png = RunOptions { format: crate::io::DisparityFormat::Png16, ..options(&params) };
-    assert!(run(&seq, &out, &png, &|_| {}).unwrap_err().to_string().contains("format pfm"));
+    let png = RunOptions { format: crate::io::DisparityFormat::Png16, ..PER_FRAME };
+    assert!(run(&seq, &out, matcher(&params), &png, &|_| {}).unwrap_err().to_string().contains("format pfm"));
     // Frame results without a record are another program's.
     let foreign = dir.path().join("foreign");
     std::fs::create_dir(&foreign).unwrap();
     std::fs::write(foreign.join("000001.pfm"), "x").unwrap();
-    assert!(run(&seq, &foreign, &options(&params), &|_| {}).unwrap_err().to_string().contains("without a"));
+    assert!(run(&seq, &foreign, matcher(&params), &PER_FRAME, &|_| {}).unwrap_err().to_string().contains("without a"));
     for inside in [seq.root.clone(), seq.root.join("gt"), seq.root.join("left/new")] {
-        let e = run(&seq, &inside, &options(&params), &|_| {}).unwrap_err().to_string();
+        let e = run(&seq, &inside, matcher(&params), &PER_FRAME, &|_| {}).unwrap_err().to_string();
         assert!(e.contains("must not be the sequence folder"), "{e}");
     }
 }
@@ -465,12 +463,11 @@ fn the_range_held_from_the_first_frame_is_given_to_every_frame() {
     let (seq, params) = small_sequence(dir.path());
     std::fs::remove_file(seq.root.join("calib.txt")).unwrap();
     let seq = Sequence::open(&seq.root).unwrap();
-    let once = RunOptions { range: RangeRule::FirstFrame, ..options(&params) };
-    let summary = run(&seq, &dir.path().join("once"), &once, &|_| {}).unwrap();
+    let summary = run(&seq, &dir.path().join("once"), matcher(&params), &FIRST_FRAME, &|_| {}).unwrap();
     let (n, measured) = summary.settled.unwrap();
     assert!(measured);
     assert!(summary.ran.iter().all(|r| r.ndisp == n && !r.ndisp_measured), "{:?}", summary.ran);
-    let per_frame = run(&seq, &dir.path().join("each"), &options(&params), &|_| {}).unwrap();
+    let per_frame = run(&seq, &dir.path().join("each"), matcher(&params), &PER_FRAME, &|_| {}).unwrap();
     assert!(per_frame.ran.iter().all(|r| r.ndisp_measured));
     assert_eq!(per_frame.ran[0].ndisp, n, "the first frame is measured the same way");
 }
@@ -482,9 +479,9 @@ fn the_range_held_from_the_first_frame_is_given_to_every_frame() {
 fn a_sequence_searched_from_a_smallest_disparity_is_matched_as_jem_match_does() {
     let dir = tempfile::tempdir().unwrap();
     let (seq, params) = small_sequence(dir.path());
-    let from = |d| RunOptions { min_disp: d, ..options(&params) };
+    let from = |d| matcher(&params).with_min_disp(d);
     let out = dir.path().join("out");
-    run(&seq, &out, &from(4), &|_| {}).unwrap();
+    run(&seq, &out, from(4), &PER_FRAME, &|_| {}).unwrap();
     for f in &seq.frames {
         let (l, r) = crate::io::png::load_rgb_pair(&f.left, &f.right).unwrap();
         let matcher = crate::matcher::Matcher::new(params.clone()).unwrap().with_max_memory(u64::MAX);
@@ -494,10 +491,10 @@ fn a_sequence_searched_from_a_smallest_disparity_is_matched_as_jem_match_does() 
         let written = std::fs::read(out.join(format!("{}.pfm", f.stem))).unwrap();
         assert_eq!(written, crate::io::pfm::encode_pfm(&expected), "frame {}", f.stem);
     }
-    let e = run(&seq, &out, &from(2), &|_| {}).unwrap_err().to_string();
+    let e = run(&seq, &out, from(2), &PER_FRAME, &|_| {}).unwrap_err().to_string();
     assert!(e.contains("another run"), "{e}");
-    let temporal = RunOptions { temporal: true, range: RangeRule::FirstFrame, ..from(4) };
-    let summary = run(&seq, &dir.path().join("temporal"), &temporal, &|_| {}).unwrap();
+    let temporal = from(4).with_temporal(true);
+    let summary = run(&seq, &dir.path().join("temporal"), temporal, &FIRST_FRAME, &|_| {}).unwrap();
     assert_eq!(summary.ran.len(), 3);
     for f in &seq.frames {
         let map = crate::io::read_disparity(&dir.path().join("temporal").join(format!("{}.pfm", f.stem))).unwrap();
