@@ -6,19 +6,22 @@
 //! `jem batch`, the Python module) matches through it.
 
 use std::borrow::Cow;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
 use crate::error::Result;
-use crate::image::{DisparityMap, Plane, RgbImage};
+use crate::image::RgbImage;
 use crate::params::Params;
-use crate::pipeline::{self, Measured, PipelineOutput, Timings};
+use crate::pipeline::{self, PipelineOutput};
 use crate::rectify::Rectification;
 use crate::setup::memory::MemoryBudget;
 use crate::setup::strategy::Strategy;
 use crate::setup::{self, NdispSource, Plan};
 pub use crate::temporal::{Exposure, FrameKind};
+
+mod output;
+pub use output::{Output, Rectified, RunPlan, Tiles};
 
 /// Matches rectified stereo pairs with one configuration.
 ///
@@ -51,132 +54,12 @@ pub struct Matcher {
     min_confidence: Option<f32>,
 }
 
-/// How a match was set up: its range, whether it went in tiles, the memory it planned for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct RunPlan {
-    /// The number of disparities searched: `min_disp..min_disp + ndisp − 1`.
-    pub ndisp: usize,
-    /// The smallest disparity searched ([`Matcher::with_min_disp`]; 0 by default).
-    pub min_disp: usize,
-    /// Whether the range was measured on the pair (none given, or the stated one no real bound).
-    pub ndisp_measured: bool,
-    /// `Some` when the pair did not fit the memory limit in one piece and ran in tiles.
-    pub tiles: Option<Tiles>,
-    /// The memory the run planned for, in bytes (what the limit was checked against).
-    pub memory_bytes: u64,
-    /// The reduction of the working resolution chosen for the pair: 1 = its own resolution; 2ᵏ when its k finest
-    /// octaves hold no detail of their own (`[working]`; `downscale` is apart from it).
-    pub working_factor: usize,
-}
-
-/// How a tiled run was cut.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Tiles {
-    /// The side of a tile's core in pixels (before any split).
-    pub core_px: usize,
-    /// The downscale factor of the coarse level the tiles start from.
-    pub coarse_factor: usize,
-}
-
-/// What a match produces.
-#[derive(Clone, Debug)]
-pub struct Output {
-    /// The left view's disparity map in pixels, `inf` where invalid (when post-processing leaves holes).
-    pub disparity: DisparityMap,
-    /// Per-pixel confidence of the disparity map, 0..1: the probability that it is within 1 px of the truth, made to
-    /// rank the errors (`post::confidence`; 0 where the map is invalid). `None` when the matcher was told not to
-    /// compute it ([`Matcher::with_confidence`]).
-    pub confidence: Option<Plane<f32>>,
-    /// The pixels that passed the left-right check (all of them when it is off).
-    pub consistent: Plane<bool>,
-    /// Time per stage.
-    pub timings: Timings,
-    /// What the adaptive front end measured on the pair; `None` when `[condition]` is off.
-    pub measured: Option<Measured>,
-    /// How the match was set up.
-    pub plan: RunPlan,
-    /// Seconds in the pipeline: the run itself, without loading, the range measurement or writing (what
-    /// MiddEval3's `time*.txt` holds).
-    pub seconds: f64,
-    /// How the frame was matched, for a matcher that remembers frames ([`Matcher::with_temporal`]); `None` for a
-    /// pair matched alone.
-    pub frame: Option<FrameKind>,
-    /// The exposure change the temporal model compensated in this frame (against the previous frame or the
-    /// still camera's running mean); `None` when there was none, or for a pair matched alone.
-    pub exposure: Option<Exposure>,
-    /// What the pair check found ([`Matcher::with_checks`]; `None` when not asked for). Its warnings as a front
-    /// end says them: [`Output::warnings`].
-    pub checks: Option<crate::PairCheck>,
-    /// The rectified view the map belongs to, when the matcher rectified the pair ([`Matcher::with_rectification`]).
-    pub rectified: Option<Rectified>,
-}
-
-/// The pair as a matcher rectified it before matching ([`Matcher::with_rectification`]).
-#[derive(Clone, Debug)]
-pub struct Rectified {
-    /// The rectified left view: the view the disparity map is of (the colours of a point cloud, say).
-    pub left: RgbImage,
-    /// The calibration file the pair was rectified with.
-    pub calibration: PathBuf,
-}
-
-impl Output {
-    /// The pair check's warnings, one line per problem (none when the pair looks right or was not checked). For a
-    /// pair the matcher rectified, a warning that the pair is not rectified doubts the calibration instead of
-    /// advising to rectify it ([`crate::PairCheck::after_rectify`]).
-    pub fn warnings(&self) -> Vec<String> {
-        let warnings = self.checks.as_ref().map(crate::PairCheck::warnings).unwrap_or_default();
-        match &self.rectified {
-            Some(r) => warnings.into_iter().map(|w| crate::PairCheck::after_rectify(w, &r.calibration)).collect(),
-            None => warnings,
-        }
-    }
-
-    /// The confidence map.
-    ///
-    /// # Errors
-    /// [`crate::error::Error::Argument`] when the matcher was told not to compute it ([`Matcher::with_confidence`]).
-    pub fn confidence_map(&self) -> Result<&Plane<f32>> {
-        let missing = || crate::error::Error::argument("no confidence map was computed for this run");
-        self.confidence.as_ref().ok_or_else(missing)
-    }
-
-    /// Refuses a `min_confidence` that is not a confidence from 0 to 1 (NaN included), naming it `name` (the
-    /// front ends check theirs with it before anything runs).
-    ///
-    /// # Errors
-    /// [`crate::Error::InvalidParam`] naming `name`.
-    pub fn check_min_confidence(name: &str, min_confidence: f32) -> Result<()> {
-        if (0.0..=1.0).contains(&min_confidence) {
-            Ok(())
-        } else {
-            Err(crate::Error::param(name, min_confidence, "a confidence from 0 to 1"))
-        }
-    }
-
-    /// The disparity map with every pixel whose confidence is below `min_confidence` made invalid (`inf`): the
-    /// reliable pixels only (`jem --min-confidence`).
-    ///
-    /// # Errors
-    /// [`crate::Error::InvalidParam`] naming `min_confidence` when it is not a confidence from 0 to 1 (NaN included);
-    /// as [`Output::confidence_map`].
-    pub fn reliable_disparity(&self, min_confidence: f32) -> Result<DisparityMap> {
-        Output::check_min_confidence("min_confidence", min_confidence)?;
-        let confidence = self.confidence_map()?;
-        let mut out = self.disparity.clone();
-        out.data.iter_mut().zip(&confidence.data).filter(|&(_, &c)| c < min_confidence).for_each(|(d, _)| {
-            *d = f32::INFINITY;
-        });
-        Ok(out)
-    }
-}
-
 /// What a match reports while it runs (see [`Matcher::match_pair_with`]).
 #[derive(Clone, Copy, Debug)]
 pub enum Progress<'a> {
     /// The range is known and the run set up; the pipeline starts.
     Planned(&'a RunPlan),
-    /// A stage of the pipeline starts (its name, as [`Timings`] reports it).
+    /// A stage of the pipeline starts (its name, as [`crate::Timings`] reports it).
     Stage(&'a str),
 }
 
@@ -601,118 +484,4 @@ pub fn default_memory_limit() -> u64 {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::synth::{SynthParams, render_scene};
-
-    /// The matcher gives the pipeline's map, byte for byte, and says how it set the run up.
-    #[test]
-    fn a_matcher_runs_the_pipeline_on_a_borrowed_pair() {
-        let scene = render_scene(&SynthParams { width: 96, height: 64, ndisp: 16, seed: 4 }).unwrap();
-        let params = Params::default();
-        let mut matcher = Matcher::new(params.clone()).unwrap().with_ndisp(NdispSource::Given(scene.ndisp));
-        let out = matcher.match_pair(&scene.left, &scene.right).unwrap();
-        let pair = crate::image::StereoPair::borrowed(&scene.left, &scene.right, scene.ndisp).unwrap();
-        let direct = pipeline::run(&params, &pair).unwrap();
-        assert_eq!(out.disparity.data, direct.disparity.data);
-        assert_eq!((out.plan.ndisp, out.plan.ndisp_measured, out.plan.tiles), (scene.ndisp, false, None));
-        assert!(out.plan.memory_bytes > 0 && out.seconds > 0.0);
-    }
-
-    #[test]
-    fn reliable_disparity_drops_the_pixels_below_the_confidence() {
-        let scene = render_scene(&SynthParams { width: 64, height: 48, ndisp: 16, seed: 2 }).unwrap();
-        let mut matcher = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(16));
-        let out = matcher.match_pair(&scene.left, &scene.right).unwrap();
-        let kept = out.reliable_disparity(0.95).unwrap();
-        let confidence = out.confidence.as_ref().unwrap();
-        for ((&d, &k), &c) in out.disparity.data.iter().zip(&kept.data).zip(&confidence.data) {
-            assert!(if c < 0.95 { k.is_infinite() } else { k.to_bits() == d.to_bits() });
-        }
-        assert_eq!(out.reliable_disparity(0.0).unwrap().data, out.disparity.data);
-        for outside in [-0.1, 1.5, f32::NAN] {
-            let e = out.reliable_disparity(outside).unwrap_err().to_string();
-            assert!(e.starts_with("invalid min_confidence") && e.contains("from 0 to 1"), "{e}");
-        }
-    }
-
-    /// A matcher told not to compute the confidence map skips that stage and gives the same disparity map.
-    #[test]
-    fn the_confidence_is_computed_only_when_asked_for() {
-        let scene = render_scene(&SynthParams { width: 64, height: 48, ndisp: 16, seed: 5 }).unwrap();
-        let matcher = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(16));
-        let with = matcher.clone().match_pair(&scene.left, &scene.right).unwrap();
-        let without = matcher.with_confidence(false).match_pair(&scene.left, &scene.right).unwrap();
-        assert!(with.confidence.is_some() && without.confidence.is_none());
-        assert!(without.reliable_disparity(0.5).is_err() && without.confidence_map().is_err());
-        let bits = |o: &Output| o.disparity.data.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
-        assert_eq!(bits(&with), bits(&without));
-        let stages = |o: &Output| o.timings.stages.iter().map(|(name, _)| *name).collect::<Vec<_>>();
-        assert!(stages(&with).contains(&"confidence") && !stages(&without).contains(&"confidence"));
-    }
-
-    /// A small rig: equal pinhole cameras, the right one 0.1 to the right and turned by 1° about the vertical.
-    fn small_rig() -> crate::rectify::StereoCalibration {
-        use crate::rectify::Intrinsics;
-        let k = |cx: f64| Intrinsics {
-            matrix: [[90.0, 0.0, cx], [0.0, 90.0, 32.0], [0.0, 0.0, 1.0]],
-            distortion: [0.0; 8],
-        };
-        let (c, s) = (1f64.to_radians().cos(), 1f64.to_radians().sin());
-        crate::rectify::StereoCalibration {
-            path: PathBuf::from("rig.yml"),
-            cameras: [k(48.0), k(47.0)],
-            rotation: [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]],
-            translation: [-0.1, 0.0, 0.0],
-            image_size: Some((96, 64)),
-            given: None,
-            prerectified: None,
-        }
-    }
-
-    /// A matcher with a rectification matches the rectified pair, as rectifying first and matching after does,
-    /// and gives the rectified left view; its pair check's warnings doubt the calibration, not the rectifying.
-    #[test]
-    fn a_matcher_with_a_rectification_matches_the_rectified_pair() {
-        let scene = render_scene(&SynthParams { width: 96, height: 64, ndisp: 16, seed: 3 }).unwrap();
-        let rect = small_rig().rectification((96, 64)).unwrap();
-        let plain = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(16));
-        let (l, r) = rect.rectify_pair(&scene.left, &scene.right).unwrap();
-        let expected = plain.clone().match_pair(&l, &r).unwrap();
-        let mut rectifying = plain.with_rectification(rect).with_checks(true);
-        let out = rectifying.match_pair(&scene.left, &scene.right).unwrap();
-        let bits = |o: &Output| o.disparity.data.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
-        assert_eq!(bits(&out), bits(&expected));
-        let rectified = out.rectified.as_ref().unwrap();
-        assert_eq!((&rectified.left.channels, rectified.calibration.as_path()), (&l.channels, Path::new("rig.yml")));
-        assert_eq!(rectifying.search_range(&scene.left, &scene.right).unwrap(), (16, false));
-        let mut offset = out.clone();
-        let check = offset.checks.as_mut().unwrap();
-        check.vertical_px = Some(check.vertical_limit_px + 5.0);
-        let (plain_words, words) = (check.warnings().join(" "), offset.warnings().join(" "));
-        assert!(plain_words.contains("rectify it with --rectify CALIB"), "{plain_words}");
-        assert!(words.contains("after --rectify rig.yml") && !words.contains("rectify it with"), "{words}");
-        let small = RgbImage::new(64, 48);
-        assert!(rectifying.match_pair(&small, &small).unwrap_err().to_string().contains("rectification is for 96x64"));
-    }
-
-    /// A bound on the confidence gives the map of the reliable pixels, with the confidence computed though it
-    /// was not asked for, and the pair checked on the map before the bound.
-    #[test]
-    fn a_matcher_with_a_confidence_bound_keeps_the_reliable_pixels() {
-        let scene = render_scene(&SynthParams { width: 64, height: 48, ndisp: 16, seed: 2 }).unwrap();
-        let matcher = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(16)).with_checks(true);
-        let full = matcher.clone().match_pair(&scene.left, &scene.right).unwrap();
-        let mut bounded = matcher.with_confidence(false).with_min_confidence(0.95).unwrap();
-        let out = bounded.match_pair(&scene.left, &scene.right).unwrap();
-        assert_eq!(out.disparity.data, full.reliable_disparity(0.95).unwrap().data);
-        assert!(out.disparity.data.iter().any(|d| d.is_infinite()) && out.confidence.is_some());
-        assert_eq!(out.checks.map(|c| c.to_string()), full.checks.map(|c| c.to_string()));
-        assert!(Matcher::new(Params::default()).unwrap().with_min_confidence(1.5).is_err());
-    }
-
-    #[test]
-    fn invalid_parameters_are_refused_when_the_matcher_is_built() {
-        assert!(Matcher::new(Params { downscale: 0, ..Params::default() }).is_err());
-    }
-}
+mod tests;
