@@ -89,4 +89,20 @@ fn a_depth_png_is_the_depth_in_whole_baseline_units() {
     assert!(!dir.path().join("f.png").exists() && !dir.path().join("f.pfm").exists());
     match_example(dir.path(), "g.pfm", &["--depth", "g.png", "--baseline", "10000", "--max-depth", "65535"]);
     assert!(dir.path().join("g.png").is_file());
+    // Read back as the depth it holds (not as a disparity PNG's × 256), and drawn over the same depths as the PFM.
+    let back = jem::io::read_depth(&dir.path().join("z.png")).unwrap();
+    for (&f, &b) in z.data().iter().zip(back.data()) {
+        assert!(if f.is_finite() { b == f.round() } else { b.is_infinite() }, "{f} read back as {b}");
+    }
+    let range = |depth: &str, out: &str| {
+        let said = stderr(&run_in(dir.path(), &["viz", depth, "--depth", "-o", out]));
+        let from = said.split(" from ").nth(1).and_then(|r| r.split(" (indigo)").next()).unwrap_or_default();
+        from.replace(" (dark red)", "")
+    };
+    let (of_pfm, of_png) = (range("z.pfm", "zp.png"), range("z.png", "zz.png"));
+    let ends = |r: &str| r.split(" to ").map(|v| v.parse::<f32>().unwrap()).collect::<Vec<_>>();
+    assert_eq!(ends(&of_pfm).len(), 2, "{of_pfm}");
+    for (a, b) in ends(&of_pfm).into_iter().zip(ends(&of_png)) {
+        assert!((a - b).abs() <= 0.01 * a, "{of_pfm} against {of_png}");
+    }
 }

@@ -86,7 +86,8 @@ pub(super) fn run(args: &VizArgs, global: &GlobalArgs) -> Result<ExitCode> {
     }
     let read_refs: Vec<&Path> = read.iter().map(PathBuf::as_path).collect();
     jem::io::check_outputs(&read_refs, &[&args.output])?;
-    let disp = jem::io::read_disparity(&args.input)?;
+    // A depth PNG holds the depth itself, not a disparity × 256.
+    let disp = if args.depth { jem::io::read_depth(&args.input)? } else { jem::io::read_disparity(&args.input)? };
     if args.depth {
         if args.gt.is_some() {
             return Err(Error::argument("--gt scores disparity maps; a depth map (--depth) is drawn alone"));

@@ -298,6 +298,18 @@ pub fn read_disparity(path: &Path) -> Result<DisparityMap> {
     }
 }
 
+/// Reads a depth map as [`encode_depth`] writes it: a `.pfm` or `.exr` holds the depths themselves, a 16-bit `.png`
+/// the depth in the baseline's unit, rounded (0 = invalid → inf; not the disparity PNG's × 256).
+///
+/// # Errors
+/// A missing or malformed file, naming the path.
+pub fn read_depth(path: &Path) -> Result<crate::image::Plane<f32>> {
+    match DisparityFormat::from_path(path)? {
+        DisparityFormat::Png16 => png::read_depth_png16(path),
+        _ => read_disparity(path),
+    }
+}
+
 /// Opens a file for reading when it is a regular file (through symbolic links), and refuses anything else before
 /// a read can block or never end: a FIFO waits for a writer forever, `/dev/zero` has no end, a folder has no
 /// bytes. The file is opened without blocking and checked again once open (it may have been replaced meanwhile).

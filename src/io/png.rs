@@ -349,6 +349,19 @@ pub(crate) fn encode_depth_png16(path: &Path, depth: &Plane<f32>) -> Result<Vec<
 /// # Errors
 /// [`Error::Io`] or [`Error::Image`] naming the path.
 pub(crate) fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
+    read_png16(path, 256.0)
+}
+
+/// Reads a 16-bit depth PNG as `jem --depth` writes it (the depth in the baseline's unit, 0 = invalid → inf).
+///
+/// # Errors
+/// As [`read_disparity_png16`].
+pub(crate) fn read_depth_png16(path: &Path) -> Result<Plane<f32>> {
+    read_png16(path, 1.0)
+}
+
+/// Reads a one-channel 16-bit PNG as values / `unit` (0 = invalid → inf).
+fn read_png16(path: &Path, unit: f32) -> Result<Plane<f32>> {
     let bytes = super::read_regular(path)?;
     let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
         .map_err(|source| Error::Image { path: path.to_path_buf(), source })?;
@@ -364,7 +377,7 @@ pub(crate) fn read_disparity_png16(path: &Path) -> Result<DisparityMap> {
         ));
     }
     let grey = img.to_luma16();
-    let data = grey.pixels().map(|p| if p.0[0] == 0 { f32::INFINITY } else { f32::from(p.0[0]) / 256.0 }).collect();
+    let data = grey.pixels().map(|p| if p.0[0] == 0 { f32::INFINITY } else { f32::from(p.0[0]) / unit }).collect();
     Ok(Plane::from_parts(grey.width() as usize, grey.height() as usize, data))
 }
 
