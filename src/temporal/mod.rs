@@ -137,6 +137,8 @@ pub(crate) fn match_frame(
     pair: &StereoPair,
     options: &RunOptions<'_>,
 ) -> Result<(PipelineOutput, FrameKind, Option<Exposure>)> {
+    (options.on_stage)("motion");
+    let start = std::time::Instant::now();
     let grey = pair.left.to_grey();
     let noise = crate::condition::channel_noise(&pair.left);
     let previous = state.previous.take().filter(|p| p.grey.dims() == grey.dims() && p.ndisp == pair.ndisp);
@@ -144,7 +146,10 @@ pub(crate) fn match_frame(
     let compared = previous.as_ref().map(|p| compare(&p.grey, &grey));
     let unexplained = compared.as_ref().map_or(0.0, |c| motion::unexplained(c.shift, &grey, noise));
     let cut = unexplained > CUT_UNEXPLAINED;
-    let (out, kind, exposure) = match (previous, compared) {
+    // The comparison with the previous frame (and for a moving camera, the previous answer carried into this one),
+    // timed as a stage of the frames that have one.
+    let mut motion_time = seen.then(|| start.elapsed());
+    let (mut out, kind, exposure) = match (previous, compared) {
         (Some(_), Some(c)) if !cut && (c.shift.dx, c.shift.dy) == (0, 0) && unexplained < STILL_UNEXPLAINED => {
             let (out, frames, exposure) = still_frame(state, params, pair, noise, options)?;
             (out, FrameKind::Still { frames }, exposure)
@@ -152,6 +157,7 @@ pub(crate) fn match_frame(
         (Some(prev), Some(c)) if !cut => {
             state.still = None;
             let (carried, released, motion) = carry_previous(&prev, &c, &grey, noise);
+            motion_time = Some(start.elapsed());
             let out = moving_frame(params, pair, carried, released, motion.is_some(), options)?;
             let kind = match motion {
                 Some(m) => FrameKind::Travelling { tracks: m.inliers as u32 },
@@ -166,6 +172,9 @@ pub(crate) fn match_frame(
             (out, if seen { FrameKind::Cut } else { FrameKind::First }, None)
         }
     };
+    if let Some(t) = motion_time {
+        out.timings.stages.insert(0, ("motion", t));
+    }
     state.previous = Some(Previous { grey, answer: out.clone(), ndisp: pair.ndisp });
     Ok((out, kind, exposure))
 }
