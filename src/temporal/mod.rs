@@ -156,7 +156,7 @@ pub(crate) fn match_frame(
         }
         (Some(prev), Some(c)) if !cut => {
             state.still = None;
-            let (carried, released, motion) = carry_previous(&prev, &c, &grey, noise);
+            let (carried, released, motion) = carry_previous(&prev, &c, &grey, noise, unexplained);
             motion_time = Some(start.elapsed());
             let out = moving_frame(params, pair, carried, released, motion.is_some(), options)?;
             let kind = match motion {
@@ -234,16 +234,23 @@ fn still_frame(
 
 /// The previous answer carried into the current frame, and where it is released (the frames disagree there):
 /// moved by the camera's 3D motion where a global shift does not explain the tracked points
-/// ([`beyond_shift`]; the motion returned), else by the shift.
+/// ([`beyond_shift`]; the motion returned; not tried where the shift leaves no more unexplained than noise does),
+/// else by the shift.
 fn carry_previous(
     prev: &Previous,
     compared: &Compared,
     grey: &Plane<f32>,
     noise: f32,
+    unexplained: f64,
 ) -> (PipelineOutput, Plane<bool>, Option<Motion>) {
     let limit = RELEASE_NOISE_MULTIPLE * (crate::imgproc::noise::GREY_DIFFERENCE_PER_SIGMA as f32 * noise + 0.5);
     let reference = compared.reference.as_ref().unwrap_or(&prev.grey);
-    match beyond_shift(reference, grey, &prev.answer.disparity, compared.shift, noise) {
+    // Where the shift leaves no more unexplained than a still camera's noise does (a pan without parallax), no
+    // motion can explain clearly more: the points are not tracked.
+    let beyond = (unexplained >= STILL_UNEXPLAINED)
+        .then(|| beyond_shift(reference, grey, &prev.answer.disparity, compared.shift, noise))
+        .flatten();
+    match beyond {
         Some(m) => {
             let (answer, moved) = egomotion::carry(&prev.answer, reference, &m);
             (answer, egomotion::disagreement(&moved, grey, limit), Some(m))
