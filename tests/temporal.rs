@@ -133,6 +133,12 @@ fn a_panning_camera_takes_the_previous_answer_and_stays_as_accurate() {
     let (alone, remembered) = (run(&scenes, false), run(&scenes, true));
     let moving = |o: &Output| matches!(o.frame, Some(FrameKind::Moving { .. } | FrameKind::Travelling { .. }));
     assert!(remembered[1..].iter().all(moving), "a moving camera is found");
+    // The comparison with the previous frame is timed as the first stage of every frame that has one.
+    let first_stage = |o: &Output| o.timings.stages.first().map(|(name, _)| *name);
+    assert!(
+        remembered[1..].iter().all(|o| first_stage(o) == Some("motion"))
+            && first_stage(&remembered[0]) != Some("motion")
+    );
     let mean = |outs: &[Output]| (1..5).map(|k| error(&outs[k], &scenes[k])).sum::<f64>() / 4.0;
     let (a, r) = (mean(&alone), mean(&remembered));
     assert!(r < 1.1 * a + 0.02, "panning: {r:.3} remembered against {a:.3} alone");
