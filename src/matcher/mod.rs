@@ -238,18 +238,24 @@ impl Matcher {
         right: &RgbImage,
         on_progress: &dyn Fn(Progress<'_>),
     ) -> Result<Output> {
-        let rectified = self.rectify(left, right)?;
-        let (left, right) = rectified.as_ref().map_or((left, right), |(l, r)| (l, r));
-        let (l, r) = self.cut(left, right)?;
+        let (left, right) = self.rectify(left, right)?;
+        let (l, r) = self.cut(&left, &right)?;
         let plan = setup::plan_match(&l, &r, self.source(), &self.params, self.max_memory_bytes)?;
         let out = self.run(&plan, on_progress)?;
-        let out = self.finish(out, left, right)?;
-        Ok(self.with_views(out, rectified))
+        let out = self.finish(out, &left, &right)?;
+        Ok(self.with_views(out, left))
     }
 
-    /// The pair rectified, when the matcher rectifies ([`Matcher::with_rectification`]).
-    fn rectify(&self, left: &RgbImage, right: &RgbImage) -> Result<Option<(RgbImage, RgbImage)>> {
-        self.rectification.as_ref().map(|rect| rect.rectify_pair(left, right)).transpose()
+    /// The pair as the matcher matches it: rectified when it rectifies ([`Matcher::with_rectification`]), else as
+    /// given.
+    fn rectify<'p>(&self, left: &'p RgbImage, right: &'p RgbImage) -> Result<(Cow<'p, RgbImage>, Cow<'p, RgbImage>)> {
+        match &self.rectification {
+            Some(rect) => {
+                let (l, r) = rect.rectify_pair(left, right)?;
+                Ok((Cow::Owned(l), Cow::Owned(r)))
+            }
+            None => Ok((Cow::Borrowed(left), Cow::Borrowed(right))),
+        }
     }
 
     /// What a match does after the run on the pair it matched: the pair check, then the confidence bound.
@@ -263,9 +269,10 @@ impl Matcher {
         Ok(out)
     }
 
-    /// `out` with the rectified left view of `rectified` (none when the pair was matched as given).
-    fn with_views(&self, mut out: Output, rectified: Option<(RgbImage, RgbImage)>) -> Output {
-        if let (Some((left, _)), Some(rect)) = (rectified, &self.rectification) {
+    /// `out` with the left view it matched when the matcher rectified it ([`Matcher::rectify`]; nothing for a pair
+    /// matched as given).
+    fn with_views(&self, mut out: Output, left: Cow<'_, RgbImage>) -> Output {
+        if let (Cow::Owned(left), Some(rect)) = (left, &self.rectification) {
             out.rectified = Some(Rectified { left, calibration: rect.calibration_path().to_path_buf() });
         }
         out
@@ -323,9 +330,8 @@ impl Matcher {
     /// # Errors
     /// As [`Matcher::match_pair`], for the range.
     pub fn search_range(&self, left: &RgbImage, right: &RgbImage) -> Result<(usize, bool)> {
-        let rectified = self.rectify(left, right)?;
-        let (left, right) = rectified.as_ref().map_or((left, right), |(l, r)| (l, r));
-        let (left, right) = self.cut(left, right)?;
+        let (left, right) = self.rectify(left, right)?;
+        let (left, right) = self.cut(&left, &right)?;
         let plan = setup::plan_match(&left, &right, self.ndisp, &self.params, self.max_memory_bytes)?;
         Ok((plan.pair.ndisp, plan.ndisp_measured))
     }
@@ -357,9 +363,8 @@ impl Matcher {
         let mut held = budget.as_deref().map(|b| wait_for(b, need, on_progress));
         on_progress(Progress::Stage("loading"));
         let raw = crate::io::png::load_rgb_pair_within(left, right, self.max_memory_bytes)?;
-        let rectified = self.rectify(&raw.0, &raw.1)?;
-        let views = rectified.as_ref().unwrap_or(&raw);
-        let (l, r) = self.cut(&views.0, &views.1)?;
+        let (left, right) = self.rectify(&raw.0, &raw.1)?;
+        let (l, r) = self.cut(&left, &right)?;
         let plan = setup::plan_match(&l, &r, self.source(), &self.params, self.max_memory_bytes)?;
         if let Some(budget) = budget.as_deref() {
             let (w, h) = l.dims();
@@ -371,8 +376,8 @@ impl Matcher {
         }
         let out = self.run(&plan, on_progress);
         drop(held);
-        let out = self.finish(out?, &views.0, &views.1)?;
-        Ok(self.with_views(out, rectified))
+        let out = self.finish(out?, &left, &right)?;
+        Ok(self.with_views(out, left))
     }
 
     /// Checks a matched pair for what would make any disparity map of it wrong ([`crate::PairCheck`]: swapped
