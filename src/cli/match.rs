@@ -118,7 +118,7 @@ impl std::str::FromStr for MinDisp {
 
 /// Matches one pair.
 pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
-    let request = Request::check(args)?;
+    let mut request = Request::check(args)?;
     let params = args.config.params()?;
     let start = Instant::now();
     let mut matcher = Matcher::new(params.clone())?
@@ -128,9 +128,8 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
         // Always: the pair checks read it (a region of repetitive texture matched doubtfully).
         .with_confidence(true)
         .with_checks(true);
-    if let Some(rect) = &request.rectification {
-        matcher.set_rectification(Some(rect.clone()));
-    }
+    // With --rectify, the matcher rectifies the raw views.
+    matcher.set_rectification(request.rectification.take());
     if let Some(c) = args.min_confidence {
         // With --min-confidence, the map written holds the reliable pixels only.
         matcher = matcher.with_min_confidence(c)?;
@@ -144,7 +143,7 @@ pub(super) fn run(args: &MatchArgs, global: &GlobalArgs) -> Result<ExitCode> {
     let load_time = start.elapsed();
     let out = match_with_progress(&mut matcher, (&l, &r), request.stated_ndisp, global.quiet)?;
     let mut warnings = out.warnings();
-    if let (Some(rect), Some(calib)) = (&request.rectification, &args.rectify) {
+    if let (Some(rect), Some(calib)) = (matcher.rectification(), &args.rectify) {
         warnings.extend(rect.warnings().into_iter().map(|w| format!("{}: {w}", calib.display())));
     }
     if args.strict && !warnings.is_empty() {
@@ -196,7 +195,7 @@ struct Request<'a> {
     min_disp: usize,
     /// For `--depth` and `--cloud`.
     camera: Option<jem::geometry::Camera>,
-    /// With `--rectify`: how the pair is rectified before matching.
+    /// With `--rectify`: how the pair is rectified before matching (handed to the matcher).
     rectification: Option<jem::rectify::Rectification>,
 }
 
