@@ -172,24 +172,17 @@ impl Sequence {
         Ok(Sequence { root: dir.to_path_buf(), layout, frames, calib })
     }
 
-    /// Where the range comes from, as `jem match` takes it: `given` (`--ndisp`), else the `ndisp` of the root's
-    /// `calib.txt` ([`NdispSource::Stated`]), else [`NdispSource::Unknown`] (also for a `calib.txt` that states no
-    /// `ndisp`: geometry only).
+    /// Where the range comes from, as `jem match` takes it: `given` (`--ndisp`, or a matcher's
+    /// [`crate::Matcher::ndisp`]) unless it is [`NdispSource::Unknown`], else the `ndisp` of the root's `calib.txt`
+    /// ([`NdispSource::Stated`]), else [`NdispSource::Unknown`] (also for a `calib.txt` that states no `ndisp`:
+    /// geometry only).
     ///
     /// # Errors
-    /// [`Error::Calib`] for a `calib.txt` whose `ndisp` is not a positive integer (when `given` is `None`).
-    pub fn ndisp_source(&self, given: Option<usize>) -> Result<NdispSource> {
-        match (given, &self.calib) {
-            (Some(n), _) => Ok(NdispSource::Given(n)),
-            (None, Some(c)) => {
-                let calib = crate::io::calib::Calib::load(c)?;
-                match calib.stated_ndisp()? {
-                    Some(n) => Ok(NdispSource::Stated(n)),
-                    None => Ok(NdispSource::Unknown),
-                }
-            }
-            (None, None) => Ok(NdispSource::Unknown),
-        }
+    /// [`Error::Calib`] for a `calib.txt` whose `ndisp` is not a positive integer (when it is read).
+    pub fn ndisp_source(&self, given: NdispSource) -> Result<NdispSource> {
+        let (NdispSource::Unknown, Some(c)) = (given, &self.calib) else { return Ok(given) };
+        let calib = crate::io::calib::Calib::load(c)?;
+        Ok(NdispSource::resolve(None, calib.stated_ndisp()?))
     }
 
     /// Whether any frame has ground truth.

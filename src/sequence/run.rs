@@ -143,15 +143,16 @@ pub struct RunSummary {
 /// Matches every frame of `seq` into the folder `out` (created if missing), skipping frames an earlier run of
 /// the same kind left there (see the module doc), each with `matcher` (the range it is given, else the one the
 /// sequence's `calib.txt` states: [`Sequence::ndisp_source`]; no confidence map or pair check is made, as none is
-/// written). Frames run one after another; each uses the threads of the current rayon pool. The folder is locked against a second run for the time of this one
-/// ([`crate::dataset::lock_folder`]), and its record ([`RUN_FILE`], [`CONFIG_FILE`]) is written with the
-/// first frame: a run that writes no frame leaves nothing (a folder it made is removed again).
+/// written). Frames run one after another; each uses the threads of the current rayon pool. The folder is locked
+/// against a second run for the time of this one ([`crate::dataset::lock_folder`]), and its record ([`RUN_FILE`],
+/// [`CONFIG_FILE`]) is written with the first frame: a run that writes no frame leaves nothing (a folder it made is
+/// removed again).
 ///
 /// # Errors
 /// [`Error::Output`] when `out` is the sequence folder or one of its input folders, a file, or holds another run's
-/// results, [`Error::Locked`] when another run holds its lock, [`Error::Output`] when a file where an output goes is not a regular file; any error of
-/// loading, planning (memory) or running a frame, naming the frame ([`Error::Frame`]). Frames written before the
-/// error stay, whole, and a rerun continues from them.
+/// results, or a file where an output goes is not a regular file; [`Error::Locked`] when another run holds its lock;
+/// any error of loading, planning (memory) or running a frame, naming the frame ([`Error::Frame`]). Frames written
+/// before the error stay, whole, and a rerun continues from them.
 pub fn run(
     seq: &Sequence,
     out: &Path,
@@ -160,10 +161,7 @@ pub fn run(
     on_event: &dyn Fn(Event<'_>),
 ) -> Result<RunSummary> {
     check_output_folder(seq, out)?;
-    let source = match matcher.ndisp() {
-        NdispSource::Unknown => seq.ndisp_source(None)?,
-        given => given,
-    };
+    let source = seq.ndisp_source(matcher.ndisp())?;
     let matcher = matcher.with_ndisp(source).with_confidence(false).with_checks(false);
     let record = record_text(seq, &matcher, opts, source);
     let created = make_folder(out)?;

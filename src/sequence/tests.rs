@@ -107,7 +107,7 @@ fn kitti_raw_drive_folders_are_recognised() {
     assert_eq!(seq.frames.len(), 3);
     assert_eq!(seq.frames[2].stem, "0000000002");
     assert_eq!(seq.frames[2].right, drive.join("image_03/data/0000000002.png"));
-    assert_eq!((seq.calib.as_ref(), seq.ndisp_source(None).unwrap()), (None, NdispSource::Unknown));
+    assert_eq!((seq.calib.as_ref(), seq.ndisp_source(NdispSource::Unknown).unwrap()), (None, NdispSource::Unknown));
 }
 
 #[test]
@@ -130,17 +130,17 @@ fn the_range_is_given_else_stated_by_calib_else_unknown() {
     let dir = tempfile::tempdir().unwrap();
     folders(dir.path(), &["1.png"], &["1.png"]);
     let seq = Sequence::open(dir.path()).unwrap();
-    assert_eq!(seq.ndisp_source(None).unwrap(), NdispSource::Unknown);
-    assert_eq!(seq.ndisp_source(Some(9)).unwrap(), NdispSource::Given(9));
+    assert_eq!(seq.ndisp_source(NdispSource::Unknown).unwrap(), NdispSource::Unknown);
+    assert_eq!(seq.ndisp_source(NdispSource::Given(9)).unwrap(), NdispSource::Given(9));
     std::fs::write(dir.path().join("calib.txt"), "width=8\nndisp=5\n").unwrap();
     let seq = Sequence::open(dir.path()).unwrap();
-    assert_eq!(seq.ndisp_source(None).unwrap(), NdispSource::Stated(5));
-    assert_eq!(seq.ndisp_source(Some(9)).unwrap(), NdispSource::Given(9));
+    assert_eq!(seq.ndisp_source(NdispSource::Unknown).unwrap(), NdispSource::Stated(5));
+    assert_eq!(seq.ndisp_source(NdispSource::Given(9)).unwrap(), NdispSource::Given(9));
     // A calib.txt of geometry only (as `jem rectify` writes one): the range is measured.
     std::fs::write(dir.path().join("calib.txt"), "width=8\n").unwrap();
-    assert_eq!(Sequence::open(dir.path()).unwrap().ndisp_source(None).unwrap(), NdispSource::Unknown);
+    assert_eq!(Sequence::open(dir.path()).unwrap().ndisp_source(NdispSource::Unknown).unwrap(), NdispSource::Unknown);
     std::fs::write(dir.path().join("calib.txt"), "width=8\nndisp=zero\n").unwrap();
-    let e = Sequence::open(dir.path()).unwrap().ndisp_source(None).unwrap_err().to_string();
+    let e = Sequence::open(dir.path()).unwrap().ndisp_source(NdispSource::Unknown).unwrap_err().to_string();
     assert!(e.contains("calib.txt") && e.contains("ndisp"), "{e}");
 }
 
@@ -160,7 +160,7 @@ fn a_written_sequence_reads_back() {
     assert_eq!(stems, ["000000", "000001", "000002"]);
     let seq = Sequence::open(&out).unwrap();
     assert_eq!(seq.frames.len(), 3);
-    assert_eq!(seq.ndisp_source(None).unwrap(), NdispSource::Stated(4));
+    assert_eq!(seq.ndisp_source(NdispSource::Unknown).unwrap(), NdispSource::Stated(4));
     for (k, f) in seq.frames.iter().enumerate() {
         let expected = frame(k as f32);
         assert_eq!(crate::io::png::load_rgb(&f.left).unwrap(), expected.left);
