@@ -383,7 +383,8 @@ pub const COPIED_FILES: [&str; 5] = [CALIB_FILE, GT_FILE, MASK_FILE, "disp1GT.pf
 ///
 /// # Errors
 /// [`Error::Output`] if `out` exists and is not an empty folder, or `out` and `src` contain one another,
-/// [`Error::Dataset`] if `src` holds no scene; [`Error::Io`] / [`Error::Image`] naming the file for unreadable inputs or failed writes.
+/// [`Error::Dataset`] if `src` holds no scene; [`Error::Io`] / [`Error::Image`] naming the file for unreadable inputs
+/// or failed writes.
 pub fn degrade_tree(src: &Path, out: &Path, recipe: &Recipe, seed: u64) -> Result<Vec<PathBuf>> {
     let src_real = std::fs::canonicalize(src).map_err(|e| Error::io(src, e))?;
     if out.exists() {

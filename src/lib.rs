@@ -8,11 +8,12 @@
 //!
 //! ## Use
 //!
-//! A [`Matcher`] is built once from a configuration ([`Params`]: defaults, a shipped preset ([`Params::preset`]), a TOML file, `key=value` overrides) and
-//! matches rectified pairs: decoded images ([`Matcher::match_pair`]) or image files ([`Matcher::match_files`]).
-//! The images are [`RgbImage`]s (samples 0..=255, whatever the file's bit depth); the result is an [`Output`],
-//! whose disparity map is a [`DisparityMap`] (`inf` where invalid). [`io`] reads and writes images and disparity
-//! maps (PFM, EXR, 16-bit PNG), [`geometry`] turns disparities into depth and point clouds.
+//! A [`Matcher`] is built once from a configuration ([`Params`]: defaults, a shipped preset ([`Params::preset`]),
+//! a TOML file, `key=value` overrides) and matches rectified pairs: decoded images ([`Matcher::match_pair`]) or
+//! image files ([`Matcher::match_files`]). The images are [`RgbImage`]s (samples 0..=255, whatever the file's bit
+//! depth); the result is an [`Output`], whose disparity map is a [`DisparityMap`] (`inf` where invalid). [`io`]
+//! reads and writes images and disparity maps (PFM, EXR, 16-bit PNG), [`geometry`] turns disparities into depth and
+//! point clouds.
 //!
 //! ```
 //! use jem::{Matcher, NdispSource, Params};

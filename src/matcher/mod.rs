@@ -220,8 +220,8 @@ impl Matcher {
     /// (and the rest of [`Output`]).
     ///
     /// # Errors
-    /// [`crate::error::Error::SizeMismatch`] or [`crate::error::Error::InputImage`] for unequal, empty or 1-pixel-wide images
-    /// (or views not of the rectification's size),
+    /// [`crate::error::Error::SizeMismatch`] or [`crate::error::Error::InputImage`] for unequal, empty or 1-pixel-wide
+    /// images (or views not of the rectification's size),
     /// [`crate::error::Error::InvalidParam`] for an impossible range or parameters the image cannot hold,
     /// [`crate::error::Error::OutOfMemory`] when the run fits the limit neither in one piece nor in tiles.
     pub fn match_pair(&mut self, left: &RgbImage, right: &RgbImage) -> Result<Output> {
@@ -342,8 +342,8 @@ impl Matcher {
     /// neither image is decoded when the pair cannot fit.
     ///
     /// # Errors
-    /// [`crate::error::Error::Io`] or [`crate::error::Error::Image`] naming the file, [`crate::error::Error::SizeMismatch`] from the
-    /// headers, [`crate::error::Error::OutOfMemory`] as above.
+    /// [`crate::error::Error::Io`] or [`crate::error::Error::Image`] naming the file,
+    /// [`crate::error::Error::SizeMismatch`] from the headers, [`crate::error::Error::OutOfMemory`] as above.
     pub fn read_pair(&self, left: &Path, right: &Path) -> Result<(RgbImage, RgbImage)> {
         let header = crate::io::png::read_pair_header(left, right)?;
         setup::check_before_decode(&header, self.ndisp, &self.params, self.max_memory_bytes)?;

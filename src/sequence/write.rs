@@ -39,8 +39,8 @@ const TAKEN: [&str; 10] =
 ///
 /// # Errors
 /// [`Error::Output`] when `out` is a file or already holds a scene or a sequence (`left/`, `calib.txt`, `im0.png`,
-/// …), [`Error::Dataset`] when the frames differ in what they carry; whatever `frame` returns; [`Error::Io`] / [`Error::Image`] naming
-/// the file that could not be written.
+/// …), [`Error::Dataset`] when the frames differ in what they carry; whatever `frame` returns; [`Error::Io`] /
+/// [`Error::Image`] naming the file that could not be written.
 ///
 /// # Panics
 /// If `files` names a file outside [`ROOT_FILES`].
