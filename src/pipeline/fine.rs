@@ -45,6 +45,8 @@ pub(crate) struct FineInput<'a> {
     /// The guidance pair's measured noise σn (the noisier view's, grey levels; 0 when conditioning is off): the
     /// second median's colour weight widens with it.
     pub noise: f32,
+    /// The planes' segmentation to start from (a panning camera's previous frame, moved; `None`: a grid).
+    pub segmentation: Option<&'a post::planes::Segmentation>,
 }
 
 /// How a frame of a sequence runs its two views: its prior has placed each pixel, so fewer mean-field iterations
@@ -81,7 +83,7 @@ pub(crate) fn fine_pass(
     on_stage("post-processing");
     // The decoded map before post-processing, for the confidence only.
     let decoded = input.confidence.then(|| left.disparity.clone());
-    let (disparity, trusted) = pass.post_process(left.disparity, right.as_ref(), &guide_left, &mut t);
+    let (disparity, trusted, segmentation) = pass.post_process(left.disparity, right.as_ref(), &guide_left, &mut t);
     let confidence = decoded.map(|decoded| {
         t.time("confidence", || {
             post::confidence::confidence_map(&post::confidence::ConfidenceInputs {
@@ -104,6 +106,7 @@ pub(crate) fn fine_pass(
         timings: t,
         measured: None,
         vertical_offset: None,
+        segmentation: segmentation.filter(|_| pass.input.left_from == 0),
     })
 }
 
@@ -249,16 +252,17 @@ impl Pass<'_> {
     }
 
     /// Left-right check (with `right`), fill, weighted median, planes, the median at depth edges and the sub-pixel
-    /// refinement (on the cost pair) on the left view's `disparity`; returns the map and the pixels that passed the
-    /// check.
+    /// refinement (on the cost pair) on the left view's `disparity`; returns the map, the pixels that passed the
+    /// check and the planes' segmentation.
     fn post_process(
         &self,
         mut disparity: DisparityMap,
         right: Option<&ViewEstimate>,
         guide_left: &RgbImage,
         t: &mut Timings,
-    ) -> (DisparityMap, Plane<bool>) {
+    ) -> (DisparityMap, Plane<bool>, Option<post::planes::Segmentation>) {
         let (post, left_from) = (&self.params.post, self.input.left_from);
+        let mut segmentation = None;
         let mut trusted = Plane::new(disparity.width, disparity.height, true);
         if let Some(right) = right {
             let (checked, mask) = t.time("lrc", || {
@@ -288,7 +292,11 @@ impl Pass<'_> {
                 t.time("wmedian", || post::wmedian::weighted_median(&disparity, guide_left, &targets, &post.wmedian));
         }
         if post.sps.enabled {
-            disparity = t.time("sps", || post::planes::fit_slanted_planes(guide_left, &disparity, &trusted, &post.sps));
+            let start = self.input.segmentation;
+            let (planes, segments) =
+                t.time("sps", || post::planes::fit_planes_from(guide_left, &disparity, &trusted, &post.sps, start));
+            disparity = planes;
+            segmentation = Some(segments);
             // A plane extrapolated to a segment's far corner can leave the search range.
             self.clamp_to_searched(&mut disparity);
         }
@@ -313,7 +321,7 @@ impl Pass<'_> {
             // Half a pixel past either end of the range, from a surface at its edge.
             self.clamp_to_searched(&mut disparity);
         }
-        (disparity, trusted)
+        (disparity, trusted, segmentation)
     }
 
     /// Clamps every finite disparity to the range that was searched, 0..=ndisp − 1: the answer is never outside it.

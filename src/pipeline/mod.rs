@@ -124,6 +124,7 @@ fn run_level(
         timings: t,
         measured: low.measured,
         vertical_offset: None,
+        segmentation: None,
     })
 }
 
@@ -144,17 +145,25 @@ fn run_pipeline(
     } else {
         None
     };
-    fine_at_full_resolution(params, pair, &input, prior.as_ref(), None, options, t)
+    fine_at_full_resolution(params, pair, &input, prior.as_ref(), FromFrame::default(), options, t)
 }
 
-/// The fine pass on the prepared pair, with `prior` and the frame's `views` (see [`FineInput`]), as `options` ask,
+/// What a frame of a sequence takes from the frame before it into the fine pass besides the prior (see
+/// [`FineInput`]): how its views run, and the segmentation its planes start from.
+#[derive(Clone, Copy, Default)]
+struct FromFrame<'a> {
+    views: Option<FrameViews>,
+    segmentation: Option<&'a crate::post::planes::Segmentation>,
+}
+
+/// The fine pass on the prepared pair, with `prior` and what the frame before gives (`from`), as `options` ask,
 /// appending its stage times to `t`; the output carries what preparing the pair measured.
 fn fine_at_full_resolution(
     params: &Params,
     pair: &StereoPair,
     input: &Prepared,
     prior: Option<&prior::Prior>,
-    views: Option<FrameViews>,
+    from: FromFrame<'_>,
     options: &RunOptions<'_>,
     t: Timings,
 ) -> Result<PipelineOutput> {
@@ -167,8 +176,9 @@ fn fine_at_full_resolution(
         noise: input.noise(),
         prior,
         left_from: 0,
-        views,
+        views: from.views,
         confidence: options.confidence,
+        segmentation: from.segmentation,
     };
     let mut out = fine_pass(params, &fine, &mut Default::default(), options.on_stage, t)?;
     out.measured = input.measured();
@@ -219,7 +229,15 @@ pub(crate) fn run_with_prior(
         }
     }
     let weight = input.prior_weight * from.weight_scale;
-    let mut prior = prior::Prior::from_coarse(from.answer, weight, input.prior_flat, c.prior.untrusted);
+    let mut answer = from.answer;
+    // Where the frames disagree the carried segments do not hold either: those pixels start on the grid's cells.
+    let segmentation = answer.segmentation.take().map(|mut s| {
+        if let Some(released) = &from.released {
+            s.release(&released.data);
+        }
+        s
+    });
+    let mut prior = prior::Prior::from_coarse(answer, weight, input.prior_flat, c.prior.untrusted);
     if let Some(released) = &from.released {
         prior.confidence.data.iter_mut().zip(&released.data).filter(|(_, r)| **r).for_each(|(f, _)| *f = 0.0);
         if from.in_bands {
@@ -229,7 +247,8 @@ pub(crate) fn run_with_prior(
         }
     }
     prior.in_bands = from.in_bands;
-    fine_at_full_resolution(params, pair, &input, Some(&prior), from.views, options, t)
+    let frame = FromFrame { views: from.views, segmentation: segmentation.as_ref() };
+    fine_at_full_resolution(params, pair, &input, Some(&prior), frame, options, t)
 }
 
 /// The fully connected kernel's features must fit the lattice at this image size.

@@ -66,6 +66,9 @@ pub struct PipelineOutput {
     pub measured: Option<Measured>,
     /// The right view's vertical offset that was removed, if one was (a sequence's next frame reuses it).
     pub(crate) vertical_offset: Option<crate::condition::vertical::VerticalOffset>,
+    /// The segments and planes the slanted-plane smoothing ended with (a panning camera's next frame starts from
+    /// them); `None` without the planes, and for tiled or reduced runs.
+    pub(crate) segmentation: Option<crate::post::planes::Segmentation>,
 }
 
 /// What the adaptive front end (`crate::condition`) measured on a pair and the values it derived (`jem -v`

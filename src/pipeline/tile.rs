@@ -93,6 +93,7 @@ pub fn run_tiled(
         timings: Timings::default(),
         measured: input.measured(),
         vertical_offset: None,
+        segmentation: None,
     };
     let margin = f + 2;
     let step = plan.core_px.max(MIN_CORE_PX);
@@ -279,6 +280,7 @@ impl TileJob<'_> {
             left_from: tile.left_from(),
             views: None,
             confidence: self.confidence,
+            segmentation: None,
         };
         fine_pass(&params, &input, buffers, &|_| {}, Timings::default())
     }
@@ -403,6 +405,7 @@ mod tests {
                 left_from,
                 views: None,
                 confidence: true,
+                segmentation: None,
             };
             fine_pass(&params, &input, buffers, &|_| {}, Timings::default()).unwrap()
         };

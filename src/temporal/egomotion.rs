@@ -415,6 +415,7 @@ mod tests {
             timings: Default::default(),
             measured: None,
             vertical_offset: None,
+            segmentation: None,
         };
         let grey = Plane::from_parts(w, h, (0..w).map(|x| x as f32 * 10.0).collect());
         let (out, moved_grey) = carry(&answer, &grey, &motion);

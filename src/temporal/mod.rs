@@ -24,7 +24,9 @@
 //!   view compared under the new exposure). The vertical
 //!   offset removed from the previous frame's right view is reused instead of measured again, and the frame runs
 //!   one mean-field iteration fewer (the prior has placed each pixel), its right view, which serves the left-right
-//!   check only, one with the local term alone. The running means start again.
+//!   check only, one with the local term alone. The slanted planes start from the previous frame's segments and
+//!   planes, moved by the shift (new cells where the frames disagree), and stop once they have settled
+//!   ([`crate::post::planes`]). The running means start again.
 //! - **travelling** (a motion in depth or a turn: a car driving forward, a camera moving sideways with parallax).
 //!   Points are tracked from the previous left view into the current one ([`track`]) and the camera's 3D motion
 //!   fitted to them through the previous answer's disparities ([`egomotion`]; no calibration needed). Where it

@@ -116,7 +116,9 @@ pub(crate) fn shift_answer(answer: &PipelineOutput, shift: Shift) -> PipelineOut
         let as_f32 = Plane::from_parts(w, h, answer.consistent.data.iter().map(|&c| f32::from(u8::from(c))).collect());
         moved(&as_f32, 0.0).data.iter().map(|&v| v > 0.5).collect()
     });
-    carried(answer, moved(&answer.disparity, f32::INFINITY), consistent, moved)
+    let mut out = carried(answer, moved(&answer.disparity, f32::INFINITY), consistent, moved);
+    out.segmentation = answer.segmentation.as_ref().map(|s| s.shifted(shift.dx, shift.dy));
+    out
 }
 
 /// The previous frame's answer carried into the current frame: its `disparity` and `consistent` as carried, its
@@ -135,6 +137,7 @@ pub(crate) fn carried(
         timings: Default::default(),
         measured: None,
         vertical_offset: answer.vertical_offset,
+        segmentation: None,
     }
 }
 
@@ -229,6 +232,7 @@ mod tests {
             timings: Default::default(),
             measured: None,
             vertical_offset: None,
+            segmentation: None,
         };
         let moved = shift_answer(&answer, Shift { dx: 1, dy: 0, residual: 0.0 });
         assert_eq!(moved.disparity.data[..2], [2.0, 3.0]);

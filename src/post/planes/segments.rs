@@ -45,12 +45,13 @@ impl SegModel {
     }
 }
 
-/// One sweep over the boundary pixels in 9 parallel phases (see the module doc).
-pub(super) fn sweep(scene: &Scene, labels: &mut [u32], models: &[SegModel], pos_scale: f32, p: &SpsParams) {
+/// One sweep over the boundary pixels in 9 parallel phases (see the module doc). Returns the number of pixels moved.
+pub(super) fn sweep(scene: &Scene, labels: &mut [u32], models: &[SegModel], pos_scale: f32, p: &SpsParams) -> usize {
     let (w, h) = (scene.width, scene.height);
     let lambda_d = p.disparity_weight;
     let tau2 = p.inlier_thresh_px * p.inlier_thresh_px;
     let lambda_bou = p.boundary_weight;
+    let mut moved = 0;
     for phase in 0..9 {
         let (px, py) = (phase % 3, phase / 3);
         let cur: &[u32] = labels;
@@ -119,10 +120,12 @@ pub(super) fn sweep(scene: &Scene, labels: &mut [u32], models: &[SegModel], pos_
                 out
             })
             .collect();
+        moved += changes.len();
         for (i, t) in changes {
             labels[i] = t;
         }
     }
+    moved
 }
 
 /// Number of 8-neighbours of (x, y) labelled `t` (outside pixels count as different).
