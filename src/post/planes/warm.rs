@@ -58,8 +58,8 @@ impl Segmentation {
 
 /// A carried segmentation made ready to start from: uncovered and released pixels get the cells of the grid of
 /// `step` they lie in, every 4-connected piece of a segment becomes a segment, and the small pieces of the strip
-/// (uncovered, or released beside what is) join a neighbour ([`merge_small`]); segments are numbered in raster order of first appearance. Returns the
-/// labels and each segment's plane (`None` for the new cells, which have none yet).
+/// (uncovered, or released beside what is) join a neighbour ([`merge_small`]); segments are numbered in raster order
+/// of first appearance. Returns the labels and each segment's plane (`None` for the new cells, which have none yet).
 pub(super) fn restart_from(start: &Segmentation, step: f64) -> (Vec<u32>, Vec<Option<[f64; 3]>>) {
     let (w, h) = (start.width, start.height);
     let (grid, cells) = grid_labels(w, h, step);
@@ -81,19 +81,28 @@ pub(super) fn restart_from(start: &Segmentation, step: f64) -> (Vec<u32>, Vec<Op
     // into the strip, so it lets go of a margin along it).
     let kind = |from: u64| (from >= old, (old..old + cells).contains(&from));
     let mut strip: Vec<bool> = sources.iter().map(|&from| kind(from).1).collect();
-    for (i, &a) in pieces.iter().enumerate() {
-        let right = (i % w + 1 < w).then(|| pieces[i + 1]);
-        for b in [right, pieces.get(i + w).copied()].into_iter().flatten() {
-            let ((new_a, unc_a), (new_b, unc_b)) = (kind(sources[a as usize]), kind(sources[b as usize]));
-            if new_a && unc_b {
-                strip[a as usize] = true;
-            }
-            if new_b && unc_a {
-                strip[b as usize] = true;
-            }
+    neighbour_pairs(&pieces, w, |a, b| {
+        let ((new_a, unc_a), (new_b, unc_b)) = (kind(sources[a as usize]), kind(sources[b as usize]));
+        if new_a && unc_b {
+            strip[a as usize] = true;
+        }
+        if new_b && unc_a {
+            strip[b as usize] = true;
+        }
+    });
+    merge_small(&pieces, &planes, &strip, w, step)
+}
+
+/// Calls `f` with the labels of every two 4-neighbouring pixels of a `w` pixels wide image, each pair once.
+fn neighbour_pairs(labels: &[u32], w: usize, mut f: impl FnMut(u32, u32)) {
+    for (i, &a) in labels.iter().enumerate() {
+        if i % w + 1 < w {
+            f(a, labels[i + 1]);
+        }
+        if let Some(&below) = labels.get(i + w) {
+            f(a, below);
         }
     }
-    merge_small(&pieces, &planes, &strip, w, step)
 }
 
 /// The 4-connected pieces of equal `source` values, numbered in raster order of first appearance, and each
@@ -157,14 +166,12 @@ fn merge_small(
             }
         }
     };
-    for (i, &a) in pieces.iter().enumerate() {
-        let right = (i % w + 1 < w).then(|| pieces[i + 1]);
-        let below = pieces.get(i + w).copied();
-        for b in [right, below].into_iter().flatten().filter(|&b| b != a) {
+    neighbour_pairs(pieces, w, |a, b| {
+        if a != b {
             count(a, b);
             count(b, a);
         }
-    }
+    });
     let mut parent: Vec<u32> = (0..n as u32).collect();
     let root = |parent: &[u32], mut k: u32| {
         while parent[k as usize] != k {
@@ -246,7 +253,8 @@ mod tests {
         let seg = Segmentation { width: 5, height: 2, labels: vec![0, 0, 0, 0, u, 0, 0, 0, 0, u], planes: vec![p] };
         let (labels, planes) = restart_from(&seg, 3.0);
         assert_eq!((labels, planes), (vec![0; 10], vec![Some(p)]));
-        // A segment of 14 (one and a half cells with the column): the column stays a segment of its own, without a plane yet.
+        // A segment of 14 (one and a half cells with the column): the column stays a segment of its own, without a
+        // plane yet.
         let mut labels = vec![0; 16];
         labels[7] = u;
         labels[15] = u;
