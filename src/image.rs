@@ -111,6 +111,29 @@ impl<T: Copy> Plane<T> {
     }
 }
 
+impl<T: Copy + Send + Sync> Plane<T> {
+    /// The plane moved by (dx, dy): sample (x, y) takes what (x + dx, y + dy) held, `fill` where that is outside.
+    pub(crate) fn shifted(&self, dx: i64, dy: i64, fill: T) -> Self {
+        use rayon::prelude::*;
+        let (w, h) = (self.width, self.height);
+        let mut out = Plane::new(w, h, fill);
+        out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+            let sy = y as i64 + dy;
+            if sy < 0 || sy >= h as i64 {
+                return;
+            }
+            let src = self.row(sy as usize);
+            for (x, o) in row.iter_mut().enumerate() {
+                let sx = x as i64 + dx;
+                if sx >= 0 && sx < w as i64 {
+                    *o = src[sx as usize];
+                }
+            }
+        });
+        out
+    }
+}
+
 /// `storage` resized to `len` values, for a buffer whose every value is written before it is read: a fresh
 /// allocation is zeroed by the OS (no fill pass); a reused one keeps what it held (only a grown part is zeroed, in
 /// parallel), so a buffer carried from one run to the next is not page-faulted again.

@@ -188,7 +188,8 @@ fn fine_at_full_resolution(
 
 /// What a frame of a sequence takes from the frame before it in place of the coarse chain ([`run_with_prior`]).
 pub(crate) struct FramePrior {
-    /// The previous frame's answer, moved by the camera's motion (`inf` where it says nothing).
+    /// The previous frame's answer, moved by the camera's motion (`inf` where it says nothing); the planes start
+    /// from its segmentation, if it carries one.
     pub answer: PipelineOutput,
     /// Pixels where the frames disagree (something moved): no prior there.
     pub released: Option<Plane<bool>>,
@@ -230,13 +231,7 @@ pub(crate) fn run_with_prior(
     }
     let weight = input.prior_weight * from.weight_scale;
     let mut answer = from.answer;
-    // Where the frames disagree the carried segments do not hold either: those pixels start on the grid's cells.
-    let segmentation = answer.segmentation.take().map(|mut s| {
-        if let Some(released) = &from.released {
-            s.release(&released.data);
-        }
-        s
-    });
+    let segmentation = answer.segmentation.take();
     let mut prior = prior::Prior::from_coarse(answer, weight, input.prior_flat, c.prior.untrusted);
     if let Some(released) = &from.released {
         prior.confidence.data.iter_mut().zip(&released.data).filter(|(_, r)| **r).for_each(|(f, _)| *f = 0.0);

@@ -308,11 +308,15 @@ fn beyond_shift(
 fn moving_frame(
     params: &Params,
     pair: &StereoPair,
-    carried: PipelineOutput,
+    mut carried: PipelineOutput,
     released: Plane<bool>,
     travelling: bool,
     options: &RunOptions<'_>,
 ) -> Result<PipelineOutput> {
+    // Where the frames disagree the carried segments do not hold either: those pixels start on the grid's cells.
+    if let Some(s) = &mut carried.segmentation {
+        s.release(&released.data);
+    }
     let from = FramePrior {
         vertical_offset: carried.vertical_offset,
         answer: carried,

@@ -110,12 +110,8 @@ pub(crate) fn unexplained(shift: Shift, cur: &Plane<f32>, noise_sigma: f32) -> f
 /// The previous frame's answer moved by `shift`: pixel (x, y) takes what (x + dx, y + dy) held; where that is
 /// outside the frame there is no answer (`inf`, confidence 0, not consistent).
 pub(crate) fn shift_answer(answer: &PipelineOutput, shift: Shift) -> PipelineOutput {
-    let moved = |p: &Plane<f32>, fill: f32| shift_plane(p, shift, fill);
-    let (w, h) = answer.disparity.dims();
-    let consistent = Plane::from_parts(w, h, {
-        let as_f32 = Plane::from_parts(w, h, answer.consistent.data.iter().map(|&c| f32::from(u8::from(c))).collect());
-        moved(&as_f32, 0.0).data.iter().map(|&v| v > 0.5).collect()
-    });
+    let moved = |p: &Plane<f32>, fill: f32| p.shifted(shift.dx, shift.dy, fill);
+    let consistent = answer.consistent.shifted(shift.dx, shift.dy, false);
     let mut out = carried(answer, moved(&answer.disparity, f32::INFINITY), consistent, moved);
     out.segmentation = answer.segmentation.as_ref().map(|s| s.shifted(shift.dx, shift.dy));
     out
@@ -141,30 +137,10 @@ pub(crate) fn carried(
     }
 }
 
-/// `p` moved by `shift` (see [`shift_answer`]), `fill` where the source is outside.
-pub(crate) fn shift_plane(p: &Plane<f32>, shift: Shift, fill: f32) -> Plane<f32> {
-    let (w, h) = p.dims();
-    let mut out = Plane::new(w, h, fill);
-    out.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
-        let sy = y as i64 + shift.dy;
-        if sy < 0 || sy >= h as i64 {
-            return;
-        }
-        let src = p.row(sy as usize);
-        for (x, o) in row.iter_mut().enumerate() {
-            let sx = x as i64 + shift.dx;
-            if sx >= 0 && sx < w as i64 {
-                *o = src[sx as usize];
-            }
-        }
-    });
-    out
-}
-
 /// Where the frames disagree after the shift: the 5 × 5 mean absolute grey difference exceeds `limit` (and where
 /// the previous frame does not reach).
 pub(crate) fn disagreement(prev: &Plane<f32>, cur: &Plane<f32>, shift: Shift, limit: f32) -> Plane<bool> {
-    disagreement_beyond(&shift_plane(prev, shift, f32::INFINITY), cur, |_| limit)
+    disagreement_beyond(&prev.shifted(shift.dx, shift.dy, f32::INFINITY), cur, |_| limit)
 }
 
 /// Where the previous view, already moved into the current frame (`inf` where nothing lands), disagrees with the

@@ -174,13 +174,13 @@ pub(crate) fn fit_planes_from(
     assert_eq!(trusted.dims(), disp.dims(), "disparity map and trusted mask differ in size");
     let (w, h) = disp.dims();
     if w == 0 || h == 0 {
-        return (disp.clone(), Segmentation { width: w, height: h, labels: Vec::new(), planes: Vec::new() });
+        return (disp.clone(), Segmentation { labels: Plane::new(w, h, 0), planes: Vec::new() });
     }
     let scene = Scene::new(image, disp, trusted, p);
-    let start = start.filter(|s| (s.width, s.height) == (w, h));
+    let start = start.filter(|s| s.labels.dims() == (w, h));
     let (labels, planes) = segment_and_fit(&scene, p, start);
     let out = render(&labels, &planes, w, scene.max_disp + p.inlier_thresh_px);
-    (out, Segmentation { width: w, height: h, labels, planes })
+    (out, Segmentation { labels: Plane::from_parts(w, h, labels), planes })
 }
 
 /// A carried segmentation has settled when a sweep moves fewer than this share of the pixels: about what the tenth
@@ -419,9 +419,9 @@ mod tests {
         let (warm, settled) = fit_planes_from(&img, &disp, &trusted, &p, Some(&carried));
         let (cold_err, warm_err) = (mean_error(&cold, &truth), mean_error(&warm, &truth));
         assert!(warm_err < 0.3 && warm_err <= cold_err + 0.05, "warm {warm_err:.3} px, cold {cold_err:.3} px");
-        assert_connected(&settled.labels, w, h);
+        assert_connected(&settled.labels.data, w, h);
         let (again, same) = fit_planes_from(&img, &disp, &trusted, &p, Some(&settled));
-        assert_eq!(same.labels.len(), w * h);
+        assert_eq!(same.labels.dims(), (w, h));
         assert!(mean_error(&again, &warm) < 0.05);
     }
 

@@ -9,6 +9,7 @@
 //! 4-connected piece becomes a segment of its own (the sweep's connectivity test assumes it), with its old plane.
 
 use super::segments::grid_labels;
+use crate::image::Plane;
 
 /// Marks a pixel without a segment: in view only in the current frame.
 pub(crate) const UNCOVERED: u32 = u32::MAX;
@@ -18,10 +19,8 @@ pub(crate) const RELEASED: u32 = u32::MAX - 1;
 /// The segments and planes the slanted-plane smoothing ended with on one frame.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Segmentation {
-    pub(crate) width: usize,
-    pub(crate) height: usize,
-    /// Segment per pixel, row-major; [`UNCOVERED`] or [`RELEASED`] where a moved segmentation says nothing.
-    pub(crate) labels: Vec<u32>,
+    /// Segment per pixel; [`UNCOVERED`] or [`RELEASED`] where a moved segmentation says nothing.
+    pub(crate) labels: Plane<u32>,
     /// `[a, b, c]` per segment: d(x, y) = a·x + b·y + c.
     pub(crate) planes: Vec<[f64; 3]>,
 }
@@ -30,28 +29,14 @@ impl Segmentation {
     /// The segmentation moved as [`crate::temporal`] moves an answer by a shift: pixel (x, y) takes the segment of
     /// (x + dx, y + dy) ([`UNCOVERED`] where that is outside), and each plane moves with its segment.
     pub(crate) fn shifted(&self, dx: i64, dy: i64) -> Segmentation {
-        let (w, h) = (self.width, self.height);
-        let mut labels = vec![UNCOVERED; w * h];
-        for (y, row) in labels.chunks_exact_mut(w.max(1)).enumerate() {
-            let sy = y as i64 + dy;
-            if !(0..h as i64).contains(&sy) {
-                continue;
-            }
-            for (x, l) in row.iter_mut().enumerate() {
-                let sx = x as i64 + dx;
-                if (0..w as i64).contains(&sx) {
-                    *l = self.labels[sy as usize * w + sx as usize];
-                }
-            }
-        }
         // d'(x, y) = d(x + dx, y + dy).
         let planes = self.planes.iter().map(|&[a, b, c]| [a, b, c + a * dx as f64 + b * dy as f64]).collect();
-        Segmentation { width: w, height: h, labels, planes }
+        Segmentation { labels: self.labels.shifted(dx, dy, UNCOVERED), planes }
     }
 
     /// Lets go of the segments of the pixels where `released` is true ([`RELEASED`]; uncovered pixels stay so).
     pub(crate) fn release(&mut self, released: &[bool]) {
-        let covered = self.labels.iter_mut().zip(released).filter(|(l, r)| **r && **l != UNCOVERED);
+        let covered = self.labels.data.iter_mut().zip(released).filter(|(l, r)| **r && **l != UNCOVERED);
         covered.for_each(|(l, _)| *l = RELEASED);
     }
 }
@@ -61,12 +46,13 @@ impl Segmentation {
 /// (uncovered, or released beside what is) join a neighbour ([`merge_small`]); segments are numbered in raster order
 /// of first appearance. Returns the labels and each segment's plane (`None` for the new cells, which have none yet).
 pub(super) fn restart_from(start: &Segmentation, step: f64) -> (Vec<u32>, Vec<Option<[f64; 3]>>) {
-    let (w, h) = (start.width, start.height);
+    let (w, h) = start.labels.dims();
     let (grid, cells) = grid_labels(w, h, step);
     let (old, cells) = (start.planes.len() as u64, cells as u64);
     // Old segments keep their ids below `old`, the uncovered cells follow them, then the released ones.
     let source: Vec<u64> = start
         .labels
+        .data
         .iter()
         .zip(&grid)
         .map(|(&l, &g)| match l {
@@ -219,10 +205,11 @@ mod tests {
     fn a_shift_moves_labels_and_planes_and_uncovers_the_entering_strip() {
         let (w, h) = (6, 2);
         let labels = vec![0, 0, 0, 1, 1, 1, 0, 0, 0, 1, 1, 1];
-        let seg = Segmentation { width: w, height: h, labels, planes: vec![[0.5, 0.0, 1.0], [0.0, 0.25, 3.0]] };
+        let seg =
+            Segmentation { labels: Plane::from_parts(w, h, labels), planes: vec![[0.5, 0.0, 1.0], [0.0, 0.25, 3.0]] };
         let moved = seg.shifted(2, 0);
         let u = UNCOVERED;
-        assert_eq!(moved.labels, vec![0, 1, 1, 1, u, u, 0, 1, 1, 1, u, u]);
+        assert_eq!(moved.labels.data, vec![0, 1, 1, 1, u, u, 0, 1, 1, 1, u, u]);
         // The plane gives pixel (x, y) what it gave (x + 2, y).
         assert_eq!(moved.planes, vec![[0.5, 0.0, 2.0], [0.0, 0.25, 3.0]]);
     }
@@ -238,7 +225,7 @@ mod tests {
             1, 1, 1, u, u,
         ];
         let (p0, p1) = ([0.0, 0.0, 1.0], [0.0, 0.0, 2.0]);
-        let seg = Segmentation { width: 5, height: 3, labels, planes: vec![p0, p1] };
+        let seg = Segmentation { labels: Plane::from_parts(5, 3, labels), planes: vec![p0, p1] };
         let (labels, planes) = restart_from(&seg, 1.0);
         assert_eq!(labels, vec![0, 1, 2, 3, 4, 0, 1, 2, 5, 6, 1, 1, 1, 7, 8]);
         assert_eq!(planes[..3], [Some(p0), Some(p1), Some(p0)]);
@@ -250,7 +237,7 @@ mod tests {
         // A segment of 8 pixels and an uncovered column of 2 (a 3 px grid: cells of 9, small below 4.5): joined.
         let u = UNCOVERED;
         let p = [0.5, 0.0, 1.0];
-        let seg = Segmentation { width: 5, height: 2, labels: vec![0, 0, 0, 0, u, 0, 0, 0, 0, u], planes: vec![p] };
+        let seg = Segmentation { labels: Plane::from_parts(5, 2, vec![0, 0, 0, 0, u, 0, 0, 0, 0, u]), planes: vec![p] };
         let (labels, planes) = restart_from(&seg, 3.0);
         assert_eq!((labels, planes), (vec![0; 10], vec![Some(p)]));
         // A segment of 14 (one and a half cells with the column): the column stays a segment of its own, without a
@@ -258,17 +245,17 @@ mod tests {
         let mut labels = vec![0; 16];
         labels[7] = u;
         labels[15] = u;
-        let seg = Segmentation { width: 8, height: 2, labels, planes: vec![p] };
+        let seg = Segmentation { labels: Plane::from_parts(8, 2, labels), planes: vec![p] };
         let (labels, planes) = restart_from(&seg, 3.0);
         assert_eq!((labels[7], labels[15], labels[0]), (1, 1, 0));
         assert_eq!(planes, vec![Some(p), None]);
         // A released column inside the view (the frames disagree there: another surface, perhaps) stays a segment
         // of its own; one beside the uncovered strip joins as the strip does.
         let r = RELEASED;
-        let seg = Segmentation { width: 5, height: 2, labels: vec![0, 0, r, 0, 0, 0, 0, r, 0, 0], planes: vec![p] };
+        let seg = Segmentation { labels: Plane::from_parts(5, 2, vec![0, 0, r, 0, 0, 0, 0, r, 0, 0]), planes: vec![p] };
         let (labels, planes) = restart_from(&seg, 3.0);
         assert_eq!((labels[2], labels[7], planes.len()), (1, 1, 3));
-        let seg = Segmentation { width: 5, height: 2, labels: vec![0, 0, 0, r, u, 0, 0, 0, r, u], planes: vec![p] };
+        let seg = Segmentation { labels: Plane::from_parts(5, 2, vec![0, 0, 0, r, u, 0, 0, 0, r, u]), planes: vec![p] };
         let (labels, planes) = restart_from(&seg, 3.0);
         assert_eq!((labels, planes), (vec![0; 10], vec![Some(p)]));
     }
