@@ -9,10 +9,19 @@ use crate::imgproc::noise::GREY_DIFFERENCE_PER_SIGMA;
 use crate::pipeline::PipelineOutput;
 
 /// The shift search covers ±this many pixels of the search image (the grey image reduced until it is at most
-/// [`SEARCH_WIDTH`] wide), and is refined within ±`factor` pixels at full size.
+/// [`SEARCH_WIDTH`] wide): the range the search reaches, in pixels of that image.
 const SEARCH_RADIUS: i64 = 16;
-/// The widest image the coarse shift search runs on.
+/// The widest image whose ±[`SEARCH_RADIUS`] the search covers.
 const SEARCH_WIDTH: usize = 512;
+/// The search runs on up to this many further halvings of the search image (the radius halved with each), and is
+/// refined by ±[`REFINE_RADIUS`] on each finer level down to full size.
+const PYRAMID_OCTAVES: u32 = 2;
+/// The coarsest level keeps at least this many pixels in each direction.
+const PYRAMID_MIN_SIDE: usize = 48;
+/// The refinement's reach on each finer level around twice the coarser level's shift.
+const REFINE_RADIUS: i64 = 2;
+/// How many of the coarsest level's best distinct shifts are followed down to full size.
+const HYPOTHESES: usize = 4;
 
 /// The global shift between two frames: the current frame's pixel (x, y) shows what the previous frame showed
 /// at (x + dx, y + dy), and the mean absolute grey difference left after that shift.
@@ -67,33 +76,84 @@ fn row_difference(a: &[f32], b: &[f32]) -> f64 {
     acc.iter().map(|&v| f64::from(v)).sum::<f64>() + f64::from(tail)
 }
 
-/// The candidate with the least difference; ties go to the smaller shift, then the first in the list.
-fn best(candidates: Vec<(i64, i64)>, diff: impl Fn(i64, i64) -> Option<f64> + Sync) -> Option<Shift> {
+/// Each candidate's difference (those that overlap enough), ordered from the least; ties go to the smaller shift,
+/// then the first in the list.
+fn ranked(candidates: Vec<(i64, i64)>, diff: impl Fn(i64, i64) -> Option<f64> + Sync) -> Vec<Shift> {
     let scored: Vec<Option<Shift>> =
         candidates.into_par_iter().map(|(dx, dy)| diff(dx, dy).map(|residual| Shift { dx, dy, residual })).collect();
-    scored.into_iter().flatten().fold(None, |b: Option<Shift>, c| match b {
-        Some(b) if (b.residual, b.dx.abs() + b.dy.abs()) <= (c.residual, c.dx.abs() + c.dy.abs()) => Some(b),
-        _ => Some(c),
-    })
+    let mut scored: Vec<Shift> = scored.into_iter().flatten().collect();
+    scored.sort_by(by_difference);
+    scored
 }
 
-/// The global integer shift between the previous and the current left view (grey): searched over ±16 pixels of
-/// the views reduced to at most 512 pixels wide, then within ±(reduction) pixels at full size around it.
+/// The order of shifts: the least difference first, then the smaller shift.
+fn by_difference(a: &Shift, b: &Shift) -> std::cmp::Ordering {
+    a.residual.total_cmp(&b.residual).then((a.dx.abs() + a.dy.abs()).cmp(&(b.dx.abs() + b.dy.abs())))
+}
+
+/// The candidate with the least difference (ties as [`ranked`]).
+fn best(candidates: Vec<(i64, i64)>, diff: impl Fn(i64, i64) -> Option<f64> + Sync) -> Option<Shift> {
+    ranked(candidates, diff).into_iter().next()
+}
+
+/// Up to `k` of the ranked shifts, each the best of those more than [`REFINE_RADIUS`] pixels from the ones before it.
+fn distinct_best(ranked: Vec<Shift>, k: usize) -> Vec<Shift> {
+    let mut kept: Vec<Shift> = Vec::with_capacity(k);
+    for s in ranked {
+        if kept.len() == k {
+            break;
+        }
+        if kept.iter().all(|t| (t.dx - s.dx).abs().max((t.dy - s.dy).abs()) > REFINE_RADIUS) {
+            kept.push(s);
+        }
+    }
+    kept
+}
+
+/// The candidate shifts (dx, dy) within ±`r` of `(cx, cy)`.
+fn around(cx: i64, cy: i64, r: i64) -> Vec<(i64, i64)> {
+    (-r..=r).flat_map(|dy| (-r..=r).map(move |dx| (cx + dx, cy + dy))).collect()
+}
+
+/// The global integer shift between the previous and the current left view (grey), coarse to fine: the views
+/// reduced to at most 512 pixels wide reach ±16 pixels there; the search itself runs on up to two more halvings
+/// (±8, ±4 pixels; each level at least 48 pixels each way), and each finer level down to full size looks within
+/// ±2 pixels of twice the coarser level's shift.
 pub(crate) fn global_shift(prev: &Plane<f32>, cur: &Plane<f32>) -> Shift {
     let factor = prev.width.div_ceil(SEARCH_WIDTH).next_power_of_two();
-    let (small_prev, small_cur) = (box_reduce(prev, factor), box_reduce(cur, factor));
-    let r = SEARCH_RADIUS;
-    let coarse: Vec<(i64, i64)> = (-r..=r).flat_map(|dy| (-r..=r).map(move |dx| (dx, dy))).collect();
-    let step = if factor > 1 { 1 } else { 2 };
-    let at = best(coarse, |dx, dy| shifted_difference(&small_prev, &small_cur, dx, dy, step));
-    let (cx, cy) = at.map_or((0, 0), |s| (s.dx * factor as i64, s.dy * factor as i64));
-    let f = factor as i64;
-    let fine: Vec<(i64, i64)> = (-f..=f).flat_map(|dy| (-f..=f).map(move |dx| (cx + dx, cy + dy))).collect();
-    best(fine, |dx, dy| shifted_difference(prev, cur, dx, dy, 1)).unwrap_or(Shift {
-        dx: 0,
-        dy: 0,
-        residual: shifted_difference(prev, cur, 0, 0, 1).unwrap_or(f64::INFINITY),
-    })
+    let mut octaves = factor.trailing_zeros();
+    let mut radius = SEARCH_RADIUS;
+    for _ in 0..PYRAMID_OCTAVES {
+        let next = 2usize << octaves;
+        if prev.width / next < PYRAMID_MIN_SIDE || prev.height / next < PYRAMID_MIN_SIDE {
+            break;
+        }
+        octaves += 1;
+        radius /= 2;
+    }
+    // The reduced levels, each from the finer one (box means of box means: the coarser box means up to rounding).
+    let mut reduced: Vec<(Plane<f32>, Plane<f32>)> = Vec::with_capacity(octaves as usize);
+    for _ in 0..octaves {
+        let (p, c) = reduced.last().map_or((prev, cur), |(p, c)| (p, c));
+        let next = (box_reduce(p, 2), box_reduce(c, 2));
+        reduced.push(next);
+    }
+    let (coarse_prev, coarse_cur) = reduced.last().map_or((prev, cur), |(p, c)| (p, c));
+    let coarse = ranked(around(0, 0, radius), |dx, dy| shifted_difference(coarse_prev, coarse_cur, dx, dy, 1));
+    // A coarse level cannot tell a shift from a repetition of the scene's pattern that only fine texture tells
+    // apart: its few best distinct shifts are each followed down, and the full size decides between them.
+    let mut found = distinct_best(coarse, if octaves > 0 { HYPOTHESES } else { 1 });
+    for level in (0..octaves as usize).rev() {
+        let (p, c) = if level == 0 { (prev, cur) } else { (&reduced[level - 1].0, &reduced[level - 1].1) };
+        found = found
+            .iter()
+            .filter_map(|s| {
+                best(around(2 * s.dx, 2 * s.dy, REFINE_RADIUS), |dx, dy| shifted_difference(p, c, dx, dy, 1))
+            })
+            .collect();
+    }
+    let fallback = || Shift { dx: 0, dy: 0, residual: shifted_difference(prev, cur, 0, 0, 1).unwrap_or(f64::INFINITY) };
+    found.into_iter().min_by(by_difference).unwrap_or_else(fallback)
 }
 
 /// The share of the image's own contrast that the shift leaves unexplained beyond what noise gives: (residual −
