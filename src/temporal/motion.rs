@@ -249,6 +249,21 @@ mod tests {
     }
 
     #[test]
+    fn a_shift_near_the_reach_is_found_through_the_pyramid() {
+        // 400 × 300 searches on two halvings (±4 px at a quarter size): a shift of (−15, 13) is found there and
+        // refined down to the pixel.
+        let big = texture(440, 340, 7);
+        let crop = |x0: usize, y0: usize| {
+            let data = (0..300).flat_map(|y| big.row(y0 + y)[x0..x0 + 400].to_vec()).collect();
+            Plane::from_parts(400, 300, data)
+        };
+        let (prev, cur) = (crop(30, 2), crop(15, 15));
+        let s = global_shift(&prev, &cur);
+        assert_eq!((s.dx, s.dy), (-15, 13));
+        assert!(s.residual < 1e-6, "{}", s.residual);
+    }
+
+    #[test]
     fn another_scene_is_unexplained_and_the_same_one_is_not() {
         let (a, b) = (texture(200, 120, 1), texture(200, 120, 2));
         let same = global_shift(&a, &a);
