@@ -233,14 +233,15 @@ mod tests {
         Plane::from_parts(w, h, data)
     }
 
+    /// The `w` × `h` window of `big` whose top-left pixel is (x0, y0): a camera's view of a larger scene.
+    fn crop(big: &Plane<f32>, x0: usize, y0: usize, w: usize, h: usize) -> Plane<f32> {
+        Plane::from_parts(w, h, (0..h).flat_map(|y| big.row(y0 + y)[x0..x0 + w].to_vec()).collect())
+    }
+
     #[test]
     fn a_window_moved_across_an_image_is_found_exactly() {
         let big = texture(300, 200, 3);
-        let crop = |x0: usize, y0: usize| {
-            let data = (0..160).flat_map(|y| big.row(y0 + y)[x0..x0 + 240].to_vec()).collect();
-            Plane::from_parts(240, 160, data)
-        };
-        let (prev, cur) = (crop(20, 10), crop(27, 8));
+        let (prev, cur) = (crop(&big, 20, 10, 240, 160), crop(&big, 27, 8, 240, 160));
         let s = global_shift(&prev, &cur);
         // The current frame's (x, y) is the big image's (x + 27, y + 8), the previous frame's (x + 7, y − 2).
         assert_eq!((s.dx, s.dy), (7, -2));
@@ -253,11 +254,7 @@ mod tests {
         // 400 × 300 searches on two halvings (±4 px at a quarter size): a shift of (−15, 13) is found there and
         // refined down to the pixel.
         let big = texture(440, 340, 7);
-        let crop = |x0: usize, y0: usize| {
-            let data = (0..300).flat_map(|y| big.row(y0 + y)[x0..x0 + 400].to_vec()).collect();
-            Plane::from_parts(400, 300, data)
-        };
-        let (prev, cur) = (crop(30, 2), crop(15, 15));
+        let (prev, cur) = (crop(&big, 30, 2, 400, 300), crop(&big, 15, 15, 400, 300));
         let s = global_shift(&prev, &cur);
         assert_eq!((s.dx, s.dy), (-15, 13));
         assert!(s.residual < 1e-6, "{}", s.residual);
