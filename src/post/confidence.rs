@@ -137,65 +137,58 @@ const LANES: usize = 8;
 fn minima_in_lanes(c: &[f32]) -> [CostMinima; LANES] {
     const INF: [f32; LANES] = [f32::INFINITY; LANES];
     let m = c.len() / LANES;
-    let (mut v0, mut v1, mut v2, mut prev) = (INF, INF, INF, INF);
-    let (mut d0, mut d1, mut d2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+    // The kept values and disparities in arrays of their own, one lane per curve, so that the lanes vectorise.
+    let ([mut v0, mut v1, mut v2], mut at) = ([INF; MINIMA], [[0.0f32; LANES]; MINIMA]);
+    let mut prev = INF;
     for d in 0..m {
         let cur = &c[d * LANES..][..LANES];
         let next = if d + 1 < m { &c[(d + 1) * LANES..][..LANES] } else { &INF[..] };
-        let at = d as f32;
+        let [a0, a1, a2] = &mut at;
         for l in 0..LANES {
             let v = if cur[l] <= prev[l] && cur[l] < next[l] { cur[l] } else { f32::INFINITY };
-            let (lt0, lt1, lt2) = (v < v0[l], v < v1[l], v < v2[l]);
-            (v2[l], d2[l]) = if lt1 {
-                (v1[l], d1[l])
-            } else if lt2 {
-                (v, at)
-            } else {
-                (v2[l], d2[l])
-            };
-            (v1[l], d1[l]) = if lt0 {
-                (v0[l], d0[l])
-            } else if lt1 {
-                (v, at)
-            } else {
-                (v1[l], d1[l])
-            };
-            (v0[l], d0[l]) = if lt0 { (v, at) } else { (v0[l], d0[l]) };
+            keep_lowest([&mut v0[l], &mut v1[l], &mut v2[l]], [&mut a0[l], &mut a1[l], &mut a2[l]], v, d as f32);
             prev[l] = cur[l];
         }
     }
-    std::array::from_fn(|l| with_repeats([[v0[l], d0[l]], [v1[l], d1[l]], [v2[l], d2[l]]]))
+    std::array::from_fn(|l| with_repeats([[v0[l], at[0][l]], [v1[l], at[1][l]], [v2[l], at[2][l]]]))
 }
 
 /// [`cost_minima_row`] of one pixel's curve: one pass, branch-free (a value that is no local minimum enters as
 /// `inf`; the kept minima are updated by selects, which the compiler makes conditional moves: a cost curve's local
 /// minima come at random, and a branch on them mispredicts).
 fn curve_minima(c: &[f32]) -> CostMinima {
-    let (mut b0, mut b1, mut b2) = ([f32::INFINITY, 0.0], [f32::INFINITY, 0.0], [f32::INFINITY, 0.0]);
+    let ([mut v0, mut v1, mut v2], [mut a0, mut a1, mut a2]) = ([f32::INFINITY; MINIMA], [0.0f32; MINIMA]);
     let mut prev = f32::INFINITY;
     let next = c.iter().skip(1).chain(std::iter::once(&f32::INFINITY));
     for (d, (&cur, &next)) in c.iter().zip(next).enumerate() {
         let v = if cur <= prev && cur < next { cur } else { f32::INFINITY };
-        let new = [v, d as f32];
-        let (lt0, lt1, lt2) = (v < b0[0], v < b1[0], v < b2[0]);
-        b2 = if lt1 {
-            b1
-        } else if lt2 {
-            new
-        } else {
-            b2
-        };
-        b1 = if lt0 {
-            b0
-        } else if lt1 {
-            new
-        } else {
-            b1
-        };
-        b0 = if lt0 { new } else { b0 };
+        keep_lowest([&mut v0, &mut v1, &mut v2], [&mut a0, &mut a1, &mut a2], v, d as f32);
         prev = cur;
     }
-    with_repeats([b0, b1, b2])
+    with_repeats([[v0, a0], [v1, a1], [v2, a2]])
+}
+
+/// Puts value `v` at disparity `at` among the kept `values` (lowest first) and their `disparities` if it is lower
+/// than one of them, by selects (which the compiler makes conditional moves).
+#[inline(always)]
+fn keep_lowest(values: [&mut f32; MINIMA], disparities: [&mut f32; MINIMA], v: f32, at: f32) {
+    let ([v0, v1, v2], [d0, d1, d2]) = (values, disparities);
+    let (lt0, lt1, lt2) = (v < *v0, v < *v1, v < *v2);
+    (*v2, *d2) = if lt1 {
+        (*v1, *d1)
+    } else if lt2 {
+        (v, at)
+    } else {
+        (*v2, *d2)
+    };
+    (*v1, *d1) = if lt0 {
+        (*v0, *d0)
+    } else if lt1 {
+        (v, at)
+    } else {
+        (*v1, *d1)
+    };
+    (*v0, *d0) = if lt0 { (v, at) } else { (*v0, *d0) };
 }
 
 /// `best` with each minimum that was not found (`inf`) replaced by the one before it.
