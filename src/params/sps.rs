@@ -13,6 +13,9 @@ pub struct SpsParams {
     pub enabled: bool,
     /// Target number of segments; the initial grid step is √(pixels / segments).
     pub segments: usize,
+    /// The most pixels a segment covers on average (0 = no bound): an image with more than `segments` × this gets
+    /// more segments ([`SpsParams::segments_for`]), so that the planes follow the detail a larger image holds.
+    pub max_segment_px: f32,
     /// Outer iterations (pixel sweep, labels, planes).
     pub iterations: usize,
     /// λ_pos: weight of the squared distance to the segment centre, in grid steps.
@@ -52,6 +55,7 @@ impl Default for SpsParams {
         SpsParams {
             enabled: true,
             segments: 1500,
+            max_segment_px: 250.0,
             iterations: 10,
             position_weight: 300.0,
             disparity_weight: 100.0,
@@ -74,6 +78,23 @@ impl Default for SpsParams {
 const MIN_PLANE_POINTS: f32 = 3.0;
 
 impl SpsParams {
+    /// The segments for an image of `pixels` pixels: `segments`, or more where each would cover more than
+    /// `max_segment_px` pixels on average, and at most [`SpsParams::max_segments`].
+    ///
+    /// `segments` was tuned on MiddEval3 trainingQ (0.17 to 0.37 M pixels: 112 to 245 px a segment), where the bound
+    /// of 250 px changes nothing. On larger real images a count per image makes the segments grow with the image
+    /// and the planes smooth over what the extra pixels add: the MiddEval3 trainingH views of Motorcycle and
+    /// PlaytableP (1.5 and 1.3 M pixels, scored on the Q grid) 1.80 and 1.38 with 1500 segments (980 and 840 px
+    /// each), 1.25 and 1.32 with 6000; Middlebury 2005 at full size (four pairs, 1.5 M pixels, their own truth)
+    /// 1.151 against 0.995 (docs/tuning-log.md, session 38).
+    pub fn segments_for(&self, pixels: usize) -> usize {
+        let by_size = if self.max_segment_px > 0.0 {
+            (pixels as f64 / f64::from(self.max_segment_px)).ceil() as usize
+        } else {
+            0
+        };
+        self.segments.max(by_size).min(self.max_segments(pixels))
+    }
     /// The most segments an image of `pixels` pixels can hold (at least 1): the grid's cells must each be able to
     /// carry the data weight a plane of its own needs, `min_support` (at least 3 points). Above it no segment can
     /// fit a plane alone and the map is wrecked, so the planes use at most this many (RESULTS.md, "Bad input").
@@ -96,6 +117,7 @@ impl SpsParams {
         if self.ransac_iterations == 0 || self.ransac_iterations > 100_000 {
             return Err(Error::param("post.sps.ransac_iterations", self.ransac_iterations, "1 to 100000"));
         }
+        check_nonneg("post.sps.max_segment_px", self.max_segment_px)?;
         check_nonneg("post.sps.position_weight", self.position_weight)?;
         check_nonneg("post.sps.disparity_weight", self.disparity_weight)?;
         check_positive("post.sps.inlier_thresh_px", self.inlier_thresh_px)?;
@@ -112,5 +134,28 @@ impl SpsParams {
             return Err(Error::param("post.sps.untrusted_weight", self.untrusted_weight, "0 to 1"));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn large_images_get_segments_of_bounded_size() {
+        let p = SpsParams::default();
+        // MiddEval3 trainingQ's sizes, Teddy to Motorcycle: the configured count.
+        for (w, h) in [(450, 375), (741, 497)] {
+            assert_eq!(p.segments_for(w * h), p.segments, "{w}×{h}");
+        }
+        // trainingH Motorcycle: one segment per 250 px.
+        assert_eq!(p.segments_for(1482 * 994), (1482 * 994usize).div_ceil(250));
+        // No bound: a count per image.
+        let per_image = SpsParams { max_segment_px: 0.0, ..p.clone() };
+        assert_eq!(per_image.segments_for(1482 * 994), p.segments);
+        // Never more than the image can hold.
+        let tiny = SpsParams { max_segment_px: 1.0, ..p.clone() };
+        assert_eq!(tiny.segments_for(100 * 100), tiny.max_segments(100 * 100));
+        assert!(SpsParams { max_segment_px: -1.0, ..p }.validate().is_err());
     }
 }

@@ -192,8 +192,9 @@ pub(crate) const SETTLED_SHARE: f64 = 0.01;
 /// returns the final segment labels (row-major) and one plane per segment.
 fn segment_and_fit(scene: &Scene, p: &SpsParams, start: Option<&Segmentation>) -> (Vec<u32>, Vec<[f64; 3]>) {
     let (w, h) = (scene.width, scene.height);
-    // More segments than the image can hold are absurd (see `max_segments`); the caller warns about it.
-    let segments = p.segments.min(p.max_segments(w * h));
+    // A large image gets more segments (`segments_for`); more than the image can hold are absurd (see
+    // `max_segments`; the caller warns about it).
+    let segments = p.segments_for(w * h);
     let step = ((w * h) as f64 / segments as f64).sqrt().max(1.0);
     // A carried segmentation that has splintered (disocclusions and cut segments add pieces frame after frame)
     // past half as many segments again as configured starts from the grid.
