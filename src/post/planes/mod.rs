@@ -63,7 +63,8 @@
 //! segment has a plane (no data at all), every segment is fronto-parallel at the median of the data, or 0 without
 //! data. The output is therefore always finite.
 //!
-//! Defaults: `segments = 1500` (≈ 15 px cells at Q; Yamaguchi et al. use 1000 on KITTI's 0.47 Mpx),
+//! Defaults: `segments = 1500` (≈ 15 px cells at Q; Yamaguchi et al. use 1000 on KITTI's 0.47 Mpx; a larger image
+//! gets more, each at most `max_segment_px = 250` px on average: `SpsParams::segments_for`),
 //! `untrusted_weight = 0.3`, `disparity_weight = 100` and `inlier_thresh_px = 3`, tuned on trainingQ with the full
 //! pipeline (docs/RESULTS.md); the other weights were set by reasoning about magnitudes (the position term reaches
 //! λ_pos at one grid step) and checked on synthetic scenes, and the sweeps show them to matter little.
