@@ -174,21 +174,20 @@ fn curve_minima(c: &[f32]) -> CostMinima {
 fn keep_lowest(values: [&mut f32; MINIMA], disparities: [&mut f32; MINIMA], v: f32, at: f32) {
     let ([v0, v1, v2], [d0, d1, d2]) = (values, disparities);
     let (lt0, lt1, lt2) = (v < *v0, v < *v1, v < *v2);
-    (*v2, *d2) = if lt1 {
-        (*v1, *d1)
-    } else if lt2 {
-        (v, at)
-    } else {
-        (*v2, *d2)
+    // Each slot, from the last: the slot above moves down into it when `v` is below that one, else `v` enters when
+    // it is below this one.
+    let slot = |below_above: bool, below_own: bool, above: (f32, f32), own: (f32, f32)| {
+        if below_above {
+            above
+        } else if below_own {
+            (v, at)
+        } else {
+            own
+        }
     };
-    (*v1, *d1) = if lt0 {
-        (*v0, *d0)
-    } else if lt1 {
-        (v, at)
-    } else {
-        (*v1, *d1)
-    };
-    (*v0, *d0) = if lt0 { (v, at) } else { (*v0, *d0) };
+    (*v2, *d2) = slot(lt1, lt2, (*v1, *d1), (*v2, *d2));
+    (*v1, *d1) = slot(lt0, lt1, (*v0, *d0), (*v1, *d1));
+    (*v0, *d0) = slot(false, lt0, (*v0, *d0), (*v0, *d0));
 }
 
 /// `best` with each minimum that was not found (`inf`) replaced by the one before it.
