@@ -82,11 +82,9 @@ impl SpsParams {
     /// `max_segment_px` pixels on average, and at most [`SpsParams::max_segments`].
     ///
     /// `segments` was tuned on MiddEval3 trainingQ (0.17 to 0.37 M pixels: 112 to 245 px a segment), where the bound
-    /// of 250 px changes nothing. On larger real images a count per image makes the segments grow with the image
-    /// and the planes smooth over what the extra pixels add: the MiddEval3 trainingH views of Motorcycle and
-    /// PlaytableP (1.5 and 1.3 M pixels, scored on the Q grid) 1.80 and 1.38 with 1500 segments (980 and 840 px
-    /// each), 1.25 and 1.32 with 6000; Middlebury 2005 at full size (four pairs, 1.5 M pixels, their own truth)
-    /// 1.151 against 0.995 (docs/tuning-log.md, session 38).
+    /// changes nothing. A count per image lets the segments grow with a larger image, and the planes then smooth over
+    /// the detail its extra pixels hold; bounded, the planes follow it (measured on MiddEval3 trainingH views and
+    /// Middlebury 2005 at full size: docs/tuning-log.md, "The planes' segments bounded in size").
     pub fn segments_for(&self, pixels: usize) -> usize {
         let by_size = if self.max_segment_px > 0.0 {
             (pixels as f64 / f64::from(self.max_segment_px)).ceil() as usize
@@ -95,6 +93,7 @@ impl SpsParams {
         };
         self.segments.max(by_size).min(self.max_segments(pixels))
     }
+
     /// The most segments an image of `pixels` pixels can hold (at least 1): the grid's cells must each be able to
     /// carry the data weight a plane of its own needs, `min_support` (at least 3 points). Above it no segment can
     /// fit a plane alone and the map is wrecked, so the planes use at most this many (RESULTS.md, "Bad input").
