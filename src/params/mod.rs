@@ -269,6 +269,15 @@ impl Params {
         warnings
     }
 
+    /// The parameters a fine pass on an image of `pixels` pixels runs with: the weighted median's windows follow
+    /// the image's size ([`WmedianParams::for_image`]). A coarse level or a tile starts again from the stated
+    /// parameters with its own image's size (a tile: the whole image's).
+    pub fn for_image(&self, pixels: usize) -> Params {
+        let mut p = self.clone();
+        p.post.wmedian = self.post.wmedian.for_image(pixels);
+        p
+    }
+
     /// The fully connected weight ω the model actually uses (0 for `lcm` and `wta`).
     pub fn effective_fcm_weight(&self) -> f32 {
         match self.model {

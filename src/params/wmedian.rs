@@ -32,6 +32,10 @@ pub struct WmedianParams {
     /// same σ). With the measured noise σn it widens to √(σ² + 3σn²): noise adds 6σn² to the expected squared
     /// distance of two pixels of one colour.
     pub edge_sigma_rgb: f32,
+    /// The windows above (`radius`, `sigma_xy`, `edge_radius`) are stated for an image of this many pixels; a
+    /// larger one gets them × √(pixels / `reference_px`), so that they cover the same part of the scene
+    /// ([`WmedianParams::for_image`]). 0: the same in pixels at every size.
+    pub reference_px: f32,
 }
 
 impl Default for WmedianParams {
@@ -45,11 +49,34 @@ impl Default for WmedianParams {
             edge_band: 1,
             edge_radius: 5,
             edge_sigma_rgb: 10.0,
+            reference_px: 375_000.0,
         }
     }
 }
 
 impl WmedianParams {
+    /// The parameters for an image of `pixels` pixels: the windows grow with its side above `reference_px` (at
+    /// most 64 px), and stay as stated below it.
+    ///
+    /// They were tuned on MiddEval3 trainingQ (0.17 to 0.37 M pixels), where the first run's window must reach
+    /// across an occlusion and the second's across the band a window cost smears at a depth edge. Both are parts
+    /// of the scene, not numbers of pixels: on an image four times larger the same radius covers a quarter of it
+    /// (measured on MiddEval3 trainingH views and Middlebury 2005 at full size: docs/tuning-log.md, "The median's
+    /// windows follow the image").
+    pub fn for_image(&self, pixels: usize) -> WmedianParams {
+        if !(self.reference_px > 0.0) || pixels as f64 <= f64::from(self.reference_px) {
+            return self.clone();
+        }
+        let k = (pixels as f64 / f64::from(self.reference_px)).sqrt();
+        let grow = |r: usize| ((r as f64 * k).round() as usize).min(64);
+        WmedianParams {
+            radius: grow(self.radius),
+            sigma_xy: (f64::from(self.sigma_xy) * k) as f32,
+            edge_radius: grow(self.edge_radius),
+            ..self.clone()
+        }
+    }
+
     /// The filter's parameters in the second run, after the planes, on views with measured noise `noise` (σn, grey
     /// levels): `edge_radius`, and `edge_sigma_rgb` widened to √(σ² + 3σn²). Noise adds 6σn² to the expected squared
     /// RGB distance of two pixels of one colour; the σ² that keeps their weight is at least 3σn² more.
@@ -75,9 +102,38 @@ impl WmedianParams {
             return Err(Error::param("post.wmedian.edge_band", self.edge_band, "0 to 16"));
         }
         check_positive("post.wmedian.edge_sigma_rgb", self.edge_sigma_rgb)?;
+        if !(self.reference_px >= 0.0 && self.reference_px.is_finite()) {
+            return Err(Error::param("post.wmedian.reference_px", self.reference_px, "0 (off) or a number of pixels"));
+        }
         if !(self.edge_px >= 0.0 && self.edge_px.is_finite()) {
             return Err(Error::param("post.wmedian.edge_px", self.edge_px, "0 (off) or a positive number of pixels"));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_windows_follow_a_larger_image() {
+        let p = WmedianParams::default();
+        // MiddEval3 trainingQ's sizes, Teddy to Motorcycle: as stated.
+        for (w, h) in [(450, 375), (741, 497)] {
+            assert_eq!(p.for_image(w * h), p, "{w}×{h}");
+        }
+        // Four times the reference: twice the windows, the rest as stated.
+        let big = p.for_image(4 * 375_000);
+        assert_eq!((big.radius, big.edge_radius, big.sigma_xy), (2 * p.radius, 2 * p.edge_radius, 2.0 * p.sigma_xy));
+        assert_eq!((big.sigma_rgb, big.edge_px, big.edge_band), (p.sigma_rgb, p.edge_px, p.edge_band));
+        // At most the largest radius the parameters allow.
+        assert_eq!(p.for_image(400 * 375_000).radius, 64);
+        assert!(p.for_image(400 * 375_000).validate().is_ok());
+        // Off: the same in pixels at every size.
+        let fixed = WmedianParams { reference_px: 0.0, ..p.clone() };
+        assert_eq!(fixed.for_image(4 * 375_000), fixed);
+        assert!(WmedianParams { reference_px: -1.0, ..p.clone() }.validate().is_err());
+        assert!(WmedianParams { reference_px: f32::NAN, ..p }.validate().is_err());
     }
 }

@@ -168,6 +168,7 @@ fn fine_at_full_resolution(
     t: Timings,
 ) -> Result<PipelineOutput> {
     let (guide, cost_pair) = input.pairs(pair);
+    let params = &params.for_image(pair.left.width * pair.left.height);
     let fine = FineInput {
         guide,
         cost_pair,

@@ -103,8 +103,10 @@ pub fn run_tiled(
             cores.push(Rect { x0, y0, x1: (x0 + step).min(w), y1: (y0 + step).min(h) });
         }
     }
+    // The median's windows follow the whole image's size, not a tile's.
+    let sized = params.for_image(w * h);
     let job = TileJob {
-        params,
+        params: &sized,
         guide,
         cost_pair,
         cost_params: &input.cost_params,
@@ -112,7 +114,7 @@ pub fn run_tiled(
         noise: input.noise(),
         prior: &prior,
         margin,
-        halo: halo_px(params),
+        halo: halo_px(&sized),
         confidence: options.confidence,
     };
     let share = tile_share(plan.tile_budget_bytes);

@@ -57,7 +57,7 @@ pub(crate) fn plan_tiles(
     let beside = FULL_SIZE_BYTES_PER_PX * (width * height) as u64;
     let budget = limit_bytes.checked_sub(beside)?;
     // The smallest tile must fit even with the whole range as its window.
-    let side = MIN_CORE_PX + 2 * halo_px(params);
+    let side = MIN_CORE_PX + 2 * halo_px(&params.for_image(width * height));
     if estimate_memory_bytes((side + ndisp).min(width), side.min(height), ndisp, params) > tile_share(budget) {
         return None;
     }
