@@ -36,6 +36,11 @@ pub struct WmedianParams {
     /// larger one gets them × √(pixels / `reference_px`), so that they cover the same part of the scene
     /// ([`WmedianParams::for_image`]). 0: the same in pixels at every size.
     pub reference_px: f32,
+    /// The windows sample every `step`-th pixel in x and y from the target: set by [`WmedianParams::for_image`] to
+    /// the factor the windows grew by (rounded), so that a grown window holds about as many samples as the stated
+    /// one and costs about as much. Not a key (1 as configured).
+    #[serde(skip)]
+    pub step: usize,
 }
 
 impl Default for WmedianParams {
@@ -50,13 +55,14 @@ impl Default for WmedianParams {
             edge_radius: 5,
             edge_sigma_rgb: 10.0,
             reference_px: 375_000.0,
+            step: 1,
         }
     }
 }
 
 impl WmedianParams {
     /// The parameters for an image of `pixels` pixels: the windows grow with its side above `reference_px` (at
-    /// most 64 px), and stay as stated below it.
+    /// most 64 px) and are sampled every `step` pixels; below it they stay as stated.
     ///
     /// They were tuned on MiddEval3 trainingQ (0.17 to 0.37 M pixels), where the first run's window must reach
     /// across an occlusion and the second's across the band a window cost smears at a depth edge. Both are parts
@@ -64,15 +70,17 @@ impl WmedianParams {
     /// (measured on MiddEval3 trainingH views and Middlebury 2005 at full size: docs/tuning-log.md, "The median's
     /// windows follow the image").
     pub fn for_image(&self, pixels: usize) -> WmedianParams {
-        if !(self.reference_px > 0.0) || pixels as f64 <= f64::from(self.reference_px) {
+        let reference = f64::from(self.reference_px);
+        if reference.is_nan() || reference <= 0.0 || pixels as f64 <= reference {
             return self.clone();
         }
-        let k = (pixels as f64 / f64::from(self.reference_px)).sqrt();
+        let k = (pixels as f64 / reference).sqrt();
         let grow = |r: usize| ((r as f64 * k).round() as usize).min(64);
         WmedianParams {
             radius: grow(self.radius),
             sigma_xy: (f64::from(self.sigma_xy) * k) as f32,
             edge_radius: grow(self.edge_radius),
+            step: (k.round() as usize).max(1),
             ..self.clone()
         }
     }
@@ -127,6 +135,7 @@ mod tests {
         let big = p.for_image(4 * 375_000);
         assert_eq!((big.radius, big.edge_radius, big.sigma_xy), (2 * p.radius, 2 * p.edge_radius, 2.0 * p.sigma_xy));
         assert_eq!((big.sigma_rgb, big.edge_px, big.edge_band), (p.sigma_rgb, p.edge_px, p.edge_band));
+        assert_eq!((p.step, big.step, big.second_run(0.0).step), (1, 2, 2));
         // At most the largest radius the parameters allow.
         assert_eq!(p.for_image(400 * 375_000).radius, 64);
         assert!(p.for_image(400 * 375_000).validate().is_ok());

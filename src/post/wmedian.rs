@@ -93,7 +93,7 @@ pub fn weighted_median(
         .collect();
     let inv_rgb = 1.0 / (2.0 * p.sigma_rgb * p.sigma_rgb);
 
-    let ctx = RowContext { disp, targets, image, spatial: &spatial, radius: r, inv_rgb };
+    let ctx = RowContext { disp, targets, image, spatial: &spatial, radius: r, step: p.step.max(1), inv_rgb };
     out.data
         .par_chunks_mut(w)
         .enumerate()
@@ -109,6 +109,8 @@ struct RowContext<'a> {
     /// Spatial exponents |Δxy|²/2σ², indexed [(dy + r) * side + dx + r].
     spatial: &'a [f32],
     radius: usize,
+    /// The window's samples are every `step`-th pixel in x and y from the target (1: every pixel).
+    step: usize,
     /// 1/2σ_rgb².
     inv_rgb: f32,
 }
@@ -117,23 +119,39 @@ struct RowContext<'a> {
 /// AVX2 + FMA as well, picked at run time (same results).
 #[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 fn filter_row<'c>(ctx: &RowContext<'c>, scratch: &mut Scratch, y: usize, row: &mut [f32]) {
-    let RowContext { disp, targets, image, spatial, radius: r, inv_rgb } = *ctx;
+    let RowContext { disp, targets, image, spatial, radius: r, step, inv_rgb } = *ctx;
     let (w, h) = disp.dims();
     let side = 2 * r + 1;
     let [red, green, blue] = &image.channels;
     let trow = targets.row(y);
-    let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1));
+    // The window's first and last sample from `c` along an axis of `n` pixels: a multiple of `step` away.
+    let reach =
+        |c: usize, n: usize| (c - step * (r / step).min(c / step), c + step * (r / step).min((n - 1 - c) / step));
+    let (y0, y1) = reach(y, h);
     // The previous result on this row: a good guess for the next median (see `Scratch::median`).
     let mut last: Option<f32> = None;
     let mut guesses = GuessRate::default();
     for (x, (d_out, _)) in row.iter_mut().zip(trow).enumerate().filter(|(_, (_, t))| **t) {
-        let (x0, x1) = (x.saturating_sub(r), (x + r).min(w - 1));
+        let (x0, x1) = reach(x, w);
         let i = y * w + x;
         let (ci_r, ci_g, ci_b) = (red[i], green[i], blue[i]);
         scratch.vals.clear();
         scratch.wts.clear();
-        for yy in y0..=y1 {
+        for yy in (y0..=y1).step_by(step) {
             let base = yy * w;
+            if step > 1 {
+                for xx in (x0..=x1).step_by(step) {
+                    let (j, d) = (base + xx, disp.data[base + xx]);
+                    if d.is_finite() {
+                        let (dr, dg, db) = (red[j] - ci_r, green[j] - ci_g, blue[j] - ci_b);
+                        scratch.vals.push(d);
+                        scratch
+                            .wts
+                            .push(spatial[(yy + r - y) * side + xx + r - x] + (dr * dr + dg * dg + db * db) * inv_rgb);
+                    }
+                }
+                continue;
+            }
             let (dseg, rseg, gseg, bseg) = (
                 &disp.data[base + x0..=base + x1],
                 &red[base + x0..=base + x1],
@@ -482,7 +500,7 @@ mod tests {
     /// Reference filter: the same weights, computed naively, then the sort-based median.
     fn reference_filter(disp: &DisparityMap, image: &RgbImage, targets: &Plane<bool>, p: &WmedianParams) -> Vec<f32> {
         let (w, h) = disp.dims();
-        let r = p.radius as isize;
+        let (r, step) = (p.radius as isize, p.step.max(1) as isize);
         let mut out = disp.data.clone();
         for y in 0..h as isize {
             for x in 0..w as isize {
@@ -491,8 +509,10 @@ mod tests {
                     continue;
                 }
                 let mut items = Vec::new();
-                for yy in (y - r).max(0)..=(y + r).min(h as isize - 1) {
-                    for xx in (x - r).max(0)..=(x + r).min(w as isize - 1) {
+                // Offsets that are multiples of the step, at most the radius, inside the image.
+                let on_grid = |o: isize, c: isize, n: isize| o % step == 0 && (0..n).contains(&(c + o));
+                for yy in (-r..=r).filter(|&o| on_grid(o, y, h as isize)).map(|o| y + o) {
+                    for xx in (-r..=r).filter(|&o| on_grid(o, x, w as isize)).map(|o| x + o) {
                         let j = (yy as usize) * w + xx as usize;
                         if disp.data[j].is_finite() {
                             let dxy = ((xx - x).pow(2) + (yy - y).pow(2)) as f64;
@@ -771,6 +791,23 @@ mod tests {
             let mismatches = out.data.iter().zip(&expected).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
             assert_eq!(mismatches, 0, "radius {radius}");
         }
+    }
+
+    #[test]
+    fn a_sampled_window_matches_the_naive_reference() {
+        let (disp, img, targets) = random_scene(29, 19, 5);
+        for (radius, step) in [(4, 2), (5, 2), (7, 3), (2, 4)] {
+            let p = WmedianParams { radius, sigma_xy: 6.0, step, edge_px: 0.0, ..Default::default() };
+            let out = weighted_median(&disp, &img, &targets, &p);
+            let expected = reference_filter(&disp, &img, &targets, &p);
+            let mismatches = out.data.iter().zip(&expected).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+            assert_eq!(mismatches, 0, "radius {radius}, step {step}");
+        }
+        // Sampling leaves values out: not the full window's answer.
+        let p = WmedianParams { radius: 5, sigma_xy: 6.0, edge_px: 0.0, ..Default::default() };
+        let full = weighted_median(&disp, &img, &targets, &p);
+        let sampled = weighted_median(&disp, &img, &targets, &WmedianParams { step: 2, ..p });
+        assert_ne!(full.data, sampled.data);
     }
 
     #[test]
