@@ -28,8 +28,6 @@ Books that labels 99.0 % and 99.8 % of the ground-truth pixels as the shipped di
 """
 import importlib.util
 import os
-import shutil
-import sys
 
 import numpy as np
 
@@ -77,22 +75,7 @@ def build(b):
 
 
 def main():
-    if len(sys.argv) > 1 and sys.argv[1] in ('-h', '--help'):
-        print(__doc__)
-        sys.exit(0)
-    if len(sys.argv) != 3:
-        sys.exit(__doc__.split('\n\n')[1].strip())
-    src, out = sys.argv[1], os.path.normpath(sys.argv[2])
-    if os.path.lexists(out):
-        sys.exit(f'error: {out}: exists (give a new folder)')
-    # Built in a hidden folder beside OUT and renamed at the end: OUT appears whole or not at all.
-    partial = os.path.join(os.path.dirname(out) or '.', f'.{os.path.basename(out)}.partial-{os.getpid()}')
-    os.mkdir(partial)
-    try:
-        build(ood.Builder(src, os.path.join(partial, 'trainingX')))
-        os.rename(partial, out)
-    finally:
-        shutil.rmtree(partial, ignore_errors=True)
+    ood.run(__doc__, 'trainingX', build)
 
 
 if __name__ == '__main__':

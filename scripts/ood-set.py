@@ -188,12 +188,14 @@ class Builder:
                    f'mli0603/stereo-transformer 44703b0 {s}/*')
 
 
-def main():
+def run(doc, split, build):
+    """The command line `SCRIPT SRC OUT` of a set builder whose usage is `doc`: `build(builder)` fills OUT/split
+    through a Builder reading SRC; OUT must not exist and appears whole or not at all."""
     if len(sys.argv) > 1 and sys.argv[1] in ('-h', '--help'):
-        print(__doc__)
+        print(doc)
         sys.exit(0)
     if len(sys.argv) != 3:
-        sys.exit(__doc__.split('\n\n')[1].strip())
+        sys.exit(doc.split('\n\n')[1].strip())
     src, out = sys.argv[1], os.path.normpath(sys.argv[2])
     if os.path.lexists(out):
         sys.exit(f'error: {out}: exists (give a new folder)')
@@ -202,10 +204,14 @@ def main():
     # Created here (an existing folder of that name is an error), so the clean-up below only removes our own.
     os.mkdir(partial)
     try:
-        Builder(src, os.path.join(partial, 'trainingQ')).build()
+        build(Builder(src, os.path.join(partial, split)))
         os.rename(partial, out)
     finally:
         shutil.rmtree(partial, ignore_errors=True)
+
+
+def main():
+    run(__doc__, 'trainingQ', Builder.build)
 
 
 if __name__ == '__main__':

@@ -114,7 +114,7 @@ pub fn run_tiled(
         noise: input.noise(),
         prior: &prior,
         margin,
-        halo: halo_px(&sized),
+        halo: halo_px(params, w * h),
         confidence: options.confidence,
     };
     let share = tile_share(plan.tile_budget_bytes);
@@ -379,7 +379,7 @@ mod tests {
         assert!(e_many <= 1.1 * e_one + 0.05, "tiled {e_many:.3} px vs untiled {e_one:.3} px");
         assert!(e_one < 1.0, "the scene is matched: {e_one:.3} px");
         // A tight memory budget splits the cores further; the result is still the same problem.
-        let halo = halo_px(&params);
+        let halo = halo_px(&params, pair.left.width * pair.left.height);
         let need = estimate_memory_bytes(96 + 2 * halo + 40, 96 + 2 * halo, 40, &params);
         let split_plan = TilePlan { tile_budget_bytes: need / 2, ..tiles };
         let small = run_tiled(&params, &pair, &split_plan, &crate::pipeline::RunOptions::quiet()).unwrap();
@@ -467,7 +467,7 @@ mod tests {
                 noise: 0.0,
                 prior,
                 margin: 4,
-                halo: halo_px(&params),
+                halo: halo_px(&params, pair.left.width * pair.left.height),
                 confidence: false,
             };
             check(&job);

@@ -12,11 +12,13 @@ pub(crate) fn kernel_reach_px(params: &Params) -> usize {
     (3.0 * params.meanfield.sigma_xy).ceil() as usize
 }
 
-/// Pixels added on every side of a core: the fully connected kernel's reach, 3σx, plus the weighted median's
-/// radius (15 + 9 by default): beyond it no pixel of the core sees the crop's border (docs/tuning-log.md, "Label
-/// bands in tiles").
-pub(crate) fn halo_px(params: &Params) -> usize {
-    kernel_reach_px(params) + if params.post.wmedian.enabled { params.post.wmedian.radius } else { 0 }
+/// Pixels added on every side of a core of an image of `pixels` pixels: the fully connected kernel's reach, 3σx,
+/// plus the weighted median's radius at that image's size (15 + 9 by default up to 0.375 M pixels;
+/// [`crate::params::WmedianParams::for_image`]): beyond it no pixel of the core sees the crop's border
+/// (docs/tuning-log.md, "Label bands in tiles").
+pub(crate) fn halo_px(params: &Params, pixels: usize) -> usize {
+    let wm = &params.post.wmedian;
+    kernel_reach_px(params) + if wm.enabled { wm.for_image(pixels).radius } else { 0 }
 }
 
 /// The smallest core a tile is split down to.
@@ -57,7 +59,7 @@ pub(crate) fn plan_tiles(
     let beside = FULL_SIZE_BYTES_PER_PX * (width * height) as u64;
     let budget = limit_bytes.checked_sub(beside)?;
     // The smallest tile must fit even with the whole range as its window.
-    let side = MIN_CORE_PX + 2 * halo_px(&params.for_image(width * height));
+    let side = MIN_CORE_PX + 2 * halo_px(params, width * height);
     if estimate_memory_bytes((side + ndisp).min(width), side.min(height), ndisp, params) > tile_share(budget) {
         return None;
     }
