@@ -85,6 +85,14 @@ pub struct MeanFieldParams {
     pub pyramid_levels: usize,
     /// Iterations at each level finer than the coarsest (with `pyramid_levels` > 1).
     pub pyramid_iterations: usize,
+    /// The inference's labels are stated for an image of this many pixels: a larger one's fine pass infers on
+    /// labels grouped `label_step` at a time and recovers the full labels from the cost
+    /// ([`MeanFieldParams::for_image`]). 0: every label at every size.
+    pub reference_px: f32,
+    /// Labels grouped this many at a time for the inference: set by [`MeanFieldParams::for_image`]. Not a key (1 as
+    /// configured).
+    #[serde(skip)]
+    pub label_step: usize,
 }
 
 impl Default for MeanFieldParams {
@@ -111,11 +119,30 @@ impl Default for MeanFieldParams {
             schedule: Schedule::Checkerboard,
             pyramid_levels: 1,
             pyramid_iterations: 10,
+            reference_px: 375_000.0,
+            label_step: 1,
         }
     }
 }
 
 impl MeanFieldParams {
+    /// The parameters for an image of `pixels` pixels: above `reference_px`, labels grouped k at a time, k =
+    /// √(pixels / `reference_px`) rounded (the factor its side exceeds the reference by); below, every label.
+    ///
+    /// A disparity label is a pixel, so a larger image of the same scene has proportionally more of them, and the
+    /// inference's work grows with pixels × labels. Which surface a pixel belongs to needs no finer labels than the
+    /// reference size's; the larger image's finer disparity is recovered from the cost afterwards
+    /// (`crate::pipeline`'s label step; measured on MiddEval3 trainingH views and Middlebury 2005 at full size:
+    /// docs/tuning-log.md, "Inference on grouped labels").
+    pub fn for_image(&self, pixels: usize) -> MeanFieldParams {
+        let reference = f64::from(self.reference_px);
+        if reference.is_nan() || reference <= 0.0 || pixels as f64 <= reference {
+            return self.clone();
+        }
+        let k = (pixels as f64 / reference).sqrt();
+        MeanFieldParams { label_step: (k.round() as usize).clamp(1, 8), ..self.clone() }
+    }
+
     /// Checks every value's range.
     ///
     /// # Errors
@@ -159,6 +186,35 @@ impl MeanFieldParams {
         check_nonneg("meanfield.lambda1", self.lambda1)?;
         check_nonneg("meanfield.lambda2", self.lambda2)?;
         check_nonneg("meanfield.lambda3", self.lambda3)?;
+        if !(self.reference_px >= 0.0 && self.reference_px.is_finite()) {
+            return Err(Error::param("meanfield.reference_px", self.reference_px, "0 (off) or a number of pixels"));
+        }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_labels_group_above_the_reference() {
+        let p = MeanFieldParams::default();
+        // MiddEval3 trainingQ's sizes, Teddy to Motorcycle: every label.
+        for (w, h) in [(450, 375), (741, 497)] {
+            assert_eq!(p.for_image(w * h), p, "{w}×{h}");
+        }
+        // The side grown by k: labels grouped round(k) at a time (1.34 → 1, 1.98 → 2), nothing else changed.
+        assert_eq!(p.for_image(900 * 750).label_step, 1);
+        let big = p.for_image(1482 * 994);
+        assert_eq!(big.label_step, 2);
+        assert_eq!(MeanFieldParams { label_step: 1, ..big }, p);
+        assert_eq!(p.for_image(9 * 375_000).label_step, 3);
+        assert_eq!(p.for_image(10_000 * 375_000).label_step, 8);
+        // Off: every label at every size.
+        let every = MeanFieldParams { reference_px: 0.0, ..p.clone() };
+        assert_eq!(every.for_image(16 * 375_000), every);
+        assert!(MeanFieldParams { reference_px: -1.0, ..p.clone() }.validate().is_err());
+        assert!(MeanFieldParams { reference_px: f32::INFINITY, ..p }.validate().is_err());
     }
 }

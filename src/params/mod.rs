@@ -269,12 +269,14 @@ impl Params {
         warnings
     }
 
-    /// The parameters a fine pass on an image of `pixels` pixels runs with: the weighted median's windows follow
-    /// the image's size ([`WmedianParams::for_image`]). A coarse level or a tile starts again from the stated
-    /// parameters with its own image's size (a tile: the whole image's).
+    /// The parameters a fine pass on an image of `pixels` pixels runs with: the weighted median's windows and the
+    /// inference's labels follow the image's size ([`WmedianParams::for_image`], [`MeanFieldParams::for_image`]). A
+    /// coarse level or a tile starts again from the stated parameters with its own image's size (a tile: the whole
+    /// image's; a tile's fine pass searches label windows and bands, so its labels are never grouped).
     pub fn for_image(&self, pixels: usize) -> Params {
         let mut p = self.clone();
         p.post.wmedian = self.post.wmedian.for_image(pixels);
+        p.meanfield = self.meanfield.for_image(pixels);
         p
     }
 

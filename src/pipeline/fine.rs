@@ -10,6 +10,7 @@ use crate::image::{CostVolume, DisparityMap, Plane, RgbImage, StereoPair};
 use crate::params::{self, LrcMode, MeanFieldParams, Model, Params};
 use crate::{cost, meanfield, post};
 
+use super::label_step;
 use super::output::{PipelineOutput, Timings};
 use super::prior::Prior;
 
@@ -212,6 +213,10 @@ impl Pass<'_> {
         let need_right = params.post.lrc.mode != LrcMode::Off;
         let iterations = self.input.views.map_or([params.meanfield.iterations; 2], |v| v.iterations);
         let LeftVolume { cost: cost_left, bands: left_bands, .. } = volume;
+        let step = params.meanfield.label_step;
+        if step > 1 && left_from == 0 && left_bands.is_none() && params.model != Model::Wta {
+            return self.infer_grouped(cost_left, guide_left, iterations, buffers, on_stage, t);
+        }
         let (left, cost_right) = if left_from > 0 {
             let cost_right = need_right.then(|| self.right_volume(&cost_left, buffers, t));
             let kept = t.time("cost", || cost_left.into_columns_from(left_from));
@@ -248,6 +253,45 @@ impl Pass<'_> {
             buffers.recycle(cost_right.data);
             right
         });
+        (left, right)
+    }
+
+    /// [`Pass::infer_views`] on labels grouped `label_step` at a time (a large image; [`label_step`]): each view's
+    /// grouped volume from the full left one, its inference, and its decoded map brought back to the full labels
+    /// by the full volume. Alive at most: the full volume, one grouped volume and a view's marginals (the full
+    /// volume and two halves at step 2, against three full volumes on every label).
+    fn infer_grouped(
+        &self,
+        full: CostVolume,
+        guide_left: &RgbImage,
+        iterations: [usize; 2],
+        buffers: &mut meanfield::Buffers,
+        on_stage: &dyn Fn(&str),
+        t: &mut Timings,
+    ) -> (ViewEstimate, Option<ViewEstimate>) {
+        let params = self.params;
+        let step = params.meanfield.label_step;
+        let out_of_view = cost::truncation_cost(&params.cost);
+        let mut infer = |side: label_step::View, image: &RgbImage, iterations: usize, local_only: bool| {
+            let storage = buffers.take(full.data.len().div_ceil(step));
+            let grouped =
+                t.time("group labels", || label_step::grouped_volume(&full, side, step, out_of_view, storage));
+            let mut estimate =
+                estimate_view(params, View { image, cost: &grouped, iterations, local_only }, None, t, buffers);
+            buffers.recycle(grouped.data);
+            t.time("refine labels", || {
+                label_step::refine_from_full(&mut estimate.disparity, &full, side, step, out_of_view);
+            });
+            estimate
+        };
+        let left = infer(label_step::View::Left, guide_left, iterations[0], false);
+        let right = (params.post.lrc.mode != LrcMode::Off).then(|| {
+            on_stage("inference (right)");
+            // Only a model with both terms has a local term to keep.
+            let local_only = self.input.views.is_some_and(|v| v.right_local_only) && params.model == Model::Jem;
+            infer(label_step::View::Right, &self.input.guide.right, iterations[1], local_only)
+        });
+        buffers.recycle(full.data);
         (left, right)
     }
 

@@ -13,6 +13,7 @@
 //! (what a run returns: [`PipelineOutput`], [`Measured`], [`Timings`]).
 
 mod fine;
+mod label_step;
 mod output;
 mod prepared;
 mod prior;
