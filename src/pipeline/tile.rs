@@ -37,7 +37,7 @@
 //! a core is split while its four quarters are less work in all than it is by a fifth (docs/tuning-log.md,
 //! "Serial work in the tiles").
 //!
-//! **Memory.** Each tile needs [`crate::setup::memory::estimate_memory_bytes`] for its crop and window, plus one volume
+//! **Memory.** Each tile needs [`crate::setup::memory::estimate_tile_bytes`] for its crop and window, plus one volume
 //! for what the allocator keeps of freed volumes and one for the right view's volume, derived before the left view's
 //! inference (`tile_need`); a core whose tile would exceed nine tenths of the budget (the rest is left for what the
 //! allocator keeps between tiles) is split in four until it fits (or reaches [`MIN_CORE_PX`]). One tile at a time is
@@ -59,7 +59,7 @@ use super::output::{PipelineOutput, Timings};
 use super::prepared::Prepared;
 use super::prior::{CoarseLevel, Prior};
 use super::window::{Rect, cut_pairs, cut_plane, window_in};
-use crate::setup::memory::estimate_memory_bytes;
+use crate::setup::memory::estimate_tile_bytes;
 use crate::setup::strategy::{MIN_CORE_PX, TilePlan, halo_px, tile_share};
 
 /// Runs the pipeline on `pair` in tiles (see the module doc).
@@ -156,14 +156,14 @@ pub fn run_tiled(
     Ok(out)
 }
 
-/// The memory a tile plans for: [`crate::setup::memory::estimate_memory_bytes`] of its crop and window, plus one volume
+/// The memory a tile plans for: [`crate::setup::memory::estimate_tile_bytes`] of its crop and window, plus one volume
 /// (crop pixels × labels × 4 bytes): inside a tile the allocator keeps some of what is freed (a volume freed on
 /// the heap leaves a hole the next, larger one does not fit). Measured on a 1280×960 scene of 160 labels under
 /// `--max-memory 300M` (tests/cli.rs): one tile used 182 MiB against an estimate of 148. Plus the right view's
 /// volume, which a tile derives before the left view's inference (`fine_pass`): three volumes are alive then.
 fn tile_need(tile: &Tile, params: &Params) -> u64 {
     let (w, h) = (tile.crop.x1 - tile.crop.x0, tile.crop.y1 - tile.crop.y0);
-    estimate_memory_bytes(w, h, tile.labels, params) + 2 * 4 * tile.work()
+    estimate_tile_bytes(w, h, tile.labels, params) + 2 * 4 * tile.work()
 }
 
 /// The four quarters of a core (fewer for a thin one), in row-major order.
@@ -380,7 +380,7 @@ mod tests {
         assert!(e_one < 1.0, "the scene is matched: {e_one:.3} px");
         // A tight memory budget splits the cores further; the result is still the same problem.
         let halo = halo_px(&params, pair.left.width * pair.left.height);
-        let need = estimate_memory_bytes(96 + 2 * halo + 40, 96 + 2 * halo, 40, &params);
+        let need = estimate_tile_bytes(96 + 2 * halo + 40, 96 + 2 * halo, 40, &params);
         let split_plan = TilePlan { tile_budget_bytes: need / 2, ..tiles };
         let small = run_tiled(&params, &pair, &split_plan, &crate::pipeline::RunOptions::quiet()).unwrap();
         let (e_small, _, apart) = compare(&small.disparity, &one.disparity, &scene.gt, &scene.mask);

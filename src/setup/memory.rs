@@ -20,6 +20,8 @@ use crate::scale;
 /// - coarse-to-fine (`meanfield.pyramid_levels` = L > 1): each coarse level k < L adds its volume and marginals
 ///   (and next Q with Jacobi) at 4^−k of the size, at most 2/3 (1) of a volume more;
 /// - WTA: one volume, two with the left-right check (both views' cost volumes);
+/// - on labels grouped k at a time (an image above `meanfield.reference_px`, run whole: [`Params::for_image`]):
+///   the full cost volume beside the above at 1/k of the labels (1 + 4/k volumes for JEM and FCM);
 /// - plus ~300 bytes per pixel: the images, the lattice's per-pixel tables, the maps of the post-processing; and
 ///   [`COST_MINIMA_BYTES_PER_PX`], the cost's lowest minima kept for the confidence while the volume is built;
 /// - plus the process itself, [`PROCESS_BYTES`].
@@ -69,7 +71,21 @@ fn reduced_run_bytes(width: usize, height: usize, ndisp: usize, params: &Params,
         Model::Wta => 0,
         _ => (1..params.meanfield.pyramid_levels as u32).map(|k| (2 + next_q) * volume.div_ceil(4u64.pow(k))).sum(),
     };
-    volumes * volume + pyramid + (300 + COST_MINIMA_BYTES_PER_PX) * n + PROCESS_BYTES
+    // Labels grouped k at a time: the full volume stays beside the inference's (see `crate::pipeline`'s label step).
+    let groups = match params.model {
+        Model::Wta => 1,
+        _ => params.meanfield.for_image(w * h).label_step.max(1) as u64,
+    };
+    let inference = (volumes * volume + pyramid).div_ceil(groups);
+    let full = if groups > 1 { volume } else { 0 };
+    full + inference + (300 + COST_MINIMA_BYTES_PER_PX) * n + PROCESS_BYTES
+}
+
+/// [`estimate_memory_bytes`] for a tile's crop: a tile searches its label window in bands, on every label.
+pub(crate) fn estimate_tile_bytes(width: usize, height: usize, ndisp: usize, params: &Params) -> u64 {
+    let mut every_label = params.clone();
+    every_label.meanfield.reference_px = 0.0;
+    estimate_memory_bytes(width, height, ndisp, &every_label)
 }
 
 /// Bytes per input pixel a downscaled run holds at the input's size, at the most: the pair (24), the maps brought
@@ -228,6 +244,25 @@ mod tests {
         pyramid.meanfield.pyramid_levels = 2;
         let extra = estimate_memory_bytes(720, 480, 190, &pyramid) - estimate_memory_bytes(720, 480, 190, &lcm);
         assert_eq!(extra, 2 * volume / 4);
+    }
+
+    #[test]
+    fn memory_estimate_follows_grouped_labels() {
+        let p = Params::default();
+        let mut every = p.clone();
+        every.meanfield.reference_px = 0.0;
+        // Motorcycle H: 1482x994, 140 labels, grouped 2 at a time: the full volume plus 4 volumes of half the
+        // labels (measured: 2127 MiB peak against this 2831 MiB).
+        let (n, volume) = (1482 * 994, 4 * 1482 * 994 * 140);
+        let grouped = estimate_memory_bytes(1482, 994, 140, &p);
+        assert_eq!(grouped, volume + 4 * volume / 2 + 324 * n + PROCESS_BYTES);
+        assert_eq!(estimate_memory_bytes(1482, 994, 140, &every), 4 * volume + 324 * n + PROCESS_BYTES);
+        // A tile searches every label of its window: its crop is counted as such, whatever its size.
+        assert_eq!(estimate_tile_bytes(1482, 994, 140, &p), estimate_memory_bytes(1482, 994, 140, &every));
+        // WTA and the sizes below the reference are not grouped.
+        let wta = Params { model: Model::Wta, ..p.clone() };
+        assert_eq!(estimate_memory_bytes(1482, 994, 140, &wta), 2 * volume + 324 * n + PROCESS_BYTES);
+        assert_eq!(estimate_memory_bytes(741, 497, 70, &p), estimate_memory_bytes(741, 497, 70, &every));
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! memory model ([`super::memory`]) before anything large is allocated. The tiled run itself is the pipeline's
 //! (`pipeline/tile.rs`, whose module doc explains the cut and the memory of a tile).
 
-use super::memory::{check_memory, coarse_level_bytes, estimate_memory_bytes};
+use super::memory::{check_memory, coarse_level_bytes, estimate_memory_bytes, estimate_tile_bytes};
 use crate::error::Result;
 use crate::params::Params;
 
@@ -60,7 +60,7 @@ pub(crate) fn plan_tiles(
     let budget = limit_bytes.checked_sub(beside)?;
     // The smallest tile must fit even with the whole range as its window.
     let side = MIN_CORE_PX + 2 * halo_px(params, width * height);
-    if estimate_memory_bytes((side + ndisp).min(width), side.min(height), ndisp, params) > tile_share(budget) {
+    if estimate_tile_bytes((side + ndisp).min(width), side.min(height), ndisp, params) > tile_share(budget) {
         return None;
     }
     let mut coarse = params.clone();
