@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{check_nonneg, check_positive};
+use super::{check_nonneg, check_positive, check_reference_px, side_growth};
 use crate::error::{Error, Result};
 
 /// Normalisation of the bilateral (fully connected) message.
@@ -135,11 +135,7 @@ impl MeanFieldParams {
     /// (`crate::pipeline`'s label step; measured on MiddEval3 trainingH views and Middlebury 2005 at full size:
     /// docs/tuning-log.md, "Inference on grouped labels").
     pub fn for_image(&self, pixels: usize) -> MeanFieldParams {
-        let reference = f64::from(self.reference_px);
-        if reference.is_nan() || reference <= 0.0 || pixels as f64 <= reference {
-            return self.clone();
-        }
-        let k = (pixels as f64 / reference).sqrt();
+        let Some(k) = side_growth(self.reference_px, pixels) else { return self.clone() };
         MeanFieldParams { label_step: (k.round() as usize).clamp(1, 8), ..self.clone() }
     }
 
@@ -186,10 +182,7 @@ impl MeanFieldParams {
         check_nonneg("meanfield.lambda1", self.lambda1)?;
         check_nonneg("meanfield.lambda2", self.lambda2)?;
         check_nonneg("meanfield.lambda3", self.lambda3)?;
-        if !(self.reference_px >= 0.0 && self.reference_px.is_finite()) {
-            return Err(Error::param("meanfield.reference_px", self.reference_px, "0 (off) or a number of pixels"));
-        }
-        Ok(())
+        check_reference_px("meanfield.reference_px", self.reference_px)
     }
 }
 

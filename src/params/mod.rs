@@ -297,6 +297,19 @@ impl Params {
     }
 }
 
+/// How many times the side of an image of `pixels` pixels exceeds that of one of `reference_px`: √(pixels /
+/// `reference_px`) above it; `None` at or below it, or with the reference off (0). The rule by which parameters
+/// stated for trainingQ's sizes follow a larger image ([`WmedianParams::for_image`], [`MeanFieldParams::for_image`]).
+pub(crate) fn side_growth(reference_px: f32, pixels: usize) -> Option<f64> {
+    let reference = f64::from(reference_px);
+    (reference > 0.0 && pixels as f64 > reference).then(|| (pixels as f64 / reference).sqrt())
+}
+
+/// Errors unless `v` is a size of reference for [`side_growth`]: 0 (off) or a finite number of pixels.
+pub(crate) fn check_reference_px(name: &str, v: f32) -> Result<()> {
+    if v >= 0.0 && v.is_finite() { Ok(()) } else { Err(Error::param(name, v, "0 (off) or a number of pixels")) }
+}
+
 /// Errors unless `v` is finite and ≥ 0.
 pub(crate) fn check_nonneg(name: &str, v: f32) -> Result<()> {
     if v.is_finite() && v >= 0.0 { Ok(()) } else { Err(Error::param(name, v, "a finite number >= 0")) }

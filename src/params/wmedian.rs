@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::check_positive;
+use super::{check_positive, check_reference_px, side_growth};
 use crate::error::{Error, Result};
 
 /// Weighted-median parameters.
@@ -70,11 +70,7 @@ impl WmedianParams {
     /// (measured on MiddEval3 trainingH views and Middlebury 2005 at full size: docs/tuning-log.md, "The median's
     /// windows follow the image").
     pub fn for_image(&self, pixels: usize) -> WmedianParams {
-        let reference = f64::from(self.reference_px);
-        if reference.is_nan() || reference <= 0.0 || pixels as f64 <= reference {
-            return self.clone();
-        }
-        let k = (pixels as f64 / reference).sqrt();
+        let Some(k) = side_growth(self.reference_px, pixels) else { return self.clone() };
         let grow = |r: usize| ((r as f64 * k).round() as usize).min(64);
         WmedianParams {
             radius: grow(self.radius),
@@ -110,9 +106,7 @@ impl WmedianParams {
             return Err(Error::param("post.wmedian.edge_band", self.edge_band, "0 to 16"));
         }
         check_positive("post.wmedian.edge_sigma_rgb", self.edge_sigma_rgb)?;
-        if !(self.reference_px >= 0.0 && self.reference_px.is_finite()) {
-            return Err(Error::param("post.wmedian.reference_px", self.reference_px, "0 (off) or a number of pixels"));
-        }
+        check_reference_px("post.wmedian.reference_px", self.reference_px)?;
         if !(self.edge_px >= 0.0 && self.edge_px.is_finite()) {
             return Err(Error::param("post.wmedian.edge_px", self.edge_px, "0 (off) or a positive number of pixels"));
         }

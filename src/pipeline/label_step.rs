@@ -52,10 +52,9 @@ pub(crate) fn grouped_volume(
     out_of_view: f32,
     storage: Vec<f32>,
 ) -> CostVolume {
-    let (w, h, m) = (full.width, full.height, full.ndisp);
-    let groups = m.div_ceil(step.max(1));
+    let (w, h, m, step) = (full.width, full.height, full.ndisp, step.max(1));
+    let groups = m.div_ceil(step);
     let mut data = crate::image::reuse_storage(storage, w * h * groups); // every entry is written below
-    let step = step.max(1);
     data.par_chunks_mut(w * groups).enumerate().for_each(|(y, out)| {
         let row = &full.data[y * w * m..][..w * m];
         match view {
