@@ -58,13 +58,18 @@ pub(crate) fn grouped_volume(
     data.par_chunks_mut(w * groups).enumerate().for_each(|(y, out)| {
         let row = &full.data[y * w * m..][..w * m];
         match view {
-            View::Left => {
-                for (out, costs) in out.chunks_exact_mut(groups).zip(row.chunks_exact(m)) {
-                    for (o, members) in out.iter_mut().zip(costs.chunks(step)) {
-                        *o = members.iter().copied().fold(f32::INFINITY, f32::min);
+            View::Left => match step {
+                2 => group_left_row::<2>(row, m, out),
+                3 => group_left_row::<3>(row, m, out),
+                4 => group_left_row::<4>(row, m, out),
+                _ => {
+                    for (out, costs) in out.chunks_exact_mut(groups).zip(row.chunks_exact(m)) {
+                        for (o, members) in out.iter_mut().zip(costs.chunks(step)) {
+                            *o = lowest(members);
+                        }
                     }
                 }
-            }
+            },
             View::Right => group_right_row(row, m, step, out_of_view, out),
         }
     });
@@ -86,9 +91,34 @@ fn group_right_row(row: &[f32], m: usize, step: usize, out_of_view: f32, out: &m
         }
     }
     for (xl, costs) in row.chunks_exact(m).enumerate() {
-        for (d, &c) in costs.iter().enumerate().take(xl + 1) {
-            let o = &mut out[(xl - d) * groups + d / step];
-            *o = o.min(c);
+        // Label d = g·step + j goes to right pixel xl − d, group g (d ≤ xl).
+        for (g, members) in costs[..(xl + 1).min(m)].chunks(step).enumerate() {
+            for (j, &c) in members.iter().enumerate() {
+                let o = &mut out[(xl - g * step - j) * groups + g];
+                *o = o.min(c);
+            }
+        }
+    }
+}
+
+/// The lowest of `members` (∞ for none).
+#[inline(always)]
+fn lowest(members: &[f32]) -> f32 {
+    members.iter().copied().fold(f32::INFINITY, f32::min)
+}
+
+/// One row of the left view's grouped volume, `STEP` labels a group (a constant, so that the groups of a pixel are
+/// taken as whole vectors): each pixel's `m` costs of `row` into its `m.div_ceil(STEP)` groups of `out`.
+fn group_left_row<const STEP: usize>(row: &[f32], m: usize, out: &mut [f32]) {
+    let (whole, groups) = (m / STEP, m.div_ceil(STEP));
+    for (out, costs) in out.chunks_exact_mut(groups).zip(row.chunks_exact(m)) {
+        let (head, tail) = costs.split_at(whole * STEP);
+        let (out_head, out_tail) = out.split_at_mut(whole);
+        for (o, members) in out_head.iter_mut().zip(head.chunks_exact(STEP)) {
+            *o = members[1..].iter().fold(members[0], |a, &b| a.min(b));
+        }
+        if let Some(o) = out_tail.first_mut() {
+            *o = lowest(tail);
         }
     }
 }
@@ -161,10 +191,10 @@ mod tests {
     /// Each group holds the lowest of its labels' costs, the right view's read through the derived right volume.
     #[test]
     fn a_group_holds_its_lowest_label() {
-        let (w, h, m, oov) = (9, 4, 7, 5.0);
-        let full = random_volume(w, h, m, 3);
-        let right = derive_right_volume(&full, oov);
-        for step in [1, 2, 3] {
+        let (w, h, oov) = (9, 4, 5.0);
+        for (m, step) in [7, 8].into_iter().flat_map(|m| (1..=5).map(move |step| (m, step))) {
+            let full = random_volume(w, h, m, 3);
+            let right = derive_right_volume(&full, oov);
             for (view, reference) in [(View::Left, &full), (View::Right, &right)] {
                 let grouped = grouped_volume(&full, view, step, oov, Vec::new());
                 assert_eq!(grouped.ndisp, m.div_ceil(step));
@@ -172,7 +202,11 @@ mod tests {
                     for (g, &c) in grouped.pixel(i).iter().enumerate() {
                         let members = &reference.pixel(i)[g * step..((g + 1) * step).min(m)];
                         let lowest = members.iter().copied().fold(f32::INFINITY, f32::min);
-                        assert_eq!(c.to_bits(), lowest.to_bits(), "{view:?} step {step} pixel {i} group {g}");
+                        assert_eq!(
+                            c.to_bits(),
+                            lowest.to_bits(),
+                            "{view:?} {m} labels, step {step}, pixel {i} group {g}"
+                        );
                     }
                 }
             }
