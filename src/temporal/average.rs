@@ -134,6 +134,26 @@ impl AnswerMean {
     }
 }
 
+/// Where a moving frame's answer agrees with the previous answer carried into it (within [`AGREE_PX`], at a pixel
+/// the frames agree on), the answer moves [`CARRIED_SHARE`] of the way to the carried one: a surface seen in both
+/// frames keeps its disparity from frame to frame instead of taking each frame's own error, and since the carried
+/// answer is the previous frame's answer so carried, each is a running mean over the frames that saw the surface
+/// (older frames weigh less by half each frame). Where they disagree (a depth edge moved, something moved, one of
+/// them wrong) the frame's own answer stands.
+pub(crate) fn carry_answer(answer: &mut DisparityMap, carried: &DisparityMap, released: &Plane<bool>) {
+    for ((d, &c), &r) in answer.data.iter_mut().zip(&carried.data).zip(&released.data) {
+        if !r && d.is_finite() && c.is_finite() && (c - *d).abs() <= AGREE_PX {
+            *d += CARRIED_SHARE * (c - *d);
+        }
+    }
+}
+
+/// The share of the carried answer in a moving frame's answer where the two agree ([`carry_answer`]).
+const CARRIED_SHARE: f32 = 0.5;
+/// How close (px) a moving frame's answer and the carried one must be to be the same surface ([`carry_answer`]):
+/// the left-right check's threshold.
+const AGREE_PX: f32 = 1.0;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -213,5 +233,19 @@ mod tests {
         // Where the views started again (one frame in their mean), the new answer.
         m.fold(&Plane::from_parts(2, 1, vec![40.0, 6.0]), &Plane::from_parts(2, 1, vec![1, 4]));
         assert_eq!(m.mean.data[0], 40.0);
+    }
+
+    #[test]
+    fn a_moving_frame_keeps_half_of_the_carried_answer_where_they_agree() {
+        let inf = f32::INFINITY;
+        let carried = Plane::from_parts(6, 1, vec![10.0, 10.0, 10.0, 10.0, inf, 10.0]);
+        let mut answer = Plane::from_parts(6, 1, vec![10.8, 12.0, 9.2, 10.6, 7.0, inf]);
+        let released = Plane::from_parts(6, 1, vec![false, false, false, true, false, false]);
+        carry_answer(&mut answer, &carried, &released);
+        // Within 1 px: half-way; 2 px apart, released, or either one missing: the frame's own answer.
+        for (i, want) in [10.4, 12.0, 9.6, 10.6, 7.0].into_iter().enumerate() {
+            assert!((answer.data[i] - want).abs() < 1e-5, "pixel {i}: {} against {want}", answer.data[i]);
+        }
+        assert!(!answer.data[5].is_finite());
     }
 }

@@ -49,7 +49,7 @@ use crate::error::Result;
 use crate::image::{Plane, StereoPair};
 use crate::params::Params;
 use crate::pipeline::{self, FramePrior, FrameViews, PipelineOutput, RunOptions};
-use average::{AnswerMean, ViewMeans};
+use average::{AnswerMean, ViewMeans, carry_answer};
 use egomotion::Motion;
 pub use exposure::Exposure;
 use motion::Shift;
@@ -160,7 +160,9 @@ pub(crate) fn match_frame(
             state.still = None;
             let (carried, released, motion) = carry_previous(&prev, &c, &grey, noise, unexplained);
             motion_time = Some(start.elapsed());
-            let out = moving_frame(params, pair, carried, released, motion.is_some(), options)?;
+            let (before, held) = (carried.disparity.clone(), released.clone());
+            let mut out = moving_frame(params, pair, carried, released, motion.is_some(), options)?;
+            carry_answer(&mut out.disparity, &before, &held);
             let kind = match motion {
                 Some(m) => FrameKind::Travelling { tracks: m.inliers as u32 },
                 None => FrameKind::Moving { dx: c.shift.dx as i32, dy: c.shift.dy as i32 },
@@ -303,8 +305,9 @@ fn beyond_shift(
 /// a 3D motion (`travelling`), the prior weighs [`TRAVELLING_PRIOR_SCALE`] times more, both views run the
 /// configured inference, and each pixel's inference is kept to a band of labels around the carried answer (the
 /// tiles' label bands: the answers within the fully connected kernel's reach, ± the prior's margin and truncation,
-/// and the pixel's own best label): on KITTI frames 0–11 it made the answers more consistent (2.42 → 2.11 px) and
-/// the frames 2.2× cheaper.
+/// and the pixel's own best label): on KITTI frames 0–11 it made the answers more consistent (2.42 → 2.11 px). It
+/// saves no time there: the bands average a third of the labels, but the banded update still reads marginals laid
+/// out for every label (docs/tuning-log.md, "Label bands in a travelling frame").
 fn moving_frame(
     params: &Params,
     pair: &StereoPair,
