@@ -35,6 +35,9 @@
 //!   where the previous view seen through the motion disagrees with the current one, with twice the prior's weight,
 //!   both views' full inference and each pixel's labels kept to a band around the carried answer.
 //!
+//! A moving or travelling frame's answer then moves half-way to the carried one wherever the two agree within 1 px
+//! and the frames agree ([`average::carry_answer`]): each surface keeps a running mean of its disparity.
+//!
 //! Frames run this way only when the pipeline runs whole and at full resolution (no tiles, `downscale` 1);
 //! otherwise each frame is matched alone. The search range is held from the first frame (a measured range is
 //! measured once). Measurements: docs/tuning-log.md, "Stereo video".
@@ -307,7 +310,7 @@ fn beyond_shift(
 /// tiles' label bands: the answers within the fully connected kernel's reach, ± the prior's margin and truncation,
 /// and the pixel's own best label): on KITTI frames 0–11 it made the answers more consistent (2.42 → 2.11 px). It
 /// saves no time there: the bands average a third of the labels, but the banded update still reads marginals laid
-/// out for every label (docs/tuning-log.md, "Label bands in a travelling frame").
+/// out for every label (docs/tuning-log.md, "Session 41").
 fn moving_frame(
     params: &Params,
     pair: &StereoPair,
