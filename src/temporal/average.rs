@@ -151,7 +151,7 @@ pub(crate) fn carry_answer(answer: &mut DisparityMap, carried: &DisparityMap, re
 /// The share of the carried answer in a moving frame's answer where the two agree ([`carry_answer`]).
 const CARRIED_SHARE: f32 = 0.5;
 /// How close (px) a moving frame's answer and the carried one must be to be the same surface ([`carry_answer`]):
-/// the left-right check's threshold.
+/// as close as the left-right check's default asks of the two views' answers.
 const AGREE_PX: f32 = 1.0;
 
 #[cfg(test)]

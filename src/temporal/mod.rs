@@ -308,9 +308,9 @@ fn beyond_shift(
 /// a 3D motion (`travelling`), the prior weighs [`TRAVELLING_PRIOR_SCALE`] times more, both views run the
 /// configured inference, and each pixel's inference is kept to a band of labels around the carried answer (the
 /// tiles' label bands: the answers within the fully connected kernel's reach, ± the prior's margin and truncation,
-/// and the pixel's own best label): on KITTI frames 0–11 it made the answers more consistent (2.42 → 2.11 px). It
-/// saves no time there: the bands average a third of the labels, but the banded update still reads marginals laid
-/// out for every label (docs/tuning-log.md, "Session 41").
+/// and the pixel's own best label), which makes the answers more consistent from frame to frame. The bands save no
+/// time: they hold about a third of a KITTI frame's labels, but the banded update still reads marginals laid out for
+/// every label.
 fn moving_frame(
     params: &Params,
     pair: &StereoPair,
