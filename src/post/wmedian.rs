@@ -45,6 +45,8 @@
 //! The row kernel is compiled for AVX2 + FMA as well and picked at run time, with the same results; the
 //! `force-baseline` feature leaves only the baseline version (see `crate::fastmath`, "SIMD in jem").
 
+use std::borrow::Cow;
+
 use rayon::prelude::*;
 
 use crate::fastmath::{exp_nonpositive, lane_max, lane_min};
@@ -93,7 +95,8 @@ pub fn weighted_median(
         .collect();
     let inv_rgb = 1.0 / (2.0 * p.sigma_rgb * p.sigma_rgb);
 
-    let ctx = RowContext { disp, targets, image, spatial: &spatial, radius: r, step: p.step.max(1), inv_rgb };
+    let grid = SampleGrid::new(disp, image, &spatial, r, p.step.max(1));
+    let ctx = RowContext { disp, targets, image, grid: &grid, inv_rgb };
     out.data
         .par_chunks_mut(w)
         .enumerate()
@@ -101,16 +104,51 @@ pub fn weighted_median(
     out
 }
 
+/// The window's samples laid out so that each window row's are contiguous: every `step`-th pixel from the target,
+/// so with a step above 1 the map and the image are split by column phase (`x mod step`), each phase a plane of
+/// its own columns, and the spatial exponents kept for the sampled offsets only. With step 1 it borrows the inputs.
+/// The samples, their order and their exponents are those of the full window read every `step`-th pixel.
+struct SampleGrid<'a> {
+    step: usize,
+    /// The sampled offsets per side of the centre: the most whole steps within the radius.
+    reach: usize,
+    /// Per column phase: its width and its [disparity, red, green, blue] planes, rows of that width.
+    phases: Vec<(usize, [Cow<'a, [f32]>; 4])>,
+    /// Spatial exponents of the sampled offsets, indexed [(dy/step + reach) · (2·reach + 1) + dx/step + reach].
+    spatial: Vec<f32>,
+}
+
+impl<'a> SampleGrid<'a> {
+    fn new(disp: &'a DisparityMap, image: &'a RgbImage, spatial: &[f32], r: usize, step: usize) -> Self {
+        let (w, [red, green, blue]) = (disp.width, &image.channels);
+        let planes = [&disp.data, red, green, blue];
+        if step == 1 {
+            let phase = planes.map(|p| Cow::Borrowed(p.as_slice()));
+            return SampleGrid { step, reach: r, phases: vec![(w, phase)], spatial: spatial.to_vec() };
+        }
+        let phases = (0..step.min(w))
+            .map(|p| {
+                let split = |plane: &Vec<f32>| -> Cow<'a, [f32]> {
+                    Cow::Owned(plane.chunks_exact(w).flat_map(|row| row[p..].iter().step_by(step)).copied().collect())
+                };
+                ((w - p).div_ceil(step), planes.map(split))
+            })
+            .collect();
+        let (reach, side) = (r / step, 2 * r + 1);
+        let offset = |k: usize| r + step * k - step * reach;
+        let spatial = (0..(2 * reach + 1).pow(2))
+            .map(|k| spatial[offset(k / (2 * reach + 1)) * side + offset(k % (2 * reach + 1))])
+            .collect();
+        SampleGrid { step, reach, phases, spatial }
+    }
+}
+
 /// What [`filter_row`] reads.
 struct RowContext<'a> {
     disp: &'a DisparityMap,
     targets: &'a Plane<bool>,
     image: &'a RgbImage,
-    /// Spatial exponents |Δxy|²/2σ², indexed [(dy + r) * side + dx + r].
-    spatial: &'a [f32],
-    radius: usize,
-    /// The window's samples are every `step`-th pixel in x and y from the target (1: every pixel).
-    step: usize,
+    grid: &'a SampleGrid<'a>,
     /// 1/2σ_rgb².
     inv_rgb: f32,
 }
@@ -119,46 +157,33 @@ struct RowContext<'a> {
 /// AVX2 + FMA as well, picked at run time (same results).
 #[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 fn filter_row<'c>(ctx: &RowContext<'c>, scratch: &mut Scratch, y: usize, row: &mut [f32]) {
-    let RowContext { disp, targets, image, spatial, radius: r, step, inv_rgb } = *ctx;
+    let RowContext { disp, targets, image, grid, inv_rgb } = *ctx;
     let (w, h) = disp.dims();
-    let side = 2 * r + 1;
+    let (step, reach) = (grid.step, grid.reach);
+    let side = 2 * reach + 1;
     let [red, green, blue] = &image.channels;
     let trow = targets.row(y);
     // The window's first and last sample from `c` along an axis of `n` pixels: a multiple of `step` away.
-    let reach =
-        |c: usize, n: usize| (c - step * (r / step).min(c / step), c + step * (r / step).min((n - 1 - c) / step));
-    let (y0, y1) = reach(y, h);
+    let span = |c: usize, n: usize| (c - step * reach.min(c / step), c + step * reach.min((n - 1 - c) / step));
+    let (y0, y1) = span(y, h);
     // The previous result on this row: a good guess for the next median (see `Scratch::median`).
     let mut last: Option<f32> = None;
     let mut guesses = GuessRate::default();
     for (x, (d_out, _)) in row.iter_mut().zip(trow).enumerate().filter(|(_, (_, t))| **t) {
-        let (x0, x1) = reach(x, w);
+        let (x0, x1) = span(x, w);
         let i = y * w + x;
         let (ci_r, ci_g, ci_b) = (red[i], green[i], blue[i]);
+        // The samples' columns in the target's phase plane, and the first one's spatial column.
+        let (pw, [dp, rp, gp, bp]) = &grid.phases[x % step];
+        let (k0, k1) = (x0 / step, x1 / step);
+        let sx = k0 + reach - x / step;
         scratch.vals.clear();
         scratch.wts.clear();
         for yy in (y0..=y1).step_by(step) {
-            let base = yy * w;
-            if step > 1 {
-                for xx in (x0..=x1).step_by(step) {
-                    let (j, d) = (base + xx, disp.data[base + xx]);
-                    if d.is_finite() {
-                        let (dr, dg, db) = (red[j] - ci_r, green[j] - ci_g, blue[j] - ci_b);
-                        scratch.vals.push(d);
-                        scratch
-                            .wts
-                            .push(spatial[(yy + r - y) * side + xx + r - x] + (dr * dr + dg * dg + db * db) * inv_rgb);
-                    }
-                }
-                continue;
-            }
-            let (dseg, rseg, gseg, bseg) = (
-                &disp.data[base + x0..=base + x1],
-                &red[base + x0..=base + x1],
-                &green[base + x0..=base + x1],
-                &blue[base + x0..=base + x1],
-            );
-            let sseg = &spatial[(yy + r - y) * side + x0 + r - x..][..dseg.len()];
+            let base = yy * pw;
+            let seg = |plane: &'c [f32]| &plane[base + k0..=base + k1];
+            let (dseg, rseg, gseg, bseg) = (seg(dp), seg(rp), seg(gp), seg(bp));
+            let sseg = &grid.spatial[(yy + step * reach - y) / step * side + sx..][..dseg.len()];
             let exponent = |(((s, r), g), b): (((&f32, &f32), &f32), &f32)| {
                 let (dr, dg, db) = (r - ci_r, g - ci_g, b - ci_b);
                 s + (dr * dr + dg * dg + db * db) * inv_rgb
