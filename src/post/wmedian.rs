@@ -95,8 +95,8 @@ pub fn weighted_median(
         .collect();
     let inv_rgb = 1.0 / (2.0 * p.sigma_rgb * p.sigma_rgb);
 
-    let grid = SampleGrid::new(disp, image, &spatial, r, p.step.max(1));
-    let ctx = RowContext { disp, targets, image, grid: &grid, inv_rgb };
+    let grid = SampleGrid::new(disp, image, spatial, r, p.step.max(1));
+    let ctx = RowContext { targets, image, grid: &grid, inv_rgb };
     out.data
         .par_chunks_mut(w)
         .enumerate()
@@ -119,12 +119,12 @@ struct SampleGrid<'a> {
 }
 
 impl<'a> SampleGrid<'a> {
-    fn new(disp: &'a DisparityMap, image: &'a RgbImage, spatial: &[f32], r: usize, step: usize) -> Self {
+    fn new(disp: &'a DisparityMap, image: &'a RgbImage, spatial: Vec<f32>, r: usize, step: usize) -> Self {
         let (w, [red, green, blue]) = (disp.width, &image.channels);
         let planes = [&disp.data, red, green, blue];
         if step == 1 {
             let phase = planes.map(|p| Cow::Borrowed(p.as_slice()));
-            return SampleGrid { step, reach: r, phases: vec![(w, phase)], spatial: spatial.to_vec() };
+            return SampleGrid { step, reach: r, phases: vec![(w, phase)], spatial };
         }
         let phases = (0..step.min(w))
             .map(|p| {
@@ -145,7 +145,7 @@ impl<'a> SampleGrid<'a> {
 
 /// What [`filter_row`] reads.
 struct RowContext<'a> {
-    disp: &'a DisparityMap,
+    /// The pixels to filter (the map's and the image's size).
     targets: &'a Plane<bool>,
     image: &'a RgbImage,
     grid: &'a SampleGrid<'a>,
@@ -157,8 +157,8 @@ struct RowContext<'a> {
 /// AVX2 + FMA as well, picked at run time (same results).
 #[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 fn filter_row<'c>(ctx: &RowContext<'c>, scratch: &mut Scratch, y: usize, row: &mut [f32]) {
-    let RowContext { disp, targets, image, grid, inv_rgb } = *ctx;
-    let (w, h) = disp.dims();
+    let RowContext { targets, image, grid, inv_rgb } = *ctx;
+    let (w, h) = targets.dims();
     let (step, reach) = (grid.step, grid.reach);
     let side = 2 * reach + 1;
     let [red, green, blue] = &image.channels;
