@@ -257,9 +257,10 @@ impl Pass<'_> {
     }
 
     /// [`Pass::infer_views`] on labels grouped `label_step` at a time (a large image; [`label_step`]): each view's
-    /// grouped volume from the full left one, its inference, and its decoded map brought back to the full labels
-    /// by the full volume. Alive at most: the full volume, one grouped volume and a view's marginals (the full
-    /// volume and two halves at step 2, against three full volumes on every label).
+    /// grouped volume from the full left one, its inference (the local term alone with `meanfield.grouped_local`),
+    /// and its decoded map brought back to the full labels by the full volume. Alive at most: the full volume, one
+    /// grouped volume and a view's marginals (the full volume and two halves at step 2, against three full volumes
+    /// on every label).
     fn infer_grouped(
         &self,
         full: CostVolume,
@@ -284,11 +285,13 @@ impl Pass<'_> {
             });
             estimate
         };
-        let left = infer(label_step::View::Left, guide_left, iterations[0], false);
+        // Only a model with both terms has a local term to keep.
+        let jem = params.model == Model::Jem;
+        let local = params.meanfield.grouped_local && jem;
+        let left = infer(label_step::View::Left, guide_left, iterations[0], local);
         let right = (params.post.lrc.mode != LrcMode::Off).then(|| {
             on_stage("inference (right)");
-            // Only a model with both terms has a local term to keep.
-            let local_only = self.input.views.is_some_and(|v| v.right_local_only) && params.model == Model::Jem;
+            let local_only = local || (self.input.views.is_some_and(|v| v.right_local_only) && jem);
             infer(label_step::View::Right, &self.input.guide.right, iterations[1], local_only)
         });
         buffers.recycle(full.data);

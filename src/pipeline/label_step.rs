@@ -158,18 +158,21 @@ mod tests {
     use crate::test_util::rand_vec;
 
     /// The whole pipeline on a synthetic scene with the reference size lowered so that its labels are grouped two at
-    /// a time: the grouped path runs (its stages are timed), and its answer is about as accurate as every label's.
+    /// a time: the grouped path runs (its stages are timed), and its answer is about as accurate as every label's,
+    /// with the local term alone there (the default) and with both terms.
     #[test]
     fn a_scene_matched_on_grouped_labels_is_as_accurate() {
         let scene =
             crate::synth::render_scene(&crate::synth::SynthParams { width: 240, height: 160, ndisp: 40, seed: 11 })
                 .unwrap();
         let pair = crate::image::StereoPair::borrowed(&scene.left, &scene.right, scene.ndisp).unwrap();
-        let run = |reference_px: f32| {
+        let run_with = |reference_px: f32, grouped_local: bool| {
             let mut params = crate::params::Params::default();
             params.meanfield.reference_px = reference_px;
+            params.meanfield.grouped_local = grouped_local;
             crate::pipeline::run(&params, &pair).unwrap()
         };
+        let run = |reference_px: f32| run_with(reference_px, true);
         let error = |out: &crate::pipeline::PipelineOutput| {
             let visible = scene.mask.data.iter().map(|&m| m == crate::synth::MASK_VISIBLE);
             let pairs = out.disparity.data.iter().zip(&scene.gt.data).zip(visible).filter(|(_, v)| *v);
@@ -182,6 +185,11 @@ mod tests {
         let (e, g) = (error(&every), error(&grouped));
         assert!(e < 0.5, "every label: mean error {e}");
         assert!(g < 1.15 * e + 0.02, "grouped labels: mean error {g} against {e}");
+        // Both terms on the groups: a different answer, as accurate.
+        let both = run_with(10_000.0, false);
+        assert_ne!(both.disparity.data, grouped.disparity.data);
+        let b = error(&both);
+        assert!(b < 1.15 * e + 0.02, "grouped labels, both terms: mean error {b} against {e}");
     }
 
     fn random_volume(w: usize, h: usize, m: usize, seed: u64) -> CostVolume {

@@ -21,7 +21,8 @@ use crate::scale;
 ///   (and next Q with Jacobi) at 4^−k of the size, at most 2/3 (1) of a volume more;
 /// - WTA: one volume, two with the left-right check (both views' cost volumes);
 /// - on labels grouped k at a time (an image above `meanfield.reference_px`, run whole: [`Params::for_image`]):
-///   the full cost volume beside the above at 1/k of the labels (1 + 4/k volumes for JEM and FCM);
+///   the full cost volume beside the above at 1/k of the labels (1 + 4/k volumes for FCM; 1 + 2/k for JEM, whose
+///   local term runs alone there with `meanfield.grouped_local`);
 /// - plus ~300 bytes per pixel: the images, the lattice's per-pixel tables, the maps of the post-processing; and
 ///   [`COST_MINIMA_BYTES_PER_PX`], the cost's lowest minima kept for the confidence while the volume is built;
 /// - plus the process itself, [`PROCESS_BYTES`].
@@ -60,21 +61,24 @@ fn reduced_run_bytes(width: usize, height: usize, ndisp: usize, params: &Params,
     let n = w as u64 * h as u64;
     let volume = 4 * n * m as u64;
     let next_q = u64::from(params.meanfield.schedule == Schedule::Jacobi);
+    // Labels grouped k at a time: the full volume stays beside the inference's (see `crate::pipeline`'s label step).
+    let groups = match params.model {
+        Model::Wta => 1,
+        _ => params.meanfield.for_image(w * h).label_step.max(1) as u64,
+    };
+    // On grouped labels the `jem` model may run its local term alone: no lattice.
+    let local = groups > 1 && params.meanfield.grouped_local;
     let volumes = match params.model {
         Model::Wta if params.post.lrc.mode == LrcMode::Off => 1,
         Model::Wta => 2,
         Model::Lcm => 2 + next_q,
+        Model::Jem if local => 2 + next_q,
         Model::Fcm | Model::Jem => 4 + next_q,
     };
     // Coarse-to-fine: each coarse level's volume and marginals (and next Q with Jacobi), at 4^−k of the size.
     let pyramid = match params.model {
         Model::Wta => 0,
         _ => (1..params.meanfield.pyramid_levels as u32).map(|k| (2 + next_q) * volume.div_ceil(4u64.pow(k))).sum(),
-    };
-    // Labels grouped k at a time: the full volume stays beside the inference's (see `crate::pipeline`'s label step).
-    let groups = match params.model {
-        Model::Wta => 1,
-        _ => params.meanfield.for_image(w * h).label_step.max(1) as u64,
     };
     let inference = (volumes * volume + pyramid).div_ceil(groups);
     let full = if groups > 1 { volume } else { 0 };
@@ -251,10 +255,15 @@ mod tests {
         let p = Params::default();
         let mut every = p.clone();
         every.meanfield.reference_px = 0.0;
-        // Motorcycle H: 1482x994, 140 labels, grouped 2 at a time: the full volume plus 4 volumes of half the
-        // labels (measured: 2127 MiB peak against this 2831 MiB).
+        // Motorcycle H: 1482x994, 140 labels, grouped 2 at a time: the full volume plus 2 volumes of half the
+        // labels with the local term alone (measured: 1870 MiB peak against this 2045 MiB), 4 with both terms
+        // (2127 MiB against 2831 MiB).
         let (n, volume) = (1482 * 994, 4 * 1482 * 994 * 140);
         let grouped = estimate_memory_bytes(1482, 994, 140, &p);
+        assert_eq!(grouped, volume + 2 * volume / 2 + 324 * n + PROCESS_BYTES);
+        let mut both_terms = p.clone();
+        both_terms.meanfield.grouped_local = false;
+        let grouped = estimate_memory_bytes(1482, 994, 140, &both_terms);
         assert_eq!(grouped, volume + 4 * volume / 2 + 324 * n + PROCESS_BYTES);
         assert_eq!(estimate_memory_bytes(1482, 994, 140, &every), 4 * volume + 324 * n + PROCESS_BYTES);
         // A tile searches every label of its window: its crop is counted as such, whatever its size.
