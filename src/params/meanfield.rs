@@ -89,11 +89,11 @@ pub struct MeanFieldParams {
     /// labels grouped `label_step` at a time and recovers the full labels from the cost
     /// ([`MeanFieldParams::for_image`]). 0: every label at every size.
     pub reference_px: f32,
-    /// On grouped labels (an image above `reference_px`, `label_step` > 1) the `jem` model's inference runs its local
-    /// term alone: the coarse prior, matched at about the reference size with both terms, already gives each pixel
-    /// the scene-wide context the fully connected term adds, and the finer level decides detail, which is local. No
-    /// lattice is built at that size (docs/tuning-log.md, "The local term alone on grouped labels"). False: both
-    /// terms at every size.
+    /// On grouped labels (an image above `reference_px`, `label_step` > 1) the `jem` model's inference at the full
+    /// resolution runs its local term alone: the coarse prior, matched with both terms (its levels always have both),
+    /// already gives each pixel the scene-wide context the fully connected term adds, and the finer level decides
+    /// detail, which is local. No lattice is built at that size (docs/tuning-log.md, "The local term alone on
+    /// grouped labels"). False: both terms at every size.
     pub grouped_local: bool,
     /// Labels grouped this many at a time for the inference: set by [`MeanFieldParams::for_image`]. Not a key (1 as
     /// configured).

@@ -96,6 +96,9 @@ impl CoarseLevel {
         // coarse pixels has no use for.
         coarse.post.wmedian.edge_px = 0.0;
         coarse.post.subpixel.enabled = false;
+        // A coarse level gives the finer one its scene-wide context: both terms of the model, grouped labels or not
+        // (`meanfield.grouped_local` is for the full resolution).
+        coarse.meanfield.grouped_local = false;
         if self.same_segment_size {
             // A 1/F² of the pixels gets a 1/F² of the segments.
             coarse.post.sps.segments = params.post.sps.segments.div_ceil(self.factor * self.factor);
@@ -387,6 +390,21 @@ mod tests {
     use super::*;
     use crate::image::RgbImage;
     use crate::synth;
+
+    /// The coarse levels keep both terms of the model whatever their size; the full resolution's setting is its own.
+    #[test]
+    fn a_coarse_level_infers_with_both_terms() {
+        let scene = synth::render_scene(&synth::SynthParams { width: 64, height: 48, ndisp: 16, seed: 2 }).unwrap();
+        let pair = StereoPair::borrowed(&scene.left, &scene.right, scene.ndisp).unwrap();
+        let params = Params::default();
+        assert!(params.meanfield.grouped_local);
+        let input = Prepared::of(&params, &pair, None, &mut Timings::default());
+        for level in [CoarseLevel::chain(), CoarseLevel::tiles(4)] {
+            let coarse = level.params(&params, &input);
+            assert!(!coarse.meanfield.grouped_local, "{level:?}");
+            assert_eq!(coarse.meanfield.fcm_weight, params.meanfield.fcm_weight);
+        }
+    }
 
     #[test]
     fn the_prior_holds_where_the_cost_is_flat_even_at_zero_noise() {
