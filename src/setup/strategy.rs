@@ -63,12 +63,20 @@ pub(crate) fn plan_tiles(
     if estimate_tile_bytes((side + ndisp).min(width), side.min(height), ndisp, params) > tile_share(budget) {
         return None;
     }
-    let mut coarse = params.clone();
     let factor = (1..8).map(|k| 1usize << k).find(|&f| {
-        coarse.downscale = f;
+        let coarse = coarse_level_params(params, f);
         crate::scale::factor_fits(width, ndisp, f) && coarse_level_bytes(width, height, ndisp, &coarse) <= budget
     })?;
     Some(TilePlan { coarse_factor: factor, core_px: 1024, tile_budget_bytes: budget, split_for_work: true })
+}
+
+/// The parameters a tiled run's coarse level at 1/`factor` is planned with: as it runs, with both terms of the model
+/// on grouped labels (`crate::pipeline`'s coarse level sets `meanfield.grouped_local` off at every coarse level).
+fn coarse_level_params(params: &Params, factor: usize) -> Params {
+    let mut coarse = params.clone();
+    coarse.downscale = factor;
+    coarse.meanfield.grouped_local = false;
+    coarse
 }
 
 /// The part of the budget one tile may plan for. The allocator keeps some of each tile's freed memory, so the
@@ -117,5 +125,23 @@ impl Strategy {
             Strategy::Whole => estimate_memory_bytes(width, height, ndisp, params),
             Strategy::Tiled(p) => p.tile_budget_bytes + FULL_SIZE_BYTES_PER_PX * (width * height) as u64,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A coarse level large enough for grouped labels runs both terms, and is planned with their memory.
+    #[test]
+    fn a_tiled_coarse_level_is_planned_with_both_terms() {
+        let p = Params::default();
+        assert!(p.meanfield.grouped_local);
+        let coarse = coarse_level_params(&p, 2);
+        assert_eq!(coarse.downscale, 2);
+        assert!(!coarse.meanfield.grouped_local);
+        // 4000 x 3000 at 1/2: 3 M pixels, grouped; both terms need more than the local term alone.
+        let as_configured = Params { downscale: 2, ..p.clone() };
+        assert!(coarse_level_bytes(4000, 3000, 256, &coarse) > coarse_level_bytes(4000, 3000, 256, &as_configured));
     }
 }
