@@ -146,6 +146,13 @@ impl MeanFieldParams {
         MeanFieldParams { label_step: (k.round() as usize).clamp(1, 8), ..self.clone() }
     }
 
+    /// The parameters of a coarse level (the prior's chain, a tiled run's coarse level): both terms of the model on
+    /// grouped labels too, since a coarse level gives the finer one its scene-wide context (`grouped_local` is for
+    /// the full resolution). The pipeline runs its coarse levels with these and the tile planner plans them so.
+    pub fn for_coarse_level(&self) -> MeanFieldParams {
+        MeanFieldParams { grouped_local: false, ..self.clone() }
+    }
+
     /// Checks every value's range.
     ///
     /// # Errors

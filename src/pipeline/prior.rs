@@ -96,9 +96,8 @@ impl CoarseLevel {
         // coarse pixels has no use for.
         coarse.post.wmedian.edge_px = 0.0;
         coarse.post.subpixel.enabled = false;
-        // A coarse level gives the finer one its scene-wide context: both terms of the model, grouped labels or not
-        // (`meanfield.grouped_local` is for the full resolution).
-        coarse.meanfield.grouped_local = false;
+        // A coarse level gives the finer one its scene-wide context: both terms of the model, grouped labels or not.
+        coarse.meanfield = params.meanfield.for_coarse_level();
         if self.same_segment_size {
             // A 1/F² of the pixels gets a 1/F² of the segments.
             coarse.post.sps.segments = params.post.sps.segments.div_ceil(self.factor * self.factor);

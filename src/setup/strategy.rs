@@ -70,13 +70,10 @@ pub(crate) fn plan_tiles(
     Some(TilePlan { coarse_factor: factor, core_px: 1024, tile_budget_bytes: budget, split_for_work: true })
 }
 
-/// The parameters a tiled run's coarse level at 1/`factor` is planned with: as it runs, with both terms of the model
-/// on grouped labels (`crate::pipeline`'s coarse level sets `meanfield.grouped_local` off at every coarse level).
+/// The parameters a tiled run's coarse level at 1/`factor` is planned with: its mean field as every coarse level runs
+/// it ([`crate::params::MeanFieldParams::for_coarse_level`]).
 fn coarse_level_params(params: &Params, factor: usize) -> Params {
-    let mut coarse = params.clone();
-    coarse.downscale = factor;
-    coarse.meanfield.grouped_local = false;
-    coarse
+    Params { downscale: factor, meanfield: params.meanfield.for_coarse_level(), ..params.clone() }
 }
 
 /// The part of the budget one tile may plan for. The allocator keeps some of each tile's freed memory, so the
