@@ -18,7 +18,12 @@ fn frames_lit(motion: Motion, noise: f64, n: usize, gain: GainChange) -> Vec<jem
 
 /// Matches every frame with one matcher (remembering frames or not).
 fn run(scenes: &[jem::synth::SynthScene], temporal: bool) -> Vec<Output> {
-    let matcher = Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(32));
+    run_with(Params::default(), scenes, temporal)
+}
+
+/// [`run`] with `params`.
+fn run_with(params: Params, scenes: &[jem::synth::SynthScene], temporal: bool) -> Vec<Output> {
+    let matcher = Matcher::new(params).unwrap().with_ndisp(NdispSource::Given(32));
     let mut matcher = matcher.with_temporal(temporal);
     scenes.iter().map(|s| matcher.match_pair(&s.left, &s.right).unwrap()).collect()
 }
@@ -186,4 +191,24 @@ fn a_camera_driving_forward_is_carried_by_its_motion() {
     let (a, r) = (mean(&alone), mean(&remembered));
     eprintln!("dolly: {r:.4} remembered against {a:.4} alone");
     assert!(r <= 1.02 * a, "dolly: {r:.4} remembered against {a:.4} alone");
+}
+
+/// A driving camera's frames on an image large enough that inference groups its labels (here a reference size of a
+/// quarter of the image's pixels: labels two at a time): the carried answer's label bands are grouped with the labels,
+/// so the frame runs in the grouped run's memory, and it is at least as accurate as matched alone.
+#[test]
+fn a_large_travelling_frame_keeps_its_bands_on_grouped_labels() {
+    let scenes = frames(Motion::Dolly, 0.0, 4);
+    let mut params = Params::default();
+    params.meanfield.reference_px = (200 * 140 / 4) as f32;
+    let (alone, remembered) = (run_with(params.clone(), &scenes, false), run_with(params, &scenes, true));
+    let ran = |o: &Output, stage: &str| o.timings.stages.iter().any(|(name, _)| *name == stage);
+    for o in &remembered[1..] {
+        assert!(matches!(o.frame, Some(FrameKind::Travelling { .. })), "{:?}", o.frame);
+        assert!(ran(o, "group labels") && ran(o, "bands"), "{:?}", o.timings.stages);
+    }
+    let mean = |outs: &[Output]| (1..4).map(|k| error(&outs[k], &scenes[k])).sum::<f64>() / 3.0;
+    let (a, r) = (mean(&alone), mean(&remembered));
+    eprintln!("grouped dolly: {r:.4} remembered against {a:.4} alone");
+    assert!(r <= 1.02 * a, "grouped dolly: {r:.4} remembered against {a:.4} alone");
 }

@@ -97,6 +97,14 @@ impl LabelBands {
         sum as f64 / self.bands.len().max(1) as f64
     }
 
+    /// The same bands on labels grouped `step` at a time (group g: labels g·step … g·step + step − 1): each
+    /// pixel's groups are those that hold any of its labels.
+    pub fn grouped(&self, step: usize) -> Self {
+        let step = step.max(1) as u32;
+        let bands = self.bands.iter().map(|&[lo, hi]| [lo / step, hi.div_ceil(step)]).collect();
+        LabelBands { width: self.width, height: self.height, ndisp: self.ndisp.div_ceil(step as usize), bands }
+    }
+
     /// The bands of the columns `x0..` (for a view that starts there).
     pub fn columns_from(&self, x0: usize) -> Self {
         let w = self.width - x0;
@@ -158,6 +166,24 @@ mod tests {
         let none = LabelBands::around((&nothing, &nothing), &best, m, 2, 3.0, 1);
         assert!((0..w * h).all(|i| none.of(i) == (0, m)));
         assert!((bands.mean_width() - 7.0).abs() < 5.0);
+    }
+
+    /// A grouped band holds every group that holds one of the pixel's labels, and no other.
+    #[test]
+    fn grouped_bands_hold_the_groups_of_their_labels() {
+        let (w, m) = (5, 11);
+        let coarse = Plane::from_parts(w, 1, vec![0.0, 3.0, 4.0, 7.0, 10.0]);
+        let bands = LabelBands::around((&coarse, &coarse), &Plane::new(w, 1, f32::INFINITY), m, 0, 1.0, 0);
+        for step in 1..=4 {
+            let grouped = bands.grouped(step);
+            assert_eq!((grouped.width, grouped.height, grouped.ndisp), (w, 1, m.div_ceil(step)));
+            for i in 0..w {
+                let (lo, hi) = bands.of(i);
+                let (glo, ghi) = grouped.of(i);
+                let holds = |g: usize| (g * step..(g + 1) * step).any(|d| (lo..hi).contains(&d));
+                assert!((0..grouped.ndisp).all(|g| holds(g) == (glo..ghi).contains(&g)), "step {step}, pixel {i}");
+            }
+        }
     }
 
     /// Left pixels land on the right pixel x − d; where several land, the right pixel allows all their ranges.

@@ -48,6 +48,10 @@ pub(crate) struct FineInput<'a> {
     pub noise: f32,
     /// The planes' segmentation to start from (a panning camera's previous frame, moved; `None`: a grid).
     pub segmentation: Option<&'a post::planes::Segmentation>,
+    /// Whether a large image's inference on grouped labels (`meanfield.label_step` > 1) keeps the prior's label
+    /// bands, grouped with the labels (a travelling frame of a sequence: it runs in the grouped run's time and
+    /// memory); otherwise a pass with bands infers on every label (a tile).
+    pub grouped_bands: bool,
 }
 
 /// How a frame of a sequence runs its two views: its prior has placed each pixel, so fewer mean-field iterations
@@ -214,8 +218,9 @@ impl Pass<'_> {
         let iterations = self.input.views.map_or([params.meanfield.iterations; 2], |v| v.iterations);
         let LeftVolume { cost: cost_left, bands: left_bands, .. } = volume;
         let step = params.meanfield.label_step;
-        if step > 1 && left_from == 0 && left_bands.is_none() && params.model != Model::Wta {
-            return self.infer_grouped(cost_left, guide_left, iterations, buffers, on_stage, t);
+        let bands_allow = left_bands.is_none() || self.input.grouped_bands;
+        if step > 1 && left_from == 0 && bands_allow && params.model != Model::Wta {
+            return self.infer_grouped(cost_left, left_bands, guide_left, iterations, buffers, on_stage, t);
         }
         let (left, cost_right) = if left_from > 0 {
             let cost_right = need_right.then(|| self.right_volume(&cost_left, buffers, t));
@@ -260,10 +265,13 @@ impl Pass<'_> {
     /// grouped volume from the full left one, its inference (the local term alone with `meanfield.grouped_local`),
     /// and its decoded map brought back to the full labels by the full volume. Alive at most: the full volume, one
     /// grouped volume and a view's marginals (the full volume and two halves at step 2, against three full volumes
-    /// on every label).
+    /// on every label). With a prior in bands, each view keeps its bands, grouped: the left view's `left_bands`, the
+    /// right view's around its own best groups.
+    #[allow(clippy::too_many_arguments)]
     fn infer_grouped(
         &self,
         full: CostVolume,
+        left_bands: Option<meanfield::LabelBands>,
         guide_left: &RgbImage,
         iterations: [usize; 2],
         buffers: &mut meanfield::Buffers,
@@ -273,12 +281,29 @@ impl Pass<'_> {
         let params = self.params;
         let step = params.meanfield.label_step;
         let out_of_view = cost::truncation_cost(&params.cost);
-        let mut infer = |side: label_step::View, image: &RgbImage, iterations: usize, local_only: bool| {
+        let ndisp = self.input.guide.ndisp;
+        let mut infer = |side: label_step::View,
+                         image: &RgbImage,
+                         iterations: usize,
+                         local_only: bool,
+                         bands: Option<meanfield::LabelBands>| {
             let storage = buffers.take(full.data.len().div_ceil(step));
             let grouped =
                 t.time("group labels", || label_step::grouped_volume(&full, side, step, out_of_view, storage));
+            // The right view's bands around its own best groups (the left view's come with its volume).
+            let bands = match (side, self.prior_bands) {
+                (label_step::View::Left, _) => bands,
+                (label_step::View::Right, Some(prior)) => Some(t.time("bands", || {
+                    let best = cost::winner_take_all(&grouped);
+                    let best =
+                        Plane::from_parts(best.width, best.height, best.data.iter().map(|g| g * step as f32).collect());
+                    prior.label_bands(&best, ndisp, true, params)
+                })),
+                (label_step::View::Right, None) => None,
+            }
+            .map(|b| b.grouped(step));
             let mut estimate =
-                estimate_view(params, View { image, cost: &grouped, iterations, local_only }, None, t, buffers);
+                estimate_view(params, View { image, cost: &grouped, iterations, local_only }, bands, t, buffers);
             buffers.recycle(grouped.data);
             t.time("refine labels", || {
                 label_step::refine_from_full(&mut estimate.disparity, &full, side, step, out_of_view);
@@ -288,11 +313,11 @@ impl Pass<'_> {
         // Only a model with both terms has a local term to keep.
         let jem = params.model == Model::Jem;
         let local = params.meanfield.grouped_local && jem;
-        let left = infer(label_step::View::Left, guide_left, iterations[0], local);
+        let left = infer(label_step::View::Left, guide_left, iterations[0], local, left_bands);
         let right = (params.post.lrc.mode != LrcMode::Off).then(|| {
             on_stage("inference (right)");
             let local_only = local || (self.input.views.is_some_and(|v| v.right_local_only) && jem);
-            infer(label_step::View::Right, &self.input.guide.right, iterations[1], local_only)
+            infer(label_step::View::Right, &self.input.guide.right, iterations[1], local_only, None)
         });
         buffers.recycle(full.data);
         (left, right)

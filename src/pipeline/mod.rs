@@ -155,6 +155,8 @@ fn run_pipeline(
 struct FromFrame<'a> {
     views: Option<FrameViews>,
     segmentation: Option<&'a crate::post::planes::Segmentation>,
+    /// Whether the prior's label bands go with the labels when a large image groups them (a travelling frame).
+    grouped_bands: bool,
 }
 
 /// The fine pass on the prepared pair, with `prior` and what the frame before gives (`from`), as `options` ask,
@@ -181,6 +183,7 @@ fn fine_at_full_resolution(
         views: from.views,
         confidence: options.confidence,
         segmentation: from.segmentation,
+        grouped_bands: from.grouped_bands,
     };
     let mut out = fine_pass(params, &fine, &mut Default::default(), options.on_stage, t)?;
     out.measured = input.measured();
@@ -202,7 +205,8 @@ pub(crate) struct FramePrior {
     /// How the frame's views run (`None`: as configured).
     pub views: Option<FrameViews>,
     /// Inference keeps each pixel to a band of labels around the carried answer ([`prior::Prior::label_bands`]);
-    /// a released pixel's band comes from its neighbours' answers, or is every label.
+    /// a released pixel's band comes from its neighbours' answers, or is every label. On grouped labels (a large
+    /// image) the bands are grouped with them.
     pub in_bands: bool,
 }
 
@@ -244,7 +248,7 @@ pub(crate) fn run_with_prior(
         }
     }
     prior.in_bands = from.in_bands;
-    let frame = FromFrame { views: from.views, segmentation: segmentation.as_ref() };
+    let frame = FromFrame { views: from.views, segmentation: segmentation.as_ref(), grouped_bands: from.in_bands };
     fine_at_full_resolution(params, pair, &input, Some(&prior), frame, options, t)
 }
 

@@ -283,6 +283,7 @@ impl TileJob<'_> {
             views: None,
             confidence: self.confidence,
             segmentation: None,
+            grouped_bands: false,
         };
         fine_pass(&params, &input, buffers, &|_| {}, Timings::default())
     }
@@ -408,6 +409,7 @@ mod tests {
                 views: None,
                 confidence: true,
                 segmentation: None,
+                grouped_bands: false,
             };
             fine_pass(&params, &input, buffers, &|_| {}, Timings::default()).unwrap()
         };

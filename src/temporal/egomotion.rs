@@ -28,15 +28,16 @@ use super::track::Track;
 
 /// RANSAC's samples.
 const RANSAC_ITERATIONS: usize = 400;
-/// A track is an inlier when the motion puts it within this many pixels (plus twice the grey noise's effect on a
-/// 7 × 7 window's position, small) of where it was found.
-const INLIER_PX: f64 = 1.0;
+/// A track is an inlier when the motion puts it within a tolerance of where it was found: at least this many pixels,
+/// more where the tracks' own precision is coarser ([`tolerance`]).
+pub(crate) const INLIER_PX: f64 = 1.0;
+/// The tolerance is this many times the median track's distance from where the motion puts it (a motion that
+/// holds explains half the tracks within the median by definition, and most within twice it)...
+const TOLERANCE_PER_MEDIAN: f64 = 2.0;
+/// ... and at most this many pixels: past it the tracks do not follow one motion.
+const MAX_INLIER_PX: f64 = 2.0;
 /// The seed of RANSAC's stream.
 const SEED: u64 = 0x6567_6f6d_6f74_696f;
-/// The position error the disagreement test allows the carried view, in pixels: a track is an inlier within
-/// [`INLIER_PX`], and the carried disparity places a pixel to within about as much (on KITTI frames 0.25 px released
-/// too much, 2 px too little; the tuning log's "Stereo video II").
-const POSITION_SLACK_PX: f32 = 1.0;
 /// A target pixel takes a moved point within this distance on both axes.
 const FOOTPRINT_PX: f64 = 0.75;
 
@@ -47,6 +48,10 @@ pub(crate) struct Motion {
     rows: [[f64; 4]; 3],
     /// The tracks it explains.
     pub(crate) inliers: usize,
+    /// Within how many pixels it explains them: also the position error the disagreement test allows the carried
+    /// view, since the carried disparity places a pixel to within about as much (on KITTI frames, where the
+    /// tolerance is [`INLIER_PX`], 0.25 px released too much and 2 px too little; the tuning log's "Stereo video II").
+    pub(crate) tolerance: f64,
 }
 
 impl Motion {
@@ -77,7 +82,7 @@ impl Motion {
             let t = -(0..3).map(|j| inv[i][j] * m(j, 3)).sum::<f64>();
             [inv[i][0], inv[i][1], inv[i][2], t]
         });
-        Some(Motion { rows, inliers: self.inliers })
+        Some(Motion { rows, ..*self })
     }
 
     /// How far from where it was found the motion puts a track, in pixels.
@@ -86,9 +91,9 @@ impl Motion {
     }
 }
 
-/// The motion that explains most `tracks` (RANSAC, then refitted on its inliers twice); `None` with fewer than
-/// six tracks or no model that explains six.
-pub(crate) fn fit(tracks: &[Track]) -> Option<Motion> {
+/// The motion that explains most `tracks` within `tolerance` pixels (RANSAC, then refitted on its inliers twice);
+/// `None` with fewer than six tracks or no model that explains six.
+pub(crate) fn fit(tracks: &[Track], tolerance: f64) -> Option<Motion> {
     if tracks.len() < 6 {
         return None;
     }
@@ -98,17 +103,17 @@ pub(crate) fn fit(tracks: &[Track]) -> Option<Motion> {
         let sample = distinct(&mut rng, tracks.len(), 6);
         let chosen: Vec<Track> = sample.iter().map(|&i| tracks[i]).collect();
         let Some(model) = solve(&chosen) else { continue };
-        let model = Motion { inliers: count_inliers(&model, tracks), ..model };
+        let model = Motion { inliers: count_inliers(&model, tracks, tolerance), tolerance, ..model };
         if best.is_none_or(|b| model.inliers > b.inliers) {
             best = Some(model);
         }
     }
     let mut best = best.filter(|b| b.inliers >= 6)?;
     for _ in 0..2 {
-        let inliers: Vec<Track> = tracks.iter().filter(|t| best.error(t) <= INLIER_PX).copied().collect();
+        let inliers: Vec<Track> = tracks.iter().filter(|t| best.error(t) <= tolerance).copied().collect();
         match solve(&inliers) {
             Some(m) => {
-                let m = Motion { inliers: count_inliers(&m, tracks), ..m };
+                let m = Motion { inliers: count_inliers(&m, tracks, tolerance), tolerance, ..m };
                 if m.inliers < best.inliers {
                     break;
                 }
@@ -120,8 +125,22 @@ pub(crate) fn fit(tracks: &[Track]) -> Option<Motion> {
     Some(best)
 }
 
-fn count_inliers(m: &Motion, tracks: &[Track]) -> usize {
-    tracks.iter().filter(|t| m.error(t) <= INLIER_PX).count()
+fn count_inliers(m: &Motion, tracks: &[Track], tolerance: f64) -> usize {
+    tracks.iter().filter(|t| m.error(t) <= tolerance).count()
+}
+
+/// The tolerance the tracks' precision asks of a motion fitted to them: [`TOLERANCE_PER_MEDIAN`] times the median
+/// track's distance from where `m` puts it, within [`INLIER_PX`] … [`MAX_INLIER_PX`]. The distances grow with what
+/// blurs the views or the previous disparities (a larger image of the same scene, a softer lens, noise): on KITTI
+/// frames the median is about 0.5 px, on the same frames enlarged 1.5 times about 0.8 px.
+pub(crate) fn tolerance(m: &Motion, tracks: &[Track]) -> f64 {
+    let mut errors: Vec<f64> = tracks.iter().map(|t| m.error(t)).collect();
+    if errors.is_empty() {
+        return INLIER_PX;
+    }
+    let mid = errors.len() / 2;
+    let (_, median, _) = errors.select_nth_unstable_by(mid, f64::total_cmp);
+    (TOLERANCE_PER_MEDIAN * *median).clamp(INLIER_PX, MAX_INLIER_PX)
 }
 
 /// `k` distinct indices below `n` (`n` ≥ `k`).
@@ -188,7 +207,7 @@ fn solve(tracks: &[Track]) -> Option<Motion> {
     }
     let scale = det.cbrt();
     rows.iter_mut().flatten().for_each(|v| *v /= scale);
-    Some(Motion { rows, inliers: 0 })
+    Some(Motion { rows, inliers: 0, tolerance: INLIER_PX })
 }
 
 /// The determinant of the left 3 × 3 block.
@@ -308,9 +327,9 @@ fn sample_back(grey: &Plane<f32>, carried: &Plane<f32>, motion: &Motion) -> Plan
 
 /// Where the previous view seen from the new frame disagrees with the current view (the 5 × 5 mean absolute
 /// grey difference above `limit`, a pixel with nothing carried counting as far off), allowing beside the noise's
-/// `limit` what a position off by [`POSITION_SLACK_PX`] changes at the current view's local gradient: the motion
-/// places a point only to within its inliers' error.
-pub(crate) fn disagreement(moved: &Plane<f32>, cur: &Plane<f32>, limit: f32) -> Plane<bool> {
+/// `limit` what a position off by `slack_px` (the motion's tolerance) changes at the current view's local gradient:
+/// the motion places a point only to within its inliers' error.
+pub(crate) fn disagreement(moved: &Plane<f32>, cur: &Plane<f32>, limit: f32, slack_px: f64) -> Plane<bool> {
     // |gx| + |gy| of central differences, halved at the borders as well (imgproc's `central_differences` is
     // one-sided there, which gives the border rows more slack and changes the maps the slack was chosen with).
     let (w, h) = cur.dims();
@@ -328,7 +347,8 @@ pub(crate) fn disagreement(moved: &Plane<f32>, cur: &Plane<f32>, limit: f32) -> 
             .collect(),
     );
     let slack = box_mean(&gradient, 2);
-    super::motion::disagreement_beyond(moved, cur, |i| limit + POSITION_SLACK_PX * slack.data[i])
+    let slack_px = slack_px as f32;
+    super::motion::disagreement_beyond(moved, cur, |i| limit + slack_px * slack.data[i])
 }
 
 #[cfg(test)]
@@ -374,7 +394,7 @@ mod tests {
         for t in tracks.iter_mut().step_by(3) {
             (t.tx, t.ty) = (t.tx + rng.range(-30.0, 30.0), t.ty + rng.range(3.0, 20.0));
         }
-        let fitted = fit(&tracks).expect("a motion");
+        let fitted = fit(&tracks, INLIER_PX).expect("a motion");
         assert!(fitted.inliers >= 200 && fitted.inliers <= 201, "{} inliers", fitted.inliers);
         for (x, y, d) in [(100.0, 300.0, 60.0), (600.0, 180.0, 5.0), (1100.0, 50.0, 20.0)] {
             let (ex, ey, ed) = m(x, y, d);
@@ -387,7 +407,7 @@ mod tests {
     #[test]
     fn too_few_or_inconsistent_tracks_give_no_motion() {
         let m = true_motion(700.0, 600.0, 180.0, 0.5, 0.0, [0.0, 0.0, -1.0]);
-        assert!(fit(&tracks_of(&m, 5, 3)).is_none());
+        assert!(fit(&tracks_of(&m, 5, 3), INLIER_PX).is_none());
         let mut rng = SplitMix64::new(4);
         let noise: Vec<Track> = (0..100)
             .map(|_| Track {
@@ -398,14 +418,53 @@ mod tests {
                 ty: rng.range(0.0, 300.0),
             })
             .collect();
-        assert!(fit(&noise).is_none_or(|m| m.inliers < 15), "random tracks");
+        assert!(fit(&noise, INLIER_PX).is_none_or(|m| m.inliers < 15), "random tracks");
+    }
+
+    /// Tracks found to within a coarser precision (here each moved by up to ±s px on both axes) are judged within
+    /// a wider tolerance, and with it the motion explains most of them again; exact tracks keep the least tolerance,
+    /// and tracks that follow no motion do not widen it past the most.
+    #[test]
+    fn the_tolerance_follows_the_tracks_precision() {
+        let m = true_motion(707.0, 601.9, 183.1, 0.54, 0.01, [0.02, -0.01, -1.2]);
+        let exact = tracks_of(&m, 300, 1);
+        let fitted = fit(&exact, INLIER_PX).expect("a motion");
+        assert_eq!(tolerance(&fitted, &exact), INLIER_PX);
+        for s in [0.8, 1.1] {
+            let mut rng = SplitMix64::new(7);
+            let mut blurred = exact.clone();
+            for t in &mut blurred {
+                (t.tx, t.ty) = (t.tx + rng.range(-s, s), t.ty + rng.range(-s, s));
+            }
+            let first = fit(&blurred, INLIER_PX).expect("a motion");
+            let wider = tolerance(&first, &blurred);
+            // The median distance of a point uniform in the square of side 2s is about 0.8 s (π a² = 2 s²).
+            assert!(wider > INLIER_PX && (wider - 1.6 * s).abs() < 0.25 * s, "s {s}: tolerance {wider}");
+            let again = fit(&blurred, wider).expect("a motion");
+            assert!(
+                again.inliers > first.inliers && again.inliers >= 270,
+                "s {s}: {} then {}",
+                first.inliers,
+                again.inliers
+            );
+        }
+        let mut rng = SplitMix64::new(8);
+        let lost: Vec<Track> = exact
+            .iter()
+            .map(|t| Track { tx: t.tx + rng.range(-20.0, 20.0), ty: t.ty + rng.range(-20.0, 20.0), ..*t })
+            .collect();
+        assert_eq!(tolerance(&fitted, &lost), MAX_INLIER_PX);
     }
 
     #[test]
     fn the_nearer_surface_wins_and_gaps_are_left_without_an_answer() {
         let (w, h) = (8, 1);
         // A shift by +2 px of the far background (d 1) while the near pixel (d 3) moves by +3 px: x' = x + d.
-        let motion = Motion { rows: [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]], inliers: 0 };
+        let motion = Motion {
+            rows: [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
+            inliers: 0,
+            tolerance: INLIER_PX,
+        };
         let d = Plane::from_parts(w, h, vec![1.0, 1.0, 3.0, 1.0, 1.0, 1.0, f32::INFINITY, 1.0]);
         let answer = PipelineOutput {
             confidence: None,

@@ -260,7 +260,7 @@ fn carry_previous(
     match beyond {
         Some(m) => {
             let (answer, moved) = egomotion::carry(&prev.answer, reference, &m);
-            (answer, egomotion::disagreement(&moved, grey, limit), Some(m))
+            (answer, egomotion::disagreement(&moved, grey, limit, m.tolerance), Some(m))
         }
         None => (
             motion::shift_answer(&prev.answer, compared.shift),
@@ -296,10 +296,17 @@ fn beyond_shift(
     let (dx, dy) = (shift.dx as f64, shift.dy as f64);
     let tracks = tracker.follow(|x, y, _| Some((x - dx, y - dy)), Reach::Wide);
     let n = tracks.len() as f64;
-    let by_shift = tracks.iter().filter(|t| (t.tx - (t.x - dx)).hypot(t.ty - (t.y - dy)) <= 1.0).count() as f64;
-    let first = egomotion::fit(&tracks)?;
+    let first = egomotion::fit(&tracks, egomotion::INLIER_PX)?;
     let again = tracker.follow(|x, y, d| first.apply(x, y, d).map(|(x, y, _)| (x, y)), Reach::Near);
-    let m = egomotion::fit(&again).filter(|m| m.inliers >= first.inliers).unwrap_or(first);
+    let m = egomotion::fit(&again, egomotion::INLIER_PX).filter(|m| m.inliers >= first.inliers).unwrap_or(first);
+    // Judged within what the tracks' precision allows, the shift as well as the motion.
+    let tolerance = egomotion::tolerance(&m, &again);
+    let m = if tolerance > m.tolerance {
+        egomotion::fit(&again, tolerance).filter(|t| t.inliers >= m.inliers).unwrap_or(m)
+    } else {
+        m
+    };
+    let by_shift = tracks.iter().filter(|t| (t.tx - (t.x - dx)).hypot(t.ty - (t.y - dy)) <= m.tolerance).count() as f64;
     let explained = m.inliers as f64;
     (m.inliers >= MIN_TRACKS && explained >= MIN_TRACK_SHARE * n && explained > 1.25 * by_shift + 0.05 * n).then_some(m)
 }
@@ -308,9 +315,10 @@ fn beyond_shift(
 /// a 3D motion (`travelling`), the prior weighs [`TRAVELLING_PRIOR_SCALE`] times more, both views run the
 /// configured inference, and each pixel's inference is kept to a band of labels around the carried answer (the
 /// tiles' label bands: the answers within the fully connected kernel's reach, ± the prior's margin and truncation,
-/// and the pixel's own best label), which makes the answers more consistent from frame to frame. The bands save no
-/// time: they hold about a third of a KITTI frame's labels, but the banded update still reads marginals laid out for
-/// every label.
+/// and the pixel's own best label), which makes the answers more consistent from frame to frame. At a size where
+/// labels run every one the bands save no time: they hold about a third of a KITTI frame's labels, but the banded
+/// update still reads marginals laid out for every label. On a larger image, whose inference groups its labels, the
+/// bands are grouped with them: the frame takes the grouped run's time and memory, not every label's.
 fn moving_frame(
     params: &Params,
     pair: &StereoPair,
