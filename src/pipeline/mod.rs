@@ -155,8 +155,6 @@ fn run_pipeline(
 struct FromFrame<'a> {
     views: Option<FrameViews>,
     segmentation: Option<&'a crate::post::planes::Segmentation>,
-    /// Whether the prior's label bands go with the labels when a large image groups them (a travelling frame).
-    grouped_bands: bool,
 }
 
 /// The fine pass on the prepared pair, with `prior` and what the frame before gives (`from`), as `options` ask,
@@ -183,7 +181,8 @@ fn fine_at_full_resolution(
         views: from.views,
         confidence: options.confidence,
         segmentation: from.segmentation,
-        grouped_bands: from.grouped_bands,
+        // A whole image's prior in bands is a travelling frame's: its bands are grouped with the labels, if any.
+        grouped_bands: prior.is_some_and(|p| p.in_bands),
     };
     let mut out = fine_pass(params, &fine, &mut Default::default(), options.on_stage, t)?;
     out.measured = input.measured();
@@ -248,7 +247,7 @@ pub(crate) fn run_with_prior(
         }
     }
     prior.in_bands = from.in_bands;
-    let frame = FromFrame { views: from.views, segmentation: segmentation.as_ref(), grouped_bands: from.in_bands };
+    let frame = FromFrame { views: from.views, segmentation: segmentation.as_ref() };
     fine_at_full_resolution(params, pair, &input, Some(&prior), frame, options, t)
 }
 
