@@ -5,7 +5,8 @@ the temporal model does at a size its thresholds were not chosen at (KITTI frame
 Usage: scripts/enlarge-sequence.py SEQ OUT FACTOR
 
 SEQ holds left/, right/ (PNG frames), calib.txt (Middlebury keys) and optionally poses.txt; OUT must not exist.
-Each view is resized bicubically (pixel centres kept: x' = (x + 0.5) * FACTOR - 0.5); calib.txt's cam0/cam1 focal
+Each view is resized bicubically (pixel centres kept: x' = (x + 0.5) * FACTOR - 0.5; the kernel's overshoot at edges
+is held to the views' integer range, as any resampled 8/16-bit image is); calib.txt's cam0/cam1 focal
 length and principal point, width, height and ndisp are scaled to match (the baseline stays: poses are in metres),
 poses.txt is copied as it is. Needs numpy and cv2 (opencv-python-headless).
 """
