@@ -140,9 +140,36 @@ pub struct MeanField<'a> {
     spare: Vec<Vec<f32>>,
     /// Each pixel's labels (its marginal is 0 outside them); `None`: all labels.
     label_bands: Option<LabelBands>,
+    /// The pixels that have settled ([`MeanField::settle`]): later steps keep their marginals (empty: none).
+    settled: Vec<bool>,
 }
 
 impl<'a> MeanField<'a> {
+    /// Marks as settled every pixel whose largest marginal is at least `confidence`, and returns how many are:
+    /// the steps after this keep their marginals as they are and update only the others (a frame whose prior,
+    /// carried from the previous frame, has already placed most pixels). The settled pixels still send their
+    /// messages to the others. `confidence` above 1 settles none: the steps are then the usual ones, bit for bit.
+    pub fn settle(&mut self, confidence: f32) -> usize {
+        let m = self.cost.ndisp;
+        let bands = self.label_bands.as_ref();
+        self.settled = self
+            .q
+            .par_chunks(m)
+            .enumerate()
+            .map(|(i, q)| {
+                let (a, b) = bands.map_or((0, m), |bands| bands.of(i));
+                q[a..b].iter().fold(0.0f32, |top, &v| top.max(v)) >= confidence
+            })
+            .collect();
+        self.settled.iter().filter(|&&s| s).count()
+    }
+
+    /// Whether pixel `i` has settled ([`MeanField::settle`]).
+    #[inline]
+    pub(super) fn is_settled(&self, i: usize) -> bool {
+        self.settled.get(i).copied().unwrap_or(false)
+    }
+
     /// Prepares inference: the lattice (only if ω > 0), the local weights, and Q initialised to softmax(−ψ_u).
     ///
     /// # Panics
@@ -271,6 +298,7 @@ impl<'a> MeanField<'a> {
             scratch,
             spare,
             label_bands,
+            settled: Vec::new(),
         }
     }
 

@@ -488,3 +488,58 @@ fn buffers_hand_out_the_best_fitting_spare() {
     }
     assert_eq!(b.take(1).capacity(), 3, "the smallest were freed beyond MAX_SPARE");
 }
+
+/// Settled pixels keep their marginals through later steps, with either schedule, in or out of label bands, while
+/// the others still change; a confidence above 1 settles none and leaves the run bit for bit as it was; the result
+/// is the same with 1 and 3 threads.
+#[test]
+fn meanfield_settled_pixels_keep_their_marginals() {
+    let (w, h, nd) = (40, 17, 9);
+    let (left, right, _) = banded_pair(w, h);
+    let cost = crate::cost::build_cost_volume(&left, &right, nd, &CostParams::default());
+    let weights = PairwiseWeights { fcm: 8.0, lcm: 1.5 };
+    for schedule in [Schedule::Checkerboard, Schedule::Jacobi] {
+        for banded in [false, true] {
+            let p = MeanFieldParams { schedule, ..MeanFieldParams::default() };
+            let make = || match banded {
+                false => MeanField::new(&cost, &left, &p, weights),
+                true => {
+                    let bands = random_bands(w, h, nd, 7);
+                    MeanField::in_label_bands(&cost, &left, &p, weights, Buffers::default(), bands)
+                }
+            };
+            let run = |confidence: Option<f32>, threads: usize| {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                pool.install(|| {
+                    let mut mf = make();
+                    mf.step();
+                    let settled = confidence.map_or(0, |c| mf.settle(c));
+                    let before = mf.q.clone();
+                    let flags = mf.settled.clone();
+                    mf.step();
+                    mf.step();
+                    (before, flags, settled, mf.q)
+                })
+            };
+            let (_, _, none, plain) = run(None, 2);
+            let (_, _, above_one, same) = run(Some(1.5), 2);
+            assert_eq!((none, above_one), (0, 0));
+            assert!(plain.iter().zip(&same).all(|(a, b)| a.to_bits() == b.to_bits()), "{schedule:?} {banded}");
+            let (before, flags, settled, q) = run(Some(0.6), 2);
+            assert!(settled > 0 && settled < w * h, "{schedule:?} {banded}: {settled} settled");
+            for (i, &s) in flags.iter().enumerate() {
+                let (a, b) = (&before[i * nd..][..nd], &q[i * nd..][..nd]);
+                let top = a.iter().fold(0.0f32, |t, &v| t.max(v));
+                assert_eq!(s, top >= 0.6, "pixel {i}");
+                if s {
+                    assert!(a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()), "settled pixel {i} moved");
+                }
+            }
+            assert!(flags.iter().zip(q.chunks(nd)).zip(plain.chunks(nd)).any(|((&s, a), b)| !s && a != b));
+            let (_, _, _, one_thread) = run(Some(0.6), 1);
+            let (_, _, _, three) = run(Some(0.6), 3);
+            assert!(one_thread.iter().zip(&three).all(|(a, b)| a.to_bits() == b.to_bits()));
+            assert!(one_thread.iter().zip(&q).all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
+    }
+}

@@ -76,6 +76,13 @@ pub(super) fn update_row<'c, 'r>(
             }
             Pass::Odd => {}
         }
+        if mf.is_settled(i) {
+            // Its marginal stays: in place it is already there, otherwise it is copied from the previous Q.
+            if let Some(own) = nbrs.own {
+                out_row[x * m..][..m].copy_from_slice(&own[x * m..][..m]);
+            }
+            continue;
+        }
         // The pixel's own slot, and the row's other pixels (its left and right neighbours when updating in
         // place: they are of the other colour, so not written by this pass).
         let (before, rest) = out_row.split_at_mut(x * m);

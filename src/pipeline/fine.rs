@@ -56,12 +56,15 @@ pub(crate) struct FineInput<'a> {
 
 /// How a frame of a sequence runs its two views: its prior has placed each pixel, so fewer mean-field iterations
 /// serve, and its right view only serves the left-right check.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct FrameViews {
     /// Mean-field iterations of the left and the right view.
     pub iterations: [usize; 2],
     /// The right view with the local term alone (no fully connected term: no lattice is built for it).
     pub right_local_only: bool,
+    /// After each iteration but the last, the pixels at least this sure of their label settle: the later
+    /// iterations update only the others ([`meanfield::MeanField::settle`]; `None`: every pixel, every iteration).
+    pub settle_at: Option<f32>,
 }
 
 /// The pipeline from the cost volume on, for `input` ([`FineInput`]): cost volume (stage `cost volume`), inference
@@ -216,6 +219,7 @@ impl Pass<'_> {
         let (params, left_from) = (self.params, self.input.left_from);
         let need_right = params.post.lrc.mode != LrcMode::Off;
         let iterations = self.input.views.map_or([params.meanfield.iterations; 2], |v| v.iterations);
+        let settle_at = self.input.views.and_then(|v| v.settle_at);
         let LeftVolume { cost: cost_left, bands: left_bands, .. } = volume;
         let step = params.meanfield.label_step;
         let bands_allow = left_bands.is_none() || self.input.grouped_bands;
@@ -227,7 +231,7 @@ impl Pass<'_> {
             let kept = t.time("cost", || cost_left.into_columns_from(left_from));
             let left = estimate_view(
                 params,
-                View { image: guide_left, cost: &kept, iterations: iterations[0], local_only: false },
+                View { image: guide_left, cost: &kept, iterations: iterations[0], local_only: false, settle_at },
                 left_bands,
                 t,
                 buffers,
@@ -235,7 +239,8 @@ impl Pass<'_> {
             buffers.recycle(kept.data);
             (left, cost_right)
         } else {
-            let view = View { image: guide_left, cost: &cost_left, iterations: iterations[0], local_only: false };
+            let view =
+                View { image: guide_left, cost: &cost_left, iterations: iterations[0], local_only: false, settle_at };
             let left = estimate_view(params, view, left_bands, t, buffers);
             // The right volume goes into the left view's spent marginals, and the left volume's storage becomes the
             // right view's marginals: no new allocation for the right view.
@@ -252,8 +257,13 @@ impl Pass<'_> {
             on_stage("inference (right)");
             // Only a model with both terms has a local term to keep.
             let local_only = self.input.views.is_some_and(|v| v.right_local_only) && params.model == Model::Jem;
-            let view =
-                View { image: &self.input.guide.right, cost: &cost_right, iterations: iterations[1], local_only };
+            let view = View {
+                image: &self.input.guide.right,
+                cost: &cost_right,
+                iterations: iterations[1],
+                local_only,
+                settle_at,
+            };
             let right = estimate_view(params, view, right_bands, t, buffers);
             buffers.recycle(cost_right.data);
             right
@@ -282,6 +292,7 @@ impl Pass<'_> {
         let step = params.meanfield.label_step;
         let out_of_view = cost::truncation_cost(&params.cost);
         let ndisp = self.input.guide.ndisp;
+        let settle_at = self.input.views.and_then(|v| v.settle_at);
         let mut infer = |side: label_step::View,
                          image: &RgbImage,
                          iterations: usize,
@@ -302,8 +313,13 @@ impl Pass<'_> {
                 (label_step::View::Right, None) => None,
             }
             .map(|b| b.grouped(step));
-            let mut estimate =
-                estimate_view(params, View { image, cost: &grouped, iterations, local_only }, bands, t, buffers);
+            let mut estimate = estimate_view(
+                params,
+                View { image, cost: &grouped, iterations, local_only, settle_at },
+                bands,
+                t,
+                buffers,
+            );
             buffers.recycle(grouped.data);
             t.time("refine labels", || {
                 label_step::refine_from_full(&mut estimate.disparity, &full, side, step, out_of_view);
@@ -410,6 +426,8 @@ struct View<'a> {
     cost: &'a CostVolume,
     iterations: usize,
     local_only: bool,
+    /// [`FrameViews::settle_at`].
+    settle_at: Option<f32>,
 }
 
 /// Inference for one view: WTA on the cost, or mean field with the view's own image (the configuration's mean field
@@ -417,7 +435,7 @@ struct View<'a> {
 /// carries the large allocations from one view to the next.
 fn estimate_view(
     params: &Params,
-    View { image, cost, iterations, local_only }: View<'_>,
+    View { image, cost, iterations, local_only, settle_at }: View<'_>,
     bands: Option<meanfield::LabelBands>,
     t: &mut Timings,
     buffers: &mut meanfield::Buffers,
@@ -440,7 +458,14 @@ fn estimate_view(
                     Some(bands) => meanfield::MeanField::in_label_bands(cost, image, &mf_params, weights, reuse, bands),
                     None => meanfield::MeanField::with_buffers(cost, image, &mf_params, weights, reuse),
                 });
-                t.time("mf iterations", || (0..iterations).for_each(|_| mf.step()));
+                t.time("mf iterations", || {
+                    for k in 0..iterations {
+                        mf.step();
+                        if let Some(confidence) = settle_at.filter(|_| k + 1 < iterations) {
+                            mf.settle(confidence);
+                        }
+                    }
+                });
                 mf.into_marginals_and_buffers()
             };
             let (disparity, confidence) =
