@@ -77,7 +77,7 @@ const RELEASE_NOISE_MULTIPLE: f32 = 2.0;
 const RIGHT_ITERATIONS: usize = 1;
 
 /// A pan's left view: after its first iteration, the pixels at least this sure of their label settle and the
-/// second iteration updates only the others (about a fifth of a pan's pixels). On the moving sequences of
+/// second iteration updates only the others (a fifth to a quarter of a pan's pixels). On the moving sequences of
 /// `scripts/video-sequences.sh` the answers are as good (avgErr against `--independent` within ±1 %, ArtL and the
 /// dolly 1–2 % better) for 3 % of the sequence's CPU; 0.9 and 0.99 measured the same. Not on a travelling frame:
 /// there the bands already keep the update cheap, and settled pixels left its answers less consistent with the
