@@ -332,8 +332,17 @@ impl Pass<'_> {
         let left = infer(label_step::View::Left, guide_left, iterations[0], local, left_bands);
         let right = (params.post.lrc.mode != LrcMode::Off).then(|| {
             on_stage("inference (right)");
-            let local_only = local || (self.input.views.is_some_and(|v| v.right_local_only) && jem);
-            infer(label_step::View::Right, &self.input.guide.right, iterations[1], local_only, None)
+            let frame_local = self.input.views.is_some_and(|v| v.right_local_only);
+            let local_only = local || (frame_local && jem);
+            // A frame's fewer right-view iterations presume the fully connected term, whose one iteration reaches
+            // across the image; where the grouping leaves the local term alone (one pixel per iteration), the
+            // right view keeps the configured iterations unless the frame asked for the local term itself.
+            let right_iterations = if local && self.input.views.is_some() && !frame_local {
+                params.meanfield.iterations
+            } else {
+                iterations[1]
+            };
+            infer(label_step::View::Right, &self.input.guide.right, right_iterations, local_only, None)
         });
         buffers.recycle(full.data);
         (left, right)
