@@ -77,11 +77,11 @@ const RELEASE_NOISE_MULTIPLE: f32 = 2.0;
 const RIGHT_ITERATIONS: usize = 1;
 
 /// A pan's left view: after its first iteration, the pixels at least this sure of their label settle and the
-/// second iteration updates only the others (a fifth to a quarter of a pan's pixels). On the moving sequences of
-/// `scripts/video-sequences.sh` the answers are as good (avgErr against `--independent` within ±1 %, ArtL and the
-/// dolly 1–2 % better) for 3 % of the sequence's CPU; 0.9 and 0.99 measured the same. Not on a travelling frame:
-/// there the bands already keep the update cheap, and settled pixels left its answers less consistent with the
-/// camera's motion (KITTI frames 0–11: 2.33 against 2.04 px; the tuning log's "Session 47").
+/// second iteration updates only the others (a fifth to a quarter of a pan's pixels). The prior carried from the
+/// previous frame has placed the settled ones, so a second update would barely move them: the answers are as good
+/// for less time, and 0.9 or 0.99 do the same. Not on a travelling frame: there the carried prior weighs twice and
+/// makes pixels sure early, and the later iterations are what moves them toward the camera's motion (figures: the
+/// tuning log, "Settled pixels on a pan").
 const SETTLED_CONFIDENCE: f32 = 0.95;
 
 /// How a frame was matched.
@@ -285,9 +285,10 @@ fn carry_previous(
 /// driving camera 1.3 % of photometric error and 5 % of consistency.
 const TRAVELLING_PRIOR_SCALE: f32 = 2.0;
 
-/// Mean-field iterations of a travelling frame's right view, with both terms: it serves the left-right check only,
-/// within label bands around the carried answer warped across (KITTI frames 0–11: photometric 8.150 against 8.188 with the
-/// configured 3, consistency 2.119 against 2.040 px; the tuning log's "Session 47").
+/// Mean-field iterations of a travelling frame's right view, with both terms, in label bands around the carried
+/// answer warped across: it serves the left-right check only, and one iteration of the fully connected term reaches
+/// across the image (on KITTI frames the left answer's photometric error was no worse than with the configured
+/// three, for about 15 % less time; figures: the tuning log, "A travelling frame's right view with one iteration").
 const TRAVELLING_RIGHT_ITERATIONS: usize = 1;
 
 /// The fewest tracked points a motion must explain, and the share of all tracked points.
@@ -326,11 +327,12 @@ fn beyond_shift(
 
 /// A moving camera's frame: the previous answer, carried into it, as the prior (see the module doc). Carried by
 /// a 3D motion (`travelling`), the prior weighs [`TRAVELLING_PRIOR_SCALE`] times more, the left view runs the
-/// configured inference and the right view [`TRAVELLING_RIGHT_ITERATIONS`] of it, and each pixel's inference is kept to a band of labels around the carried answer (the
-/// tiles' label bands: the answers within the fully connected kernel's reach, ± the prior's margin and truncation,
-/// and the pixel's own best label), which makes the answers more consistent from frame to frame. At a size where
-/// labels run every one the bands save no time: they hold about a third of a KITTI frame's labels, but the banded
-/// update still reads marginals laid out for every label. On a larger image, whose inference groups its labels, the
+/// configured inference and the right view [`TRAVELLING_RIGHT_ITERATIONS`] of it, and each pixel's inference is
+/// kept to a band of labels around the carried answer (the tiles' label bands: the answers within the fully
+/// connected kernel's reach, ± the prior's margin and truncation, and the pixel's own best label), which makes the
+/// answers more consistent from frame to frame. At a size where labels run every one the bands save no time: they
+/// hold about a third of a KITTI frame's labels, but the banded update still reads marginals laid out for every
+/// label, and waits on memory rather than on arithmetic. On a larger image, whose inference groups its labels, the
 /// bands are grouped with them: the frame takes the grouped run's time and memory, not every label's.
 fn moving_frame(
     params: &Params,
