@@ -189,29 +189,36 @@ impl Lattice {
     /// `pixel_scale[p]` if given) and blurs; returns the vertex values (`num_vertices × channels`), to be read
     /// per pixel with [`Lattice::slice`]. Lets a caller fuse slicing into its own per-pixel loop.
     ///
-    /// With `bands`, pixel p splats only its channels `bands[p][0]..bands[p][1]`: the caller promises that its
-    /// other channels are 0, and the result is the same, bit for bit, as splatting them all (adding w·0 to a sum
-    /// of non-negative terms changes nothing).
+    /// With `bands`, pixel p splats only its channels `bands.ranges[p]`: the caller promises that its other
+    /// channels are 0, and the result is the same, bit for bit, as splatting them all (adding w·0 to a sum of
+    /// non-negative terms changes nothing). With packed bands, `input` holds only those channels
+    /// ([`Bands::packed`]).
     ///
     /// # Panics
-    /// If `input` does not have `num_pixels × channels` elements, `pixel_scale` or `bands` not `num_pixels`, or a
-    /// band is not within `0..channels`.
+    /// If `input` does not have `num_pixels × channels` elements (or, packed, the bands' total), `pixel_scale` or
+    /// `bands` not `num_pixels`, or a band is not within `0..channels`.
     pub fn splat_blur<'s>(
         &self,
         input: &[f32],
         pixel_scale: Option<&[f32]>,
-        bands: Option<&[[u32; 2]]>,
+        bands: Option<Bands<'_>>,
         channels: usize,
         scratch: &'s mut LatticeScratch,
     ) -> &'s [f32] {
         let nc = channels;
-        assert_eq!(input.len(), self.npix * nc, "lattice filter input has the wrong size");
+        let values = bands.and_then(|b| b.packed).map_or(self.npix * nc, |o| o.last().copied().unwrap_or(0));
+        assert_eq!(input.len(), values, "lattice filter input has the wrong size");
         if let Some(s) = pixel_scale {
             assert_eq!(s.len(), self.npix, "lattice pixel scale has the wrong size");
         }
-        if let Some(b) = bands {
-            assert_eq!(b.len(), self.npix, "lattice bands have the wrong size");
-            assert!(b.iter().all(|&[lo, hi]| lo <= hi && hi as usize <= nc), "a lattice band is out of range");
+        if let Some(Bands { ranges, packed }) = bands {
+            assert_eq!(ranges.len(), self.npix, "lattice bands have the wrong size");
+            assert!(ranges.iter().all(|&[lo, hi]| lo <= hi && hi as usize <= nc), "a lattice band is out of range");
+            if let Some(o) = packed {
+                assert_eq!(o.len(), self.npix + 1, "lattice band offsets have the wrong size");
+                let fits = ranges.iter().zip(o.windows(2)).all(|(&[lo, hi], w)| w[1] - w[0] == (hi - lo) as usize);
+                assert!(fits, "lattice band offsets do not match the bands");
+            }
         }
         let len = self.nvert * nc;
         // Both are written in full before they are read (the splat zeroes its vertices, each blur pass writes every
@@ -322,19 +329,29 @@ fn splat_ranges(pix_vertex: &[u32], nvert: usize, count: usize) -> Vec<(usize, u
 }
 
 /// What a splat reads: `channels` values per pixel, each pixel's scaled by `pixel_scale[p]` when given, and only
-/// those in the pixel's band `bands[p]` when given.
+/// those in the pixel's band when given.
 #[derive(Clone, Copy)]
 pub(crate) struct SplatInput<'a> {
     pub(crate) values: &'a [f32],
     pub(crate) pixel_scale: Option<&'a [f32]>,
-    pub(crate) bands: Option<&'a [[u32; 2]]>,
+    pub(crate) bands: Option<Bands<'a>>,
     pub(crate) channels: usize,
+}
+
+/// Each pixel's channels `ranges[p][0]..ranges[p][1]` (its other channels are 0): where the input holds them.
+#[derive(Clone, Copy, Debug)]
+pub struct Bands<'a> {
+    /// `[lo, hi]` per pixel.
+    pub ranges: &'a [[u32; 2]],
+    /// `None`: pixel p's channel c at `p · channels + c` (every channel stored); `Some(offsets)`: only the band is
+    /// stored, pixel p's channels `lo..hi` at `offsets[p]..offsets[p + 1]` (`num_pixels + 1` offsets).
+    pub packed: Option<&'a [usize]>,
 }
 
 /// Splats into the vertices `first..first + acc.len() / nc` by scanning the pixels `pixels` (which include
 /// every pixel contributing to them) in order and adding each one's value to those of its vertices in the range:
 /// every vertex sums its contributions in pixel order. With `bands`, pixel p's values are read and added only in
-/// its band `bands[p]` (see [`Lattice::splat_blur`]). Compiled for AVX2 + FMA as well (same results).
+/// its band (see [`Lattice::splat_blur`]). Compiled for AVX2 + FMA as well (same results).
 #[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 fn splat_scatter<'s>(
     lat: &Lattice,
@@ -350,8 +367,11 @@ fn splat_scatter<'s>(
         let ids = &lat.pix_vertex[p * D1..][..D1];
         let ws = &lat.pix_weight[p * D1..][..D1];
         let scale = pixel_scale.map_or(1.0, |s| s[p]);
-        let [lo, hi] = bands.map_or([0, nc], |b| b[p].map(|v| v as usize));
-        let src = &input[p * nc + lo..][..hi - lo];
+        let [lo, hi] = bands.map_or([0, nc], |b| b.ranges[p].map(|v| v as usize));
+        let src = match bands.and_then(|b| b.packed) {
+            Some(offsets) => &input[offsets[p]..offsets[p + 1]],
+            None => &input[p * nc + lo..][..hi - lo],
+        };
         for (&v, &w) in ids.iter().zip(ws) {
             let local = (v as usize).wrapping_sub(first);
             if local < count {

@@ -236,8 +236,20 @@ fn lattice_splat_in_bands_matches_the_full_splat() {
     let scale: Vec<f32> = rand_vec(img.len(), 10).iter().map(|s| 0.5 + s).collect();
     let (mut full, mut banded) = (LatticeScratch::default(), LatticeScratch::default());
     let a = lat.splat_blur(&input, Some(&scale), None, nc, &mut full);
-    let b = lat.splat_blur(&input, Some(&scale), Some(&bands), nc, &mut banded);
+    let b = lat.splat_blur(&input, Some(&scale), Some(Bands { ranges: &bands, packed: None }), nc, &mut banded);
     assert!(a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()));
+    // Only the bands stored, one pixel after another: the same vertices again.
+    let mut offsets = vec![0usize];
+    let mut packed_input = Vec::new();
+    for (p, values) in input.chunks_exact(nc).enumerate() {
+        let [lo, hi] = bands[p].map(|v| v as usize);
+        packed_input.extend_from_slice(&values[lo..hi]);
+        offsets.push(packed_input.len());
+    }
+    let mut packed = LatticeScratch::default();
+    let ranges = Bands { ranges: &bands, packed: Some(&offsets) };
+    let c = lat.splat_blur(&packed_input, Some(&scale), Some(ranges), nc, &mut packed);
+    assert!(a.iter().zip(c).all(|(x, y)| x.to_bits() == y.to_bits()));
     let mut out = vec![0.0; 4];
     for p in [0, 17, img.len() - 1] {
         let mut all = vec![0.0; nc];

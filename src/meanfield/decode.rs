@@ -11,18 +11,32 @@ use crate::image::{DisparityMap, Plane};
 /// Disparity (argmax Q, ties to the smaller label, with an optional sub-pixel parabola through ln Q) and
 /// confidence (max Q) from marginals.
 pub fn decode_marginals(q: &Marginals, subpixel: bool) -> (DisparityMap, Plane<f32>) {
-    let (w, h, m) = (q.width, q.height, q.ndisp);
+    decode_with(q.width, q.height, subpixel, |i| (q.pixel(i), 0, q.ndisp))
+}
+
+/// [`decode_marginals`] for a `w × h` view whose pixel i holds the labels `lo..lo + q.len()` of `m` in
+/// `labels(i) = (q, lo, m)`, the others 0: the same answer as its dense marginals give.
+pub(super) fn decode_with<'q>(
+    w: usize,
+    h: usize,
+    subpixel: bool,
+    labels: impl Fn(usize) -> (&'q [f32], usize, usize) + Sync,
+) -> (DisparityMap, Plane<f32>) {
     let mut disp = Plane::new(w, h, 0.0f32);
     let mut conf = Plane::new(w, h, 0.0f32);
     disp.data.par_iter_mut().zip(conf.data.par_iter_mut()).enumerate().with_min_len(1024).for_each(|(i, (d, c))| {
-        let qi = q.pixel(i);
-        // The first label holding the maximum (two vectorisable passes instead of a serial compare chain).
+        let (qi, lo, m) = labels(i);
+        // The first label holding the maximum (two vectorisable passes instead of a serial compare chain). The
+        // maximum is positive (the marginal sums to 1), so no label outside the band holds it.
         let max = lane_max(qi);
-        let best = qi.iter().position(|&v| v == max).unwrap_or(0);
-        *c = qi[best];
+        let k = qi.iter().position(|&v| v == max).unwrap_or(0);
+        let best = lo + k;
+        *c = qi[k];
         *d = best as f32;
         if subpixel && best > 0 && best + 1 < m {
-            *d += parabola_offset(qi[best - 1], qi[best], qi[best + 1]);
+            let below = k.checked_sub(1).map_or(0.0, |j| qi[j]);
+            let above = qi.get(k + 1).copied().unwrap_or(0.0);
+            *d += parabola_offset(below, qi[k], above);
         }
     });
     (disp, conf)

@@ -15,7 +15,7 @@
 //! vertex values per pixel inside its own loop, so the N × M message is never stored.
 
 use crate::image::RgbImage;
-use crate::lattice::{Lattice, LatticeScratch};
+use crate::lattice::{Bands, Lattice, LatticeScratch};
 use crate::params::{MeanFieldParams, Normalization};
 
 /// The fully connected kernel of one view: the lattice over (x/σx, y/σx, rgb/σf) and the normalisation and
@@ -60,11 +60,12 @@ impl FullKernel {
 
     /// Splats the marginals `q` (`N × m`, pre-scaled for the symmetric normalisation) onto the lattice and blurs
     /// them: the vertex values that [`FullKernel::slice`] reads per pixel.
-    /// With `bands`, pixel i's marginals are 0 outside `bands[i]` and only its band is splatted (the same result).
+    /// With `bands`, pixel i's marginals are 0 outside its band and only its band is splatted (the same result); packed
+    /// bands hold only the bands.
     pub(super) fn splat_blur<'s>(
         &self,
         q: &[f32],
-        bands: Option<&[[u32; 2]]>,
+        bands: Option<Bands<'_>>,
         m: usize,
         scratch: &'s mut LatticeScratch,
     ) -> &'s [f32] {

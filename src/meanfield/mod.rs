@@ -43,6 +43,7 @@ pub(crate) mod bands;
 pub(crate) mod decode;
 pub(crate) mod energy;
 pub(crate) mod full;
+mod packed;
 pub(crate) mod pyramid;
 pub(crate) mod schedule;
 pub(crate) mod update;
@@ -50,7 +51,7 @@ pub(crate) mod update;
 use rayon::prelude::*;
 
 use crate::image::{CostVolume, RgbImage};
-use crate::lattice::LatticeScratch;
+use crate::lattice::{Bands, LatticeScratch};
 use crate::params::{MeanFieldParams, Schedule};
 
 pub(crate) use anneal::{UnarySchedule, label_aware_weights};
@@ -61,6 +62,7 @@ pub(crate) use pyramid::infer_coarse_to_fine;
 
 use energy::unary_marginals;
 use full::FullKernel;
+use packed::Packed;
 use pyramid::copy_from_coarse;
 use schedule::checkerboard_bands;
 use update::Pass;
@@ -140,6 +142,10 @@ pub struct MeanField<'a> {
     spare: Vec<Vec<f32>>,
     /// Each pixel's labels (its marginal is 0 outside them); `None`: all labels.
     label_bands: Option<LabelBands>,
+    /// With label bands: only the bands are stored, Q (and `next`) packed ([`packed`]); `None`: `N × M`.
+    packed: Option<Packed>,
+    /// Where each row of pixels starts in Q: `height + 1` entries (`y · width · M` unless packed).
+    row_starts: Vec<usize>,
     /// The pixels that have settled ([`MeanField::settle`]): later steps keep their marginals (empty: none).
     settled: Vec<bool>,
 }
@@ -150,15 +156,22 @@ impl<'a> MeanField<'a> {
     /// carried from the previous frame, has already placed most pixels). The settled pixels still send their
     /// messages to the others. `confidence` above 1 settles none: the steps are then the usual ones, bit for bit.
     pub fn settle(&mut self, confidence: f32) -> usize {
-        let m = self.cost.ndisp;
+        let (n, m) = (self.cost.width * self.cost.height, self.cost.ndisp);
         let bands = self.label_bands.as_ref();
-        self.settled = self
-            .q
-            .par_chunks(m)
-            .enumerate()
-            .map(|(i, q)| {
-                let (a, b) = bands.map_or((0, m), |bands| bands.of(i));
-                q[a..b].iter().fold(0.0f32, |top, &v| top.max(v)) >= confidence
+        let (q, packed) = (&self.q, self.packed.as_ref());
+        self.settled = (0..n)
+            .into_par_iter()
+            .with_min_len(1024)
+            .map(|i| {
+                let labels = match (packed, bands) {
+                    (Some(p), _) => &q[p.offsets[i]..p.offsets[i + 1]],
+                    (None, Some(bands)) => {
+                        let (a, b) = bands.of(i);
+                        &q[i * m + a..i * m + b]
+                    }
+                    (None, None) => &q[i * m..][..m],
+                };
+                labels.iter().fold(0.0f32, |top, &v| top.max(v)) >= confidence
             })
             .collect();
         self.settled.iter().filter(|&&s| s).count()
@@ -193,7 +206,8 @@ impl<'a> MeanField<'a> {
     }
 
     /// Like [`MeanField::with_buffers`], with each pixel's marginal kept to its band of labels (0 outside it):
-    /// an iteration's update, splat and slice cost the bands, not all labels (`bands`).
+    /// an iteration's update, splat and slice cost the bands, not all labels (`bands`), and only the bands are
+    /// stored (`packed`).
     ///
     /// # Panics
     /// If the image, the cost volume and the bands differ in size or labels.
@@ -205,7 +219,20 @@ impl<'a> MeanField<'a> {
         buffers: Buffers,
         label_bands: LabelBands,
     ) -> Self {
-        Self::build(cost, image, p, weights, buffers, None, Some(label_bands))
+        Self::build(cost, image, p, weights, buffers, None, Some((label_bands, true)))
+    }
+
+    /// [`MeanField::in_label_bands`] with Q kept `N × M` (0 outside the bands): the reference for the packed run.
+    #[cfg(test)]
+    pub(super) fn in_dense_label_bands(
+        cost: &'a CostVolume,
+        image: &RgbImage,
+        p: &MeanFieldParams,
+        weights: PairwiseWeights,
+        buffers: Buffers,
+        label_bands: LabelBands,
+    ) -> Self {
+        Self::build(cost, image, p, weights, buffers, None, Some((label_bands, false)))
     }
 
     /// Like [`MeanField::with_buffers`], but Q starts from the marginals of a level reduced 2 times instead of
@@ -226,7 +253,7 @@ impl<'a> MeanField<'a> {
     }
 
     /// The constructors' common body: Q from `coarse` if given, else softmax(−ψ_u) (within the label bands, if
-    /// given).
+    /// given, packed if asked).
     fn build(
         cost: &'a CostVolume,
         image: &RgbImage,
@@ -234,27 +261,37 @@ impl<'a> MeanField<'a> {
         weights: PairwiseWeights,
         buffers: Buffers,
         coarse: Option<&Marginals>,
-        label_bands: Option<LabelBands>,
+        label_bands: Option<(LabelBands, bool)>,
     ) -> Self {
         assert_eq!((cost.width, cost.height), image.dims(), "cost volume and image differ in size");
-        if let Some(b) = &label_bands {
+        if let Some((b, _)) = &label_bands {
             assert_eq!((b.width, b.height, b.ndisp), (cost.width, cost.height, cost.ndisp), "label bands differ");
         }
         let (n, m) = (image.len(), cost.ndisp);
         let weights = label_aware_weights(weights, p, m);
         let full = (weights.fcm > 0.0).then(|| FullKernel::new(image, p));
         let mut buffers = buffers;
+        let packed = match &label_bands {
+            Some((bands, true)) => Some(Packed::new(bands, cost, &mut |len| buffers.take(len))),
+            _ => None,
+        };
+        let label_bands = label_bands.map(|(bands, _)| bands);
+        let values = packed.as_ref().map_or(n * m, Packed::len);
         // Q is written in full below, in parallel, and `next` (needed by the Jacobi schedule only) by each iteration
         // before it is read: what a reused buffer held does not matter.
-        let mut q = buffers.take(n * m);
+        let mut q = buffers.take(values);
         let Buffers { spare, mut next, scratch } = buffers;
-        let next_len = if p.schedule == Schedule::Jacobi { n * m } else { 0 };
+        let next_len = if p.schedule == Schedule::Jacobi { values } else { 0 };
         if next.len() != next_len {
             next = vec![0.0; next_len];
-        } else if label_bands.is_some() {
+        } else if label_bands.is_some() && packed.is_none() {
             // Each iteration writes only the bands of `next`: the rest must be 0.
             next.fill(0.0);
         }
+        let row_starts = match &packed {
+            Some(packed) => packed.row_starts(cost.width, cost.height),
+            None => (0..=cost.height).map(|y| y * cost.width * m).collect(),
+        };
         let edges = match p.schedule {
             Schedule::Jacobi => Vec::new(),
             Schedule::Checkerboard => {
@@ -263,9 +300,12 @@ impl<'a> MeanField<'a> {
         };
         let unary_schedule = UnarySchedule::new(p);
         let scale = unary_schedule.at(0);
-        match (coarse, &label_bands) {
-            (Some(coarse), _) => copy_from_coarse(&mut q, cost.width, cost.height, m, coarse),
-            (None, Some(bands)) => {
+        match (coarse, &label_bands, &packed) {
+            (Some(coarse), _, _) => copy_from_coarse(&mut q, cost.width, cost.height, m, coarse),
+            (None, Some(bands), Some(packed)) => {
+                packed.fill(&mut q, bands, cost, |c, q| unary_marginals(c, scale, c.len(), q));
+            }
+            (None, Some(bands), None) => {
                 const CHUNK: usize = 256;
                 q.par_chunks_mut(m * CHUNK).zip(cost.data.par_chunks(m * CHUNK)).enumerate().for_each(|(k, (q, c))| {
                     for (j, (q, c)) in q.chunks_exact_mut(m).zip(c.chunks_exact(m)).enumerate() {
@@ -275,7 +315,7 @@ impl<'a> MeanField<'a> {
                     }
                 });
             }
-            (None, None) => {
+            (None, None, _) => {
                 const CHUNK: usize = 256;
                 q.par_chunks_mut(m * CHUNK).zip(cost.data.par_chunks(m * CHUNK)).for_each(|(q, c)| {
                     unary_marginals(c, scale, m, q);
@@ -298,6 +338,8 @@ impl<'a> MeanField<'a> {
             scratch,
             spare,
             label_bands,
+            packed,
+            row_starts,
             settled: Vec::new(),
         }
     }
@@ -313,7 +355,13 @@ impl<'a> MeanField<'a> {
         let mut scratch = std::mem::take(&mut self.scratch);
         let mut edges = std::mem::take(&mut self.edges);
         let vals: &[f32] = match &self.full {
-            Some(full) => full.splat_blur(&q, self.label_bands.as_ref().map(LabelBands::as_slice), m, &mut scratch),
+            Some(full) => {
+                let bands = self.label_bands.as_ref().map(|b| Bands {
+                    ranges: b.as_slice(),
+                    packed: self.packed.as_ref().map(|p| p.offsets.as_slice()),
+                });
+                full.splat_blur(&q, bands, m, &mut scratch)
+            }
             None => &[],
         };
         let this = &*self;
@@ -338,13 +386,21 @@ impl<'a> MeanField<'a> {
     /// The fully connected message Q̃ (normalised, self term excluded as configured) for the current marginals,
     /// `N × M`; empty when ω = 0. For tests and diagnostics: [`MeanField::step`] computes the same values inline.
     pub fn fcm_message(&mut self) -> Vec<f32> {
+        let q = self.marginals().into_owned();
         let Some(full) = &self.full else { return Vec::new() };
-        full.message(&self.q, self.cost.ndisp, &mut self.scratch)
+        full.message(&q, self.cost.ndisp, &mut self.scratch)
     }
 
-    /// The current marginals.
-    pub fn marginals(&self) -> &[f32] {
-        &self.q
+    /// The current marginals, `N × M` (unpacked if packed).
+    pub fn marginals(&self) -> std::borrow::Cow<'_, [f32]> {
+        match (&self.packed, &self.label_bands) {
+            (Some(packed), Some(bands)) => {
+                let mut dense = vec![0.0; self.cost.data.len()];
+                packed.unpack(&self.q, bands, self.cost.ndisp, &mut dense);
+                std::borrow::Cow::Owned(dense)
+            }
+            _ => std::borrow::Cow::Borrowed(&self.q),
+        }
     }
 
     /// Consumes the state, returning the marginals as a volume.
@@ -352,11 +408,43 @@ impl<'a> MeanField<'a> {
         self.into_marginals_and_buffers().0
     }
 
+    /// The disparity and confidence of the current marginals ([`decode_marginals`]), without unpacking packed ones.
+    pub fn decode(&self, subpixel: bool) -> (crate::image::DisparityMap, crate::image::Plane<f32>) {
+        let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
+        match (&self.packed, &self.label_bands) {
+            (Some(packed), Some(bands)) => decode::decode_with(w, h, subpixel, |i| {
+                (&self.q[packed.offsets[i]..packed.offsets[i + 1]], bands.of(i).0, m)
+            }),
+            _ => decode::decode_with(w, h, subpixel, |i| (&self.q[i * m..][..m], 0, m)),
+        }
+    }
+
+    /// Consumes the state, returning its buffers for reuse by another [`MeanField`] (the marginals among them).
+    pub fn into_buffers(self) -> Buffers {
+        let mut buffers = Buffers { spare: self.spare, next: self.next, scratch: self.scratch };
+        buffers.recycle(self.q);
+        if let Some(packed) = self.packed {
+            buffers.recycle(packed.cost);
+        }
+        buffers
+    }
+
     /// Consumes the state, returning the marginals and the buffers for reuse by another [`MeanField`].
     pub fn into_marginals_and_buffers(self) -> (Marginals, Buffers) {
         let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
-        let buffers = Buffers { spare: self.spare, next: self.next, scratch: self.scratch };
-        (CostVolume { width: w, height: h, ndisp: m, data: self.q }, buffers)
+        let mut buffers = Buffers { spare: self.spare, next: self.next, scratch: self.scratch };
+        let data = match (self.packed, &self.label_bands) {
+            (Some(packed), Some(bands)) => {
+                // Written in full by the unpacking.
+                let mut dense = buffers.take(w * h * m);
+                packed.unpack(&self.q, bands, m, &mut dense);
+                buffers.recycle(self.q);
+                buffers.recycle(packed.cost);
+                dense
+            }
+            _ => self.q,
+        };
+        (CostVolume { width: w, height: h, ndisp: m, data }, buffers)
     }
 }
 

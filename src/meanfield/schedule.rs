@@ -8,7 +8,7 @@
 use rayon::prelude::*;
 
 use super::MeanField;
-use super::update::{NeighbourRows, Pass, RowScratch, split_rows, update_row};
+use super::update::{NeighbourRows, Pass, RowScratch, rows_of, split_rows};
 
 /// A band of rows `[a, b)` of [`MeanField::checkerboard_in_place`] as one task sees it: its interior rows
 /// a + 1 … b − 2 (`interior`, updated in place), the new values of its first and last rows (`first`, `last`: the
@@ -26,25 +26,25 @@ impl Band<'_> {
     /// One pass over row y of the band (the rows outside it are read on pass 1 only).
     fn step(&mut self, mf: &MeanField<'_>, pass: Pass, y: usize, vals: &[f32], s: &mut RowScratch) {
         let (a, b) = self.rows;
-        let len = self.first.len();
+        // Where row r starts within the interior (rows a + 1 … b − 2).
+        let rel = |r: usize| mf.row_starts[r] - mf.row_starts[a + 1];
         let interior = &mut *self.interior;
         let (outside_above, outside_below) = if pass == Pass::Even { self.outside } else { (None, None) };
         if y == a {
-            let below = if b - a > 2 { &interior[..len] } else { &*self.last };
+            let below = if b - a > 2 { &interior[..rel(a + 2)] } else { &*self.last };
             let nbrs = NeighbourRows { above: outside_above, same: None, below: Some(below), own: None };
-            update_row(mf, y, pass, nbrs, vals, self.first, s);
+            mf.update(y, pass, nbrs, vals, self.first, s);
         } else if y + 1 == b {
-            let above = if b - a > 2 { &interior[interior.len() - len..] } else { &*self.first };
+            let above = if b - a > 2 { &interior[rel(b - 2)..] } else { &*self.first };
             let nbrs = NeighbourRows { above: Some(above), same: None, below: outside_below, own: None };
-            update_row(mf, y, pass, nbrs, vals, self.last, s);
+            mf.update(y, pass, nbrs, vals, self.last, s);
         } else {
-            let r = y - a - 1;
-            let (before, rest) = interior.split_at_mut(r * len);
-            let (row, after) = rest.split_at_mut(len);
-            let above: &[f32] = if r == 0 { self.first } else { &before[(r - 1) * len..] };
-            let below: &[f32] = if after.is_empty() { self.last } else { &after[..len] };
+            let (before, rest) = interior.split_at_mut(rel(y));
+            let (row, after) = rest.split_at_mut(rel(y + 1) - rel(y));
+            let above: &[f32] = if y == a + 1 { self.first } else { &before[rel(y - 1)..] };
+            let below: &[f32] = if y + 2 == b { self.last } else { &after[..rel(y + 2) - rel(y + 1)] };
             let nbrs = NeighbourRows { above: Some(above), same: None, below: Some(below), own: None };
-            update_row(mf, y, pass, nbrs, vals, row, s);
+            mf.update(y, pass, nbrs, vals, row, s);
         }
     }
 
@@ -87,13 +87,12 @@ impl MeanField<'_> {
     /// One parallel sweep of `pass` over all rows of `out`: neighbours from `src`, each pixel's own previous
     /// marginal from `src` (`own_in_src`) or from `out` itself.
     pub(super) fn sweep(&self, pass: Pass, src: &[f32], own_in_src: bool, vals: &[f32], out: &mut [f32]) {
-        let m = self.cost.ndisp;
-        let len = self.cost.width * m;
-        out.par_chunks_mut(len).enumerate().for_each_init(
-            || RowScratch::new(m),
+        let rs = &self.row_starts;
+        rows_of(out, rs).into_par_iter().enumerate().for_each_init(
+            || RowScratch::new(self.cost.ndisp),
             |s, (y, row)| {
-                let own = own_in_src.then(|| &src[y * len..][..len]);
-                update_row(self, y, pass, NeighbourRows { own, ..NeighbourRows::of(src, y, len) }, vals, row, s);
+                let own = own_in_src.then(|| &src[rs[y]..rs[y + 1]]);
+                self.update(y, pass, NeighbourRows { own, ..NeighbourRows::of(src, y, rs) }, vals, row, s);
             },
         );
     }
@@ -102,18 +101,18 @@ impl MeanField<'_> {
     /// last rows of `q` stay old (the neighbouring bands read them), their pass 1 going into `edges` (two rows per
     /// band, starting as copies of the old rows).
     fn sweep_bands(&self, q: &mut [f32], vals: &[f32], bands: &[(usize, usize)], edges: &mut [f32]) {
-        let len = self.cost.width * self.cost.ndisp;
+        let rs = &self.row_starts;
         let h = self.cost.height;
         let mut parts = Vec::with_capacity(bands.len());
         let (mut rest, mut edge_rest): (&mut [f32], &mut [f32]) = (q, edges);
         for &(a, b) in bands {
-            let (band, r) = std::mem::take(&mut rest).split_at_mut((b - a) * len);
+            let (band, r) = std::mem::take(&mut rest).split_at_mut(rs[b] - rs[a]);
             rest = r;
-            let (first, r) = band.split_at_mut(len);
-            let (interior, last) = r.split_at_mut((b - a - 2) * len);
-            let (edge, r) = std::mem::take(&mut edge_rest).split_at_mut(2 * len);
+            let (first, r) = band.split_at_mut(rs[a + 1] - rs[a]);
+            let (interior, last) = r.split_at_mut(rs[b - 1] - rs[a + 1]);
+            let (edge, r) = std::mem::take(&mut edge_rest).split_at_mut(first.len() + last.len());
             edge_rest = r;
-            let (first_new, last_new) = edge.split_at_mut(len);
+            let (first_new, last_new) = edge.split_at_mut(first.len());
             first_new.copy_from_slice(first);
             last_new.copy_from_slice(last);
             parts.push(((a, b), (&*first, &*last), interior, (first_new, last_new)));
@@ -147,15 +146,14 @@ impl MeanField<'_> {
         bands: &[(usize, usize)],
         edges: &mut [f32],
     ) {
-        let m = self.cost.ndisp;
-        let len = self.cost.width * m;
+        let rs = &self.row_starts;
         let h = self.cost.height;
-        let mut s = RowScratch::new(m);
+        let mut s = RowScratch::new(self.cost.ndisp);
         if bands.is_empty() {
             for pass in [Pass::Even, Pass::Odd] {
                 for y in 0..h {
-                    let (nbrs, row) = split_rows(q, y, len);
-                    update_row(self, y, pass, nbrs, vals, row, &mut s);
+                    let (nbrs, row) = split_rows(q, y, rs);
+                    self.update(y, pass, nbrs, vals, row, &mut s);
                 }
             }
             return;
@@ -163,14 +161,19 @@ impl MeanField<'_> {
         self.sweep_bands(q, vals, bands, edges);
         // Pass 1 of the edge rows back into Q, then their pass 2 (reading only the even pixels of the rows
         // around, all final now).
-        for (&(a, b), edge) in bands.iter().zip(edges.chunks_exact(2 * len)) {
-            q[a * len..][..len].copy_from_slice(&edge[..len]);
-            q[(b - 1) * len..][..len].copy_from_slice(&edge[len..]);
+        let mut edge = &edges[..];
+        for &(a, b) in bands {
+            let (first, last) = (rs[a]..rs[a + 1], rs[b - 1]..rs[b]);
+            let (first_new, rest) = edge.split_at(first.len());
+            let (last_new, rest) = rest.split_at(last.len());
+            q[first].copy_from_slice(first_new);
+            q[last].copy_from_slice(last_new);
+            edge = rest;
         }
         for &(a, b) in bands {
             for y in [a, b - 1] {
-                let (nbrs, row) = split_rows(q, y, len);
-                update_row(self, y, Pass::Odd, nbrs, vals, row, &mut s);
+                let (nbrs, row) = split_rows(q, y, rs);
+                self.update(y, Pass::Odd, nbrs, vals, row, &mut s);
             }
         }
     }

@@ -6,6 +6,7 @@
 //! and picked at run time, with the same results (Rust never contracts a·b + c into an FMA).
 
 use super::energy::{FullTerm, LocalTerm, pixel_energies, softmax_neg_padded};
+use super::packed::update_row_packed;
 use super::{MeanField, PairwiseWeights};
 
 /// Which pixels one update pass computes: all, or one colour of the checkerboard ((x + y) even or odd).
@@ -151,24 +152,60 @@ pub(super) struct NeighbourRows<'s> {
 }
 
 impl<'s> NeighbourRows<'s> {
-    /// Rows y − 1, y, y + 1 of a whole volume with rows of `len` values.
-    pub(super) fn of(volume: &'s [f32], y: usize, len: usize) -> Self {
-        let h = volume.len() / len;
+    /// Rows y − 1, y, y + 1 of a whole volume whose row r is `volume[row_starts[r]..row_starts[r + 1]]`.
+    pub(super) fn of(volume: &'s [f32], y: usize, row_starts: &[usize]) -> Self {
+        let h = row_starts.len() - 1;
+        let row = |r: usize| &volume[row_starts[r]..row_starts[r + 1]];
         NeighbourRows {
-            above: (y > 0).then(|| &volume[(y - 1) * len..][..len]),
-            same: Some(&volume[y * len..][..len]),
-            below: (y + 1 < h).then(|| &volume[(y + 1) * len..][..len]),
+            above: (y > 0).then(|| row(y - 1)),
+            same: Some(row(y)),
+            below: (y + 1 < h).then(|| row(y + 1)),
             own: None,
         }
     }
 }
 
-/// Splits rows y − 1, y, y + 1 out of a volume with rows of `len` values: row y mutable, its neighbours as
-/// [`NeighbourRows`] with `same` = `None` (for an update in place).
-pub(super) fn split_rows(volume: &mut [f32], y: usize, len: usize) -> (NeighbourRows<'_>, &mut [f32]) {
-    let (before, rest) = volume.split_at_mut(y * len);
-    let (row, after) = rest.split_at_mut(len);
-    let above = (y > 0).then(|| &before[(y - 1) * len..]);
-    let below = (!after.is_empty()).then(|| &after[..len]);
+/// Splits rows y − 1, y, y + 1 out of a volume whose row r is `volume[row_starts[r]..row_starts[r + 1]]`: row y
+/// mutable, its neighbours as [`NeighbourRows`] with `same` = `None` (for an update in place).
+pub(super) fn split_rows<'v>(
+    volume: &'v mut [f32],
+    y: usize,
+    row_starts: &[usize],
+) -> (NeighbourRows<'v>, &'v mut [f32]) {
+    let h = row_starts.len() - 1;
+    let (before, rest) = volume.split_at_mut(row_starts[y]);
+    let (row, after) = rest.split_at_mut(row_starts[y + 1] - row_starts[y]);
+    let above = (y > 0).then(|| &before[row_starts[y - 1]..]);
+    let below = (y + 1 < h).then(|| &after[..row_starts[y + 2] - row_starts[y + 1]]);
     (NeighbourRows { above, same: None, below, own: None }, row)
+}
+
+/// A volume cut into its rows (row r: `row_starts[r]..row_starts[r + 1]`).
+pub(super) fn rows_of<'v>(mut volume: &'v mut [f32], row_starts: &[usize]) -> Vec<&'v mut [f32]> {
+    row_starts
+        .windows(2)
+        .map(|r| {
+            let (row, rest) = std::mem::take(&mut volume).split_at_mut(r[1] - r[0]);
+            volume = rest;
+            row
+        })
+        .collect()
+}
+
+impl MeanField<'_> {
+    /// [`update_row`], or [`update_row_packed`] when Q is packed (the rows then packed rows).
+    pub(super) fn update(
+        &self,
+        y: usize,
+        pass: Pass,
+        nbrs: NeighbourRows<'_>,
+        vals: &[f32],
+        out_row: &mut [f32],
+        s: &mut RowScratch,
+    ) {
+        match self.packed {
+            Some(_) => update_row_packed(self, y, pass, nbrs, vals, out_row, s),
+            None => update_row(self, y, pass, nbrs, vals, out_row, s),
+        }
+    }
 }

@@ -460,8 +460,13 @@ fn estimate_view(
             let weights = meanfield::PairwiseWeights { fcm, lcm: params.effective_lcm_weight() };
             let reuse = std::mem::take(buffers);
             let mf_params = MeanFieldParams { iterations, ..params.meanfield.clone() };
-            let (q, rest) = if mf_params.pyramid_levels > 1 {
-                t.time("mf pyramid", || meanfield::infer_coarse_to_fine(cost, image, &mf_params, weights, reuse))
+            let decode = |q: &meanfield::Marginals| meanfield::decode_marginals(q, params.meanfield.subpixel);
+            let ((disparity, confidence), rest) = if mf_params.pyramid_levels > 1 {
+                let (q, mut rest) =
+                    t.time("mf pyramid", || meanfield::infer_coarse_to_fine(cost, image, &mf_params, weights, reuse));
+                let decoded = t.time("decode", || decode(&q));
+                rest.recycle(q.data);
+                (decoded, rest)
             } else {
                 let mut mf = t.time("mf setup", || match bands {
                     Some(bands) => meanfield::MeanField::in_label_bands(cost, image, &mf_params, weights, reuse, bands),
@@ -475,12 +480,9 @@ fn estimate_view(
                         }
                     }
                 });
-                mf.into_marginals_and_buffers()
+                (t.time("decode", || mf.decode(params.meanfield.subpixel)), mf.into_buffers())
             };
-            let (disparity, confidence) =
-                t.time("decode", || meanfield::decode_marginals(&q, params.meanfield.subpixel));
             *buffers = rest;
-            buffers.recycle(q.data);
             ViewEstimate { disparity, confidence }
         }
     }
