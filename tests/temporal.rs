@@ -193,6 +193,24 @@ fn a_camera_driving_forward_is_carried_by_its_motion() {
     assert!(r <= 1.02 * a, "dolly: {r:.4} remembered against {a:.4} alone");
 }
 
+/// A moving frame takes its large allocations from those the frame before it left; a copy of the matcher starts
+/// without them (they are scratch, not state), and the maps are the same either way, on a pan and on a drive.
+#[test]
+fn moving_frames_give_the_same_maps_with_or_without_the_previous_frames_buffers() {
+    for motion in [Motion::Pan, Motion::Dolly] {
+        let scenes = frames(motion, 0.0, 3);
+        let kept = run(&scenes, true);
+        let mut matcher =
+            Matcher::new(Params::default()).unwrap().with_ndisp(NdispSource::Given(32)).with_temporal(true);
+        for (s, k) in scenes.iter().zip(&kept) {
+            matcher = matcher.clone();
+            let out = matcher.match_pair(&s.left, &s.right).unwrap();
+            assert_eq!((out.frame, &out.disparity), (k.frame, &k.disparity), "{motion:?}");
+        }
+        assert!(kept[1..].iter().all(|o| !matches!(o.frame, Some(FrameKind::First | FrameKind::Cut))));
+    }
+}
+
 /// A driving camera's frames on an image large enough that inference groups its labels (here a reference size of a
 /// quarter of the image's pixels: labels two at a time): the carried answer's label bands are grouped with the labels,
 /// so the frame runs in the grouped run's memory, and it is at least as accurate as matched alone.

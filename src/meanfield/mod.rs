@@ -108,6 +108,16 @@ impl Buffers {
         }
     }
 
+    /// Frees the spare allocations beyond `values` in all, the largest kept first (the lattice's and `next` stay).
+    pub fn trim(&mut self, values: usize) {
+        self.spare.sort_by_key(|v| std::cmp::Reverse(v.capacity()));
+        let mut total = 0;
+        self.spare.retain(|v| {
+            total += v.capacity();
+            total <= values
+        });
+    }
+
     /// A spare allocation of `len` values (what it held before, or zeros; for a buffer that is written in full
     /// before it is read): the smallest that holds `len`, else the largest, grown; a fresh one if there is none.
     pub fn take(&mut self, len: usize) -> Vec<f32> {
@@ -272,7 +282,7 @@ impl<'a> MeanField<'a> {
         let full = (weights.fcm > 0.0).then(|| FullKernel::new(image, p));
         let mut buffers = buffers;
         let packed = match &label_bands {
-            Some((bands, true)) => Some(Packed::new(bands, cost, &mut |len| buffers.take(len))),
+            Some((bands, true)) => Some(Packed::new(bands, cost, p.iterations > 1, &mut |len| buffers.take(len))),
             _ => None,
         };
         let label_bands = label_bands.map(|(bands, _)| bands);
@@ -419,13 +429,11 @@ impl<'a> MeanField<'a> {
         }
     }
 
-    /// Consumes the state, returning its buffers for reuse by another [`MeanField`] (the marginals among them).
+    /// Consumes the state, returning its buffers for reuse by another [`MeanField`] (the marginals among them). A
+    /// packed cost is freed: kept as a spare beside the marginals it would only raise the peak of the next view.
     pub fn into_buffers(self) -> Buffers {
         let mut buffers = Buffers { spare: self.spare, next: self.next, scratch: self.scratch };
         buffers.recycle(self.q);
-        if let Some(packed) = self.packed {
-            buffers.recycle(packed.cost);
-        }
         buffers
     }
 

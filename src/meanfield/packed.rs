@@ -27,10 +27,16 @@ pub(super) struct Packed {
 }
 
 impl Packed {
-    /// The layout of `bands`, with the bands' cost packed out of `cost` (into a buffer from `take`) when the bands
-    /// hold at most half the volume's labels: then the packed cost and marginals together take no more memory than
-    /// the dense marginals.
-    pub(super) fn new(bands: &LabelBands, cost: &CostVolume, take: &mut dyn FnMut(usize) -> Vec<f32>) -> Self {
+    /// The layout of `bands`, with the bands' cost packed out of `cost` (into a buffer from `take`) if `pack_cost`
+    /// and the bands hold at most half the volume's labels: then the packed cost and marginals together take no
+    /// more memory than the dense marginals. (Packing reads the cost once, as an update does: it pays from the
+    /// second iteration on.)
+    pub(super) fn new(
+        bands: &LabelBands,
+        cost: &CostVolume,
+        pack_cost: bool,
+        take: &mut dyn FnMut(usize) -> Vec<f32>,
+    ) -> Self {
         let mut offsets = Vec::with_capacity(bands.as_slice().len() + 1);
         let mut total = 0usize;
         offsets.push(0);
@@ -39,7 +45,7 @@ impl Packed {
             offsets.push(total);
         }
         let mut packed = Packed { offsets, cost: Vec::new() };
-        if 2 * total <= cost.data.len() {
+        if pack_cost && 2 * total <= cost.data.len() {
             // Written in full below.
             let mut out = take(total);
             packed.for_pixel_chunks(&mut out, |first, chunk| {

@@ -23,7 +23,7 @@ mod window;
 use crate::error::{Error, Result};
 use crate::image::{Plane, StereoPair};
 use crate::params::Params;
-use crate::{lattice, scale};
+use crate::{lattice, meanfield, scale};
 
 pub(crate) use fine::FrameViews;
 use fine::{FineInput, fine_pass};
@@ -146,7 +146,8 @@ fn run_pipeline(
     } else {
         None
     };
-    fine_at_full_resolution(params, pair, &input, prior.as_ref(), FromFrame::default(), options, t)
+    let buffers = &mut meanfield::Buffers::default();
+    fine_at_full_resolution(params, pair, &input, prior.as_ref(), FromFrame::default(), (options, buffers), t)
 }
 
 /// What a frame of a sequence takes from the frame before it into the fine pass besides the prior (see
@@ -157,15 +158,16 @@ struct FromFrame<'a> {
     segmentation: Option<&'a crate::post::planes::Segmentation>,
 }
 
-/// The fine pass on the prepared pair, with `prior` and what the frame before gives (`from`), as `options` ask,
-/// appending its stage times to `t`; the output carries what preparing the pair measured.
+/// The fine pass on the prepared pair, with `prior` and what the frame before gives (`from`), as `options` ask, its
+/// large allocations taken from `buffers` and given back there; appends its stage times to `t`. The output carries
+/// what preparing the pair measured.
 fn fine_at_full_resolution(
     params: &Params,
     pair: &StereoPair,
     input: &Prepared,
     prior: Option<&prior::Prior>,
     from: FromFrame<'_>,
-    options: &RunOptions<'_>,
+    (options, buffers): (&RunOptions<'_>, &mut meanfield::Buffers),
     t: Timings,
 ) -> Result<PipelineOutput> {
     let (guide, cost_pair) = input.pairs(pair);
@@ -184,7 +186,7 @@ fn fine_at_full_resolution(
         // A whole image's prior in bands is a travelling frame's: its bands are grouped with the labels, if any.
         grouped_bands: prior.is_some_and(|p| p.in_bands),
     };
-    let mut out = fine_pass(params, &fine, &mut Default::default(), options.on_stage, t)?;
+    let mut out = fine_pass(params, &fine, buffers, options.on_stage, t)?;
     out.measured = input.measured();
     out.vertical_offset = input.vertical_offset();
     Ok(out)
@@ -212,7 +214,8 @@ pub(crate) struct FramePrior {
 /// The pipeline at the pair's own resolution with the previous frame's answer as the prior ([`FramePrior`]): the
 /// coarse chain, and the vertical-offset measurement when the previous offset is given, are not run. The prior's
 /// weight follows the coarse prior's rule (λ by the measured noise, its floor where the cost is flat, its factor by
-/// the previous confidence and left-right check), scaled, and is released where the frames disagree.
+/// the previous confidence and left-right check), scaled, and is released where the frames disagree. The large
+/// allocations come from `buffers` and go back there (a sequence's frames reuse them).
 ///
 /// # Errors
 /// As [`run`].
@@ -221,6 +224,7 @@ pub(crate) fn run_with_prior(
     pair: &StereoPair,
     from: FramePrior,
     options: &RunOptions<'_>,
+    buffers: &mut meanfield::Buffers,
 ) -> Result<PipelineOutput> {
     params.validate()?;
     check_features_fit(params, pair)?;
@@ -248,7 +252,7 @@ pub(crate) fn run_with_prior(
     }
     prior.in_bands = from.in_bands;
     let frame = FromFrame { views: from.views, segmentation: segmentation.as_ref() };
-    fine_at_full_resolution(params, pair, &input, Some(&prior), frame, options, t)
+    fine_at_full_resolution(params, pair, &input, Some(&prior), frame, (options, buffers), t)
 }
 
 /// The fully connected kernel's features must fit the lattice at this image size.

@@ -118,6 +118,22 @@ pub(crate) struct State {
     previous: Option<Previous>,
     /// The running means of a still camera's views and answers.
     still: Option<(ViewMeans, AnswerMean)>,
+    /// What the last moving frame's inference left for the next one's.
+    spare: Spare,
+}
+
+/// The large allocations (cost volumes, marginals, the lattice's buffers) one moving frame hands to the next, which
+/// takes its volumes in them instead of allocating, page-faulting and zeroing them again (about 5 % of a KITTI
+/// frame's time). At most two volumes' worth and the lattice's buffers, what one frame's inference holds anyway
+/// (`setup::memory`), kept only from one moving frame to the next: any other frame frees them before it runs.
+/// Scratch, not state: a copy of the state starts without them.
+#[derive(Debug, Default)]
+struct Spare(crate::meanfield::Buffers);
+
+impl Clone for Spare {
+    fn clone(&self) -> Self {
+        Spare::default()
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -162,8 +178,10 @@ pub(crate) fn match_frame(
     // The comparison with the previous frame (and for a moving camera, the previous answer carried into this one),
     // timed as a stage of the frames that have one.
     let mut motion_time = seen.then(|| start.elapsed());
+    let mut spare = std::mem::take(&mut state.spare);
     let (mut out, kind, exposure) = match (previous, compared) {
         (Some(_), Some(c)) if !cut && (c.shift.dx, c.shift.dy) == (0, 0) && unexplained < STILL_UNEXPLAINED => {
+            drop(spare);
             let (out, frames, exposure) = still_frame(state, params, pair, noise, options)?;
             (out, FrameKind::Still { frames }, exposure)
         }
@@ -172,7 +190,9 @@ pub(crate) fn match_frame(
             let (carried, released, motion) = carry_previous(&prev, &c, &grey, noise, unexplained);
             motion_time = Some(start.elapsed());
             let (before, held) = (carried.disparity.clone(), released.clone());
-            let mut out = moving_frame(params, pair, carried, released, motion.is_some(), options)?;
+            let mut out = moving_frame(params, pair, (carried, released), motion.is_some(), options, &mut spare.0)?;
+            spare.0.trim(3 * pair.left.len() * pair.ndisp / 2);
+            state.spare = spare;
             carry_answer(&mut out.disparity, &before, &held);
             let kind = match motion {
                 Some(m) => FrameKind::Travelling { tracks: m.inliers as u32 },
@@ -181,6 +201,7 @@ pub(crate) fn match_frame(
             (out, kind, c.exposure)
         }
         _ => {
+            drop(spare);
             state.still = None;
             let out = pipeline::run_with(params, pair, options)?;
             state.still = Some((ViewMeans::start(&pair.left, &pair.right), AnswerMean::start(&out.disparity)));
@@ -330,17 +351,17 @@ fn beyond_shift(
 /// configured inference and the right view [`TRAVELLING_RIGHT_ITERATIONS`] of it, and each pixel's inference is
 /// kept to a band of labels around the carried answer (the tiles' label bands: the answers within the fully
 /// connected kernel's reach, ± the prior's margin and truncation, and the pixel's own best label), which makes the
-/// answers more consistent from frame to frame. At a size where labels run every one the bands save no time: they
-/// hold about a third of a KITTI frame's labels, but the banded update still reads marginals laid out for every
-/// label, and waits on memory rather than on arithmetic. On a larger image, whose inference groups its labels, the
-/// bands are grouped with them: the frame takes the grouped run's time and memory, not every label's.
+/// answers more consistent from frame to frame. Only the bands are stored (about a third of a KITTI frame's
+/// labels; `meanfield::packed`), so the update reads a third of the memory. On a larger image, whose inference groups
+/// its labels, the bands are grouped with them: the frame takes the grouped run's time and memory, not every label's.
+/// The frame's large allocations come from `buffers` (what the moving frame before it left) and go back there.
 fn moving_frame(
     params: &Params,
     pair: &StereoPair,
-    mut carried: PipelineOutput,
-    released: Plane<bool>,
+    (mut carried, released): (PipelineOutput, Plane<bool>),
     travelling: bool,
     options: &RunOptions<'_>,
+    buffers: &mut crate::meanfield::Buffers,
 ) -> Result<PipelineOutput> {
     // Where the frames disagree the carried segments do not hold either: those pixels start on the grid's cells.
     if let Some(s) = &mut carried.segmentation {
@@ -365,5 +386,5 @@ fn moving_frame(
         }),
         in_bands: travelling,
     };
-    pipeline::run_with_prior(params, pair, from, options)
+    pipeline::run_with_prior(params, pair, from, options, buffers)
 }
