@@ -1,6 +1,7 @@
 //! Label bands (our addition, for tiles; [`crate::pipeline::tile`]): each pixel's marginal is kept to a contiguous run
 //! of labels and is 0 outside it, so the update, the splat and the slice of an iteration cost the pixel's band, not the
-//! view's whole label range. The blur still runs over every label of a vertex.
+//! view's whole label range, and only the bands are stored ([`super::packed`]). The blur still runs over every label
+//! of a vertex (a vertex gathers pixels near and far: its pixels' bands span most labels).
 //!
 //! A band holds what the pixel can plausibly take: every answer of the coarse level within the fully connected
 //! kernel's reach (3σx), widened by the labels over which the coarse prior still changes its penalty (its margin

@@ -28,15 +28,16 @@
 //!   (evidence crosses the local term twice as fast per iteration);
 //! - [`anneal`]: deterministic annealing of the unary temperature and the label-aware local coupling;
 //! - [`pyramid`]: coarse-to-fine inference (the same model on a 2× reduced grid first);
-//! - [`bands`]: label bands, each pixel's marginal kept to a run of labels (the tiles of [`crate::pipeline::tile`]);
+//! - [`bands`]: label bands, each pixel's marginal kept to a run of labels (the tiles of [`crate::pipeline::tile`],
+//!   a travelling frame), stored packed, one pixel's band after another ([`packed`]);
 //! - in [`full`]: the normalisation of the message (the paper leaves it unnormalised);
 //! - in [`energy`]: the floor under tiny probabilities ([`energy::MIN_RELATIVE_PROBABILITY`]) and the sub-pixel
 //!   parabola.
 //!
-//! Memory: Q, `N × M` f32 (and the next Q with the Jacobi schedule; the checkerboard updates Q in place), plus
-//! the lattice's two `vertices × M` buffers (the fully connected message is sliced per pixel inside the update,
-//! never stored); each iteration is O(N·M) and allocation-free apart from a few `M`-long scratch vectors per
-//! thread.
+//! Memory: Q, `N × M` f32 (the bands' labels only with label bands; and the next Q with the Jacobi schedule; the
+//! checkerboard updates Q in place), plus the lattice's two `vertices × M` buffers (the fully connected message is
+//! sliced per pixel inside the update, never stored); each iteration is O(N·M) and allocation-free apart from a few
+//! `M`-long scratch vectors per thread.
 
 pub(crate) mod anneal;
 pub(crate) mod bands;
