@@ -314,7 +314,7 @@ impl<'a> MeanField<'a> {
         match (coarse, &label_bands, &packed) {
             (Some(coarse), _, _) => copy_from_coarse(&mut q, cost.width, cost.height, m, coarse),
             (None, Some(bands), Some(packed)) => {
-                packed.fill(&mut q, bands, cost, |c, q| unary_marginals(c, scale, c.len(), q));
+                packed.fill_unary(&mut q, bands, cost, scale);
             }
             (None, Some(bands), None) => {
                 const CHUNK: usize = 256;

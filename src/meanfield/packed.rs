@@ -84,21 +84,12 @@ impl Packed {
         parts.into_par_iter().for_each(|(first, chunk)| f(first, chunk));
     }
 
-    /// Fills the packed `q` from each pixel's band of `m` costs: `f(cost band, q band)`.
-    pub(super) fn fill(
-        &self,
-        q: &mut [f32],
-        bands: &LabelBands,
-        cost: &CostVolume,
-        f: impl Fn(&[f32], &mut [f32]) + Sync,
-    ) {
+    /// The packed `q` as softmax(−`scale` · cost) over each pixel's band of `cost` (the marginals of
+    /// [`super::energy::unary_marginals`], bit for bit).
+    pub(super) fn fill_unary(&self, q: &mut [f32], bands: &LabelBands, cost: &CostVolume, scale: f32) {
         self.for_pixel_chunks(q, |first, chunk| {
-            let base = self.offsets[first];
-            for i in first..first + chunk.pixels {
-                let (lo, hi) = bands.of(i);
-                let at = self.offsets[i] - base;
-                f(&cost.pixel(i)[lo..hi], &mut chunk.values[at..][..hi - lo]);
-            }
+            let range = first..first + chunk.pixels;
+            unary_in_bands(cost, (bands, &self.offsets[range.start..=range.end]), range, scale, chunk.values);
         });
     }
 
@@ -114,6 +105,30 @@ impl Packed {
                 dense[hi..].fill(0.0);
             }
         });
+    }
+}
+
+/// The unary marginals of the pixels `pixels` into their packed bands `out` (`offsets` from the first pixel's, one
+/// more than the pixels), each through the padded softmax (no scalar tail; bit-identical to the in-place one).
+/// Compiled for AVX2 + FMA as well (same results).
+#[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
+fn unary_in_bands(
+    cost: &CostVolume,
+    (bands, offsets): (&LabelBands, &[usize]),
+    pixels: std::ops::Range<usize>,
+    scale: f32,
+    out: &mut [f32],
+) {
+    let lanes = cost.ndisp.next_multiple_of(8);
+    let (mut en, mut ex) = (vec![0.0f32; lanes], vec![0.0f32; lanes]);
+    for (k, i) in pixels.enumerate() {
+        let (lo, hi) = bands.of(i);
+        let len = hi - lo;
+        let padded = len.next_multiple_of(8);
+        en[..len].iter_mut().zip(&cost.pixel(i)[lo..hi]).for_each(|(e, c)| *e = c * scale);
+        en[len..padded].fill(0.0);
+        let at = offsets[k] - offsets[0];
+        softmax_neg_padded(&en[..padded], &mut ex[..padded], &mut out[at..][..len]);
     }
 }
 
