@@ -51,7 +51,7 @@ pub(crate) mod update;
 
 use rayon::prelude::*;
 
-use crate::image::{CostVolume, RgbImage};
+use crate::image::{CostVolume, Plane, RgbImage};
 use crate::lattice::{Bands, LatticeScratch};
 use crate::params::{MeanFieldParams, Schedule};
 
@@ -421,6 +421,29 @@ impl<'a> MeanField<'a> {
 
     /// The disparity and confidence of the current marginals ([`decode_marginals`]), without unpacking packed ones.
     pub fn decode(&self, subpixel: bool) -> (crate::image::DisparityMap, crate::image::Plane<f32>) {
+        self.decode_marginals(subpixel)
+    }
+
+    /// Consumes the state: frees what only the iterations need (the lattice, the local weights, the checkerboard's
+    /// edge rows, a packed cost), then
+    /// decodes the marginals ([`MeanField::decode`]) and returns the answer and the buffers, as
+    /// [`MeanField::into_buffers`]. The answer's maps never sit beside the lattice.
+    pub fn decode_into_buffers(
+        mut self,
+        subpixel: bool,
+    ) -> ((crate::image::DisparityMap, crate::image::Plane<f32>), Buffers) {
+        self.full = None;
+        self.local = LocalWeights { right: Plane::new(0, 0, 0.0), down: Plane::new(0, 0, 0.0) };
+        self.settled = Vec::new();
+        self.edges = Vec::new();
+        if let Some(packed) = &mut self.packed {
+            packed.cost = Vec::new();
+        }
+        let decoded = self.decode_marginals(subpixel);
+        (decoded, self.into_buffers())
+    }
+
+    fn decode_marginals(&self, subpixel: bool) -> (crate::image::DisparityMap, crate::image::Plane<f32>) {
         let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
         match (&self.packed, &self.label_bands) {
             (Some(packed), Some(bands)) => decode::decode_with(w, h, subpixel, |i| {

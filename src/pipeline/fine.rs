@@ -480,7 +480,7 @@ fn estimate_view(
                         }
                     }
                 });
-                (t.time("decode", || mf.decode(params.meanfield.subpixel)), mf.into_buffers())
+                t.time("decode", || mf.decode_into_buffers(params.meanfield.subpixel))
             };
             *buffers = rest;
             ViewEstimate { disparity, confidence }
