@@ -1,7 +1,7 @@
 //! Packed label bands (our addition): in label bands ([`super::bands`]) each pixel's marginal is 0 outside its
 //! band, so only its band is stored, the pixels one after another (compressed rows: pixel i's labels `lo..hi` at
-//! `offsets[i]..offsets[i + 1]`). The cost of the bands is packed the same way when that takes no more memory than
-//! the dense marginals it replaces.
+//! `offsets[i]..offsets[i + 1]`). The cost of the bands is packed the same way for a run of more than one iteration,
+//! when that takes no more memory than the dense marginals it replaces.
 //!
 //! Why: an update reads, per pixel, its cost, its own marginal and its four neighbours'. In the dense layout those
 //! are runs of the band's labels out of rows of all labels, so the memory traffic stays about the dense update's
@@ -159,8 +159,9 @@ fn add_neighbour(
     }
 }
 
-/// [`super::update::update_row`] on packed marginals (`mf.packed`, with its label bands): the rows in `nbrs` and `out_row` are packed rows (row y at
-/// `row_starts[y]..row_starts[y + 1]` of the packed buffer). The same results as the dense banded update.
+/// [`super::update::update_row`] on packed marginals (`mf.packed`, with its label bands): the rows in `nbrs` and
+/// `out_row` are packed rows (row y at `mf.row_starts[y]..mf.row_starts[y + 1]` of the packed buffer). The same
+/// results as the dense banded update.
 #[cfg_attr(not(feature = "force-baseline"), multiversion::multiversion(targets("x86_64+avx2+fma")))]
 pub(super) fn update_row_packed<'c, 'r>(
     mf: &MeanField<'c>,
