@@ -192,7 +192,7 @@ impl Lattice {
     /// With `bands`, pixel p splats only its channels `bands.ranges[p]`: the caller promises that its other
     /// channels are 0, and the result is the same, bit for bit, as splatting them all (adding w·0 to a sum of
     /// non-negative terms changes nothing). With packed bands, `input` holds only those channels
-    /// ([`Bands::packed`]).
+    /// (`Bands::packed`).
     ///
     /// # Panics
     /// If `input` does not have `num_pixels × channels` elements (or, packed, the bands' total), `pixel_scale` or
