@@ -109,7 +109,8 @@ impl Buffers {
         }
     }
 
-    /// Frees the spare allocations beyond `values` in all, the largest kept first (the lattice's and `next` stay).
+    /// Keeps the spare allocations up to `values` in all, the largest first, and frees the rest, the lattice's
+    /// buffers and `next`.
     pub fn trim(&mut self, values: usize) {
         self.spare.sort_by_key(|v| std::cmp::Reverse(v.capacity()));
         let mut total = 0;
@@ -117,6 +118,8 @@ impl Buffers {
             total += v.capacity();
             total <= values
         });
+        self.next = Vec::new();
+        self.scratch = LatticeScratch::default();
     }
 
     /// A spare allocation of `len` values (what it held before, or zeros; for a buffer that is written in full

@@ -539,14 +539,16 @@ fn buffers_hand_out_the_best_fitting_spare() {
     assert_eq!(b.take(1).capacity(), 3, "the smallest were freed beyond MAX_SPARE");
 }
 
-/// Trimming keeps the largest spares that fit the total, and frees the rest.
+/// Trimming keeps the largest spares that fit the total, and frees the rest and the lattice's buffers.
 #[test]
 fn buffers_trim_to_a_total() {
     let mut b = Buffers::default();
     for len in [10, 40, 20] {
         b.recycle(vec![0.0; len]);
     }
+    b.next = vec![0.0; 8];
     b.trim(65);
+    assert!(b.next.is_empty());
     let mut kept: Vec<usize> = b.spare.iter().map(Vec::capacity).collect();
     kept.sort_unstable();
     assert_eq!(kept, vec![20, 40], "40 and 20 fit 65, 10 more does not");
