@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use super::bands::LabelBands;
 use super::energy::{FullTerm, LocalTerm, pixel_energies, softmax_neg_padded};
-use super::update::{NeighbourRows, Pass, RowScratch};
+use super::update::{NeighbourRows, Pass, PixelStep, RowScratch};
 use super::{MeanField, PairwiseWeights};
 use crate::image::CostVolume;
 
@@ -185,24 +185,13 @@ pub(super) fn update_row_packed<'c, 'r>(
     for x in 0..w {
         let i = y * w + x;
         let (start, end) = (off[i] - base, off[i + 1] - base);
-        let odd = (x + y) % 2 == 1;
-        match pass {
-            Pass::All => {}
-            Pass::Even if odd => continue,
-            Pass::Even => {}
-            Pass::Odd if !odd => {
-                if let Some(same) = nbrs.same {
-                    out_row[start..end].copy_from_slice(&same[start..end]);
-                }
+        match nbrs.step_of(mf, pass, x, y) {
+            PixelStep::Compute => {}
+            PixelStep::Keep => continue,
+            PixelStep::Copy(from) => {
+                out_row[start..end].copy_from_slice(&from[start..end]);
                 continue;
             }
-            Pass::Odd => {}
-        }
-        if mf.is_settled(i) {
-            if let Some(own) = nbrs.own {
-                out_row[start..end].copy_from_slice(&own[start..end]);
-            }
-            continue;
         }
         let (a, b) = bands.of(i);
         let len = b - a;

@@ -64,25 +64,13 @@ pub(super) fn update_row<'c, 'r>(
     let full_kernel = mf.full.as_ref().filter(|_| fcm > 0.0);
     for x in 0..w {
         let i = y * w + x;
-        let odd = (x + y) % 2 == 1;
-        match pass {
-            Pass::All => {}
-            Pass::Even if odd => continue,
-            Pass::Even => {}
-            Pass::Odd if !odd => {
-                if let Some(same) = nbrs.same {
-                    out_row[x * m..][..m].copy_from_slice(&same[x * m..][..m]);
-                }
+        match nbrs.step_of(mf, pass, x, y) {
+            PixelStep::Compute => {}
+            PixelStep::Keep => continue,
+            PixelStep::Copy(from) => {
+                out_row[x * m..][..m].copy_from_slice(&from[x * m..][..m]);
                 continue;
             }
-            Pass::Odd => {}
-        }
-        if mf.is_settled(i) {
-            // Its marginal stays: in place it is already there, otherwise it is copied from the previous Q.
-            if let Some(own) = nbrs.own {
-                out_row[x * m..][..m].copy_from_slice(&own[x * m..][..m]);
-            }
-            continue;
         }
         // The pixel's own slot, and the row's other pixels (its left and right neighbours when updating in
         // place: they are of the other colour, so not written by this pass).
@@ -151,7 +139,31 @@ pub(super) struct NeighbourRows<'s> {
     pub(super) own: Option<&'s [f32]>,
 }
 
+/// What an update pass does with one pixel.
+pub(super) enum PixelStep<'s> {
+    /// Computes its new marginal.
+    Compute,
+    /// Leaves it: the row being written already holds it.
+    Keep,
+    /// Copies its marginal from this row (the row being written is apart from the one that holds it).
+    Copy(&'s [f32]),
+}
+
 impl<'s> NeighbourRows<'s> {
+    /// What `pass` does with pixel (x, y): the other colour's pixels and the settled ones keep their marginals,
+    /// copied from `same` (the other colour) or `own` (settled) when the row is written apart from them.
+    #[inline(always)]
+    pub(super) fn step_of(&self, mf: &MeanField<'_>, pass: Pass, x: usize, y: usize) -> PixelStep<'s> {
+        let odd = (x + y) % 2 == 1;
+        let kept_in = |row: Option<&'s [f32]>| row.map_or(PixelStep::Keep, PixelStep::Copy);
+        match pass {
+            Pass::Even if odd => PixelStep::Keep,
+            Pass::Odd if !odd => kept_in(self.same),
+            _ if mf.is_settled(y * mf.cost.width + x) => kept_in(self.own),
+            _ => PixelStep::Compute,
+        }
+    }
+
     /// Rows y − 1, y, y + 1 of a whole volume whose row r is `volume[row_starts[r]..row_starts[r + 1]]`.
     pub(super) fn of(volume: &'s [f32], y: usize, row_starts: &[usize]) -> Self {
         let h = row_starts.len() - 1;
