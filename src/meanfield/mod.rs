@@ -170,25 +170,29 @@ impl<'a> MeanField<'a> {
     /// carried from the previous frame, has already placed most pixels). The settled pixels still send their
     /// messages to the others. `confidence` above 1 settles none: the steps are then the usual ones, bit for bit.
     pub fn settle(&mut self, confidence: f32) -> usize {
-        let (n, m) = (self.cost.width * self.cost.height, self.cost.ndisp);
-        let bands = self.label_bands.as_ref();
-        let (q, packed) = (&self.q, self.packed.as_ref());
-        self.settled = (0..n)
+        let n = self.cost.width * self.cost.height;
+        let settled = (0..n)
             .into_par_iter()
             .with_min_len(1024)
-            .map(|i| {
-                let labels = match (packed, bands) {
-                    (Some(p), _) => &q[p.offsets[i]..p.offsets[i + 1]],
-                    (None, Some(bands)) => {
-                        let (a, b) = bands.of(i);
-                        &q[i * m + a..i * m + b]
-                    }
-                    (None, None) => &q[i * m..][..m],
-                };
-                labels.iter().fold(0.0f32, |top, &v| top.max(v)) >= confidence
-            })
+            .map(|i| self.stored(i).0.iter().fold(0.0f32, |top, &v| top.max(v)) >= confidence)
             .collect();
+        self.settled = settled;
         self.settled.iter().filter(|&&s| s).count()
+    }
+
+    /// Pixel i's marginal as Q stores it, and the label of its first value: its band (packed or not) with label
+    /// bands, else all labels from 0. Outside it the marginal is 0.
+    #[inline]
+    fn stored(&self, i: usize) -> (&[f32], usize) {
+        let m = self.cost.ndisp;
+        match (&self.packed, &self.label_bands) {
+            (Some(p), Some(bands)) => (&self.q[p.offsets[i]..p.offsets[i + 1]], bands.of(i).0),
+            (_, Some(bands)) => {
+                let (a, b) = bands.of(i);
+                (&self.q[i * m + a..i * m + b], a)
+            }
+            (_, None) => (&self.q[i * m..][..m], 0),
+        }
     }
 
     /// Whether pixel `i` has settled ([`MeanField::settle`]).
@@ -424,13 +428,16 @@ impl<'a> MeanField<'a> {
 
     /// The disparity and confidence of the current marginals ([`decode_marginals`]), without unpacking packed ones.
     pub fn decode(&self, subpixel: bool) -> (crate::image::DisparityMap, crate::image::Plane<f32>) {
-        self.decode_marginals(subpixel)
+        let m = self.cost.ndisp;
+        decode::decode_with(self.cost.width, self.cost.height, subpixel, |i| {
+            let (q, first) = self.stored(i);
+            (q, first, m)
+        })
     }
 
     /// Consumes the state: frees what only the iterations need (the lattice, the local weights, the checkerboard's
-    /// edge rows, a packed cost), then
-    /// decodes the marginals ([`MeanField::decode`]) and returns the answer and the buffers, as
-    /// [`MeanField::into_buffers`]. The answer's maps never sit beside the lattice.
+    /// edge rows, a packed cost), then decodes the marginals ([`MeanField::decode`]) and returns the answer and the
+    /// buffers, as [`MeanField::into_buffers`]. The answer's maps never sit beside the lattice.
     pub fn decode_into_buffers(
         mut self,
         subpixel: bool,
@@ -442,18 +449,8 @@ impl<'a> MeanField<'a> {
         if let Some(packed) = &mut self.packed {
             packed.cost = Vec::new();
         }
-        let decoded = self.decode_marginals(subpixel);
+        let decoded = self.decode(subpixel);
         (decoded, self.into_buffers())
-    }
-
-    fn decode_marginals(&self, subpixel: bool) -> (crate::image::DisparityMap, crate::image::Plane<f32>) {
-        let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
-        match (&self.packed, &self.label_bands) {
-            (Some(packed), Some(bands)) => decode::decode_with(w, h, subpixel, |i| {
-                (&self.q[packed.offsets[i]..packed.offsets[i + 1]], bands.of(i).0, m)
-            }),
-            _ => decode::decode_with(w, h, subpixel, |i| (&self.q[i * m..][..m], 0, m)),
-        }
     }
 
     /// Consumes the state, returning its buffers for reuse by another [`MeanField`] (the marginals among them). A
@@ -464,17 +461,17 @@ impl<'a> MeanField<'a> {
         buffers
     }
 
-    /// Consumes the state, returning the marginals and the buffers for reuse by another [`MeanField`].
+    /// Consumes the state, returning the marginals (`N × M`, unpacked if packed) and the buffers for reuse by another
+    /// [`MeanField`] (a packed cost freed, as by [`MeanField::into_buffers`]).
     pub fn into_marginals_and_buffers(self) -> (Marginals, Buffers) {
         let (w, h, m) = (self.cost.width, self.cost.height, self.cost.ndisp);
         let mut buffers = Buffers { spare: self.spare, next: self.next, scratch: self.scratch };
-        let data = match (self.packed, &self.label_bands) {
+        let data = match (&self.packed, &self.label_bands) {
             (Some(packed), Some(bands)) => {
                 // Written in full by the unpacking.
                 let mut dense = buffers.take(w * h * m);
                 packed.unpack(&self.q, bands, m, &mut dense);
                 buffers.recycle(self.q);
-                buffers.recycle(packed.cost);
                 dense
             }
             _ => self.q,

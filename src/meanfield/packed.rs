@@ -242,3 +242,68 @@ pub(super) fn update_row_packed<'c, 'r>(
         softmax_neg_padded(&s.energy[..lanes], &mut s.exps[..lanes], e);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::tests::{banded_pair, random_bands, random_cost};
+    use super::super::{Buffers, MeanField, PairwiseWeights, decode_marginals};
+    use super::LabelBands;
+    use crate::image::Plane;
+    use crate::params::{MeanFieldParams, Schedule};
+
+    /// Packed label bands (only the bands stored) give the marginals of the dense banded run bit for bit, with either
+    /// schedule and any thread count, with the bands' cost packed or read from the dense volume; their decoded
+    /// disparities and confidences are the dense decode's of those marginals.
+    #[test]
+    fn meanfield_packed_bands_are_the_dense_banded_run() {
+        let (w, h, m) = (23, 14, 11);
+        let cost = random_cost(w, h, m, 31, 20.0);
+        let (image, _, _) = banded_pair(w, h);
+        let weights = PairwiseWeights { fcm: 6.0, lcm: 1.5 };
+        // Random bands and narrow ones hold less than half the labels (the cost is packed), all labels more (it is
+        // not).
+        let narrow = LabelBands::around(
+            (&Plane::new(w, h, 5.0), &Plane::new(w, h, 5.0)),
+            &Plane::new(w, h, f32::INFINITY),
+            m,
+            0,
+            1.0,
+            0,
+        );
+        for bands in [random_bands(w, h, m, 32), narrow, LabelBands::full(w, h, m)] {
+            for schedule in [Schedule::Checkerboard, Schedule::Jacobi] {
+                let p = MeanFieldParams { schedule, ..MeanFieldParams::default() };
+                let run = |packed: bool, threads: usize| {
+                    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                    pool.install(|| {
+                        let (b, buffers) = (bands.clone(), Buffers::default());
+                        let mut mf = match packed {
+                            true => MeanField::in_label_bands(&cost, &image, &p, weights, buffers, b),
+                            false => MeanField::in_dense_label_bands(&cost, &image, &p, weights, buffers, b),
+                        };
+                        assert_eq!(mf.packed.is_some(), packed);
+                        let cost_packed = mf.packed.as_ref().is_some_and(|p| !p.cost.is_empty());
+                        assert_eq!(cost_packed, packed && p.iterations > 1 && 2.0 * bands.mean_width() <= m as f64);
+                        for _ in 0..3 {
+                            mf.step();
+                        }
+                        let q = mf.marginals().into_owned();
+                        // The dense run's answer from its marginals as a volume, by the dense decode.
+                        let decoded = match packed {
+                            true => mf.decode(true),
+                            false => decode_marginals(&mf.into_marginals(), true),
+                        };
+                        (q, decoded.0.data, decoded.1.data)
+                    })
+                };
+                let dense = run(false, 2);
+                for threads in [1, 3] {
+                    let packed = run(true, threads);
+                    let same = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+                    assert!(same(&dense.0, &packed.0), "{schedule:?}, {threads} threads: marginals");
+                    assert!(same(&dense.1, &packed.1) && same(&dense.2, &packed.2), "{schedule:?}: decoded");
+                }
+            }
+        }
+    }
+}

@@ -69,7 +69,7 @@ fn meanfield_fcm_message_matches_brute_force() {
 }
 
 /// Random texture, right view shifted by a three-band disparity field.
-fn banded_pair(w: usize, h: usize) -> (RgbImage, RgbImage, impl Fn(usize) -> usize) {
+pub(super) fn banded_pair(w: usize, h: usize) -> (RgbImage, RgbImage, impl Fn(usize) -> usize) {
     let field = move |x: usize| {
         if x < w / 3 {
             4
@@ -359,7 +359,7 @@ fn meanfield_cold_marginals_hold_no_subnormal_floats() {
 const LCM_ONLY: PairwiseWeights = PairwiseWeights { fcm: 0.0, lcm: 1.0 };
 
 /// Random label bands for a `w × h` view of `m` labels, a fifth of them all labels.
-fn random_bands(w: usize, h: usize, m: usize, seed: u64) -> LabelBands {
+pub(super) fn random_bands(w: usize, h: usize, m: usize, seed: u64) -> LabelBands {
     let r = rand_vec(2 * w * h, seed);
     let centre = Plane::from_parts(w, h, (0..w * h).map(|i| (r[2 * i] * m as f32).floor()).collect());
     let best = Plane::from_parts(
@@ -389,56 +389,6 @@ fn meanfield_full_label_bands_are_the_dense_run() {
         }
         let same = dense.marginals().iter().zip(banded.marginals().iter()).all(|(a, b)| a.to_bits() == b.to_bits());
         assert!(same, "{schedule:?}");
-    }
-}
-
-/// Packed label bands (only the bands stored) give the marginals of the dense banded run bit for bit, with either
-/// schedule and any thread count, with the bands' cost packed or read from the dense volume; so do their decoded
-/// disparities and confidences.
-#[test]
-fn meanfield_packed_bands_are_the_dense_banded_run() {
-    let (w, h, m) = (23, 14, 11);
-    let cost = random_cost(w, h, m, 31, 20.0);
-    let (image, _, _) = banded_pair(w, h);
-    let weights = PairwiseWeights { fcm: 6.0, lcm: 1.5 };
-    // Random bands and narrow ones hold less than half the labels (the cost is packed), all labels more (it is not).
-    let narrow = LabelBands::around(
-        (&Plane::new(w, h, 5.0), &Plane::new(w, h, 5.0)),
-        &Plane::new(w, h, f32::INFINITY),
-        m,
-        0,
-        1.0,
-        0,
-    );
-    for bands in [random_bands(w, h, m, 32), narrow, LabelBands::full(w, h, m)] {
-        for schedule in [Schedule::Checkerboard, Schedule::Jacobi] {
-            let p = MeanFieldParams { schedule, ..MeanFieldParams::default() };
-            let run = |packed: bool, threads: usize| {
-                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-                pool.install(|| {
-                    let (b, buffers) = (bands.clone(), Buffers::default());
-                    let mut mf = match packed {
-                        true => MeanField::in_label_bands(&cost, &image, &p, weights, buffers, b),
-                        false => MeanField::in_dense_label_bands(&cost, &image, &p, weights, buffers, b),
-                    };
-                    assert_eq!(mf.packed.is_some(), packed);
-                    let cost_packed = mf.packed.as_ref().is_some_and(|p| !p.cost.is_empty());
-                    assert_eq!(cost_packed, packed && p.iterations > 1 && 2.0 * bands.mean_width() <= m as f64);
-                    for _ in 0..3 {
-                        mf.step();
-                    }
-                    let decoded = mf.decode(true);
-                    (mf.marginals().into_owned(), decoded.0.data, decoded.1.data)
-                })
-            };
-            let dense = run(false, 2);
-            for threads in [1, 3] {
-                let packed = run(true, threads);
-                let same = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
-                assert!(same(&dense.0, &packed.0), "{schedule:?}, {threads} threads: marginals");
-                assert!(same(&dense.1, &packed.1) && same(&dense.2, &packed.2), "{schedule:?}: decoded");
-            }
-        }
     }
 }
 
@@ -483,7 +433,7 @@ fn meanfield_label_bands_are_dense_inference_with_the_rest_forbidden() {
 }
 
 /// A `w × h × m` cost volume of uniform random costs in `[0, scale)`.
-fn random_cost(w: usize, h: usize, m: usize, seed: u64, scale: f32) -> CostVolume {
+pub(super) fn random_cost(w: usize, h: usize, m: usize, seed: u64, scale: f32) -> CostVolume {
     CostVolume { width: w, height: h, ndisp: m, data: rand_vec(w * h * m, seed).iter().map(|v| v * scale).collect() }
 }
 
