@@ -460,11 +460,10 @@ fn estimate_view(
             let weights = meanfield::PairwiseWeights { fcm, lcm: params.effective_lcm_weight() };
             let reuse = std::mem::take(buffers);
             let mf_params = MeanFieldParams { iterations, ..params.meanfield.clone() };
-            let decode = |q: &meanfield::Marginals| meanfield::decode_marginals(q, params.meanfield.subpixel);
             let ((disparity, confidence), rest) = if mf_params.pyramid_levels > 1 {
                 let (q, mut rest) =
                     t.time("mf pyramid", || meanfield::infer_coarse_to_fine(cost, image, &mf_params, weights, reuse));
-                let decoded = t.time("decode", || decode(&q));
+                let decoded = t.time("decode", || meanfield::decode_marginals(&q, params.meanfield.subpixel));
                 rest.recycle(q.data);
                 (decoded, rest)
             } else {
