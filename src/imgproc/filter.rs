@@ -335,6 +335,31 @@ mod tests {
     }
 
     #[test]
+    fn window_extreme_matches_the_direct_window() {
+        let (w, h) = (13, 29);
+        let vals = crate::test_util::rand_vec(w * h, 9);
+        let data = vals.iter().map(|&v| if v < 0.15 { f32::INFINITY } else { v * 10.0 }).collect();
+        let p = Plane::from_parts(w, h, data);
+        for r in [0, 1, 2, 7, 14, 40] {
+            for (empty, pick) in [(f32::INFINITY, f32::min as fn(f32, f32) -> f32), (f32::NEG_INFINITY, f32::max)] {
+                let out = window_extreme(&p, r, empty, pick);
+                for y in 0..h {
+                    for x in 0..w {
+                        let mut want = empty;
+                        for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                            for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
+                                let v = p.data[yy * w + xx];
+                                want = if v.is_finite() { pick(want, v) } else { want };
+                            }
+                        }
+                        assert_eq!(out.data[y * w + x], want, "r {r} at ({x}, {y})");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
     fn running_extreme_matches_the_direct_window() {
         let src: Vec<f32> = crate::test_util::rand_vec(23, 5).iter().map(|v| v * 10.0).collect();
         for r in [0, 1, 3, 11, 30] {

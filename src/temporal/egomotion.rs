@@ -18,6 +18,8 @@
 //! (larger d') winning where two land on one pixel; the previous view's grey goes along for the disagreement test.
 //! Pixels nothing lands on have no prior (disocclusions, the new border).
 
+use rayon::prelude::*;
+
 use crate::image::Plane;
 use crate::imgproc::filter::box_mean;
 use crate::imgproc::sample::sample_bilinear;
@@ -97,17 +99,18 @@ pub(crate) fn fit(tracks: &[Track], tolerance: f64) -> Option<Motion> {
     if tracks.len() < 6 {
         return None;
     }
+    // The samples drawn in turn from the seeded stream, their models scored in parallel; the first of the most
+    // inliers in the stream's order wins, as in a sequential loop.
     let mut rng = SplitMix64::new(SEED);
-    let mut best: Option<Motion> = None;
-    for _ in 0..RANSAC_ITERATIONS {
-        let sample = distinct(&mut rng, tracks.len(), 6);
-        let chosen: Vec<Track> = sample.iter().map(|&i| tracks[i]).collect();
-        let Some(model) = solve(&chosen) else { continue };
-        let model = Motion { inliers: count_inliers(&model, tracks, tolerance), tolerance, ..model };
-        if best.is_none_or(|b| model.inliers > b.inliers) {
-            best = Some(model);
-        }
-    }
+    let samples: Vec<Vec<usize>> = (0..RANSAC_ITERATIONS).map(|_| distinct(&mut rng, tracks.len(), 6)).collect();
+    let best = samples
+        .par_iter()
+        .filter_map(|sample| {
+            let chosen: Vec<Track> = sample.iter().map(|&i| tracks[i]).collect();
+            let model = solve(&chosen)?;
+            Some(Motion { inliers: count_inliers(&model, tracks, tolerance), tolerance, ..model })
+        })
+        .reduce_with(|a, b| if b.inliers > a.inliers { b } else { a });
     let mut best = best.filter(|b| b.inliers >= 6)?;
     for _ in 0..2 {
         let inliers: Vec<Track> = tracks.iter().filter(|t| best.error(t) <= tolerance).copied().collect();
@@ -266,16 +269,21 @@ pub(crate) fn carry(answer: &PipelineOutput, grey: &Plane<f32>, motion: &Motion)
     let mut source = vec![usize::MAX; w * h];
     let mut depth = vec![f32::NEG_INFINITY; w * h];
     let mut moved = Plane::new(w, h, f32::INFINITY);
+    // Where each pixel goes, in parallel; then splatted in raster order (the first of equal depths wins).
+    let targets: Vec<Option<(f64, f64, f64)>> = (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let d = answer.disparity.data[i];
+            if !d.is_finite() {
+                return None;
+            }
+            let (tx, ty, td) = motion.apply((i % w) as f64, (i / w) as f64, f64::from(d))?;
+            (tx.is_finite() && ty.is_finite() && td.is_finite() && td >= 0.0).then_some((tx, ty, td))
+        })
+        .collect();
     for y in 0..h {
         for x in 0..w {
-            let d = answer.disparity.data[y * w + x];
-            if !d.is_finite() {
-                continue;
-            }
-            let Some((tx, ty, td)) = motion.apply(x as f64, y as f64, f64::from(d)) else { continue };
-            if !(tx.is_finite() && ty.is_finite() && td.is_finite()) || td < 0.0 {
-                continue;
-            }
+            let Some((tx, ty, td)) = targets[y * w + x] else { continue };
             let span = |c: f64, n: usize| {
                 let lo = ((c - FOOTPRINT_PX).ceil() as i64).max(0);
                 let hi = ((c + FOOTPRINT_PX).floor() as i64).min(n as i64 - 1);
@@ -309,6 +317,7 @@ fn sample_back(grey: &Plane<f32>, carried: &Plane<f32>, motion: &Motion) -> Plan
     let (w, h) = carried.dims();
     let Some(back) = motion.inverse() else { return Plane::new(w, h, f32::INFINITY) };
     let data = (0..w * h)
+        .into_par_iter()
         .map(|i| {
             let d = carried.data[i];
             if !d.is_finite() {
@@ -338,6 +347,7 @@ pub(crate) fn disagreement(moved: &Plane<f32>, cur: &Plane<f32>, limit: f32, sla
         w,
         h,
         (0..w * h)
+            .into_par_iter()
             .map(|i| {
                 let (x, y) = (i % w, i / w);
                 let gx = at((x + 1).min(w - 1), y) - at(x.saturating_sub(1), y);

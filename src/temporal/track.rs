@@ -57,11 +57,12 @@ impl Tracker {
     /// previous frame's answer, `noise` the grey noise σ.
     pub(crate) fn new(prev: &Plane<f32>, cur: &Plane<f32>, disparity: &Plane<f32>, noise: f32) -> Tracker {
         let levels = pyramid_levels(prev.width);
-        let points = features(prev, disparity, noise)
-            .into_iter()
-            .map(|(x, y)| (x, y, disparity.data[y * prev.width + x]))
-            .collect();
-        Tracker { prev: pyramid(prev, levels), cur: pyramid(cur, levels), points }
+        let (found, (prev_levels, cur_levels)) = rayon::join(
+            || features(prev, disparity, noise),
+            || rayon::join(|| pyramid(prev, levels), || pyramid(cur, levels)),
+        );
+        let points = found.into_iter().map(|(x, y)| (x, y, disparity.data[y * prev.width + x])).collect();
+        Tracker { prev: prev_levels, cur: cur_levels, points }
     }
 
     /// Every point found in the current view, searched from `guess(x, y, d)` (where it should be) coarse to fine:
