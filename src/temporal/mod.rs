@@ -33,7 +33,8 @@
 //!   explains clearly more of the points than the global shift does, the previous answer is carried by it
 //!   (each pixel to where the motion puts it, with the disparity it has there) instead of by the shift, released
 //!   where the previous view seen through the motion disagrees with the current one, with twice the prior's weight,
-//!   both views' full inference and each pixel's labels kept to a band around the carried answer.
+//!   both terms of the model in both views (the left one iteration fewer, the right one iteration) and each
+//!   pixel's labels kept to a band around the carried answer.
 //!
 //! A moving or travelling frame's answer then moves half-way to the carried one wherever the two agree within 1 px
 //! and the frames agree ([`average::carry_answer`]): each surface keeps a running mean of its disparity.
@@ -362,8 +363,8 @@ fn beyond_shift(
 }
 
 /// A moving camera's frame: the previous answer, carried into it, as the prior (see the module doc). Carried by
-/// a 3D motion (`travelling`), the prior weighs [`TRAVELLING_PRIOR_SCALE`] times more, the left view runs the
-/// configured inference and the right view [`TRAVELLING_RIGHT_ITERATIONS`] of it, and each pixel's inference is
+/// a 3D motion (`travelling`), the prior weighs [`TRAVELLING_PRIOR_SCALE`] times more, the left view runs both terms
+/// for [`travelling_left_iterations`] and the right view [`TRAVELLING_RIGHT_ITERATIONS`], and each pixel's inference is
 /// kept to a band of labels around the carried answer (the tiles' label bands: the answers within the fully
 /// connected kernel's reach, ± the prior's margin and truncation, and the pixel's own best label), which makes the
 /// answers more consistent from frame to frame. Only the bands are stored (about a third of a KITTI frame's
