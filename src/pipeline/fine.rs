@@ -65,6 +65,10 @@ pub(crate) struct FrameViews {
     /// After each iteration but the last, the pixels at least this sure of their label settle: the later
     /// iterations update only the others ([`meanfield::MeanField::settle`]; `None`: every pixel, every iteration).
     pub settle_at: Option<f32>,
+    /// Where the right view contradicts the left answer but the left pixel sees its match (no nearer surface of the
+    /// left answer covers it) and its answer agrees with the prior (the answer carried from the previous frame, not
+    /// released) within the check's tolerance, the pixel keeps its answer ([`keep_where_carried_agrees`]).
+    pub keep_carried: bool,
 }
 
 /// The pipeline from the cost volume on, for `input` ([`FineInput`]): cost volume (stage `cost volume`), inference
@@ -366,8 +370,13 @@ impl Pass<'_> {
                 let check = |left: &DisparityMap| {
                     post::lr_check::left_right_check(left, &right.disparity, post.lrc.mode, post.lrc.thresh_px)
                 };
+                let carried = self.input.prior.filter(|_| self.input.views.is_some_and(|v| v.keep_carried));
                 if left_from == 0 {
-                    return check(&disparity);
+                    let (mut checked, mut mask) = check(&disparity);
+                    if let Some(prior) = carried {
+                        keep_where_carried_agrees(&disparity, prior, post.lrc.thresh_px, &mut checked, &mut mask);
+                    }
+                    return (checked, mask);
                 }
                 // The left map at the right view's width (unknown in the extension), checked, and cut again.
                 let mut full = Plane::new(right.disparity.width, right.disparity.height, f32::INFINITY);
@@ -425,6 +434,32 @@ impl Pass<'_> {
     fn clamp_to_searched(&self, disparity: &mut DisparityMap) {
         let top = (self.input.guide.ndisp - 1) as f32;
         disparity.data.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.clamp(0.0, top));
+    }
+}
+
+/// [`FrameViews::keep_carried`]: the pixels of `left` (the answer before the check) that the check rejected
+/// (`trusted` false, `checked` invalid there) but that see their match ([`post::lr_check::visible_in_right`]) and agree
+/// within `thresh_px` with `prior`'s disparity where it holds (a positive weight: carried and not released) take
+/// their answer back and count as trusted. The right view of a frame with a carried prior runs a single iteration;
+/// where it disagrees with an answer the previous frame's inference gave and the release test confirmed against
+/// the current view, the two outweigh it. A smeared foreground is not kept unless it was carried.
+fn keep_where_carried_agrees(
+    left: &DisparityMap,
+    prior: &Prior,
+    thresh_px: f32,
+    checked: &mut DisparityMap,
+    trusted: &mut Plane<bool>,
+) {
+    let visible = post::lr_check::visible_in_right(left, thresh_px);
+    let agrees = |i: usize| {
+        let (d, c) = (left.data[i], prior.disparity.data[i]);
+        prior.confidence.data[i] > 0.0 && (d - c).abs() <= thresh_px
+    };
+    for (i, ok) in trusted.data.iter_mut().enumerate() {
+        if !*ok && visible.data[i] && agrees(i) {
+            *ok = true;
+            checked.data[i] = left.data[i];
+        }
     }
 }
 

@@ -33,6 +33,30 @@ pub fn consistency_mask(left: &DisparityMap, right: &DisparityMap, thresh_px: f3
     mask
 }
 
+/// Where the left map's own pixels see their match in the right view: each left pixel goes to its match x − round(d),
+/// the largest disparity (the nearest surface) winning per right pixel, and a pixel is visible when the winner at its
+/// match is within `thresh_px` of its own disparity. What the left map alone says about occlusion: a pixel whose
+/// match a nearer surface of the map covers is hidden. `false` where the match is outside the view or d is not
+/// finite.
+pub fn visible_in_right(left: &DisparityMap, thresh_px: f32) -> Plane<bool> {
+    let w = left.width;
+    let mut mask = Plane::new(left.width, left.height, false);
+    mask.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        let lrow = left.row(y);
+        let mut nearest = vec![f32::NEG_INFINITY; w];
+        for (x, &d) in lrow.iter().enumerate() {
+            if let Some(xr) = matching_x(x, d, w) {
+                nearest[xr] = nearest[xr].max(d);
+            }
+        }
+        for (x, ok) in row.iter_mut().enumerate() {
+            let d = lrow[x];
+            *ok = matching_x(x, d, w).is_some_and(|xr| nearest[xr] - d <= thresh_px);
+        }
+    });
+    mask
+}
+
 /// x − round(d) when that is a valid column and d is finite.
 #[inline]
 fn matching_x(x: usize, d: f32, width: usize) -> Option<usize> {
@@ -110,6 +134,16 @@ mod tests {
         let (cor, _) = left_right_check(&map(5, &[0.0, 0.0, 0.0, 0.0, 1.6]), &r2, LrcMode::Correct, 0.5);
         // x=4: d 1.6 → xr 2 (round 2), |1.6−0| > 0.5 → min(1.6, 0) = 0.
         assert_eq!(cor.data[4], 0.0);
+    }
+
+    #[test]
+    fn a_pixel_is_hidden_where_a_nearer_surface_of_the_map_covers_its_match() {
+        // x = 1..=3 (d 1) match 0..=2; x = 5 (d 4) matches 1 and covers x = 2's match; x = 4 (d 9) leaves the view.
+        let l = map(6, &[0.0, 1.0, 1.0, 1.0, 9.0, 4.0]);
+        assert_eq!(visible_in_right(&l, 1.0).data, vec![true, true, false, true, false, true]);
+        // Within the tolerance a nearer surface does not hide: x = 3 at d 1.8 matches 1, as x = 2 at d 1 does.
+        let l = map(6, &[0.0, 1.0, 1.0, 1.8, f32::INFINITY, 0.0]);
+        assert_eq!(visible_in_right(&l, 1.0).data, vec![true, true, true, true, false, true]);
     }
 
     #[test]

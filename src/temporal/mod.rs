@@ -323,9 +323,17 @@ const TRAVELLING_RIGHT_ITERATIONS: usize = 1;
 /// lost 2 % of its consistency with one fewer).
 fn travelling_left_iterations(params: &Params, pair: &StereoPair) -> usize {
     let configured = params.meanfield.iterations;
+    if grouped_local_alone(params, pair) { configured } else { configured.saturating_sub(1).max(1) }
+}
+
+/// Whether the pair's inference runs on grouped labels with the local term alone (an image above
+/// `meanfield.reference_px`, `meanfield.grouped_local`). There a travelling frame keeps the configured iterations
+/// ([`travelling_left_iterations`]) and the check's verdict ([`FrameViews::keep_carried`]): an iteration moves the
+/// answer one pixel, so the answer stays close to the carried prior, and agreeing with it says little (KITTI
+/// enlarged 1.5×: consistency 3.78 → 5.18 with the carried answers kept).
+fn grouped_local_alone(params: &Params, pair: &StereoPair) -> bool {
     let grouped = params.meanfield.for_image(pair.left.width * pair.left.height).label_step > 1;
-    let local_alone = grouped && params.meanfield.grouped_local && params.model == crate::params::Model::Jem;
-    if local_alone { configured } else { configured.saturating_sub(1).max(1) }
+    grouped && params.meanfield.grouped_local && params.model == crate::params::Model::Jem
 }
 
 /// The fewest tracked points a motion must explain, and the share of all tracked points.
@@ -393,11 +401,13 @@ fn moving_frame(
                 iterations: [travelling_left_iterations(params, pair), TRAVELLING_RIGHT_ITERATIONS],
                 right_local_only: false,
                 settle_at: None,
+                keep_carried: !grouped_local_alone(params, pair),
             },
             false => FrameViews {
                 iterations: [params.meanfield.iterations.saturating_sub(1).max(1), RIGHT_ITERATIONS],
                 right_local_only: true,
                 settle_at: Some(SETTLED_CONFIDENCE),
+                keep_carried: false,
             },
         }),
         in_bands: travelling,
