@@ -521,3 +521,30 @@ fn estimate_view(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A rejected pixel takes its answer back only where it sees its match, the carried answer holds there and the
+    /// two agree within the tolerance; trusted pixels and the others stay as the check left them.
+    #[test]
+    fn a_rejected_pixel_keeps_its_answer_only_where_the_carried_one_confirms_it() {
+        let row = |v: &[f32]| Plane::from_parts(v.len(), 1, v.to_vec());
+        // x = 5 (d 4) covers x = 2's match (1); x = 4 leaves the view.
+        let left = row(&[0.0, 1.0, 1.0, 1.0, 9.0, 4.0, 2.0, 2.0]);
+        let carried = row(&[0.0, 1.5, 1.0, 3.0, 9.0, 4.0, 2.0, f32::INFINITY]);
+        let weight = row(&[1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0]);
+        let prior =
+            Prior { disparity: carried, free: None, confidence: weight, weight: 1.0, flat: 0.0, in_bands: true };
+        let mut trusted = Plane::from_parts(8, 1, vec![true, false, false, false, false, false, false, false]);
+        let mut checked =
+            row(&[0.0, f32::INFINITY, f32::INFINITY, f32::INFINITY, f32::INFINITY, f32::INFINITY, 7.0, f32::INFINITY]);
+        keep_where_carried_agrees(&left, &prior, 1.0, &mut checked, &mut trusted);
+        // x = 1 agrees (0.5 px) and sees its match; x = 2 is hidden; x = 3 disagrees (2 px); x = 4 has no match;
+        // x = 5's carried answer was released; x = 6 agrees and takes its own answer back; x = 7 has none carried.
+        assert_eq!(trusted.data, vec![true, true, false, false, false, false, true, false]);
+        let inf = f32::INFINITY;
+        assert_eq!(checked.data, vec![0.0, 1.0, inf, inf, inf, inf, 2.0, inf]);
+    }
+}
