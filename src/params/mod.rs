@@ -280,6 +280,13 @@ impl Params {
         p
     }
 
+    /// Whether inference runs on grouped labels (`meanfield.label_step` > 1, as [`Params::for_image`] sets it) with
+    /// the local term alone (`meanfield.grouped_local`, the `jem` model): there an iteration moves an answer one
+    /// pixel, not across the image.
+    pub(crate) fn grouped_local_alone(&self) -> bool {
+        self.meanfield.label_step > 1 && self.meanfield.grouped_local && self.model == Model::Jem
+    }
+
     /// The fully connected weight ω the model actually uses (0 for `lcm` and `wta`).
     pub fn effective_fcm_weight(&self) -> f32 {
         match self.model {

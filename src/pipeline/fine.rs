@@ -332,7 +332,7 @@ impl Pass<'_> {
         };
         // Only a model with both terms has a local term to keep.
         let jem = params.model == Model::Jem;
-        let local = params.meanfield.grouped_local && jem;
+        let local = params.grouped_local_alone();
         let left = infer(label_step::View::Left, guide_left, iterations[0], local, left_bands);
         let right = (params.post.lrc.mode != LrcMode::Off).then(|| {
             on_stage("inference (right)");

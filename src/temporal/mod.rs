@@ -317,23 +317,13 @@ const TRAVELLING_RIGHT_ITERATIONS: usize = 1;
 /// Mean-field iterations of a travelling frame's left view: one fewer than configured, as on a pan. The carried
 /// prior, weighing twice and with the labels kept to bands around it, has placed the pixels: on the 51 KITTI frames
 /// the third iteration moved the photometric error by 0.05 % and the consistency by 0.6 %, for 6 % of the frame's
-/// time, and on the synthetic dolly with exact truth the frames are better with two (tuning log, "Session 49").
-/// Not where the inference runs on grouped labels with the local term alone (a large image): there an iteration
-/// carries the answer one pixel further, not across the image, and the configured count stays (KITTI enlarged 1.5×
-/// lost 2 % of its consistency with one fewer).
-fn travelling_left_iterations(params: &Params, pair: &StereoPair) -> usize {
+/// time, and on the synthetic dolly with exact truth the frames are better with two (tuning log, "A travelling
+/// frame's left view one iteration fewer"). Not where the inference runs on grouped labels with the local term alone
+/// (`local_alone`, a large image): there an iteration carries the answer one pixel further, not across the image,
+/// and the configured count stays (KITTI enlarged 1.5× lost 2 % of its consistency with one fewer).
+fn travelling_left_iterations(params: &Params, local_alone: bool) -> usize {
     let configured = params.meanfield.iterations;
-    if grouped_local_alone(params, pair) { configured } else { configured.saturating_sub(1).max(1) }
-}
-
-/// Whether the pair's inference runs on grouped labels with the local term alone (an image above
-/// `meanfield.reference_px`, `meanfield.grouped_local`). There a travelling frame keeps the configured iterations
-/// ([`travelling_left_iterations`]) and the check's verdict ([`FrameViews::keep_carried`]): an iteration moves the
-/// answer one pixel, so the answer stays close to the carried prior, and agreeing with it says little (KITTI
-/// enlarged 1.5×: consistency 3.78 → 5.18 with the carried answers kept).
-fn grouped_local_alone(params: &Params, pair: &StereoPair) -> bool {
-    let grouped = params.meanfield.for_image(pair.left.width * pair.left.height).label_step > 1;
-    grouped && params.meanfield.grouped_local && params.model == crate::params::Model::Jem
+    if local_alone { configured } else { configured.saturating_sub(1).max(1) }
 }
 
 /// The fewest tracked points a motion must explain, and the share of all tracked points.
@@ -391,6 +381,10 @@ fn moving_frame(
     if let Some(s) = &mut carried.segmentation {
         s.release(&released.data);
     }
+    // On grouped labels with the local term alone (a large image) the answer stays close to the carried prior, so
+    // agreeing with it says little: such a frame keeps the check's verdict (KITTI enlarged 1.5×: consistency 3.78 →
+    // 5.18 with the carried answers kept) and the configured iterations.
+    let local_alone = travelling && params.for_image(pair.left.width * pair.left.height).grouped_local_alone();
     let from = FramePrior {
         vertical_offset: carried.vertical_offset,
         answer: carried,
@@ -398,10 +392,10 @@ fn moving_frame(
         weight_scale: if travelling { TRAVELLING_PRIOR_SCALE } else { 1.0 },
         views: Some(match travelling {
             true => FrameViews {
-                iterations: [travelling_left_iterations(params, pair), TRAVELLING_RIGHT_ITERATIONS],
+                iterations: [travelling_left_iterations(params, local_alone), TRAVELLING_RIGHT_ITERATIONS],
                 right_local_only: false,
                 settle_at: None,
-                keep_carried: !grouped_local_alone(params, pair),
+                keep_carried: !local_alone,
             },
             false => FrameViews {
                 iterations: [params.meanfield.iterations.saturating_sub(1).max(1), RIGHT_ITERATIONS],
