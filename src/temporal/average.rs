@@ -33,14 +33,14 @@ impl ViewMeans {
         ViewMeans { left: left.clone(), right: right.clone(), counts: [Plane::new(w, h, 1), Plane::new(w, h, 1)] }
     }
 
-    /// Folds a new frame into the means and returns where the left view started again. A pixel starts again
-    /// where the 3 × 3 mean of its grey difference from the mean exceeds [`CHANGE_SIGMAS`] standard deviations of
-    /// that mean under noise of per-channel σ `noise_sigma` (something moved or changed there); elsewhere the
-    /// mean takes the frame with weight 1/n, n its count (at most [`MAX_FRAMES`]).
-    pub(crate) fn fold(&mut self, left: &RgbImage, right: &RgbImage, noise_sigma: f32) -> Plane<bool> {
-        let restarted = fold_view(&mut self.left, &mut self.counts[0], left, noise_sigma);
-        fold_view(&mut self.right, &mut self.counts[1], right, noise_sigma);
-        restarted
+    /// Folds a new frame into the means and returns where each view started again and whether any mean moved. A
+    /// pixel starts again where the 3 × 3 mean of its grey difference from the mean exceeds [`CHANGE_SIGMAS`]
+    /// standard deviations of that mean under noise of per-channel σ `noise_sigma` (something moved or changed
+    /// there); elsewhere the mean takes the frame with weight 1/n, n its count (at most [`MAX_FRAMES`]).
+    pub(crate) fn fold(&mut self, left: &RgbImage, right: &RgbImage, noise_sigma: f32) -> Folded {
+        let (left, left_moved) = fold_view(&mut self.left, &mut self.counts[0], left, noise_sigma);
+        let (right, right_moved) = fold_view(&mut self.right, &mut self.counts[1], right, noise_sigma);
+        Folded { left, right, moved: left_moved || right_moved }
     }
 
     /// Carries the means to the exposure of a new frame: each view's change against its mean is fitted
@@ -64,14 +64,48 @@ impl ViewMeans {
     }
 }
 
-/// [`ViewMeans::fold`] for one view.
-fn fold_view(mean: &mut RgbImage, count: &mut Plane<u16>, frame: &RgbImage, noise_sigma: f32) -> Plane<bool> {
+/// What folding a frame into the means did ([`ViewMeans::fold`]).
+pub(crate) struct Folded {
+    /// Where the left view started again.
+    pub(crate) left: Plane<bool>,
+    /// Where the right view started again.
+    pub(crate) right: Plane<bool>,
+    /// Whether any value of either mean changed (not, when the frame repeats the means exactly).
+    pub(crate) moved: bool,
+}
+
+impl Folded {
+    /// The left pixels whose scene changed, in either view: where the left view started again, or where the right
+    /// view did at the match `answer` gives the pixel (x − d, within a pixel either side for the answer's own
+    /// error). An object that moves changes what a left pixel's match sees even where the left view itself holds
+    /// still (the background it uncovers in the right view).
+    pub(crate) fn changed_for(&self, answer: &DisparityMap) -> Plane<bool> {
+        let mut changed = self.left.clone();
+        let w = answer.width as i64;
+        for y in 0..answer.height {
+            let (right, row) = (self.right.row(y), answer.row(y));
+            for (x, c) in changed.row_mut(y).iter_mut().enumerate() {
+                let d = row[x];
+                if *c || !d.is_finite() {
+                    continue;
+                }
+                let at = (x as f32 - d).round() as i64;
+                *c = (at - 1..=at + 1).any(|k| (0..w).contains(&k) && right[k as usize]);
+            }
+        }
+        changed
+    }
+}
+
+/// [`ViewMeans::fold`] for one view: where it started again, and whether any value of the mean changed.
+fn fold_view(mean: &mut RgbImage, count: &mut Plane<u16>, frame: &RgbImage, noise_sigma: f32) -> (Plane<bool>, bool) {
     let (w, h) = frame.dims();
     let (grey_frame, grey_mean) = (frame.to_grey(), mean.to_grey());
     let diff = Plane::from_parts(w, h, grey_frame.data.iter().zip(&grey_mean.data).map(|(f, m)| f - m).collect());
     let local = box_mean(&diff, 1);
     let sigma_grey = GREY_NOISE_PER_SIGMA * noise_sigma.max(MIN_SIGMA);
     let mut restarted = Plane::new(w, h, false);
+    let moved = frame.channels.iter().zip(&mean.channels).any(|(f, m)| f != m);
     for i in 0..w * h {
         let n = f32::from(count.data[i]);
         // The difference of a frame and an n-frame mean has σ·√(1 + 1/n); a 3 × 3 mean of it a third of that.
@@ -90,7 +124,7 @@ fn fold_view(mean: &mut RgbImage, count: &mut Plane<u16>, frame: &RgbImage, nois
             }
         }
     }
-    restarted
+    (restarted, moved)
 }
 
 /// The running mean of a still camera's answers, each weighted by the frames in the view means it was matched on
@@ -168,7 +202,7 @@ mod tests {
         let a = grey_image(&[100.0; 16], 4);
         let mut means = ViewMeans::start(&a, &a);
         let mut b = grey_image(&[102.0; 16], 4);
-        let restarted = means.fold(&b, &b, 2.0);
+        let restarted = means.fold(&b, &b, 2.0).left;
         assert!(restarted.data.iter().all(|r| !r), "a change within the noise");
         assert_eq!(means.left.channel(0)[5], 101.0);
         // A bright object enters the right half: those pixels (and their 3 × 3 neighbours) start again.
@@ -179,7 +213,7 @@ mod tests {
                 }
             }
         }
-        let restarted = means.fold(&b, &b, 2.0);
+        let restarted = means.fold(&b, &b, 2.0).left;
         assert!(restarted.data[3] && restarted.data[2] && !restarted.data[0]);
         assert_eq!(means.left.channel(1)[3], 200.0);
         assert_eq!(means.left_counts().data[3], 1);
@@ -210,7 +244,7 @@ mod tests {
         brighter.channels.iter_mut().flatten().for_each(|v| *v = (*v * 1.1).min(255.0));
         let e = means.follow_exposure(&brighter, &brighter).expect("a 10 % gain");
         assert!((e.gain - 1.1).abs() < 1e-3 && e.offset.abs() < 0.1, "{e:?}");
-        let restarted = means.fold(&brighter, &brighter, 2.0);
+        let restarted = means.fold(&brighter, &brighter, 2.0).left;
         assert!(restarted.data.iter().all(|r| !r), "the mean was carried to the new exposure");
         assert_eq!(means.left_counts().data[0], 2);
         assert!(means.left.channels[0].iter().zip(&brighter.channels[0]).all(|(m, f)| (m - f).abs() < 0.2));
