@@ -198,6 +198,29 @@ mod tests {
     }
 
     #[test]
+    fn a_left_pixel_changes_where_its_match_in_the_right_view_restarted() {
+        let row = |v: &[bool]| Plane::from_parts(v.len(), 1, v.to_vec());
+        let (f, t) = (false, true);
+        // The right view restarted at x = 2 only; the left view at x = 7.
+        let folded =
+            Folded { left: row(&[f, f, f, f, f, f, f, t]), right: row(&[f, f, t, f, f, f, f, f]), moved: true };
+        let answer = Plane::from_parts(8, 1, vec![0.0, 0.0, 0.0, 1.0, 2.0, 4.0, f32::INFINITY, 0.0]);
+        // x − d: 0, 1, 2, 2, 2, 1, -, 7; within a pixel of 2: x = 1..=5; x = 7 by the left view itself.
+        let changed = folded.changed_for(&answer);
+        assert_eq!(changed.data, vec![f, t, t, t, t, t, f, t]);
+    }
+
+    #[test]
+    fn a_repeated_frame_leaves_the_means_unmoved() {
+        let a = grey_image(&[100.0, 50.0, 20.0, 7.0], 2);
+        let mut means = ViewMeans::start(&a, &a);
+        assert!(!means.fold(&a, &a, 1.0).moved);
+        let mut b = a.clone();
+        b.channel_mut(1)[3] = 7.5;
+        assert!(means.fold(&a, &b, 1.0).moved, "the right view's mean moved");
+    }
+
+    #[test]
     fn the_mean_of_a_still_scene_averages_and_restarts_where_it_changes() {
         let a = grey_image(&[100.0; 16], 4);
         let mut means = ViewMeans::start(&a, &a);

@@ -13,9 +13,11 @@
 //!   again where the frame differs from the mean by more than its noise allows — something moved there) and the
 //!   pipeline matches the means: n frames of a still camera hold the scene with 1/√n of one frame's noise. The
 //!   answers are folded into a running mean too, weighted by the frames each was matched on
-//!   ([`average::AnswerMean`]), which starts again where the views did: a static pixel's answer settles instead
-//!   of flickering with each frame's noise. Each view's exposure change against its running mean is fitted and
-//!   the mean carried to the new exposure (clipped at 0 and 255) before the frame is folded in: the means follow
+//!   ([`average::AnswerMean`]), which starts again where either view's mean did (the right one at the pixel's match: a
+//!   moving object uncovers background in the right view where the left view holds still): a static pixel's answer
+//!   settles instead of flickering with each frame's noise. A frame that leaves the means exactly as they were (a clean
+//!   camera's repeated frame) keeps the previous answer. Each view's exposure change against its running mean is fitted
+//!   and the mean carried to the new exposure (clipped at 0 and 255) before the frame is folded in: the means follow
 //!   the camera's exposure and do not start again.
 //! - **moving** (a shift). The previous answer, moved by the shift, is the prior of the frame in place of the
 //!   coarse chain, which is not run: with the coarse prior's weight rule (λ by the measured noise, at least the
@@ -183,9 +185,8 @@ pub(crate) fn match_frame(
     let mut spare = std::mem::take(&mut state.spare);
     let (mut out, kind, exposure) = match (previous, compared) {
         (Some(prev), Some(c)) if !cut && (c.shift.dx, c.shift.dy) == (0, 0) && unexplained < STILL_UNEXPLAINED => {
-            let (out, frames, exposure) = still_frame(state, params, pair, noise, (prev, &mut spare.0), options)?;
-            spare.0.trim(3 * pair.left.len() * pair.ndisp / 2);
-            state.spare = spare;
+            drop(spare);
+            let (out, frames, exposure) = still_frame(state, params, pair, noise, prev, options)?;
             (out, FrameKind::Still { frames }, exposure)
         }
         (Some(prev), Some(c)) if !cut => {
@@ -193,8 +194,7 @@ pub(crate) fn match_frame(
             let (carried, released, motion) = carry_previous(&prev, &c, &grey, noise, unexplained);
             motion_time = Some(start.elapsed());
             let (before, held) = (carried.disparity.clone(), released.clone());
-            let how = if motion.is_some() { Carried::ByMotion } else { Carried::ByShift };
-            let mut out = moving_frame(params, pair, (carried, released), how, options, &mut spare.0)?;
+            let mut out = moving_frame(params, pair, (carried, released), motion.is_some(), options, &mut spare.0)?;
             spare.0.trim(3 * pair.left.len() * pair.ndisp / 2);
             state.spare = spare;
             carry_answer(&mut out.disparity, &before, &held);
@@ -242,17 +242,16 @@ fn compare(prev: &Plane<f32>, cur: &Plane<f32>) -> Compared {
     }
 }
 
-/// A still camera's frame: the pipeline on the views' running means, with the previous answer as its prior
-/// (released where the scene changed, [`average::Folded::changed_for`]), the answer folded into the answers' mean,
-/// which starts again where the prior was released. Frames that leave the means exactly as they were (a clean
-/// camera's repeated frame) keep the previous answer. Returns the answer, the frames the means hold at most and the
-/// left view's exposure change against its mean.
+/// A still camera's frame: the pipeline on the views' running means, the answer folded into the answers' mean,
+/// which starts again where the scene changed ([`average::Folded::changed_for`], at the previous answer's matches).
+/// A frame that leaves the means exactly as they were (a clean camera's repeated frame) keeps the previous answer.
+/// Returns the answer, the frames the means hold at most and the left view's exposure change against its mean.
 fn still_frame(
     state: &mut State,
     params: &Params,
     pair: &StereoPair,
     noise: f32,
-    (prev, buffers): (Previous, &mut crate::meanfield::Buffers),
+    prev: Previous,
     options: &RunOptions<'_>,
 ) -> Result<(PipelineOutput, u16, Option<Exposure>)> {
     let (views, answers, out, exposure) = match state.still.take() {
@@ -260,16 +259,11 @@ fn still_frame(
             let exposure = views.follow_exposure(&pair.left, &pair.right);
             let folded = views.fold(&pair.left, &pair.right, noise);
             let out = if folded.moved || exposure.is_some() {
-                let mut carried = prev.answer;
-                let released = folded.changed_for(&carried.disparity);
-                // The answers' mean starts again where the prior lets go.
+                let changed = folded.changed_for(&prev.answer.disparity);
                 let mut frames = views.left_counts().clone();
-                frames.data.iter_mut().zip(&released.data).filter(|(_, r)| **r).for_each(|(n, _)| *n = 1);
-                // The planes start afresh: a carried segmentation's released pixels become grid cells, which do not
-                // follow a moving object's outline (synthetic object: avgErr 1.035× → 1.015× of matching alone).
-                carried.segmentation = None;
+                frames.data.iter_mut().zip(&changed.data).filter(|(_, c)| **c).for_each(|(n, _)| *n = 1);
                 let means = StereoPair::borrowed(&views.left, &views.right, pair.ndisp)?;
-                let mut out = moving_frame(params, &means, (carried, released), Carried::Still, options, buffers)?;
+                let mut out = pipeline::run_with(params, &means, options)?;
                 answers.fold(&out.disparity, &frames);
                 out.disparity = answers.mean.clone();
                 out
@@ -319,23 +313,6 @@ fn carry_previous(
         ),
     }
 }
-
-/// How a frame's prior was carried from the previous frame's answer.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Carried {
-    /// A still camera: the answer where it was, the frame on the views' running means.
-    Still,
-    /// A global shift (a pan).
-    ByShift,
-    /// The camera's 3D motion (travelling).
-    ByMotion,
-}
-
-/// A still camera's prior weighs this many times the coarse prior's rule. The previous answer was matched on the
-/// views' means of all but the current frame, the evidence the frame's own cost already holds: counted again at full
-/// weight it holds on to the first, noisiest frames' errors (σ 8 ArtL frames 5–10: 0.80× of matching alone at
-/// weight 1, 0.735× at 0.5, 0.722× at 0.25, where the flicker rose 0.13× → 0.16× → 0.19×).
-const STILL_PRIOR_SCALE: f32 = 0.5;
 
 /// A prior carried by a 3D motion weighs this many times the coarse prior's rule: it is the whole answer of a
 /// frame a fraction of a second before, not a coarse run's (on KITTI frames weight 1 left the answers about as
@@ -409,7 +386,7 @@ fn moving_frame(
     params: &Params,
     pair: &StereoPair,
     (mut carried, released): (PipelineOutput, Plane<bool>),
-    how: Carried,
+    travelling: bool,
     options: &RunOptions<'_>,
     buffers: &mut crate::meanfield::Buffers,
 ) -> Result<PipelineOutput> {
@@ -420,17 +397,12 @@ fn moving_frame(
     // On grouped labels with the local term alone (a large image) the answer stays close to the carried prior, so
     // agreeing with it says little: such a frame keeps the check's verdict (KITTI enlarged 1.5×: consistency 3.78 →
     // 5.18 with the carried answers kept) and the configured iterations.
-    let travelling = how == Carried::ByMotion;
     let local_alone = travelling && params.for_image(pair.left.width * pair.left.height).grouped_local_alone();
     let from = FramePrior {
         vertical_offset: carried.vertical_offset,
         answer: carried,
         released: Some(released),
-        weight_scale: match how {
-            Carried::Still => STILL_PRIOR_SCALE,
-            Carried::ByShift => 1.0,
-            Carried::ByMotion => TRAVELLING_PRIOR_SCALE,
-        },
+        weight_scale: if travelling { TRAVELLING_PRIOR_SCALE } else { 1.0 },
         views: Some(match travelling {
             true => FrameViews {
                 iterations: [travelling_left_iterations(params, local_alone), TRAVELLING_RIGHT_ITERATIONS],
