@@ -11,7 +11,17 @@ fn frames(motion: Motion, noise: f64, n: usize) -> Vec<jem::synth::SynthScene> {
 
 /// [`frames`] under a changing exposure.
 fn frames_lit(motion: Motion, noise: f64, n: usize, gain: GainChange) -> Vec<jem::synth::SynthScene> {
-    let scene = SynthParams { width: 200, height: 140, ndisp: 32, seed: 5 };
+    frames_of(SynthParams { width: 200, height: 140, ndisp: 32, seed: 5 }, motion, noise, n, gain)
+}
+
+/// [`frames_lit`] of `scene`.
+fn frames_of(
+    scene: SynthParams,
+    motion: Motion,
+    noise: f64,
+    n: usize,
+    gain: GainChange,
+) -> Vec<jem::synth::SynthScene> {
     let params = SequenceParams { scene, frames: n, motion, noise_sigma: noise, gain };
     (0..n).map(|k| render_frame(&params, k).unwrap().0).collect()
 }
@@ -118,9 +128,7 @@ fn a_panning_camera_whose_exposure_steps_is_still_moving_with_the_step_compensat
 fn a_still_camera_with_a_moving_object_is_still_and_as_accurate_as_matching_alone() {
     // At `jem synth`'s size the object is a small part of the view: a still camera.
     let scene = SynthParams { width: 320, height: 240, ndisp: 32, seed: 1 };
-    let params =
-        SequenceParams { scene, frames: 6, motion: Motion::Object, noise_sigma: 2.0, gain: GainChange::default() };
-    let scenes: Vec<_> = (0..6).map(|k| render_frame(&params, k).unwrap().0).collect();
+    let scenes = frames_of(scene, Motion::Object, 2.0, 6, GainChange::default());
     let (alone, remembered) = (run(&scenes, false), run(&scenes, true));
     let kinds: Vec<_> = remembered.iter().map(|o| o.frame).collect();
     assert!(kinds[1..].iter().all(|k| matches!(k, Some(FrameKind::Still { .. }))), "{kinds:?}");
